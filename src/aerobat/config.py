@@ -1,0 +1,181 @@
+"""Validated construction of parameter dataclasses from TOML tables.
+
+Every parameter set in aerobat is a frozen dataclass that validates itself in
+``__post_init__``. This module adds what a *file* needs on top of that: unknown
+keys, wrong types and missing fields are reported with the file name and the
+table they were found in, so a user can fix the file without reading code.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+import types
+import typing
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, TypeVar
+
+__all__ = [
+    "ConfigError",
+    "check_finite",
+    "check_range",
+    "dataclass_from_table",
+    "dataclass_to_table",
+    "read_toml",
+]
+
+T = TypeVar("T")
+
+
+class ConfigError(ValueError):
+    """A configuration file or value is invalid; the message names where and why."""
+
+
+def check_finite(name: str, value: float, unit: str = "") -> None:
+    """Raise ``ValueError`` unless ``value`` is a finite real number."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValueError(f"{name} must be a number, got {type(value).__name__} {value!r}")
+    if not math.isfinite(value):
+        raise ValueError(f"{name} = {value} must be finite{_unit(unit)}")
+
+
+def check_range(
+    name: str,
+    value: float,
+    *,
+    low: float | None = None,
+    high: float | None = None,
+    low_inclusive: bool = True,
+    high_inclusive: bool = True,
+    unit: str = "",
+) -> None:
+    """Raise ``ValueError`` naming ``name``, ``value`` and the allowed range if out of it."""
+    check_finite(name, value, unit)
+    ok = True
+    if low is not None:
+        ok &= value >= low if low_inclusive else value > low
+    if high is not None:
+        ok &= value <= high if high_inclusive else value < high
+    if not ok:
+        raise ValueError(f"{name} = {value:g} is out of range: allowed {_describe(low, high, low_inclusive, high_inclusive)}{_unit(unit)}")
+
+
+def _describe(low: float | None, high: float | None, lo_inc: bool, hi_inc: bool) -> str:
+    if low is not None and high is not None:
+        return f"{'[' if lo_inc else '('}{low:g}, {high:g}{']' if hi_inc else ')'}"
+    if low is not None:
+        return f"{'>=' if lo_inc else '>'} {low:g}"
+    if high is not None:
+        return f"{'<=' if hi_inc else '<'} {high:g}"
+    return "any finite value"
+
+
+def _unit(unit: str) -> str:
+    return f" ({unit})" if unit else ""
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """Read a TOML file, turning I/O and syntax problems into :class:`ConfigError`."""
+    path = Path(path)
+    try:
+        with path.open("rb") as handle:
+            return tomllib.load(handle)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: file not found") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{path}: is a directory, expected a TOML file") from None
+    except PermissionError:
+        raise ConfigError(f"{path}: permission denied") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not a UTF-8 text file ({exc.reason})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: invalid TOML: {exc}") from None
+
+
+def _coerce(value: Any, annotation: Any, where: str) -> Any:
+    """Check ``value`` against a field annotation and convert lists to tuples."""
+    origin = typing.get_origin(annotation)
+    if annotation is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(f"{where}: expected a number, got {type(value).__name__} {value!r}")
+        return float(value)
+    if annotation is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{where}: expected an integer, got {type(value).__name__} {value!r}")
+        return value
+    if annotation is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where}: expected true or false, got {value!r}")
+        return value
+    if annotation is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{where}: expected a string, got {type(value).__name__} {value!r}")
+        return value
+    if origin is tuple:
+        args = typing.get_args(annotation)
+        if not isinstance(value, list | tuple):
+            raise ConfigError(f"{where}: expected an array, got {type(value).__name__} {value!r}")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_coerce(v, args[0], f"{where}[{i}]") for i, v in enumerate(value))
+        if len(value) != len(args):
+            raise ConfigError(f"{where}: expected an array of {len(args)} values, got {len(value)}")
+        return tuple(_coerce(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args, strict=True)))
+    if origin is typing.Literal:
+        choices = typing.get_args(annotation)
+        if value not in choices:
+            raise ConfigError(f"{where}: expected one of {', '.join(map(repr, choices))}, got {value!r}")
+        return value
+    if origin in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(annotation) if a is not type(None)]
+        return _coerce(value, args[0], where)
+    if dataclasses.is_dataclass(annotation):
+        if not isinstance(value, Mapping):
+            raise ConfigError(f"{where}: expected a table, got {type(value).__name__}")
+        return dataclass_from_table(annotation, value, source=where)  # type: ignore[arg-type]
+    return value
+
+
+def dataclass_from_table(cls: type[T], table: Mapping[str, Any], *, source: str) -> T:
+    """Build ``cls`` from a TOML table, with errors that name ``source`` and the field.
+
+    Missing fields take the dataclass defaults; unknown keys are an error (they are
+    almost always typos).
+    """
+    if not isinstance(table, Mapping):
+        raise ConfigError(f"{source}: expected a table, got {type(table).__name__}")
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    unknown = sorted(set(table) - set(fields))
+    if unknown:
+        raise ConfigError(f"{source}: unknown field(s) {', '.join(unknown)}; allowed: {', '.join(fields)}")
+    kwargs = {}
+    for name, value in table.items():
+        kwargs[name] = _coerce(value, hints[name], f"{source}.{name}")
+    missing = [
+        n for n, f in fields.items()
+        if n not in kwargs and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+    ]
+    if missing:
+        raise ConfigError(f"{source}: missing required field(s) {', '.join(missing)}")
+    try:
+        return cls(**kwargs)
+    except ConfigError:
+        raise
+    except ValueError as exc:
+        raise ConfigError(f"{source}: {exc}") from None
+
+
+def dataclass_to_table(obj: Any) -> dict[str, Any]:
+    """Turn a (nested) parameter dataclass into TOML-ready plain values."""
+    out: dict[str, Any] = {}
+    for field in dataclasses.fields(obj):
+        value = getattr(obj, field.name)
+        if dataclasses.is_dataclass(value):
+            out[field.name] = dataclass_to_table(value)
+        elif isinstance(value, tuple):
+            out[field.name] = list(value)
+        else:
+            out[field.name] = value
+    return out

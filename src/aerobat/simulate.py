@@ -40,7 +40,7 @@ from .dynamics import (
 from .program import CompiledProgram, Program
 from .vehicle import VehicleConfig
 
-__all__ = ["Trajectory", "final_state_summary", "simulate", "simulate_batch"]
+__all__ = ["NominalModel", "Trajectory", "final_state_summary", "simulate", "simulate_batch"]
 
 Mode = Literal["continuous", "sampled"]
 DEFAULT_MAX_STEP_S = 5e-4
@@ -355,3 +355,23 @@ def simulate_batch(
     out = np.empty_like(x0)
     _batch_continuous(x0, bp, coeffs, nseg, np.ascontiguousarray(plants, dtype=float), ctrl, max_step_s, out)
     return out
+
+
+class NominalModel:
+    """The design model Φ(p, ŝ) as a batch of final states (continuous mode, all cores).
+
+    Implements the ``FinalStateModel`` protocol of :mod:`aerobat.design`.
+    """
+
+    def __init__(self, config: VehicleConfig, *, max_step_s: float = DEFAULT_MAX_STEP_S) -> None:
+        self.config = config
+        self.max_step_s = max_step_s
+        self._plant = plant_vector(config.vehicle)
+
+    def final_states(self, programs: Sequence[Program], initial_states: np.ndarray | None = None) -> np.ndarray:
+        plants = np.tile(self._plant, (len(programs), 1))
+        return simulate_batch(programs, self.config, initial_states=initial_states, plants=plants,
+                              max_step_s=self.max_step_s)
+
+    def trajectory(self, program: Program, initial_state: np.ndarray | None = None) -> Trajectory:
+        return simulate(program, self.config, initial_state=initial_state, max_step_s=self.max_step_s)

@@ -1,0 +1,264 @@
+"""Nominal design (Fig. 3, Sect. 5): p⁰ with Φ(p⁰) = x*, the Jacobian J and the correction C.
+
+Generic over maneuvers and models: a model only has to map a batch of
+programs to final states (the :class:`FinalStateModel` protocol).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .correction import CorrectionKind, correction_matrix, svd_info
+from .maneuvers.base import Maneuver, bounds_arrays
+
+__all__ = ["Design", "DesignFailed", "FinalStateModel", "design", "finite_difference_jacobian"]
+
+
+class FinalStateModel(Protocol):
+    def final_states(self, programs: Sequence[Any], initial_states: np.ndarray | None = None) -> np.ndarray: ...
+
+
+class DesignFailed(RuntimeError):
+    """The nominal design did not converge or its Jacobian is unusable; the message says why."""
+
+    def __init__(self, message: str, design: Design | None = None) -> None:
+        super().__init__(message)
+        self.design = design
+
+
+@dataclass(frozen=True)
+class Design:
+    """Result of the nominal design.
+
+    Attributes
+    ----------
+    maneuver : the maneuver designed.
+    p_guess, p_nominal : (n_par,) initial guess p^g and solution p⁰.
+    residual : (n_err,) e(p⁰) on the nominal model; ``residual_norm`` its 2-norm (SI units mixed).
+    converged : True if the residual norm is below the tolerance.
+    status, message : solver outcome in words.
+    jacobian : (n_err, n_par) J = ∂e/∂p at p⁰ (central differences).
+    correction : (n_par, n_err) C, a right inverse of J.
+    correction_kind : how C was computed.
+    singular_values, condition_number, rank : of J in scaled coordinates.
+    duration_s : the nominal program's duration, ramps included.
+    compute_s : wall time of the design.
+    """
+
+    maneuver: Maneuver
+    p_guess: np.ndarray
+    p_nominal: np.ndarray
+    residual: np.ndarray
+    residual_norm: float
+    converged: bool
+    status: str
+    message: str
+    jacobian: np.ndarray
+    correction: np.ndarray
+    correction_kind: str
+    singular_values: np.ndarray
+    condition_number: float
+    rank: int
+    duration_s: float
+    compute_s: float
+    evaluations: int
+
+    def to_json_dict(self) -> dict[str, Any]:
+        return {
+            "maneuver": self.maneuver.spec(),
+            "parameter_names": [p.name for p in self.maneuver.parameters],
+            "parameter_units": [p.unit for p in self.maneuver.parameters],
+            "error_names": [e.name for e in self.maneuver.errors],
+            "p_guess": self.p_guess.tolist(),
+            "p_nominal": self.p_nominal.tolist(),
+            "residual": self.residual.tolist(),
+            "residual_norm": self.residual_norm,
+            "converged": self.converged,
+            "status": self.status,
+            "message": self.message,
+            "duration_s": self.duration_s,
+            "jacobian": self.jacobian.tolist(),
+            "correction": self.correction.tolist(),
+            "correction_kind": self.correction_kind,
+            "singular_values": self.singular_values.tolist(),
+            "condition_number": self.condition_number,
+            "rank": self.rank,
+            "compute_s": self.compute_s,
+        }
+
+
+def _errors(maneuver: Maneuver, model: FinalStateModel, params: np.ndarray) -> np.ndarray:
+    """(B, n_err) errors for a batch of parameter vectors (B, n_par)."""
+    programs = [maneuver.program(p) for p in params]
+    finals = model.final_states(programs)
+    return np.stack([maneuver.error(f) for f in finals])
+
+
+def finite_difference_jacobian(
+    maneuver: Maneuver, model: FinalStateModel, p: np.ndarray, *, relative_step: float = 1e-3
+) -> tuple[np.ndarray, np.ndarray]:
+    """Central-difference J at ``p`` with steps ``relative_step`` × each parameter's scale.
+
+    Steps are shrunk (one-sided if needed) to stay inside the parameter bounds.
+    Returns (J, e(p)). All 2·n + 1 simulations run as one parallel batch.
+    """
+    p = np.asarray(p, dtype=float)
+    n = p.size
+    lower, upper = bounds_arrays(maneuver.parameters)
+    scales = np.array([s.scale for s in maneuver.parameters])
+    h = relative_step * scales
+    plus = np.minimum(p + h, upper)
+    minus = np.maximum(p - h, lower)
+    batch = np.empty((2 * n + 1, n))
+    batch[0] = p
+    for i in range(n):
+        batch[1 + i] = p
+        batch[1 + i, i] = plus[i]
+        batch[1 + n + i] = p
+        batch[1 + n + i, i] = minus[i]
+    errs = _errors(maneuver, model, batch)
+    J = (errs[1 : n + 1] - errs[n + 1 :]).T / (plus - minus)[None, :]
+    return J, errs[0]
+
+
+def design(
+    maneuver: Maneuver,
+    model: FinalStateModel,
+    *,
+    p_guess: np.ndarray | None = None,
+    tolerance: float = 1e-6,
+    correction: CorrectionKind = "inverse",
+    tsvd_rtol: float = 1e-3,
+    damping: float = 1e-3,
+    max_iterations: int = 100,
+    raise_on_failure: bool = False,
+) -> Design:
+    """Find p⁰ with e(p⁰) = 0 on ``model`` from the guess, then J and C (Sect. 3 step 2).
+
+    A bounded trust-region least-squares solve on scaled errors, with batched
+    finite-difference Jacobians. The result says whether it converged and why
+    not; with ``raise_on_failure`` a failure raises :class:`DesignFailed`.
+    """
+    start = time.perf_counter()
+    guess = np.array(maneuver.guess() if p_guess is None else p_guess, dtype=float)
+    lower, upper = bounds_arrays(maneuver.parameters)
+    p_scales = np.array([s.scale for s in maneuver.parameters])
+    e_scales = np.array([s.scale for s in maneuver.errors])
+    x0 = np.clip(guess, lower, upper)
+    evaluations = 0
+    cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+    def both(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        nonlocal evaluations
+        key = p.tobytes()
+        if key not in cache:
+            J, e = finite_difference_jacobian(maneuver, model, p)
+            evaluations += 2 * p.size + 1
+            cache.clear()
+            cache[key] = (J, e)
+        return cache[key]
+
+    def residual(p: np.ndarray) -> np.ndarray:
+        nonlocal evaluations
+        key = p.tobytes()
+        if key in cache:
+            return cache[key][1] / e_scales
+        e = _errors(maneuver, model, p[None, :])[0]
+        evaluations += 1
+        return e / e_scales
+
+    def jac(p: np.ndarray) -> np.ndarray:
+        return both(p)[0] / e_scales[:, None]
+
+    status = "converged"
+    message = ""
+    try:
+        result = least_squares(
+            residual, x0, jac=jac, bounds=(lower, upper), x_scale=p_scales, method="trf",
+            xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=max_iterations,
+        )
+        p0 = result.x
+        solver_message = result.message
+    except (ValueError, FloatingPointError) as exc:  # non-finite model output
+        p0 = x0
+        solver_message = f"solver aborted: {exc}"
+    J, e0 = finite_difference_jacobian(maneuver, model, p0)
+    evaluations += 2 * p0.size + 1
+    residual_norm = float(np.linalg.norm(e0))
+    converged = bool(np.all(np.isfinite(e0)) and residual_norm < tolerance)
+    pinned = _pinned(maneuver, p0, lower, upper)
+    info = svd_info(J, p_scales, e_scales)
+    n_err = len(maneuver.errors)
+    if not converged:
+        status = "not_converged"
+        message = (
+            f"no parameters reach the target on the nominal model: residual norm {residual_norm:.3g} "
+            f"> tolerance {tolerance:g} ({solver_message})"
+        )
+        worst = int(np.argmax(np.abs(e0) / e_scales)) if np.all(np.isfinite(e0)) else 0
+        message += f"; largest error {maneuver.errors[worst].name} = {e0[worst]:+.4g} {maneuver.errors[worst].unit}"
+        if pinned:
+            message += "; at a bound: " + ", ".join(pinned)
+    elif info.rank < n_err:
+        status = "rank_deficient"
+        message = (
+            f"the Jacobian has rank {info.rank} < {n_err} errors: some errors cannot be corrected "
+            f"with these parameters (scaled singular values {np.array2string(info.singular_values, precision=3)})"
+        )
+    else:
+        message = f"converged: residual norm {residual_norm:.3g} ({solver_message})"
+    usable = status != "rank_deficient" and np.all(np.isfinite(J))
+    C = (
+        correction_matrix(J, p_scales, e_scales, kind=correction, tsvd_rtol=tsvd_rtol, damping=damping)
+        if usable
+        else np.full((J.shape[1], J.shape[0]), np.nan)
+    )
+    duration = _program_duration(maneuver, p0)
+    result_design = Design(
+        maneuver=maneuver,
+        p_guess=guess,
+        p_nominal=p0,
+        residual=e0,
+        residual_norm=residual_norm,
+        converged=converged and status == "converged",
+        status=status,
+        message=message,
+        jacobian=J,
+        correction=C,
+        correction_kind=correction,
+        singular_values=info.singular_values,
+        condition_number=info.condition_number,
+        rank=info.rank,
+        duration_s=duration,
+        compute_s=time.perf_counter() - start,
+        evaluations=evaluations,
+    )
+    if raise_on_failure and not result_design.converged:
+        raise DesignFailed(f"{maneuver.name}: design failed: {message}", result_design)
+    return result_design
+
+
+def _pinned(maneuver: Maneuver, p: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> list[str]:
+    out = []
+    for spec, value, lo, hi in zip(maneuver.parameters, p, lower, upper, strict=True):
+        tol = 1e-6 * spec.scale
+        if math.isfinite(lo) and value <= lo + tol:
+            out.append(f"{spec.name} ({spec.description}) = {value:.4g} {spec.unit} at its lower limit {lo:.4g}")
+        elif math.isfinite(hi) and value >= hi - tol:
+            out.append(f"{spec.name} ({spec.description}) = {value:.4g} {spec.unit} at its upper limit {hi:.4g}")
+    return out
+
+
+def _program_duration(maneuver: Maneuver, p: np.ndarray) -> float:
+    try:
+        program = maneuver.program(p)
+    except ValueError:
+        return float("nan")
+    return float(getattr(program, "duration_s", float("nan")))

@@ -1,0 +1,468 @@
+"""The simulated flying-machine arena and its supervisor (Sect. 10.2, Fig. 8).
+
+One :meth:`Arena.fly` is one iteration of Fig. 8: settle at the start under the
+cascaded PD controller (commands over the lossy 70 Hz link), upload the program
+with acknowledgement and retries, send exactly one trigger, keep sending
+placeholder hover commands, detect a lost trigger by timeout, estimate the
+final state at the estimated maneuver end from motion-capture samples alone,
+then recover and return to the start. All randomness comes from one seeded
+generator, so a seed reproduces every trial bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...dynamics import N_STATE, controller_vector, hover_state, plant_vector
+from ...program import Program
+from ...vehicle import VehicleConfig, VehicleParams
+from ..base import Trial
+from .kernel import MOCAP_COLUMNS, advance, pd_command
+from .params import ArenaParams
+
+__all__ = ["Arena"]
+
+
+@dataclass
+class _Log:
+    """Motion-capture samples of the current trial (grown in place)."""
+
+    rows: np.ndarray
+    count: int = 0
+
+    def view(self) -> np.ndarray:
+        return self.rows[: self.count]
+
+
+class Arena:
+    """A simulated testbed: a true vehicle unlike the nominal model, sensors, links and a supervisor.
+
+    Parameters
+    ----------
+    config : the *nominal* vehicle (the design model); the onboard controller inverts with it.
+    params : the arena's effects (defaults: a realistic Hummingbird in a mocap arena).
+    seed : seeds the arena's single random generator.
+    """
+
+    name = "arena"
+
+    def __init__(self, config: VehicleConfig, params: ArenaParams | None = None, *, seed: int = 0) -> None:
+        self.config = config
+        self.params = params or ArenaParams()
+        self.seed = seed
+        self.rng = np.random.default_rng(seed)
+        self.trials_flown = 0
+        self.capacity = 1.0
+        p = self.params
+        self.tick_s = 1.0 / p.onboard.rate_hz
+        self.mocap_every = max(1, round(p.onboard.rate_hz / p.motion_capture.rate_hz))
+        self.mocap_delay_ticks = round(p.motion_capture.latency_s / self.tick_s)
+        self.link_delay_ticks = math.ceil(p.links.command_latency_s / self.tick_s - 1e-9)
+        self.true_vehicle = self._true_vehicle_params()
+        self.ctrl = controller_vector(config.controller)
+        self.sensor = np.zeros(6)
+        self.sensor[:3] = p.onboard.gyro_scale_error
+        self.sensor[3:] = p.onboard.gyro_bias_rad_s
+        self.start_m = np.zeros(3)
+        self.tick = 0
+        self.x = hover_state(self.true_vehicle)
+        self.gyro_prev = np.zeros(3)
+        self.radio_cmd = np.array([config.vehicle.gravity_m_s2, 0.0, 0.0, 0.0])
+        self.integral = np.zeros(3)
+        self.plant = self._plant_vector()
+        self._empty_program = Program(switches=(), duration_s=1.0).compile()
+
+    # ---------------------------------------------------------------- set-up
+    def _true_vehicle_params(self) -> VehicleParams:
+        nominal = self.config.vehicle
+        tv = self.params.true_vehicle
+        if not tv.enabled:
+            return nominal
+        return VehicleParams(
+            mass_kg=nominal.mass_kg * tv.mass_scale,
+            arm_length_m=nominal.arm_length_m,
+            inertia_xx_kg_m2=nominal.inertia_xx_kg_m2 * tv.inertia_scale[0],
+            inertia_yy_kg_m2=nominal.inertia_yy_kg_m2 * tv.inertia_scale[1],
+            inertia_zz_kg_m2=nominal.inertia_zz_kg_m2 * tv.inertia_scale[2],
+            motor_rate_up_per_s=tv.motor_rate_up_per_s,
+            motor_rate_down_per_s=tv.motor_rate_down_per_s,
+            rotor_thrust_min_n=nominal.rotor_thrust_min_n,
+            rotor_thrust_max_n=nominal.rotor_thrust_max_n,
+            collective_reduced_min_m_s2=nominal.collective_reduced_min_m_s2 / tv.mass_scale,
+            collective_reduced_max_m_s2=nominal.collective_reduced_max_m_s2 / tv.mass_scale,
+            drag_constant_m=nominal.drag_constant_m * tv.drag_constant_scale,
+            gravity_m_s2=nominal.gravity_m_s2,
+        )
+
+    def _plant_vector(self) -> np.ndarray:
+        """The true plant for the next trial: constants, drift, per-trial gusts and jitter."""
+        p = self.params
+        tv = p.true_vehicle
+        gains = np.array(tv.thrust_gains if tv.enabled else (1.0, 1.0, 1.0, 1.0), dtype=float) * self.capacity
+        kwargs: dict = {}
+        if p.disturbances.enabled:
+            d = p.disturbances
+            gains = gains * (1.0 + d.thrust_gain_jitter * self.rng.standard_normal(4))
+            kwargs.update(
+                wind_m_s=tuple(d.wind_std_m_s * self.rng.standard_normal(3)),
+                gust_amplitude_m_s=tuple(d.gust_amplitude_std_m_s * self.rng.standard_normal(3)),
+                gust_frequency_hz=d.gust_frequency_hz,
+                gust_phase_rad=float(self.rng.uniform(0.0, 2.0 * math.pi)),
+            )
+        if p.aerodynamics.enabled:
+            a = p.aerodynamics
+            kwargs.update(
+                body_drag_n_s2_m2=a.body_drag_n_s2_m2,
+                rotor_drag_s_m=a.rotor_drag_s_m,
+                rotational_damping_n_m_s=a.rotational_damping_n_m_s,
+            )
+        com = tv.com_offset_m if tv.enabled else (0.0, 0.0, 0.0)
+        vec = plant_vector(self.true_vehicle, com_offset_m=com, thrust_gains=tuple(gains), **kwargs)
+        if p.aerodynamics.enabled and not p.disturbances.enabled:
+            vec[30:38] = 0.0
+        return vec
+
+    def reset_drift(self) -> None:
+        """A fresh battery and propellers: thrust capacity back to 100 %."""
+        self.capacity = 1.0
+
+    # ------------------------------------------------------------ simulation
+    def _mocap_noise(self, rows: int) -> np.ndarray:
+        mc = self.params.motion_capture
+        noise = np.empty((rows, 6))
+        noise[:, :3] = mc.position_noise_m * self.rng.standard_normal((rows, 3)) if mc.position_noise_m else 0.0
+        noise[:, 3:] = mc.attitude_noise_rad * self.rng.standard_normal((rows, 3)) if mc.attitude_noise_rad else 0.0
+        return noise
+
+    def _run(self, n_ticks: int, log: _Log, program=None, man_start_tick: int = -1) -> bool:
+        """Advance the vehicle; returns False if the state went non-finite."""
+        if n_ticks <= 0:
+            return True
+        first = self.tick
+        rows = (first + n_ticks - 1) // self.mocap_every - (first - 1) // self.mocap_every
+        if log.count + rows > log.rows.shape[0]:
+            grown = np.empty((max(2 * log.rows.shape[0], log.count + rows), MOCAP_COLUMNS))
+            grown[: log.count] = log.rows[: log.count]
+            log.rows = grown
+        noise = self._mocap_noise(rows)
+        compiled = program if program is not None else self._empty_program
+        nseg = len(compiled.breakpoints_s) - 1
+        duration = compiled.duration_s if program is not None else 0.0
+        written, bad = advance(
+            self.x, self.gyro_prev, first, n_ticks, self.tick_s, self.plant, self.ctrl, self.sensor,
+            self.params.onboard.gyro_latency_samples, self.radio_cmd, compiled.breakpoints_s,
+            compiled.coefficients, nseg, man_start_tick, duration, self.mocap_every, noise,
+            log.rows[log.count :],
+        )
+        log.count += written
+        self.tick += n_ticks
+        return bad == 0
+
+    def _estimate(self, log: _Log, now_tick: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Position, velocity (line fit over ~40 ms) and attitude available to the supervisor now."""
+        available_time = (now_tick - self.mocap_delay_ticks) * self.tick_s
+        rows = log.view()
+        if rows.shape[0] == 0:
+            return None
+        last = int(np.searchsorted(rows[:, 0], available_time + 1e-12, side="right"))
+        if last == 0:
+            return None
+        window = rows[max(0, last - 20) : last]
+        t = window[:, 0] - window[-1, 0]
+        pos = window[-1, 1:4]
+        if window.shape[0] >= 3:
+            tc = t - t.mean()
+            vel = (tc[:, None] * (window[:, 1:4] - window[:, 1:4].mean(axis=0))).sum(axis=0) / (tc @ tc)
+        else:
+            vel = np.zeros(3)
+        return pos, vel, window[-1, 4:8]
+
+    def _supervise(self, n_ticks: int, log: _Log, target: np.ndarray, *, closed_loop: bool = True,
+                   program=None, man_start_tick: int = -1) -> str | None:
+        """Fly ``n_ticks`` with radio commands every link period; returns a failure message or None."""
+        p = self.params
+        period = 1.0 / p.links.command_rate_hz
+        end_tick = self.tick + n_ticks
+        gains = np.array([p.supervisor.position_gain_per_s2, p.supervisor.velocity_gain_per_s,
+                          p.supervisor.attitude_gain_per_s, p.supervisor.yaw_gain_per_s, 3.0])
+        v = self.config.vehicle
+        limits = np.array([v.collective_reduced_min_m_s2, v.collective_reduced_max_m_s2, 0.6 * v.gravity_m_s2,
+                           8.0, v.gravity_m_s2])
+        hover_cmd = np.array([v.gravity_m_s2, 0.0, 0.0, 0.0])
+        cmd = np.empty(4)
+        while self.tick < end_tick:
+            now = self.tick * self.tick_s
+            next_send = (math.floor(now / period + 1e-9) + 1) * period
+            send_tick = min(end_tick, math.ceil(next_send / self.tick_s - 1e-9))
+            if closed_loop:
+                est = self._estimate(log, self.tick)
+                if est is None:
+                    cmd[:] = hover_cmd
+                else:
+                    pd_command(est[0], est[1], est[2], target, self.integral, gains, limits, period, cmd)
+            else:
+                cmd[:] = hover_cmd
+            delivered = self.rng.random() >= p.links.command_drop_probability
+            arrival = self.tick + self.link_delay_ticks
+            if not self._run(min(arrival, send_tick) - self.tick, log, program, man_start_tick):
+                return "non-finite vehicle state"
+            if delivered and arrival <= send_tick:
+                self.radio_cmd = cmd.copy()
+            if not self._run(send_tick - self.tick, log, program, man_start_tick):
+                return "non-finite vehicle state"
+            crash = self._volume_violation(log)
+            if crash:
+                return crash
+        return None
+
+    def _volume_violation(self, log: _Log) -> str | None:
+        rows = log.view()
+        if rows.shape[0] == 0:
+            return None
+        vol = self.params.volume
+        recent = rows[-8:]
+        for axis, (lo, hi), name in ((0, vol.x_m, "x"), (1, vol.y_m, "y"), (2, vol.z_m, "z")):
+            rel = recent[:, 1 + axis] - self.start_m[axis]
+            bad = np.nonzero((rel < lo) | (rel > hi))[0]
+            if bad.size:
+                r = recent[bad[0]]
+                where = "the floor" if (axis == 2 and rel[bad[0]] < lo) else f"the {name} limits [{lo:g}, {hi:g}] m"
+                return f"left the arena volume at t = {r[0]:.3f} s: {name} = {rel[bad[0]]:+.3f} m beyond {where}"
+        return None
+
+    def _settle(self, log: _Log) -> str | None:
+        """Fly to the start until within tolerance for the hold time; message on timeout."""
+        s = self.params.supervisor
+        hold_ticks = max(1, round(s.settle_hold_s / self.tick_s))
+        deadline = self.tick + round(s.settle_timeout_s / self.tick_s)
+        calm = 0
+        step = max(1, round(1.0 / self.params.links.command_rate_hz / self.tick_s))
+        while self.tick < deadline:
+            failure = self._supervise(step, log, self.start_m)
+            if failure:
+                return failure
+            est = self._estimate(log, self.tick)
+            if est is not None and np.linalg.norm(est[0] - self.start_m) < s.settle_position_m and \
+                    np.linalg.norm(est[1]) < s.settle_velocity_m_s:
+                calm += step
+                if calm >= hold_ticks:
+                    return None
+            else:
+                calm = 0
+        return f"did not settle at the start within {s.settle_timeout_s:g} s"
+
+    def _upload(self, program: Program, log: _Log) -> tuple[str | None, int]:
+        """Send the switch list in packets, each acknowledged; retries cost a timeout each."""
+        links = self.params.links
+        packets = max(1, math.ceil(len(program.switches) / links.upload_switches_per_packet))
+        attempts_total = 0
+        for packet in range(packets):
+            for attempt in range(1, links.upload_max_attempts + 1):
+                attempts_total += 1
+                sent = self.rng.random() >= links.upload_drop_probability
+                acked = sent and self.rng.random() >= links.upload_drop_probability
+                wait = 0.004 if acked else links.upload_timeout_s
+                failure = self._supervise(max(1, round(wait / self.tick_s)), log, self.start_m)
+                if failure:
+                    return failure, attempts_total
+                if acked:
+                    break
+            else:
+                return (f"upload of packet {packet + 1}/{packets} not acknowledged after "
+                        f"{links.upload_max_attempts} attempts"), attempts_total
+        return None, attempts_total
+
+    # ----------------------------------------------------------------- trial
+    def fly(self, program: Program) -> Trial:
+        """One supervised trial of ``program`` (Fig. 8)."""
+        p = self.params
+        nan_state = np.full(N_STATE, np.nan)
+        log = _Log(np.empty((4096, MOCAP_COLUMNS)))
+        self.plant = self._plant_vector()
+        failure = self._settle(log)
+        if failure:
+            return self._abort("crashed" if "volume" in failure else "aborted", failure, log)
+        failure, attempts = self._upload(program, log)
+        if failure:
+            return self._abort("crashed" if "volume" in failure else "aborted", failure, log)
+        compiled = program.compile()
+        duration = compiled.duration_s
+        # the trigger: exactly one packet on the command link, sent at the next link period
+        period = 1.0 / p.links.command_rate_hz
+        send_tick = math.ceil((math.floor(self.tick * self.tick_s / period + 1e-9) + 1) * period / self.tick_s - 1e-9)
+        failure = self._supervise(send_tick - self.tick, log, self.start_m)
+        if failure:
+            return self._abort("crashed" if "volume" in failure else "aborted", failure, log)
+        triggered = self.rng.random() >= p.links.command_drop_probability
+        start_tick = self.tick + self.link_delay_ticks  # measured link delay: the supervisor knows it
+        man_start = start_tick if triggered else -1
+        self.radio_cmd = np.array([self.config.vehicle.gravity_m_s2, 0.0, 0.0, 0.0])
+        start_time = start_tick * self.tick_s
+        end_tick = start_tick + math.ceil(duration / self.tick_s - 1e-9)
+        self.trials_flown += 1
+        # placeholder hover commands until the trigger check
+        check_tick = start_tick + round(min(p.supervisor.trigger_timeout_s, 0.5 * duration) / self.tick_s)
+        failure = self._supervise(check_tick - self.tick, log, self.start_m, closed_loop=False,
+                                  program=compiled, man_start_tick=man_start)
+        if failure:
+            return self._abort("crashed" if "volume" in failure else "aborted", failure, log, start_time)
+        if not self._maneuver_started(log, program, start_time, check_tick):
+            failure = self._supervise(round(p.supervisor.return_time_s / self.tick_s), log, self.start_m)
+            return Trial("no_trigger", "trigger lost: no maneuver motion within the timeout; no correction",
+                         nan_state, np.empty(0), np.empty((0, N_STATE)), nan_state.copy(),
+                         {"upload_attempts": attempts})
+        # the rest of the maneuver (placeholder commands are ignored by the vehicle)
+        margin = math.ceil(0.015 / self.tick_s)
+        failure = self._supervise(end_tick + margin - self.tick, log, self.start_m, closed_loop=False,
+                                  program=compiled, man_start_tick=man_start)
+        if failure:
+            return self._abort("crashed" if "volume" in failure else "aborted", failure, log, start_time)
+        # recover and return under closed-loop control
+        failure = self._supervise(round(p.supervisor.return_time_s / self.tick_s), log, self.start_m,
+                                  program=compiled, man_start_tick=man_start)
+        if p.drift.enabled:
+            self.capacity *= 1.0 - p.drift.thrust_loss_per_trial
+        if failure:
+            return self._abort("crashed" if "volume" in failure else "aborted", failure, log, start_time)
+        end_time = start_time + duration
+        times, states = _measured_states(log.view(), start_time, end_time, self.start_m)
+        final = _estimate_final_state(log.view(), start_time, end_time, self.start_m)
+        start_state = _estimate_final_state(log.view(), start_time - 0.06, start_time, self.start_m)
+        if final is None or not (np.all(np.isfinite(final[:13])) and np.all(np.isfinite(final[17:]))):
+            return Trial("aborted", "too few motion-capture samples to estimate the final state", nan_state,
+                         times, states, start_state if start_state is not None else nan_state.copy())
+        return Trial("ok", f"maneuver flown ({attempts} upload packet attempts)", final, times, states,
+                     start_state if start_state is not None else nan_state.copy(),
+                     {"upload_attempts": attempts, "start_time_s": start_time})
+
+    def _abort(self, status, message: str, log: _Log, start_time: float | None = None) -> Trial:
+        """Report a failed trial and put the vehicle back at the start (picked up, restarted)."""
+        nan_state = np.full(N_STATE, np.nan)
+        if start_time is not None:
+            times, states = _measured_states(log.view(), start_time, self.tick * self.tick_s, self.start_m)
+        else:
+            times, states = np.empty(0), np.empty((0, N_STATE))
+        self.x = hover_state(self.true_vehicle, tuple(self.start_m))
+        self.gyro_prev[:] = 0.0
+        self.integral[:] = 0.0
+        self.radio_cmd = np.array([self.config.vehicle.gravity_m_s2, 0.0, 0.0, 0.0])
+        return Trial(status, message, nan_state, times, states, nan_state.copy())
+
+    def _maneuver_started(self, log: _Log, program: Program, start_time: float, check_tick: int) -> bool:
+        """Compare measured motion with the nominal model's prediction at the check time."""
+        from ...simulate import simulate
+
+        t_check = check_tick * self.tick_s - start_time
+        nominal = simulate(program, self.config, record=True)
+        k = int(np.searchsorted(nominal.times_s, t_check))
+        k = min(k, len(nominal.times_s) - 1)
+        predicted = _pose_deviation(nominal.states[k, 0:3], nominal.states[k, 6:10], np.zeros(3))
+        rows = log.view()
+        available = rows[rows[:, 0] <= check_tick * self.tick_s - self.mocap_delay_ticks * self.tick_s]
+        before = rows[rows[:, 0] <= start_time]
+        if available.shape[0] == 0 or before.shape[0] == 0:
+            return True
+        ref = before[-1]
+        measured = _pose_deviation(available[-1, 1:4] - ref[1:4], available[-1, 4:8], np.zeros(3))
+        if predicted < 1e-3:
+            return True  # a program that does not move cannot be told apart from a lost trigger
+        return measured > 0.5 * predicted
+
+
+def _pose_deviation(position: np.ndarray, quat: np.ndarray, origin: np.ndarray) -> float:
+    """Position change [m] plus attitude change [rad] × 0.2 m (a pose distance)."""
+    angle = 2.0 * math.acos(min(1.0, abs(float(quat[0]))))
+    return float(np.linalg.norm(position - origin)) + 0.2 * angle
+
+
+def _relative_rotation_angles(quats: np.ndarray) -> np.ndarray:
+    """Accumulated body-axis rotation between consecutive attitude samples, (M, 3) [rad]."""
+    from ...dynamics import QUAT, rotation_matrices
+
+    states = np.zeros((quats.shape[0], N_STATE))
+    states[:, QUAT] = quats
+    R = rotation_matrices(states)
+    dR = np.einsum("kji,kjl->kil", R[:-1], R[1:])  # R_kᵀ R_{k+1}
+    cos = np.clip((np.trace(dR, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+    angle = np.arccos(cos)
+    axis = np.stack([dR[:, 2, 1] - dR[:, 1, 2], dR[:, 0, 2] - dR[:, 2, 0], dR[:, 1, 0] - dR[:, 0, 1]], axis=1)
+    sin = np.sin(angle)
+    scale = np.where(sin > 1e-9, angle / (2.0 * np.where(sin > 1e-9, sin, 1.0)), 0.5)
+    rotvec = axis * scale[:, None]
+    return np.vstack([np.zeros(3), np.cumsum(rotvec, axis=0)])
+
+
+def _measured_states(rows: np.ndarray, t0: float, t1: float, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Motion-capture samples in [t0, t1] as states (velocity by central differences)."""
+    sel = rows[(rows[:, 0] >= t0 - 1e-9) & (rows[:, 0] <= t1 + 1e-9)]
+    states = np.zeros((sel.shape[0], N_STATE))
+    if sel.shape[0] == 0:
+        return np.empty(0), states
+    states[:, 0:3] = sel[:, 1:4] - start
+    states[:, 6:10] = sel[:, 4:8]
+    if sel.shape[0] > 2:
+        states[:, 3:6] = np.gradient(sel[:, 1:4], sel[:, 0], axis=0)
+    states[:, 17:20] = _relative_rotation_angles(sel[:, 4:8])
+    states[:, 13:17] = np.nan  # motor thrusts are not measured
+    states[:, 10:13] = np.nan  # nor body rates
+    return sel[:, 0] - t0, states
+
+
+def _estimate_final_state(rows: np.ndarray, t_start: float, t_end: float, start: np.ndarray) -> np.ndarray | None:
+    """The state at ``t_end`` from mocap samples only.
+
+    Position and velocity: quadratic least-squares fit over [t_end − 40 ms, t_end + 10 ms].
+    Attitude: the sample nearest ``t_end`` rotated by the fitted body rate; whole turns
+    counted by accumulating relative rotations from ``t_start``.
+    """
+    from ...dynamics import euler_zyx
+
+    window = rows[(rows[:, 0] >= t_end - 0.040 - 1e-9) & (rows[:, 0] <= t_end + 0.010 + 1e-9)]
+    if window.shape[0] < 5:
+        return None
+    t = window[:, 0] - t_end
+    A = np.stack([np.ones_like(t), t, t * t], axis=1)
+    coef, *_ = np.linalg.lstsq(A, window[:, 1:4], rcond=None)
+    state = np.zeros(N_STATE)
+    state[0:3] = coef[0] - start
+    state[3:6] = coef[1]
+    track = rows[(rows[:, 0] >= t_start - 1e-9) & (rows[:, 0] <= t_end + 0.010 + 1e-9)]
+    turns = _relative_rotation_angles(track[:, 4:8])
+    # attitude at t_end: fit each accumulated body angle linearly over the window and apply the
+    # residual rotation to the nearest sample
+    k = int(np.argmin(np.abs(track[:, 0] - t_end)))
+    in_window = track[:, 0] >= t_end - 0.040 - 1e-9
+    tw = track[in_window, 0] - t_end
+    Aw = np.stack([np.ones_like(tw), tw], axis=1)
+    angle_fit, *_ = np.linalg.lstsq(Aw, turns[in_window], rcond=None)
+    rates = angle_fit[1]
+    dt = t_end - track[k, 0]
+    q = _rotate_quaternion(track[k, 4:8], rates * dt)
+    state[6:10] = q
+    state[10:13] = rates
+    state[13:17] = np.nan
+    integral = turns[k] + rates * dt
+    state[17:20] = integral
+    euler = euler_zyx(state)
+    state[17:20] = euler + 2.0 * np.pi * np.round((integral - euler) / (2.0 * np.pi))
+    return state
+
+
+def _rotate_quaternion(q: np.ndarray, rotvec_body: np.ndarray) -> np.ndarray:
+    angle = float(np.linalg.norm(rotvec_body))
+    if angle < 1e-12:
+        return q / np.linalg.norm(q)
+    axis = rotvec_body / angle
+    dw = math.cos(angle / 2)
+    dx, dy, dz = axis * math.sin(angle / 2)
+    w, x, y, z = q
+    out = np.array([
+        w * dw - x * dx - y * dy - z * dz,
+        w * dx + x * dw + y * dz - z * dy,
+        w * dy - x * dz + y * dw + z * dx,
+        w * dz + x * dy - y * dx + z * dw,
+    ])
+    return out / np.linalg.norm(out)

@@ -1,0 +1,174 @@
+"""Compiled pieces of the arena: the vehicle's onboard loop and the supervisor's PD controller.
+
+``advance`` runs the physical vehicle tick by tick at the onboard rate: the
+command generator (when a maneuver is running) or the last radio command (when
+not), the rate controller with gyro latency, scale error and bias, zero-order
+hold of motor commands, RK4 of the true plant, and motion-capture sampling with
+pre-drawn noise. No randomness inside: every noise sample comes from the
+arena's seeded generator.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from ...dynamics import controller_thrusts
+from ...simulate import rk4_plant_step
+
+__all__ = ["advance", "pd_command"]
+
+# mocap record columns: t, x, y, z, qw, qx, qy, qz
+MOCAP_COLUMNS = 8
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def advance(x, gyro_prev, tick0, n_ticks, tick_s, plant, ctrl, sensor, latency, radio_cmd,
+            bp, coeffs, nseg, man_start_tick, duration_s, mocap_every, mocap_noise, mocap_out):  # pragma: no cover
+    """Advance the true vehicle ``n_ticks`` onboard ticks from global tick ``tick0``.
+
+    Returns (number of mocap rows written, 0 if finite else 1).
+    """
+    n = x.shape[0]
+    k1 = np.empty(n)
+    k2 = np.empty(n)
+    k3 = np.empty(n)
+    k4 = np.empty(n)
+    tmp = np.empty(n)
+    cmd = np.empty(4)
+    ft = np.empty(4)
+    rows = 0
+    seg = 0
+    for i in range(n_ticks):
+        tick = tick0 + i
+        t = tick * tick_s
+        if tick % mocap_every == 0 and rows < mocap_out.shape[0]:
+            _mocap(x, t, mocap_noise[rows], mocap_out[rows])
+            rows += 1
+        running = False
+        if man_start_tick >= 0 and tick >= man_start_tick:
+            tau = (tick - man_start_tick) * tick_s
+            if tau < duration_s - 1e-12:
+                running = True
+                while seg < nseg - 1 and bp[seg + 1] <= tau + 1e-12:
+                    seg += 1
+                for ch in range(4):
+                    cmd[ch] = coeffs[seg, ch, 0] + (tau - bp[seg]) * (
+                        coeffs[seg, ch, 1] + (tau - bp[seg]) * coeffs[seg, ch, 2])
+        if not running:
+            for ch in range(4):
+                cmd[ch] = radio_cmd[ch]
+        gp = (1.0 + sensor[0]) * x[10] + sensor[3]
+        gq = (1.0 + sensor[1]) * x[11] + sensor[4]
+        gr = (1.0 + sensor[2]) * x[12] + sensor[5]
+        if latency > 0:
+            controller_thrusts(cmd, gyro_prev[0], gyro_prev[1], gyro_prev[2], ctrl, ft)
+        else:
+            controller_thrusts(cmd, gp, gq, gr, ctrl, ft)
+        gyro_prev[0] = gp
+        gyro_prev[1] = gq
+        gyro_prev[2] = gr
+        rk4_plant_step(t, x, ft, plant, tick_s, k1, k2, k3, k4, tmp)
+        for j in range(n):
+            if not math.isfinite(x[j]):
+                return rows, 1
+    return rows, 0
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _mocap(x, t, noise, out):  # pragma: no cover - compiled
+    out[0] = t
+    out[1] = x[0] + noise[0]
+    out[2] = x[1] + noise[1]
+    out[3] = x[2] + noise[2]
+    # attitude noise: q ⊗ exp(δ/2), δ small rotation vector in the body frame
+    qw = x[6]
+    qx = x[7]
+    qy = x[8]
+    qz = x[9]
+    dx = 0.5 * noise[3]
+    dy = 0.5 * noise[4]
+    dz = 0.5 * noise[5]
+    dw = math.sqrt(max(0.0, 1.0 - dx * dx - dy * dy - dz * dz))
+    out[4] = qw * dw - qx * dx - qy * dy - qz * dz
+    out[5] = qw * dx + qx * dw + qy * dz - qz * dy
+    out[6] = qw * dy - qx * dz + qy * dw + qz * dx
+    out[7] = qw * dz + qx * dy - qy * dx + qz * dw
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def pd_command(pos, vel, quat, target, integral, gains, limits, dt, out):  # pragma: no cover - compiled
+    """Cascaded PD(+I) hover controller: position → acceleration → attitude → body rates.
+
+    gains = (k_p [1/s²], k_d [1/s], k_att [1/s], k_yaw [1/s], k_i [1/s³]);
+    limits = (collective min, max [m/s²], max tilt acceleration [m/s²], max rate [rad/s], g).
+    Writes (collective, p̂, q̂, r̂) into ``out``; updates ``integral`` (anti-windup clamp).
+    """
+    kp = gains[0]
+    kd = gains[1]
+    katt = gains[2]
+    kyaw = gains[3]
+    ki = gains[4]
+    g = limits[4]
+    a = np.empty(3)
+    for i in range(3):
+        err = target[i] - pos[i]
+        if abs(err) < 0.1:  # conditional integration: trim only near the target
+            integral[i] = min(max(integral[i] + err * dt, -0.3), 0.3)
+        a[i] = kp * err - kd * vel[i] + ki * integral[i]
+    horiz = math.sqrt(a[0] * a[0] + a[1] * a[1])
+    if horiz > limits[2]:
+        a[0] *= limits[2] / horiz
+        a[1] *= limits[2] / horiz
+    a[2] += g
+    a[2] = max(a[2], 0.3 * g)
+    norm = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+    b3x = a[0] / norm
+    b3y = a[1] / norm
+    b3z = a[2] / norm
+    # desired heading: body x along world x projected (yaw 0)
+    b2x = b3y * 0.0 - b3z * 0.0
+    b2y = b3z * 1.0 - b3x * 0.0
+    b2z = b3x * 0.0 - b3y * 1.0
+    n2 = math.sqrt(b2x * b2x + b2y * b2y + b2z * b2z)
+    b2x /= n2
+    b2y /= n2
+    b2z /= n2
+    b1x = b2y * b3z - b2z * b3y
+    b1y = b2z * b3x - b2x * b3z
+    b1z = b2x * b3y - b2y * b3x
+    qw = quat[0]
+    qx = quat[1]
+    qy = quat[2]
+    qz = quat[3]
+    R = np.empty((3, 3))
+    R[0, 0] = 1 - 2 * (qy * qy + qz * qz)
+    R[0, 1] = 2 * (qx * qy - qw * qz)
+    R[0, 2] = 2 * (qx * qz + qw * qy)
+    R[1, 0] = 2 * (qx * qy + qw * qz)
+    R[1, 1] = 1 - 2 * (qx * qx + qz * qz)
+    R[1, 2] = 2 * (qy * qz - qw * qx)
+    R[2, 0] = 2 * (qx * qz - qw * qy)
+    R[2, 1] = 2 * (qy * qz + qw * qx)
+    R[2, 2] = 1 - 2 * (qx * qx + qy * qy)
+    Rd = np.empty((3, 3))
+    Rd[0, 0] = b1x
+    Rd[1, 0] = b1y
+    Rd[2, 0] = b1z
+    Rd[0, 1] = b2x
+    Rd[1, 1] = b2y
+    Rd[2, 1] = b2z
+    Rd[0, 2] = b3x
+    Rd[1, 2] = b3y
+    Rd[2, 2] = b3z
+    M = Rd.T @ R - R.T @ Rd
+    ex = 0.5 * M[2, 1]
+    ey = 0.5 * M[0, 2]
+    ez = 0.5 * M[1, 0]
+    collective = a[0] * R[0, 2] + a[1] * R[1, 2] + a[2] * R[2, 2]
+    out[0] = min(max(collective, limits[0]), limits[1])
+    out[1] = min(max(-katt * ex, -limits[3]), limits[3])
+    out[2] = min(max(-katt * ey, -limits[3]), limits[3])
+    out[3] = min(max(-kyaw * ez, -limits[3]), limits[3])

@@ -1,0 +1,254 @@
+"""Arena configuration: every way the simulated testbed differs from the nominal model.
+
+Each effect has its own table in the arena TOML file and an ``enabled`` switch;
+:meth:`ArenaParams.ideal` turns everything off (then the arena flies the
+nominal model, sampled at 800 Hz, with perfect sensing). Sources for the
+aerodynamic magnitudes are listed in ``docs/plants.md``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import tomli_w
+
+from ...config import ConfigError, check_range, dataclass_from_table, dataclass_to_table, read_toml
+
+__all__ = [
+    "Aerodynamics",
+    "ArenaParams",
+    "Disturbances",
+    "Drift",
+    "Links",
+    "MotionCapture",
+    "Onboard",
+    "Supervisor",
+    "TrueVehicle",
+    "Volume",
+    "load_arena",
+    "save_arena",
+]
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrueVehicle:
+    """The real vehicle's constants relative to the nominal Table 1 model."""
+
+    enabled: bool = True
+    mass_scale: float = 1.03
+    inertia_scale: tuple[float, float, float] = (1.12, 1.12, 1.20)
+    drag_constant_scale: float = 1.15
+    motor_rate_up_per_s: float = 70.0
+    motor_rate_down_per_s: float = 45.0
+    thrust_gains: tuple[float, float, float, float] = (1.00, 0.97, 1.02, 0.95)
+    com_offset_m: tuple[float, float, float] = (0.005, -0.003, 0.0)
+
+    def __post_init__(self) -> None:
+        check_range("mass_scale", self.mass_scale, low=0.5, high=2.0)
+        for i, s in enumerate(self.inertia_scale):
+            check_range(f"inertia_scale[{i}]", s, low=0.2, high=5.0)
+        check_range("drag_constant_scale", self.drag_constant_scale, low=0.2, high=5.0)
+        check_range("motor_rate_up_per_s", self.motor_rate_up_per_s, low=1.0, high=1e4, unit="1/s")
+        check_range("motor_rate_down_per_s", self.motor_rate_down_per_s, low=1.0, high=1e4, unit="1/s")
+        for i, g in enumerate(self.thrust_gains):
+            check_range(f"thrust_gains[{i}]", g, low=0.5, high=1.5)
+        for i, c in enumerate(self.com_offset_m):
+            check_range(f"com_offset_m[{i}]", c, low=-0.05, high=0.05, unit="m")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Aerodynamics:
+    """Body drag, rotor (induced) drag and rotational damping (see docs/plants.md for sources)."""
+
+    enabled: bool = True
+    body_drag_n_s2_m2: float = 5e-3
+    rotor_drag_s_m: float = 0.0455
+    rotational_damping_n_m_s: tuple[float, float, float] = (2.0e-3, 2.0e-3, 2.0e-3)
+
+    def __post_init__(self) -> None:
+        check_range("body_drag_n_s2_m2", self.body_drag_n_s2_m2, low=0.0, high=1.0, unit="N s²/m²")
+        check_range("rotor_drag_s_m", self.rotor_drag_s_m, low=0.0, high=1.0, unit="s/m")
+        for i, c in enumerate(self.rotational_damping_n_m_s):
+            check_range(f"rotational_damping_n_m_s[{i}]", c, low=0.0, high=0.1, unit="N m s/rad")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Onboard:
+    """The onboard loop: rate, gyro latency and gyro errors."""
+
+    rate_hz: float = 800.0
+    gyro_latency_samples: int = 1
+    gyro_scale_error: tuple[float, float, float] = (0.01, -0.008, 0.005)
+    gyro_bias_rad_s: tuple[float, float, float] = (0.004, -0.003, 0.002)
+
+    def __post_init__(self) -> None:
+        check_range("rate_hz", self.rate_hz, low=50.0, high=10000.0, unit="Hz")
+        check_range("gyro_latency_samples", self.gyro_latency_samples, low=0, high=10)
+        for i, s in enumerate(self.gyro_scale_error):
+            check_range(f"gyro_scale_error[{i}]", s, low=-0.2, high=0.2)
+        for i, b in enumerate(self.gyro_bias_rad_s):
+            check_range(f"gyro_bias_rad_s[{i}]", b, low=-0.5, high=0.5, unit="rad/s")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Drift:
+    """Slow loss of thrust capacity from trial to trial (battery, propeller wear)."""
+
+    enabled: bool = True
+    thrust_loss_per_trial: float = 2e-4
+
+    def __post_init__(self) -> None:
+        check_range("thrust_loss_per_trial", self.thrust_loss_per_trial, low=0.0, high=0.01)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Disturbances:
+    """Per-trial random effects: gusts and start-state error left by the hover controller."""
+
+    enabled: bool = True
+    wind_std_m_s: float = 0.05
+    gust_amplitude_std_m_s: float = 0.05
+    gust_frequency_hz: float = 1.5
+    thrust_gain_jitter: float = 0.003
+
+    def __post_init__(self) -> None:
+        check_range("wind_std_m_s", self.wind_std_m_s, low=0.0, high=5.0, unit="m/s")
+        check_range("gust_amplitude_std_m_s", self.gust_amplitude_std_m_s, low=0.0, high=5.0, unit="m/s")
+        check_range("gust_frequency_hz", self.gust_frequency_hz, low=0.0, high=50.0, unit="Hz")
+        check_range("thrust_gain_jitter", self.thrust_gain_jitter, low=0.0, high=0.1)
+
+
+@dataclass(frozen=True, kw_only=True)
+class MotionCapture:
+    """Motion capture: rate, noise and latency (Sect. 10.1: 200 Hz, mm and sub-degree)."""
+
+    rate_hz: float = 200.0
+    position_noise_m: float = 0.001
+    attitude_noise_rad: float = 0.004
+    latency_s: float = 0.005
+
+    def __post_init__(self) -> None:
+        check_range("rate_hz", self.rate_hz, low=10.0, high=2000.0, unit="Hz")
+        check_range("position_noise_m", self.position_noise_m, low=0.0, high=0.1, unit="m")
+        check_range("attitude_noise_rad", self.attitude_noise_rad, low=0.0, high=0.2, unit="rad")
+        check_range("latency_s", self.latency_s, low=0.0, high=0.2, unit="s")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Links:
+    """Radio links: 70 Hz command broadcast with drops; acknowledged program upload."""
+
+    command_rate_hz: float = 70.0
+    command_drop_probability: float = 0.05
+    command_latency_s: float = 0.010
+    upload_drop_probability: float = 0.05
+    upload_timeout_s: float = 0.02
+    upload_max_attempts: int = 10
+    upload_switches_per_packet: int = 8
+
+    def __post_init__(self) -> None:
+        check_range("command_rate_hz", self.command_rate_hz, low=5.0, high=1000.0, unit="Hz")
+        check_range("command_drop_probability", self.command_drop_probability, low=0.0, high=0.95)
+        check_range("command_latency_s", self.command_latency_s, low=0.0, high=0.2, unit="s")
+        check_range("upload_drop_probability", self.upload_drop_probability, low=0.0, high=0.95)
+        check_range("upload_timeout_s", self.upload_timeout_s, low=0.001, high=1.0, unit="s")
+        check_range("upload_max_attempts", self.upload_max_attempts, low=1, high=1000)
+        check_range("upload_switches_per_packet", self.upload_switches_per_packet, low=1, high=1000)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Volume:
+    """The flyable volume relative to the maneuver start (floor, walls, ceiling) [m]."""
+
+    x_m: tuple[float, float] = (-8.0, 8.0)
+    y_m: tuple[float, float] = (-8.0, 8.0)
+    z_m: tuple[float, float] = (-2.5, 6.0)
+
+    def __post_init__(self) -> None:
+        for name in ("x_m", "y_m", "z_m"):
+            lo, hi = getattr(self, name)
+            check_range(f"{name}[0]", lo, high=0.0, high_inclusive=False, unit="m")
+            check_range(f"{name}[1]", hi, low=0.0, low_inclusive=False, unit="m")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Supervisor:
+    """The offboard supervisor's cascaded PD hover controller and its timing rules."""
+
+    position_gain_per_s2: float = 6.0
+    velocity_gain_per_s: float = 4.0
+    attitude_gain_per_s: float = 10.0
+    yaw_gain_per_s: float = 4.0
+    settle_position_m: float = 0.02
+    settle_velocity_m_s: float = 0.05
+    settle_hold_s: float = 0.1
+    settle_timeout_s: float = 8.0
+    trigger_timeout_s: float = 0.15
+    return_time_s: float = 2.5
+
+    def __post_init__(self) -> None:
+        for name in ("position_gain_per_s2", "velocity_gain_per_s", "attitude_gain_per_s", "yaw_gain_per_s"):
+            check_range(name, getattr(self, name), low=0.0, high=1000.0, low_inclusive=False)
+        check_range("settle_position_m", self.settle_position_m, low=0.001, high=1.0, unit="m")
+        check_range("settle_velocity_m_s", self.settle_velocity_m_s, low=0.001, high=1.0, unit="m/s")
+        check_range("settle_hold_s", self.settle_hold_s, low=0.0, high=10.0, unit="s")
+        check_range("settle_timeout_s", self.settle_timeout_s, low=0.1, high=120.0, unit="s")
+        check_range("trigger_timeout_s", self.trigger_timeout_s, low=0.02, high=5.0, unit="s")
+        check_range("return_time_s", self.return_time_s, low=0.1, high=60.0, unit="s")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ArenaParams:
+    """Everything about the simulated flying-machine arena."""
+
+    true_vehicle: TrueVehicle = field(default_factory=TrueVehicle)
+    aerodynamics: Aerodynamics = field(default_factory=Aerodynamics)
+    onboard: Onboard = field(default_factory=Onboard)
+    drift: Drift = field(default_factory=Drift)
+    disturbances: Disturbances = field(default_factory=Disturbances)
+    motion_capture: MotionCapture = field(default_factory=MotionCapture)
+    links: Links = field(default_factory=Links)
+    volume: Volume = field(default_factory=Volume)
+    supervisor: Supervisor = field(default_factory=Supervisor)
+
+    @classmethod
+    def ideal(cls) -> ArenaParams:
+        """Every effect off and every noise zero: the arena flies the nominal model (800 Hz ZOH)."""
+        return cls(
+            true_vehicle=TrueVehicle(enabled=False),
+            aerodynamics=Aerodynamics(enabled=False),
+            onboard=Onboard(gyro_latency_samples=0, gyro_scale_error=(0.0, 0.0, 0.0), gyro_bias_rad_s=(0.0, 0.0, 0.0)),
+            drift=Drift(enabled=False),
+            disturbances=Disturbances(enabled=False),
+            motion_capture=MotionCapture(position_noise_m=0.0, attitude_noise_rad=0.0),
+            links=Links(command_drop_probability=0.0, upload_drop_probability=0.0),
+        )
+
+    def replace(self, **sections: Any) -> ArenaParams:
+        """Copy with whole sections or ``section__field=value`` changes."""
+        changes: dict[str, Any] = {}
+        for key, value in sections.items():
+            if "__" in key:
+                sec, fld = key.split("__", 1)
+                current = changes.get(sec, getattr(self, sec))
+                changes[sec] = dataclasses.replace(current, **{fld: value})
+            else:
+                changes[key] = value
+        return dataclasses.replace(self, **changes)
+
+
+def load_arena(path: str | Path) -> ArenaParams:
+    """Read an arena TOML file: one table per section, any field may be omitted (defaults)."""
+    path = Path(path)
+    data = read_toml(path)
+    return dataclass_from_table(ArenaParams, data, source=str(path))
+
+
+def save_arena(params: ArenaParams, path: str | Path) -> None:
+    Path(path).write_text(tomli_w.dumps(dataclass_to_table(params)))
+
+
+__all__ += ["ConfigError"]

@@ -80,8 +80,9 @@ _PRUNE_TOL_S = 1e-7  # arcs shorter than this are removed and the refinement re-
 _REFINE_T_TOL_S = 1e-9  # refined T may exceed the transcription's T by at most this
 _BOUNDARY_TOL = 1e-6
 _COARSE_INTERVALS = 30
-_GL_PANELS = 4
-_GL_NODES = 8
+_GL_PANELS = 4  # composite Gauss-Legendre on singular pieces: worst-case error
+_GL_NODES = 32  # ~1e-14 for admissible arcs up to 2 s (|omega| <= 10 rad/s)
+_RATE_CHECK_EVERY = 4  # rate bound imposed at every 4th quadrature node (verified densely later)
 
 
 # --------------------------------------------------------------------------
@@ -718,6 +719,70 @@ class _Structure:
         return self.lim.max_rate_rad_s if self.rate_kinds[j] == "max" else -self.lim.max_rate_rad_s
 
 
+@functools.lru_cache(maxsize=1)
+def _piece_functions() -> tuple[Any, Any]:
+    """CasADi functions propagating one piece (built once, reused by every refinement).
+
+    ``bang(x, f, w, d, g) -> x_end``: closed-form propagation with constant
+    thrust ``f`` and rate ``w`` over duration ``d``.
+
+    ``sing(x, f, d, g, v, t0, th_e, t_e) -> (x_end, Q)``: propagation on a
+    singular rate arc that follows the costate line ``v = (a, b, c, d)``,
+    entered at time ``t_e`` with attitude ``th_e``; the piece starts at
+    absolute time ``t0``.  ``Q`` holds ``|n(t)|^2`` at the rate-check points.
+    """
+    import casadi as ca
+
+    x = ca.SX.sym("x", 5)
+    f = ca.SX.sym("f")
+    w = ca.SX.sym("w")
+    d = ca.SX.sym("d")
+    g = ca.SX.sym("g")
+    y, z, vy, vz, th = x[0], x[1], x[2], x[3], x[4]
+    a = w * d
+    s1, c1, s2, c2 = _series_or_exact(ca, a)
+    sn, cs = ca.sin(th), ca.cos(th)
+    x_end = ca.vertcat(
+        y + vy * d + f * d * d * (sn * s2 + cs * c2),
+        z + vz * d + f * d * d * (cs * s2 - sn * c2) - 0.5 * g * d * d,
+        vy + f * d * (sn * s1 + cs * c1),
+        vz + f * d * (cs * s1 - sn * c1) - g * d,
+        th + a,
+    )
+    bang = ca.Function("bang", [x, f, w, d, g], [x_end])
+
+    v = ca.SX.sym("v", 4)
+    t0 = ca.SX.sym("t0")
+    th_e = ca.SX.sym("th_e")
+    t_e = ca.SX.sym("t_e")
+    nodes, weights = _gauss_nodes()
+    xn = ca.DM(nodes)
+    wn = ca.DM(weights)
+    pe, qe = v[0] + v[1] * t_e, v[2] + v[3] * t_e
+    tq = t0 + xn * d
+    p = v[0] + v[1] * tq
+    q = v[2] + v[3] * tq
+    r = ca.sqrt(pe * pe + qe * qe) * ca.sqrt(p * p + q * q)
+    sin_rel = (qe * p - pe * q) / r
+    cos_rel = (pe * p + qe * q) / r
+    se, ce = ca.sin(th_e), ca.cos(th_e)
+    ey = se * cos_rel + ce * sin_rel
+    ez = ce * cos_rel - se * sin_rel
+    wp = wn * (1 - xn)
+    p1, q1 = v[0] + v[1] * (t0 + d), v[2] + v[3] * (t0 + d)
+    x_end = ca.vertcat(
+        y + vy * d + f * d * d * ca.dot(wp, ey),
+        z + vz * d + f * d * d * ca.dot(wp, ez) - 0.5 * g * d * d,
+        vy + f * d * ca.dot(wn, ey),
+        vz + f * d * ca.dot(wn, ez) - g * d,
+        th_e + ca.atan2(qe * p1 - pe * q1, pe * p1 + qe * q1),
+    )
+    check = list(range(0, len(nodes), _RATE_CHECK_EVERY))
+    qq = ca.vertcat((p * p + q * q)[check], p1 * p1 + q1 * q1)
+    sing = ca.Function("sing", [x, f, d, g, v, t0, th_e, t_e], [x_end, qq])
+    return bang, sing
+
+
 def _refine_once(
     st: _Structure, target: tuple[float, float], final_angle: float
 ) -> tuple[bool, str, np.ndarray, np.ndarray | None]:
@@ -728,82 +793,46 @@ def _refine_once(
     ``n(t) = (a + b t, c + d t)``.  On a singular arc entered at ``t_e`` the
     attitude is ``theta(t) = theta(t_e) + angle(n(t_e) -> n(t))`` and
     ``n(t_e)`` must be parallel to ``(sin theta, cos theta)`` (junction
-    constraint); the rate ``(b c - a d) / |n(t)|^2`` is bounded at the
-    quadrature nodes.
+    constraint); the rate ``(b c - a d) / |n(t)|^2`` is bounded at a subset
+    of the quadrature nodes (and verified densely afterwards).
     """
     import casadi as ca
 
+    bang, sing = _piece_functions()
     lim = st.lim
     g = lim.gravity_m_s2
     wmax = lim.max_rate_rad_s
     npc = len(st.pieces)
-    d = ca.SX.sym("d", npc)
+    d = ca.MX.sym("d", npc)
     nl = 4 if st.has_singular else 0
-    v = ca.SX.sym("v", nl)
-    y = z = vy = vz = th = ca.SX(0.0)
-    t_abs = ca.SX(0.0)
-    entry: dict[int, tuple[Any, Any, Any]] = {}
-    nodes, weights = _gauss_nodes()
+    v = ca.MX.sym("v", nl)
+    xk = ca.MX.zeros(5)
+    t_abs = ca.MX(0.0)
+    entry: dict[int, tuple[Any, Any]] = {}
     eq: list[Any] = []
     ineq: list[Any] = []
     if st.has_singular:
-        a_, b_, c_, d_ = v[0], v[1], v[2], v[3]
-        k_rate = b_ * c_ - a_ * d_
-
-        def line(t: Any) -> tuple[Any, Any]:
-            return a_ + b_ * t, c_ + d_ * t
-
-        def rate_ok(t: Any) -> list[Any]:
-            p, q = line(t)
-            qq = p * p + q * q
-            return [wmax * qq - k_rate, wmax * qq + k_rate]
-
+        k_rate = v[1] * v[2] - v[0] * v[3]
     for k, (i, j) in enumerate(st.pieces):
         f = st.thrust_value(i)
-        dk = d[k]
         if st.rate_kinds[j] != "singular":
-            a = st.rate_value(j) * dk
-            s1, c1, s2, c2 = _series_or_exact(ca, a)
-            sn, cs = ca.sin(th), ca.cos(th)
-            y = y + vy * dk + f * dk * dk * (sn * s2 + cs * c2)
-            z = z + vz * dk + f * dk * dk * (cs * s2 - sn * c2) - 0.5 * g * dk * dk
-            vy = vy + f * dk * (sn * s1 + cs * c1)
-            vz = vz + f * dk * (cs * s1 - sn * c1) - g * dk
-            th = th + a
+            xk = bang(xk, f, st.rate_value(j), d[k], g)
         else:
             if j not in entry:
-                pe, qe = line(t_abs)
-                entry[j] = (th, pe, qe)
-                eq.append(ca.sin(th) * qe - ca.cos(th) * pe)  # junction: n(t_e) || e(theta)
-                ineq += rate_ok(t_abs)
-            th_e, pe, qe = entry[j]
-            se, ce = ca.sin(th_e), ca.cos(th_e)
-            ne = ca.sqrt(pe * pe + qe * qe)
-            iv_y = iv_z = ip_y = ip_z = ca.SX(0.0)
-            for xq, wq in zip(nodes, weights):
-                p, q = line(t_abs + xq * dk)
-                r = ne * ca.sqrt(p * p + q * q)
-                sin_rel = (qe * p - pe * q) / r
-                cos_rel = (pe * p + qe * q) / r
-                ey = se * cos_rel + ce * sin_rel
-                ez = ce * cos_rel - se * sin_rel
-                iv_y += wq * ey
-                iv_z += wq * ez
-                ip_y += wq * (1 - xq) * ey
-                ip_z += wq * (1 - xq) * ez
-                ineq += rate_ok(t_abs + xq * dk)
-            y = y + vy * dk + f * dk * dk * ip_y
-            z = z + vz * dk + f * dk * dk * ip_z - 0.5 * g * dk * dk
-            vy = vy + f * dk * iv_y
-            vz = vz + f * dk * iv_z - g * dk
-            p, q = line(t_abs + dk)
-            th = th_e + ca.atan2(qe * p - pe * q, pe * p + qe * q)
-            ineq += rate_ok(t_abs + dk)
-        t_abs = t_abs + dk
-    eq = [y - target[0], z - target[1], vy, vz, th - final_angle] + eq
+                entry[j] = (xk[4], t_abs)
+                pe, qe = v[0] + v[1] * t_abs, v[2] + v[3] * t_abs
+                eq.append(ca.sin(xk[4]) * qe - ca.cos(xk[4]) * pe)  # junction: n(t_e) || e(theta)
+                qq0 = pe * pe + qe * qe
+                ineq += [wmax * qq0 - k_rate, wmax * qq0 + k_rate]
+            th_e, t_e = entry[j]
+            xk, qq = sing(xk, f, d[k], g, v, t_abs, th_e, t_e)
+            ineq += [wmax * qq - k_rate, wmax * qq + k_rate]
+        t_abs = t_abs + d[k]
+    eq = [xk[0] - target[0], xk[1] - target[1], xk[2], xk[3], xk[4] - final_angle] + eq
     if st.has_singular:
         eq.append(ca.sumsqr(v) - 1.0)
     gexp = ca.vertcat(*eq, *ineq)
+    n_eq, n_in = len(eq), int(gexp.shape[0]) - len(eq)
     x = ca.vertcat(d, v)
     scale_t = float(np.sum(st.d0))
     nlp = {"x": x, "f": ca.sum1(d) / scale_t, "g": gexp}
@@ -819,7 +848,6 @@ def _refine_once(
         "ipopt.bound_relax_factor": 0.0,
     }
     solver = ca.nlpsol("refine", "ipopt", nlp, opts)
-    n_eq, n_in = len(eq), len(ineq)
     lbg = np.zeros(n_eq + n_in)
     ubg = np.concatenate([np.zeros(n_eq), np.full(n_in, np.inf)])
     lbx = np.concatenate([np.zeros(npc), np.full(nl, -1.0)])

@@ -109,10 +109,10 @@ class Disturbances:
     """Per-trial random effects: gusts and start-state error left by the hover controller."""
 
     enabled: bool = True
-    wind_std_m_s: float = 0.05
-    gust_amplitude_std_m_s: float = 0.05
+    wind_std_m_s: float = 0.03
+    gust_amplitude_std_m_s: float = 0.03
     gust_frequency_hz: float = 1.5
-    thrust_gain_jitter: float = 0.003
+    thrust_gain_jitter: float = 0.0035
 
     def __post_init__(self) -> None:
         check_range("wind_std_m_s", self.wind_std_m_s, low=0.0, high=5.0, unit="m/s")
@@ -127,7 +127,7 @@ class MotionCapture:
 
     rate_hz: float = 200.0
     position_noise_m: float = 0.001
-    attitude_noise_rad: float = 0.004
+    attitude_noise_rad: float = 0.002
     latency_s: float = 0.005
 
     def __post_init__(self) -> None:

@@ -134,7 +134,7 @@ def design(
     *,
     p_guess: np.ndarray | None = None,
     tolerance: float = 1e-6,
-    correction: CorrectionKind = "inverse",
+    correction: CorrectionKind = "tsvd",
     tsvd_rtol: float = 1e-3,
     damping: float = 1e-3,
     max_iterations: int = 100,

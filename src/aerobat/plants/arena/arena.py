@@ -246,7 +246,7 @@ class Arena:
                 return failure
             est = self._estimate(log, self.tick)
             if est is not None and np.linalg.norm(est[0] - self.start_m) < s.settle_position_m and \
-                    np.linalg.norm(est[1]) < s.settle_velocity_m_s:
+                    np.linalg.norm(est[1]) < s.settle_velocity_m_s and _tilt(est[2]) < s.settle_tilt_rad:
                 calm += step
                 if calm >= hold_ticks:
                     return None
@@ -370,6 +370,12 @@ class Arena:
         if predicted < 1e-3:
             return True  # a program that does not move cannot be told apart from a lost trigger
         return measured > 0.5 * predicted
+
+
+def _tilt(quat: np.ndarray) -> float:
+    """Angle between the body z axis and the world z axis [rad]."""
+    w, x, y, _ = quat
+    return math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y))))
 
 
 def _pose_deviation(position: np.ndarray, quat: np.ndarray, origin: np.ndarray) -> float:

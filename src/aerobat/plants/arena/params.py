@@ -184,6 +184,7 @@ class Supervisor:
     yaw_gain_per_s: float = 4.0
     settle_position_m: float = 0.02
     settle_velocity_m_s: float = 0.05
+    settle_tilt_rad: float = 0.015
     settle_hold_s: float = 0.1
     settle_timeout_s: float = 8.0
     trigger_timeout_s: float = 0.15
@@ -194,6 +195,7 @@ class Supervisor:
             check_range(name, getattr(self, name), low=0.0, high=1000.0, low_inclusive=False)
         check_range("settle_position_m", self.settle_position_m, low=0.001, high=1.0, unit="m")
         check_range("settle_velocity_m_s", self.settle_velocity_m_s, low=0.001, high=1.0, unit="m/s")
+        check_range("settle_tilt_rad", self.settle_tilt_rad, low=0.001, high=0.5, unit="rad")
         check_range("settle_hold_s", self.settle_hold_s, low=0.0, high=10.0, unit="s")
         check_range("settle_timeout_s", self.settle_timeout_s, low=0.1, high=120.0, unit="s")
         check_range("trigger_timeout_s", self.trigger_timeout_s, low=0.02, high=5.0, unit="s")

@@ -205,7 +205,9 @@ def design(
         worst = int(np.argmax(np.abs(e0) / e_scales)) if np.all(np.isfinite(e0)) else 0
         message += f"; largest error {maneuver.errors[worst].name} = {e0[worst]:+.4g} {maneuver.errors[worst].unit}"
         if pinned:
-            message += "; at a bound: " + ", ".join(pinned)
+            # the envelope limits first: they are what makes a maneuver infeasible
+            pinned.sort(key=lambda text: "β" not in text)
+            message += "; violated limits: " + "; ".join(pinned)
     elif info.rank < n_err:
         status = "rank_deficient"
         message = (
@@ -250,9 +252,11 @@ def _pinned(maneuver: Maneuver, p: np.ndarray, lower: np.ndarray, upper: np.ndar
     for spec, value, lo, hi in zip(maneuver.parameters, p, lower, upper, strict=True):
         tol = 1e-6 * spec.scale
         if math.isfinite(lo) and value <= lo + tol:
-            out.append(f"{spec.name} ({spec.description}) = {value:.4g} {spec.unit} at its lower limit {lo:.4g}")
+            name = f" = {spec.bound_names[0]}" if spec.bound_names[0] else ""
+            out.append(f"{spec.name} ({spec.description}) = {value:.4g} {spec.unit} at its lower limit {lo:.4g}{name}")
         elif math.isfinite(hi) and value >= hi - tol:
-            out.append(f"{spec.name} ({spec.description}) = {value:.4g} {spec.unit} at its upper limit {hi:.4g}")
+            name = f" = {spec.bound_names[1]}" if spec.bound_names[1] else ""
+            out.append(f"{spec.name} ({spec.description}) = {value:.4g} {spec.unit} at its upper limit {hi:.4g}{name}")
     return out
 
 

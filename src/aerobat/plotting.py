@@ -89,3 +89,62 @@ def plot_trajectory(times_s: np.ndarray, states: np.ndarray, commands: np.ndarra
         fig.suptitle(title)
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def plot_side_views(panels: Sequence[tuple[str, np.ndarray, np.ndarray]], path: str | Path, *,
+                    plane: str = "yz", title: str = "", spacing_m: float = 1.2,
+                    target: Sequence[float] = (0.0, 0.0)) -> None:
+    """Figs. 9/11/12: side views of several trajectories (label, times, states), offset for clarity."""
+    fig, ax = plt.subplots(figsize=(4.0 * len(panels), 4.5), constrained_layout=True)
+    for k, (label, times, states) in enumerate(panels):
+        if states.shape[0] == 0:
+            continue
+        draw_side_view(ax, times, states, plane=plane, every_s=0.01, offset_m=k * spacing_m, color=f"C{k}",
+                       label=label, target=target)
+    ax.legend(loc="upper right", fontsize=8)
+    ax.set_title(title or "side views (vehicle every 10 ms; circles: desired final position)")
+    ax.grid(alpha=0.3)
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def plot_learning(iterations: Sequence[dict], error_names: Sequence[str], error_units: Sequence[str],
+                  parameter_names: Sequence[str], parameter_units: Sequence[str], path: str | Path, *,
+                  title: str = "") -> None:
+    """Fig. 10: final-state errors and parameters over iterations (lost trials marked)."""
+    ok = [it for it in iterations if it["status"] == "ok"]
+    lost = [it for it in iterations if it["status"] != "ok"]
+    idx = np.array([it["i"] for it in ok])
+    errors = np.array([[np.nan if v is None else v for v in it["error"]] for it in ok]) if ok else np.empty((0, 0))
+    params = np.array([it["params"] for it in iterations])
+    all_idx = np.array([it["i"] for it in iterations])
+    n_e, n_p = len(error_names), len(parameter_names)
+    rows = max(n_e, n_p)
+    fig, axes = plt.subplots(rows, 2, figsize=(10, 1.5 * rows + 1), sharex=True, constrained_layout=True)
+    axes = np.atleast_2d(axes)
+    for k in range(rows):
+        if k < n_e and errors.size:
+            ax = axes[k, 0]
+            angle = error_units[k] == "rad"
+            values = np.degrees(errors[:, k]) if angle else errors[:, k]
+            ax.plot(idx, values, ".-", lw=0.8, ms=3)
+            ax.axhline(0, color="k", lw=0.5)
+            ax.set_ylabel(f"{error_names[k]} [{'°' if angle else error_units[k]}]", fontsize=8)
+        else:
+            axes[k, 0].axis("off")
+        if k < n_p:
+            ax = axes[k, 1]
+            ax.plot(all_idx, params[:, k], ".-", lw=0.8, ms=3, color="C1")
+            for it in lost:
+                ax.axvline(it["i"], color="r", lw=0.5, alpha=0.4)
+            ax.set_ylabel(f"{parameter_names[k]} [{parameter_units[k]}]", fontsize=8)
+        else:
+            axes[k, 1].axis("off")
+    axes[0, 0].set_title("final-state errors")
+    axes[0, 1].set_title("parameters (red lines: lost/rejected trials)")
+    axes[-1, 0].set_xlabel("iteration")
+    axes[-1, 1].set_xlabel("iteration")
+    if title:
+        fig.suptitle(title)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

@@ -29,6 +29,7 @@ class ParameterSpec:
     lower, upper : allowed range (Sect. 4.2); ``±inf`` for none.
     scale : typical magnitude of a meaningful change, used for finite-difference
         steps and for scaling before regularized inverses.
+    bound_names : what the lower and upper limits are (named in failure messages).
     """
 
     name: str
@@ -37,6 +38,7 @@ class ParameterSpec:
     lower: float = -math.inf
     upper: float = math.inf
     scale: float = 1.0
+    bound_names: tuple[str, str] = ("", "")
 
     def __post_init__(self) -> None:
         if not self.lower < self.upper:

@@ -102,12 +102,18 @@ class MultiFlip:
                 f"{self.dims}D {self.flips}x {self.axis} flip at {math.degrees(self.max_rate_rad_s):.0f} deg/s",
             )
         bl, bh = self.vehicle.collective_reduced_min_m_s2, self.vehicle.collective_reduced_max_m_s2
+        envelope_names = ("β̲, the vehicle's reduced-envelope minimum collective (collective_reduced_min_m_s2)",
+                          "β̄, the vehicle's reduced-envelope maximum collective (collective_reduced_max_m_s2)")
         params = [
-            ParameterSpec(name="p0", description="accelerate collective", unit="m/s²", lower=bl, upper=bh, scale=1.0),
-            ParameterSpec(name="p1", description="accelerate duration", unit="s", lower=0.0, upper=2.0, scale=0.02),
+            ParameterSpec(name="p0", description="accelerate collective", unit="m/s²", lower=bl, upper=bh, scale=1.0,
+                          bound_names=envelope_names),
+            ParameterSpec(name="p1", description="accelerate duration", unit="s", lower=0.0, upper=2.0, scale=0.02,
+                          bound_names=("zero duration", "the 2 s limit on a stage")),
             ParameterSpec(name="p2", description="coast duration", unit="s", lower=0.0, upper=5.0, scale=0.02),
-            ParameterSpec(name="p3", description="recover collective", unit="m/s²", lower=bl, upper=bh, scale=1.0),
-            ParameterSpec(name="p4", description="recover duration", unit="s", lower=0.0, upper=2.0, scale=0.02),
+            ParameterSpec(name="p3", description="recover collective", unit="m/s²", lower=bl, upper=bh, scale=1.0,
+                          bound_names=envelope_names),
+            ParameterSpec(name="p4", description="recover duration", unit="s", lower=0.0, upper=2.0, scale=0.02,
+                          bound_names=("zero duration", "the 2 s limit on a stage")),
         ]
         lat = "pitch" if self.axis == "roll" else "roll"
         if self.dims == 3:

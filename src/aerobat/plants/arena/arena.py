@@ -191,7 +191,8 @@ class Arena:
         v = self.config.vehicle
         limits = np.array([v.collective_reduced_min_m_s2, v.collective_reduced_max_m_s2, 0.6 * v.gravity_m_s2,
                            8.0, v.gravity_m_s2])
-        hover_cmd = np.array([v.gravity_m_s2, 0.0, 0.0, 0.0])
+        # open-loop placeholder: hover with the supervisor's learned thrust trim
+        hover_cmd = np.array([v.gravity_m_s2 + gains[4] * self.integral[2], 0.0, 0.0, 0.0])
         cmd = np.empty(4)
         while self.tick < end_tick:
             now = self.tick * self.tick_s
@@ -352,36 +353,61 @@ class Arena:
         return Trial(status, message, nan_state, times, states, nan_state.copy())
 
     def _maneuver_started(self, log: _Log, program: Program, start_time: float, check_tick: int) -> bool:
-        """Compare measured motion with the nominal model's prediction at the check time."""
+        """Did the vehicle start the maneuver? Nearest of two hypotheses at the check time.
+
+        The measured pose change since the trigger is compared with the nominal model's
+        prediction (triggered) and with no change at all (trigger lost).
+        """
         from ...simulate import simulate
 
-        t_check = check_tick * self.tick_s - start_time
-        nominal = simulate(program, self.config, record=True)
-        k = int(np.searchsorted(nominal.times_s, t_check))
-        k = min(k, len(nominal.times_s) - 1)
-        predicted = _pose_deviation(nominal.states[k, 0:3], nominal.states[k, 6:10], np.zeros(3))
         rows = log.view()
-        available = rows[rows[:, 0] <= check_tick * self.tick_s - self.mocap_delay_ticks * self.tick_s]
-        before = rows[rows[:, 0] <= start_time]
+        check_time = check_tick * self.tick_s - self.mocap_delay_ticks * self.tick_s
+        available = rows[rows[:, 0] <= check_time + 1e-12]
+        before = rows[rows[:, 0] <= start_time + 1e-12]
         if available.shape[0] == 0 or before.shape[0] == 0:
             return True
-        ref = before[-1]
-        measured = _pose_deviation(available[-1, 1:4] - ref[1:4], available[-1, 4:8], np.zeros(3))
-        if predicted < 1e-3:
-            return True  # a program that does not move cannot be told apart from a lost trigger
-        return measured > 0.5 * predicted
+        ref, now = before[-1], available[-1]
+        nominal = simulate(program, self.config, record=True)
+        k = min(int(np.searchsorted(nominal.times_s, now[0] - start_time)), len(nominal.times_s) - 1)
+        predicted_disp = nominal.states[k, 0:3]
+        predicted_rot = _rotation_vector(nominal.states[k, 6:10])
+        measured_disp = now[1:4] - ref[1:4]
+        measured_rot = _rotation_vector(_quat_multiply(_quat_conjugate(ref[4:8]), now[4:8]))
+        lever = 0.2  # metres of "pose distance" per radian
+        d_triggered = np.linalg.norm(measured_disp - predicted_disp) + lever * np.linalg.norm(measured_rot - predicted_rot)
+        d_lost = np.linalg.norm(measured_disp) + lever * np.linalg.norm(measured_rot)
+        return bool(d_triggered < d_lost)
+
+
+def _quat_conjugate(q: np.ndarray) -> np.ndarray:
+    return np.array([q[0], -q[1], -q[2], -q[3]])
+
+
+def _quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    return np.array([
+        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+    ])
+
+
+def _rotation_vector(q: np.ndarray) -> np.ndarray:
+    q = q / np.linalg.norm(q)
+    if q[0] < 0:
+        q = -q
+    s = np.linalg.norm(q[1:])
+    if s < 1e-12:
+        return 2.0 * q[1:]
+    return q[1:] / s * 2.0 * math.atan2(s, q[0])
 
 
 def _tilt(quat: np.ndarray) -> float:
     """Angle between the body z axis and the world z axis [rad]."""
     w, x, y, _ = quat
     return math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y))))
-
-
-def _pose_deviation(position: np.ndarray, quat: np.ndarray, origin: np.ndarray) -> float:
-    """Position change [m] plus attitude change [rad] × 0.2 m (a pose distance)."""
-    angle = 2.0 * math.acos(min(1.0, abs(float(quat[0]))))
-    return float(np.linalg.norm(position - origin)) + 0.2 * angle
 
 
 def _relative_rotation_angles(quats: np.ndarray) -> np.ndarray:

@@ -116,7 +116,7 @@ def pd_command(pos, vel, quat, target, integral, gains, limits, dt, out):  # pra
     for i in range(3):
         err = target[i] - pos[i]
         if abs(err) < 0.1:  # conditional integration: trim only near the target
-            integral[i] = min(max(integral[i] + err * dt, -0.3), 0.3)
+            integral[i] = min(max(integral[i] + err * dt, -1.0), 1.0)
         a[i] = kp * err - kd * vel[i] + ki * integral[i]
     horiz = math.sqrt(a[0] * a[0] + a[1] * a[1])
     if horiz > limits[2]:

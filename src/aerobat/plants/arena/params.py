@@ -112,7 +112,7 @@ class Disturbances:
     wind_std_m_s: float = 0.03
     gust_amplitude_std_m_s: float = 0.03
     gust_frequency_hz: float = 1.5
-    thrust_gain_jitter: float = 0.0035
+    thrust_gain_jitter: float = 0.007
 
     def __post_init__(self) -> None:
         check_range("wind_std_m_s", self.wind_std_m_s, low=0.0, high=5.0, unit="m/s")

@@ -94,6 +94,18 @@ class Design:
         }
 
 
+class _CountingModel:
+    """Counts simulations (for the design report)."""
+
+    def __init__(self, model: FinalStateModel) -> None:
+        self.model = model
+        self.count = 0
+
+    def final_states(self, programs: Sequence[Any], initial_states: np.ndarray | None = None) -> np.ndarray:
+        self.count += len(programs)
+        return self.model.final_states(programs, initial_states)
+
+
 def _errors(maneuver: Maneuver, model: FinalStateModel, params: np.ndarray) -> np.ndarray:
     """(B, n_err) errors for a batch of parameter vectors (B, n_par)."""
     programs = [maneuver.program(p) for p in params]
@@ -147,50 +159,52 @@ def design(
     not; with ``raise_on_failure`` a failure raises :class:`DesignFailed`.
     """
     start = time.perf_counter()
+    model = _CountingModel(model)
     guess = np.array(maneuver.guess() if p_guess is None else p_guess, dtype=float)
     lower, upper = bounds_arrays(maneuver.parameters)
     p_scales = np.array([s.scale for s in maneuver.parameters])
     e_scales = np.array([s.scale for s in maneuver.errors])
     x0 = np.clip(guess, lower, upper)
-    evaluations = 0
     cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
 
     def both(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        nonlocal evaluations
         key = p.tobytes()
         if key not in cache:
             J, e = finite_difference_jacobian(maneuver, model, p)
-            evaluations += 2 * p.size + 1
             cache.clear()
             cache[key] = (J, e)
         return cache[key]
 
     def residual(p: np.ndarray) -> np.ndarray:
-        nonlocal evaluations
         key = p.tobytes()
         if key in cache:
             return cache[key][1] / e_scales
-        e = _errors(maneuver, model, p[None, :])[0]
-        evaluations += 1
-        return e / e_scales
+        return _errors(maneuver, model, p[None, :])[0] / e_scales
 
     def jac(p: np.ndarray) -> np.ndarray:
         return both(p)[0] / e_scales[:, None]
 
     status = "converged"
     message = ""
-    try:
-        result = least_squares(
-            residual, x0, jac=jac, bounds=(lower, upper), x_scale=p_scales, method="trf",
-            xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=max_iterations,
-        )
-        p0 = result.x
-        solver_message = result.message
-    except (ValueError, FloatingPointError) as exc:  # non-finite model output
-        p0 = x0
-        solver_message = f"solver aborted: {exc}"
+    # Newton in two passes: first ignoring nearly unobservable directions (they send a full
+    # Newton step wandering along a valley), then a polishing pass with all of them
+    coarse = _newton(maneuver, model, x0, lower, upper, p_scales, e_scales, 1e3 * tolerance, rcond=1e-4,
+                     max_iterations=15)[0]
+    p0, solver_message, ok = _newton(maneuver, model, coarse, lower, upper, p_scales, e_scales, tolerance)
+    if not ok:
+        # Newton did not get there: a bounded trust-region solve finds the best reachable
+        # parameters, so the failure message can say which limits are in the way
+        try:
+            result = least_squares(
+                residual, x0, jac=jac, bounds=(lower, upper), x_scale=p_scales, method="trf",
+                xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=max_iterations,
+            )
+            p0 = result.x
+            solver_message = f"Newton failed ({solver_message}); trust region: {result.message}"
+        except (ValueError, FloatingPointError) as exc:  # non-finite model output
+            p0 = x0
+            solver_message = f"solver aborted: {exc}"
     J, e0 = finite_difference_jacobian(maneuver, model, p0)
-    evaluations += 2 * p0.size + 1
     residual_norm = float(np.linalg.norm(e0))
     converged = bool(np.all(np.isfinite(e0)) and residual_norm < tolerance)
     pinned = _pinned(maneuver, p0, lower, upper)
@@ -240,11 +254,69 @@ def design(
         rank=info.rank,
         duration_s=duration,
         compute_s=time.perf_counter() - start,
-        evaluations=evaluations,
+        evaluations=model.count,
     )
     if raise_on_failure and not result_design.converged:
         raise DesignFailed(f"{maneuver.name}: design failed: {message}", result_design)
     return result_design
+
+
+def _newton(
+    maneuver: Maneuver,
+    model: FinalStateModel,
+    x0: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    p_scales: np.ndarray,
+    e_scales: np.ndarray,
+    tolerance: float,
+    max_iterations: int = 25,
+    max_scaled_step: float = 5.0,
+    rcond: float = 1e-8,
+) -> tuple[np.ndarray, str, bool]:
+    """Bounded Newton iteration in scaled coordinates with backtracking.
+
+    A fresh finite-difference Jacobian whenever progress is slow, chord steps (reusing
+    it) while the residual falls fast. Returns (best p, message, converged).
+    """
+    x = x0.copy()
+    try:
+        J, e = finite_difference_jacobian(maneuver, model, x)
+    except ValueError as exc:
+        return x, f"Jacobian not computable at the initial guess: {exc}", False
+    if not np.all(np.isfinite(e)):
+        return x, "non-finite final state at the initial guess", False
+    for iteration in range(max_iterations):
+        norm = float(np.linalg.norm(e))
+        if norm < 0.01 * tolerance:
+            return x, f"Newton converged in {iteration} iterations", True
+        Js = (J / e_scales[:, None]) * p_scales[None, :]
+        scaled_step = np.linalg.lstsq(Js, e / e_scales, rcond=rcond)[0]
+        longest = float(np.max(np.abs(scaled_step)))
+        if longest > max_scaled_step:  # stay where the linear model means something
+            scaled_step *= max_scaled_step / longest
+        step = -p_scales * scaled_step
+        t = 1.0
+        while True:
+            candidate = np.clip(x + t * step, lower, upper)
+            try:
+                e_new = _errors(maneuver, model, candidate[None, :])[0]
+            except ValueError:  # the step left the maneuver's valid set (e.g. absurd commands)
+                e_new = np.full_like(e, np.nan)
+            if np.all(np.isfinite(e_new)) and np.linalg.norm(e_new / e_scales) < np.linalg.norm(e / e_scales):
+                break
+            t *= 0.5
+            if t < 1.0 / 64:
+                return x, f"no descent after {iteration} Newton iterations (residual {norm:.3g})", norm < tolerance
+        slow = np.linalg.norm(e_new) > 0.1 * norm
+        x, e = candidate, e_new
+        if slow or t < 1.0:  # otherwise a chord step: keep the Jacobian
+            try:
+                J, e = finite_difference_jacobian(maneuver, model, x)
+            except ValueError as exc:
+                return x, f"Jacobian not computable near the iterate: {exc}", False
+    norm = float(np.linalg.norm(e))
+    return x, f"Newton stopped after {max_iterations} iterations (residual {norm:.3g})", norm < tolerance
 
 
 def _pinned(maneuver: Maneuver, p: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> list[str]:

@@ -82,7 +82,6 @@ _BOUNDARY_TOL = 1e-6
 _COARSE_INTERVALS = 30
 _GL_PANELS = 4  # composite Gauss-Legendre on singular pieces: worst-case error
 _GL_NODES = 32  # ~1e-14 for admissible arcs up to 2 s (|omega| <= 10 rad/s)
-_RATE_CHECK_EVERY = 4  # rate bound imposed at every 4th quadrature node (verified densely later)
 
 
 # --------------------------------------------------------------------------
@@ -729,7 +728,8 @@ def _piece_functions() -> tuple[Any, Any]:
     ``sing(x, f, d, g, v, t0, th_e, t_e) -> (x_end, Q)``: propagation on a
     singular rate arc that follows the costate line ``v = (a, b, c, d)``,
     entered at time ``t_e`` with attitude ``th_e``; the piece starts at
-    absolute time ``t0``.  ``Q`` holds ``|n(t)|^2`` at the rate-check points.
+    absolute time ``t0``.  ``Q`` is the minimum of ``|n(t)|^2`` over the
+    piece, so ``|b c - a d| <= omega_max * Q`` bounds the rate exactly.
     """
     import casadi as ca
 
@@ -777,15 +777,20 @@ def _piece_functions() -> tuple[Any, Any]:
         vz + f * d * ca.dot(wn, ez) - g * d,
         th_e + ca.atan2(qe * p1 - pe * q1, pe * p1 + qe * q1),
     )
-    check = list(range(0, len(nodes), _RATE_CHECK_EVERY))
-    qq = ca.vertcat((p * p + q * q)[check], p1 * p1 + q1 * q1)
+    # exact minimum of |n(t)|^2 over the piece (the rate peaks where the
+    # costate line passes closest to the origin)
+    big_a = v[1] * v[1] + v[3] * v[3]
+    t_star = -(v[0] * v[1] + v[2] * v[3]) / ca.fmax(big_a, 1e-300)
+    t_c = ca.fmin(ca.fmax(t_star, t0), t0 + d)
+    p_c, q_c = v[0] + v[1] * t_c, v[2] + v[3] * t_c
+    qq = p_c * p_c + q_c * q_c
     sing = ca.Function("sing", [x, f, d, g, v, t0, th_e, t_e], [x_end, qq])
     return bang, sing
 
 
 def _refine_once(
     st: _Structure, target: tuple[float, float], final_angle: float
-) -> tuple[bool, str, np.ndarray, np.ndarray | None]:
+) -> tuple[bool, str, np.ndarray, np.ndarray | None, np.ndarray]:
     """One switching-time optimisation for a fixed arc structure.
 
     Decision variables: the durations of the merged pieces and, if there are
@@ -793,8 +798,8 @@ def _refine_once(
     ``n(t) = (a + b t, c + d t)``.  On a singular arc entered at ``t_e`` the
     attitude is ``theta(t) = theta(t_e) + angle(n(t_e) -> n(t))`` and
     ``n(t_e)`` must be parallel to ``(sin theta, cos theta)`` (junction
-    constraint); the rate ``(b c - a d) / |n(t)|^2`` is bounded at a subset
-    of the quadrature nodes (and verified densely afterwards).
+    constraint); the rate ``(b c - a d) / |n(t)|^2`` is bounded on each piece
+    through the minimum of ``|n(t)|^2``.
     """
     import casadi as ca
 
@@ -822,8 +827,6 @@ def _refine_once(
                 entry[j] = (xk[4], t_abs)
                 pe, qe = v[0] + v[1] * t_abs, v[2] + v[3] * t_abs
                 eq.append(ca.sin(xk[4]) * qe - ca.cos(xk[4]) * pe)  # junction: n(t_e) || e(theta)
-                qq0 = pe * pe + qe * qe
-                ineq += [wmax * qq0 - k_rate, wmax * qq0 + k_rate]
             th_e, t_e = entry[j]
             xk, qq = sing(xk, f, d[k], g, v, t_abs, th_e, t_e)
             ineq += [wmax * qq - k_rate, wmax * qq + k_rate]
@@ -857,7 +860,10 @@ def _refine_once(
     stats = solver.stats()
     xopt = np.asarray(res["x"], dtype=float).ravel()
     line_opt = xopt[npc:] if st.has_singular else None
-    return bool(stats["success"]), str(stats["return_status"]), xopt[:npc], line_opt
+    # multipliers of the five final-state constraints = adjoint lambda(T) of the
+    # problem "minimise T / scale_t" (Lagrangian f + lam_g^T g)
+    nu = np.asarray(res["lam_g"], dtype=float).ravel()[:5] * scale_t
+    return bool(stats["success"]), str(stats["return_status"]), xopt[:npc], line_opt, nu
 
 
 def _arcs_from_pieces(
@@ -896,6 +902,20 @@ def _prune(arcs: list[list[Any]]) -> tuple[list[list[Any]], bool]:
     return merged, changed
 
 
+def _line_from_adjoint(nu: np.ndarray, t_final: float) -> np.ndarray:
+    """Costate line ``(a, b, c, d)`` of ``lambda_v(t)`` from ``lambda(T) = nu``.
+
+    ``lambda_y, lambda_z`` are constant, so ``lambda_vy(t) = nu_vy + nu_y (T - t)``
+    and ``lambda_vz(t) = nu_vz + nu_z (T - t)``.
+    """
+    v = np.array([nu[2] + nu[0] * t_final, -nu[0], nu[3] + nu[1] * t_final, -nu[1]])
+    return v / np.linalg.norm(v)
+
+
+def _line_mismatch(v: np.ndarray, w: np.ndarray) -> float:
+    return float(min(np.max(np.abs(v - w)), np.max(np.abs(v + w))))
+
+
 def _refine(
     thrust: list[list[Any]],
     rate: list[list[Any]],
@@ -903,18 +923,146 @@ def _refine(
     target: tuple[float, float],
     final_angle: float,
     lim: BenchmarkLimits,
-) -> tuple[list[list[Any]], list[list[Any]], np.ndarray | None, int]:
-    for rounds in range(1, 6):
+) -> tuple[list[list[Any]], list[list[Any]], np.ndarray | None, np.ndarray, int]:
+    """Switching-time optimisation with arc pruning and costate re-initialisation.
+
+    The NLP restricted to one costate line can stop at stationary points
+    that are not Pontryagin extremals.  At a true extremal the line of
+    ``lambda_v`` obtained from the multipliers coincides with the optimised
+    line; if it does not, the NLP is re-solved starting from the multiplier
+    line (this converges in one or two rounds in practice).
+    """
+    best: tuple[float, list[list[Any]], list[list[Any]], np.ndarray | None, np.ndarray] | None = None
+    rounds = 0
+    for rounds in range(1, 9):
         st = _Structure(thrust, rate, line, lim)
-        ok, status, d, line = _refine_once(st, target, final_angle)
+        ok, status, d, line_opt, nu = _refine_once(st, target, final_angle)
         if not ok:
+            if best is not None:
+                break
             raise _SolveFailure(f"switching-time optimisation did not converge (IPOPT: {status})")
         thrust, rate = _arcs_from_pieces(st, d)
         thrust, ch1 = _prune(thrust)
         rate, ch2 = _prune(rate)
-        if not (ch1 or ch2):
-            return thrust, rate, line, rounds
-    raise _SolveFailure("switching-time optimisation kept removing arcs (no stable structure)")
+        if ch1 or ch2:
+            line = line_opt if "singular" in [a[0] for a in rate] else None
+            continue
+        t_opt = float(np.sum(d))
+        if best is None or t_opt < best[0] - 1e-12:
+            best = (t_opt, thrust, rate, line_opt, nu)
+        elif t_opt > best[0] + 1e-12:
+            break  # re-initialisation made it worse: keep the best
+        if line_opt is None:
+            break
+        line_nu = _line_from_adjoint(nu, t_opt)
+        if _line_mismatch(line_opt, line_nu) < 1e-7:
+            break
+        line = line_nu
+    if best is None:
+        raise _SolveFailure("switching-time optimisation kept removing arcs (no stable structure)")
+    _, thrust, rate, line, nu = best
+    return thrust, rate, line, nu, rounds
+
+
+def _theta_fn(rate_arcs: Sequence[InputArc]) -> Callable[[np.ndarray], np.ndarray]:
+    """Exact attitude of a rate program (theta(0) = 0)."""
+    starts = np.array([a.start_s for a in rate_arcs])
+    th0 = [0.0]
+    for a in rate_arcs[:-1]:
+        th0.append(th0[-1] + _arc_rotation(a, a.end_s))
+
+    def theta(t: np.ndarray) -> np.ndarray:
+        t = np.asarray(t, dtype=float)
+        idx = np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(rate_arcs) - 1)
+        out = np.empty(t.shape)
+        for k, a in enumerate(rate_arcs):
+            m = idx == k
+            if np.any(m):
+                out[m] = th0[k] + _arc_rotation(a, t[m])
+        return out
+
+    return theta
+
+
+def _arc_rotation(arc: InputArc, t: np.ndarray | float) -> np.ndarray:
+    s = np.asarray(t, dtype=float) - arc.start_s
+    if arc.tangent_law is None:
+        return arc.value * s
+    alpha, beta = arc.tangent_law
+    return np.arctan2(beta * s, 1.0 + alpha * s)
+
+
+def _pmp_residual(
+    thrust_arcs: Sequence[InputArc],
+    rate_arcs: Sequence[InputArc],
+    nu: np.ndarray,
+    lim: BenchmarkLimits,
+) -> tuple[float, tuple[str, float, str] | None]:
+    """Largest violation of Pontryagin's minimum principle, relative to lambda_0 = 1.
+
+    With ``lambda(T) = nu`` the adjoint is ``lambda_y, lambda_z`` constant,
+    ``lambda_v`` affine and ``lambda_theta' = -f (lambda_vy cos theta - lambda_vz sin theta)``.
+    Checks: ``f = f_max`` where ``sigma_f = lambda_v . (sin theta, cos theta) < 0``
+    and ``f_min`` where it is positive; ``omega = -omega_max sign(lambda_theta)``
+    on bang rate arcs and ``lambda_theta = 0`` on singular ones.
+
+    Returns the violation and, if positive, ``(input, time, kind)`` of the
+    needle variation that would improve most: the arc to insert.
+    """
+    t_final = thrust_arcs[-1].end_s
+    theta = _theta_fn(rate_arcs)
+    cuts = sorted({a.start_s for a in thrust_arcs} | {a.start_s for a in rate_arcs} | {t_final})
+    xg, wg = np.polynomial.legendre.leggauss(8)
+    sub = 64
+    # lambda_theta on a fine grid, integrated backwards from T (Gauss per sub-interval)
+    grid_t: list[np.ndarray] = []
+    incs: list[np.ndarray] = []
+    for t0, t1 in zip(cuts[:-1], cuts[1:]):
+        if t1 <= t0:
+            continue
+        edges = np.linspace(t0, t1, sub + 1)
+        h = np.diff(edges)
+        tq = edges[:-1, None] + (xg[None, :] + 1) / 2 * h[:, None]
+        f = _eval_arcs(thrust_arcs, np.full(tq.shape, 0.5 * (t0 + t1)))
+        th = theta(tq)
+        lvy = nu[2] + nu[0] * (t_final - tq)
+        lvz = nu[3] + nu[1] * (t_final - tq)
+        integrand = f * (lvy * np.cos(th) - lvz * np.sin(th))
+        incs.append((integrand * wg[None, :]).sum(axis=1) * h / 2)
+        grid_t.append(edges[1:])
+    t_all = np.concatenate([[0.0], *grid_t])
+    inc = np.concatenate(incs)
+    # lambda_theta(t_k) = nu_theta + int_{t_k}^T integrand
+    tail = np.concatenate([np.cumsum(inc[::-1])[::-1], [0.0]])
+    lam_th = nu[4] + tail
+    th = theta(t_all)
+    lvy = nu[2] + nu[0] * (t_final - t_all)
+    lvz = nu[3] + nu[1] * (t_final - t_all)
+    sigma_f = lvy * np.sin(th) + lvz * np.cos(th)
+    viol = 0.0
+    where: tuple[str, float, str] | None = None
+    for arc in thrust_arcs:
+        m = np.nonzero((t_all >= arc.start_s) & (t_all <= arc.end_s))[0]
+        sign = 1.0 if arc.kind == "max" else -1.0
+        if m.size and float(np.max(sign * sigma_f[m])) > viol:
+            k = m[np.argmax(sign * sigma_f[m])]
+            viol = float(sign * sigma_f[k])
+            where = ("thrust", float(t_all[k]), "min" if arc.kind == "max" else "max")
+    for arc in rate_arcs:
+        m = np.nonzero((t_all >= arc.start_s) & (t_all <= arc.end_s))[0]
+        if not m.size:
+            continue
+        if arc.kind == "singular":
+            k = m[np.argmax(np.abs(lam_th[m]))]
+            v = abs(float(lam_th[k]))
+        else:
+            sign = 1.0 if arc.kind == "max" else -1.0
+            k = m[np.argmax(sign * lam_th[m])]
+            v = float(sign * lam_th[k])
+        if v > viol:
+            viol = v
+            where = ("rate", float(t_all[k]), "min" if lam_th[k] > 0 else "max")
+    return viol, where
 
 
 # --------------------------------------------------------------------------
@@ -987,6 +1135,95 @@ def _simulate(
         times.append(t_eval[1:])
         states.append(sol.y.T[1:])
     return np.concatenate(times), np.vstack(states)
+
+
+@dataclass
+class _Candidate:
+    thrust_arcs: tuple[InputArc, ...]
+    rate_arcs: tuple[InputArc, ...]
+    times: np.ndarray
+    states: np.ndarray
+    error: float
+    duration: float
+    rounds: int
+    pmp_residual: float
+
+    def problems(self, t_trans: float, lim: BenchmarkLimits) -> list[str]:
+        out = []
+        if not self.error <= _BOUNDARY_TOL:
+            out.append(f"boundary error {self.error:.3e} exceeds {_BOUNDARY_TOL:.0e}")
+        wmax = lim.max_rate_rad_s
+        for arc in self.rate_arcs:
+            if arc.tangent_law is not None:
+                tt = np.linspace(arc.start_s, arc.end_s, 2001)
+                peak = float(np.max(np.abs(arc.evaluate(tt))))
+                if peak > wmax * (1 + 1e-9):
+                    out.append(f"singular rate arc reaches |omega|={peak:.6g} > {wmax:g} rad/s")
+        if self.duration > t_trans + _REFINE_T_TOL_S:
+            out.append(
+                f"refined T={self.duration:.10f} s exceeds transcription T={t_trans:.10f} s "
+                "(arc structure probably misidentified)"
+            )
+        return out
+
+
+def _refine_candidate(
+    thrust: list[list[Any]],
+    rate: list[list[Any]],
+    line: np.ndarray | None,
+    target: tuple[float, float],
+    angle: float,
+    limits: BenchmarkLimits,
+    final: np.ndarray,
+) -> _Candidate:
+    thrust, rate, line, nu, rounds = _refine(thrust, rate, line, target, angle, limits)
+    thrust_arcs = _make_arcs(thrust, False, limits)
+    rate_arcs = _make_arcs(rate, True, limits, line)
+    times, states = _simulate(thrust_arcs, rate_arcs, limits)
+    err = float(np.max(np.abs(states[-1] - final)))
+    return _Candidate(
+        pmp_residual=_pmp_residual(thrust_arcs, rate_arcs, nu, limits),
+        thrust_arcs=thrust_arcs,
+        rate_arcs=rate_arcs,
+        times=times,
+        states=states,
+        error=err,
+        duration=float(thrust_arcs[-1].end_s),
+        rounds=rounds,
+    )
+
+
+def _rate_variants(rate: list[list[Any]], dt: float) -> list[list[list[Any]]]:
+    """The identified rate structure followed by single-insertion variants.
+
+    Short bang fragments next to a singular arc are easily absorbed into the
+    singular run of the transcription (they share an interval with the
+    junction and are followed by ringing).  Each variant inserts one short
+    bang arc at one end of one singular arc: both kinds at the start/end of
+    the horizon, the kind opposite to the neighbour otherwise.  Arcs that are
+    not needed shrink to zero and are pruned by the refinement.
+    """
+    out = [rate]
+    other = {"max": "min", "min": "max"}
+    delta = 0.25 * dt
+    for idx, arc in enumerate(rate):
+        if arc[0] != "singular" or arc[2] - arc[1] <= 4 * delta:
+            continue
+        for side in ("start", "end"):
+            nb = idx - 1 if side == "start" else idx + 1
+            kinds = ["max", "min"] if not 0 <= nb < len(rate) else [other[rate[nb][0]]]
+            for kind in kinds:
+                new = [list(a) for a in rate]
+                if side == "start":
+                    t0 = new[idx][1]
+                    new[idx][1] = t0 + delta
+                    new.insert(idx, [kind, t0, t0 + delta, None])
+                else:
+                    t1 = new[idx][2]
+                    new[idx][2] = t1 - delta
+                    new.insert(idx + 1, [kind, t1 - delta, t1, None])
+                out.append(new)
+    return out
 
 
 # --------------------------------------------------------------------------
@@ -1096,40 +1333,47 @@ def solve_translation(
         )
     t_trans = math.nan
     try:
-        t_trans, xs, us, _ = _best_transcription(target, angle, limits, int(intervals), int(ipopt_max_iter))
+        t_trans, xs, us, _ = _best_transcription(
+            target, angle, limits, int(intervals), int(ipopt_max_iter)
+        )
         thrust, rate, line = _detect_structure(t_trans, xs, us, limits)
-        thrust, rate, line, rounds = _refine(thrust, rate, line, target, angle, limits)
-        thrust_arcs = _make_arcs(thrust, False, limits)
-        rate_arcs = _make_arcs(rate, True, limits, line)
-        duration = thrust_arcs[-1].end_s
-        times, states = _simulate(thrust_arcs, rate_arcs, limits)
-        err = float(np.max(np.abs(states[-1] - np.array([y_t, z_t, 0.0, 0.0, angle]))))
     except _SolveFailure as exc:
         return _failed(str(exc), target, angle, limits, t_trans)
-    problems = []
-    if not err <= _BOUNDARY_TOL:
-        problems.append(f"boundary error {err:.3e} exceeds {_BOUNDARY_TOL:.0e}")
-    wmax = limits.max_rate_rad_s
-    for arc in rate_arcs:
-        if arc.tangent_law is not None:
-            tt = np.linspace(arc.start_s, arc.end_s, 2001)
-            peak = float(np.max(np.abs(arc.evaluate(tt))))
-            if peak > wmax * (1 + 1e-9):
-                problems.append(f"singular rate arc reaches |omega|={peak:.6g} > {wmax:g} rad/s")
-    if duration > t_trans + _REFINE_T_TOL_S:
-        problems.append(
-            f"refined T={duration:.10f} s exceeds transcription T={t_trans:.10f} s "
-            "(arc structure probably misidentified)"
+    dt = t_trans / int(intervals)
+    final = np.array([y_t, z_t, 0.0, 0.0, angle])
+    best: _Candidate | None = None
+    reasons: list[str] = []
+    for k, rate_k in enumerate(_rate_variants(rate, dt)):
+        # the identified structure first; only if it is rejected, every variant
+        # with one extra short bang arc next to a singular arc (best one wins)
+        if k == 1 and best is not None:
+            break
+        try:
+            cand = _refine_candidate(thrust, rate_k, line, target, angle, limits, final)
+        except _SolveFailure as exc:
+            reasons.append(str(exc))
+            continue
+        issues = cand.problems(t_trans, limits)
+        if issues:
+            reasons.append("; ".join(issues))
+        elif best is None or cand.duration < best.duration:
+            best = cand
+    if best is None:
+        return _failed(
+            "refinement rejected: " + reasons[0]
+            + (f" (and {len(reasons) - 1} alternative structures failed)" if len(reasons) > 1 else ""),
+            target, angle, limits, t_trans,
         )
-    if problems:
-        return _failed("refinement rejected: " + "; ".join(problems), target, angle, limits, t_trans)
+    thrust_arcs, rate_arcs = best.thrust_arcs, best.rate_arcs
+    times, states, err, duration, rounds = best.times, best.states, best.error, best.duration, best.rounds
+    pmp = best.pmp_residual
     times.setflags(write=False)
     states.setflags(write=False)
     n_sing = sum(a.kind == "singular" for a in rate_arcs)
     msg = (
         f"optimal: T*={duration:.6f} s (transcription {t_trans:.6f} s, {intervals} intervals); "
         f"{len(thrust_arcs)} thrust arcs, {len(rate_arcs)} rate arcs ({n_sing} singular); "
-        f"boundary error {err:.1e}; refinement rounds {rounds}"
+        f"boundary error {err:.1e}; PMP residual {pmp:.1e}; refinement rounds {rounds}"
     )
     return TimeOptimalSolution(
         status="optimal",

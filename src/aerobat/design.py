@@ -292,6 +292,12 @@ def _newton(
             return x, f"Newton converged in {iteration} iterations", True
         Js = (J / e_scales[:, None]) * p_scales[None, :]
         scaled_step = np.linalg.lstsq(Js, e / e_scales, rcond=rcond)[0]
+        # active bounds: parameters at a bound that the step pushes further out are held fixed
+        blocked = ((x <= lower + 1e-12) & (scaled_step > 0)) | ((x >= upper - 1e-12) & (scaled_step < 0))
+        if blocked.any() and not blocked.all():
+            free = ~blocked
+            scaled_step = np.zeros_like(scaled_step)
+            scaled_step[free] = np.linalg.lstsq(Js[:, free], e / e_scales, rcond=rcond)[0]
         longest = float(np.max(np.abs(scaled_step)))
         if longest > max_scaled_step:  # stay where the linear model means something
             scaled_step *= max_scaled_step / longest

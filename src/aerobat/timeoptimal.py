@@ -79,6 +79,8 @@ _MIN_SINGULAR_INTERVALS = 3  # shorter non-bang runs are treated as switches ins
 _PRUNE_TOL_S = 1e-7  # arcs shorter than this are removed and the refinement re-solved
 _REFINE_T_TOL_S = 1e-9  # refined T may exceed the transcription's T by at most this
 _BOUNDARY_TOL = 1e-6
+_PMP_TOL = 1e-6  # allowed violation of the minimum principle (adjoint scaled so lambda_0 = 1)
+_MAX_STRUCTURE_TRIALS = 4
 _COARSE_INTERVALS = 30
 _GL_PANELS = 4  # composite Gauss-Legendre on singular pieces: worst-case error
 _GL_NODES = 32  # ~1e-14 for admissible arcs up to 2 s (|omega| <= 10 rad/s)
@@ -934,7 +936,7 @@ def _refine(
     """
     best: tuple[float, list[list[Any]], list[list[Any]], np.ndarray | None, np.ndarray] | None = None
     rounds = 0
-    for rounds in range(1, 9):
+    for rounds in range(1, 5):
         st = _Structure(thrust, rate, line, lim)
         ok, status, d, line_opt, nu = _refine_once(st, target, final_angle)
         if not ok:
@@ -1139,6 +1141,9 @@ def _simulate(
 
 @dataclass
 class _Candidate:
+    thrust: list[list[Any]]
+    rate: list[list[Any]]
+    line: np.ndarray | None
     thrust_arcs: tuple[InputArc, ...]
     rate_arcs: tuple[InputArc, ...]
     times: np.ndarray
@@ -1147,6 +1152,7 @@ class _Candidate:
     duration: float
     rounds: int
     pmp_residual: float
+    needle: tuple[str, float, str] | None
 
     def problems(self, t_trans: float, lim: BenchmarkLimits) -> list[str]:
         out = []
@@ -1161,8 +1167,12 @@ class _Candidate:
                     out.append(f"singular rate arc reaches |omega|={peak:.6g} > {wmax:g} rad/s")
         if self.duration > t_trans + _REFINE_T_TOL_S:
             out.append(
-                f"refined T={self.duration:.10f} s exceeds transcription T={t_trans:.10f} s "
-                "(arc structure probably misidentified)"
+                f"refined T={self.duration:.10f} s exceeds transcription T={t_trans:.10f} s"
+            )
+        if not self.pmp_residual <= _PMP_TOL:
+            out.append(
+                f"minimum principle violated (residual {self.pmp_residual:.1e} > {_PMP_TOL:.0e}): "
+                "not an extremal, arc structure incomplete"
             )
         return out
 
@@ -1181,8 +1191,11 @@ def _refine_candidate(
     rate_arcs = _make_arcs(rate, True, limits, line)
     times, states = _simulate(thrust_arcs, rate_arcs, limits)
     err = float(np.max(np.abs(states[-1] - final)))
+    pmp, needle = _pmp_residual(thrust_arcs, rate_arcs, nu, limits)
     return _Candidate(
-        pmp_residual=_pmp_residual(thrust_arcs, rate_arcs, nu, limits),
+        thrust=thrust,
+        rate=rate,
+        line=line,
         thrust_arcs=thrust_arcs,
         rate_arcs=rate_arcs,
         times=times,
@@ -1190,20 +1203,45 @@ def _refine_candidate(
         error=err,
         duration=float(thrust_arcs[-1].end_s),
         rounds=rounds,
+        pmp_residual=pmp,
+        needle=needle,
     )
 
 
-def _rate_variants(rate: list[list[Any]], dt: float) -> list[list[list[Any]]]:
-    """The identified rate structure followed by single-insertion variants.
+def _insert_arc(arcs: list[list[Any]], t: float, kind: str, width: float) -> list[list[Any]]:
+    """Insert a short arc of ``kind`` centred at ``t`` (clipped into its host arc)."""
+    out = [list(a) for a in arcs]
+    k = next((i for i, a in enumerate(out) if a[1] <= t <= a[2]), len(out) - 1)
+    t0, t1 = out[k][1], out[k][2]
+    width = min(width, 0.5 * (t1 - t0))
+    lo = min(max(t - width / 2, t0), t1 - width)
+    hi = lo + width
+    host = out[k]
+    pieces = []
+    if lo > t0:
+        pieces.append([host[0], t0, lo, None])
+    pieces.append([kind, lo, hi, None])
+    if hi < t1:
+        pieces.append([host[0], hi, t1, None])
+    out[k : k + 1] = pieces
+    merged: list[list[Any]] = []
+    for a in out:
+        if merged and merged[-1][0] == a[0] and a[0] != "singular":
+            merged[-1][2] = a[2]
+        else:
+            merged.append(a)
+    return merged
+
+
+def _edge_variants(rate: list[list[Any]], dt: float) -> list[list[list[Any]]]:
+    """Rate structures with one short bang arc next to a singular arc.
 
     Short bang fragments next to a singular arc are easily absorbed into the
     singular run of the transcription (they share an interval with the
-    junction and are followed by ringing).  Each variant inserts one short
-    bang arc at one end of one singular arc: both kinds at the start/end of
-    the horizon, the kind opposite to the neighbour otherwise.  Arcs that are
-    not needed shrink to zero and are pruned by the refinement.
+    junction and are followed by ringing).  Used only when the refinement of
+    the identified structure fails outright (no multipliers to guide it).
     """
-    out = [rate]
+    out = []
     other = {"max": "min", "min": "max"}
     delta = 0.25 * dt
     for idx, arc in enumerate(rate):
@@ -1213,17 +1251,68 @@ def _rate_variants(rate: list[list[Any]], dt: float) -> list[list[list[Any]]]:
             nb = idx - 1 if side == "start" else idx + 1
             kinds = ["max", "min"] if not 0 <= nb < len(rate) else [other[rate[nb][0]]]
             for kind in kinds:
-                new = [list(a) for a in rate]
-                if side == "start":
-                    t0 = new[idx][1]
-                    new[idx][1] = t0 + delta
-                    new.insert(idx, [kind, t0, t0 + delta, None])
-                else:
-                    t1 = new[idx][2]
-                    new[idx][2] = t1 - delta
-                    new.insert(idx + 1, [kind, t1 - delta, t1, None])
-                out.append(new)
+                t = arc[1] + delta / 2 if side == "start" else arc[2] - delta / 2
+                out.append(_insert_arc(rate, t, kind, delta))
     return out
+
+
+def _refine_with_structure_search(
+    thrust: list[list[Any]],
+    rate: list[list[Any]],
+    line: np.ndarray | None,
+    target: tuple[float, float],
+    angle: float,
+    limits: BenchmarkLimits,
+    t_trans: float,
+    dt: float,
+) -> tuple[_Candidate | None, list[str]]:
+    """Refine the identified structure; repair it by needle insertion if needed.
+
+    If the refined candidate violates the minimum principle (or is slower
+    than the transcription), the arc that Pontryagin's principle asks for at
+    the point of largest violation is inserted and the refinement repeated
+    (at most ``_MAX_STRUCTURE_TRIALS`` refinements in total).  If the first
+    refinement fails outright, single short bang arcs next to singular arcs
+    are tried instead.
+    """
+    final = np.array([target[0], target[1], 0.0, 0.0, angle])
+    queue: list[tuple[list[list[Any]], list[list[Any]], np.ndarray | None, Any]] = [
+        (thrust, rate, line, None)
+    ]
+    reasons: list[str] = []
+    trials = 0
+    while queue and trials < _MAX_STRUCTURE_TRIALS:
+        th_k, ra_k, ln_k, fallback = queue.pop(0)
+        trials += 1
+        try:
+            cand = _refine_candidate(th_k, ra_k, ln_k, target, angle, limits, final)
+        except _SolveFailure as exc:
+            reasons.append(str(exc))
+            if fallback is not None:
+                queue.insert(0, fallback)
+            elif trials == 1:
+                queue.extend((thrust, r, line, None) for r in _edge_variants(rate, dt))
+            continue
+        issues = cand.problems(t_trans, limits)
+        if not issues:
+            return cand, reasons
+        reasons.append("; ".join(issues))
+        if cand.needle is not None:
+            which, t, kind = cand.needle
+            width = 0.25 * dt
+            new_th, new_ra = cand.thrust, cand.rate
+            if which == "thrust":
+                new_th = _insert_arc(cand.thrust, t, kind, width)
+            else:
+                new_ra = _insert_arc(cand.rate, t, kind, width)
+            has_sing = "singular" in [a[0] for a in new_ra]
+            # start from the transcription's costate line; the rejected
+            # candidate's line is the fallback
+            first = line if line is not None else cand.line
+            second = cand.line if line is not None else None
+            alt = (new_th, new_ra, second, None) if has_sing and second is not None else None
+            queue.insert(0, (new_th, new_ra, first if has_sing else None, alt))
+    return None, reasons
 
 
 # --------------------------------------------------------------------------
@@ -1340,28 +1429,13 @@ def solve_translation(
     except _SolveFailure as exc:
         return _failed(str(exc), target, angle, limits, t_trans)
     dt = t_trans / int(intervals)
-    final = np.array([y_t, z_t, 0.0, 0.0, angle])
-    best: _Candidate | None = None
-    reasons: list[str] = []
-    for k, rate_k in enumerate(_rate_variants(rate, dt)):
-        # the identified structure first; only if it is rejected, every variant
-        # with one extra short bang arc next to a singular arc (best one wins)
-        if k == 1 and best is not None:
-            break
-        try:
-            cand = _refine_candidate(thrust, rate_k, line, target, angle, limits, final)
-        except _SolveFailure as exc:
-            reasons.append(str(exc))
-            continue
-        issues = cand.problems(t_trans, limits)
-        if issues:
-            reasons.append("; ".join(issues))
-        elif best is None or cand.duration < best.duration:
-            best = cand
+    best, reasons = _refine_with_structure_search(
+        thrust, rate, line, target, angle, limits, t_trans, dt
+    )
     if best is None:
         return _failed(
-            "refinement rejected: " + reasons[0]
-            + (f" (and {len(reasons) - 1} alternative structures failed)" if len(reasons) > 1 else ""),
+            "refinement rejected: " + reasons[-1]
+            + (f" (after {len(reasons)} structure trials)" if len(reasons) > 1 else ""),
             target, angle, limits, t_trans,
         )
     thrust_arcs, rate_arcs = best.thrust_arcs, best.rate_arcs

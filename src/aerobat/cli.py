@@ -37,7 +37,7 @@ def _console(json_mode: bool):
 
     stream = sys.stderr if json_mode else sys.stdout
     width = None if stream.isatty() else 160  # keep tables readable in logs and pipes
-    return Console(stderr=json_mode, highlight=False, width=width)
+    return Console(stderr=json_mode, highlight=False, markup=False, width=width)
 
 
 # ------------------------------------------------------------------ simulate

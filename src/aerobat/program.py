@@ -92,7 +92,9 @@ class RampDown:
     def __post_init__(self) -> None:
         for name in ("collective_s", "rates_s"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value < 0:
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise ValueError(f"ramp_down.{name} must be a number, got {value!r}")
+            if not math.isfinite(value) or value < 0:
                 raise ValueError(f"ramp_down.{name} = {value!r} is out of range: allowed >= 0 (s)")
 
 
@@ -120,6 +122,8 @@ class Program:
             raise ValueError(f"duration_s must be a number, got {self.duration_s!r}")
         if not math.isfinite(self.duration_s) or not 0.0 < self.duration_s <= MAX_DURATION_S:
             raise ValueError(f"duration_s = {self.duration_s} is out of range: allowed (0, {MAX_DURATION_S:g}] (s)")
+        if isinstance(self.hover_collective_m_s2, bool) or not isinstance(self.hover_collective_m_s2, int | float):
+            raise ValueError(f"hover_collective_m_s2 must be a number, got {self.hover_collective_m_s2!r}")
         if not math.isfinite(self.hover_collective_m_s2) or self.hover_collective_m_s2 <= 0:
             raise ValueError(f"hover_collective_m_s2 = {self.hover_collective_m_s2} must be finite and > 0 (m/s²)")
         seen: dict[tuple[str, float], int] = {}

@@ -25,6 +25,7 @@ import numba as nb
 import numpy as np
 
 from .dynamics import (
+    N_PLANT,
     N_STATE,
     POS,
     VEL,
@@ -330,6 +331,8 @@ def simulate_batch(
     -------
     (B, N_STATE) final states.
     """
+    if not max_step_s > 0 or not math.isfinite(max_step_s):
+        raise ValueError(f"max_step_s = {max_step_s} must be finite and > 0 (s)")
     compiled = [p.compile() if isinstance(p, Program) else p for p in programs]
     B = len(compiled)
     if B == 0:
@@ -352,8 +355,15 @@ def simulate_batch(
     if initial_states is None:
         initial_states = np.stack([hover_state(c.vehicle) for c in cfgs])
     x0 = np.ascontiguousarray(initial_states, dtype=float)
+    plants = np.ascontiguousarray(plants, dtype=float)
+    if x0.shape != (B, N_STATE):
+        raise ValueError(f"initial_states must have shape ({B}, {N_STATE}), got {x0.shape}")
+    if plants.shape != (B, N_PLANT):
+        raise ValueError(f"plants must have shape ({B}, {N_PLANT}), got {plants.shape}")
+    if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(plants))):
+        raise ValueError("initial_states and plants must be finite")
     out = np.empty_like(x0)
-    _batch_continuous(x0, bp, coeffs, nseg, np.ascontiguousarray(plants, dtype=float), ctrl, max_step_s, out)
+    _batch_continuous(x0, bp, coeffs, nseg, plants, ctrl, max_step_s, out)
     return out
 
 

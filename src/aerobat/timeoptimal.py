@@ -447,19 +447,21 @@ def _run_transcription(
     final_angle: float,
     lim: BenchmarkLimits,
     max_iter: int,
-) -> tuple[bool, str, float, np.ndarray, np.ndarray]:
+) -> tuple[bool, str, float, np.ndarray, np.ndarray, np.ndarray]:
     solver = _transcription_solver(n, lim._key(), max_iter)
     lbx, ubx = _pack_bounds(n, target, final_angle, lim)
     w0 = np.clip(w0, lbx, ubx)
     try:
         res = solver(x0=w0, lbx=lbx, ubx=ubx, lbg=0.0, ubg=0.0)
     except RuntimeError as exc:  # pragma: no cover - CasADi evaluation errors
-        return False, f"IPOPT raised {exc}", math.nan, np.empty((0, 5)), np.empty((0, 2))
+        return False, f"IPOPT raised {exc}", math.nan, np.empty((0, 5)), np.empty((0, 2)), np.empty((0, 5))
     stats = solver.stats()
     w = np.asarray(res["x"], dtype=float).ravel()
     xs = w[1 : 1 + 5 * (n + 1)].reshape(n + 1, 5)
     us = w[1 + 5 * (n + 1) :].reshape(n, 2)
-    return bool(stats["success"]), str(stats["return_status"]), float(w[0]), xs, us
+    # defect multipliers: discrete adjoint at the end of each interval
+    lam = np.asarray(res["lam_g"], dtype=float).ravel().reshape(n, 5)
+    return bool(stats["success"]), str(stats["return_status"]), float(w[0]), xs, us, lam
 
 
 def _resample(w: np.ndarray, n_from: int, n_to: int) -> np.ndarray:
@@ -480,14 +482,18 @@ def _best_transcription(
     lim: BenchmarkLimits,
     intervals: int,
     max_iter: int,
-) -> tuple[float, np.ndarray, np.ndarray, str]:
-    """Multi-start coarse solves, then the best basin(s) on the fine grid."""
+) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    """Multi-start coarse solves, then the best basin(s) on the fine grid.
+
+    Returns ``T``, node states ``(N+1, 5)``, interval inputs ``(N, 2)`` and the
+    defect multipliers ``(N, 5)`` of the best fine solution.
+    """
     n_coarse = min(_COARSE_INTERVALS, intervals)
     coarse: list[tuple[float, np.ndarray]] = []
     statuses: list[str] = []
     for theta_fn in _theta_guesses(final_angle):
         w0 = _initial_point(n_coarse, target, final_angle, theta_fn, lim)
-        ok, status, t_final, xs, us = _run_transcription(
+        ok, status, t_final, xs, us, _ = _run_transcription(
             n_coarse, w0, target, final_angle, lim, max_iter
         )
         statuses.append(status)
@@ -504,21 +510,21 @@ def _best_transcription(
         inits = [_resample(w, n_coarse, intervals) for _, w in starts]
     else:
         inits = [_initial_point(intervals, target, final_angle, _theta_guesses(final_angle)[0], lim)]
-    best: tuple[float, np.ndarray, np.ndarray] | None = None
+    best: tuple[float, np.ndarray, np.ndarray, np.ndarray] | None = None
     fine_status = []
     for w0 in inits:
-        ok, status, t_final, xs, us = _run_transcription(
+        ok, status, t_final, xs, us, lam = _run_transcription(
             intervals, w0, target, final_angle, lim, max_iter
         )
         fine_status.append(status)
         if ok and (best is None or t_final < best[0]):
-            best = (t_final, xs, us)
+            best = (t_final, xs, us, lam)
     if best is None:
         raise _SolveFailure(
             "direct transcription did not converge (IPOPT status: "
             f"coarse {sorted(set(statuses))}, fine {sorted(set(fine_status))})"
         )
-    return best[0], best[1], best[2], fine_status[0]
+    return best[0], best[1], best[2], best[3]
 
 
 # --------------------------------------------------------------------------
@@ -591,7 +597,7 @@ def _fit_costate_line(t: np.ndarray, theta: np.ndarray) -> np.ndarray:
 
 
 def _detect_structure(
-    t_final: float, xs: np.ndarray, us: np.ndarray, lim: BenchmarkLimits
+    t_final: float, xs: np.ndarray, us: np.ndarray, lim: BenchmarkLimits, lam: np.ndarray | None = None
 ) -> tuple[list[list[Any]], list[list[Any]], np.ndarray | None]:
     """Arc structure of both inputs from a transcription.
 
@@ -601,7 +607,9 @@ def _detect_structure(
         Arc lists of the two inputs.
     line : numpy.ndarray or None
         Initial guess ``(a, b, c, d)`` of the costate line shared by all
-        singular rate arcs (``None`` if there are none).
+        singular rate arcs (``None`` if there are none): an affine fit of the
+        transcription's velocity multipliers (its discrete adjoint), or, if
+        those are unavailable, a fit of the attitude on the singular runs.
     """
     n = us.shape[0]
     dt = t_final / n
@@ -643,8 +651,26 @@ def _detect_structure(
                 (kind, dur, None) for kind, dur in _bang_segments(w, -wmax, wmax, dt, runs, k)
             )
     rate = _merge_segments(segs)
-    line = _fit_costate_line(np.concatenate(fit_t), np.concatenate(fit_theta)) if fit_t else None
+    line = None
+    if fit_t:
+        line = _line_from_multipliers(lam, t_final) if lam is not None else None
+        if line is None:
+            line = _fit_costate_line(np.concatenate(fit_t), np.concatenate(fit_theta))
     return thrust, rate, line
+
+
+def _line_from_multipliers(lam: np.ndarray, t_final: float) -> np.ndarray | None:
+    """Affine fit ``(a + b t, c + d t)`` of the transcription's velocity multipliers."""
+    n = lam.shape[0]
+    t = np.arange(1, n + 1) * t_final / n
+    mat = np.column_stack([np.ones(n), t])
+    cy = np.linalg.lstsq(mat, lam[:, 2], rcond=None)[0]
+    cz = np.linalg.lstsq(mat, lam[:, 3], rcond=None)[0]
+    v = np.array([cy[0], cy[1], cz[0], cz[1]])
+    norm = float(np.linalg.norm(v))
+    if not math.isfinite(norm) or norm < 1e-12:
+        return None
+    return v / norm
 
 
 # --------------------------------------------------------------------------
@@ -790,57 +816,58 @@ def _piece_functions() -> tuple[Any, Any]:
     return bang, sing
 
 
-def _refine_once(
-    st: _Structure, target: tuple[float, float], final_angle: float
-) -> tuple[bool, str, np.ndarray, np.ndarray | None, np.ndarray]:
-    """One switching-time optimisation for a fixed arc structure.
+@functools.lru_cache(maxsize=128)
+def _refine_solver(
+    signature: tuple[tuple[str, str, int], ...], limits_key: tuple[float, ...]
+) -> tuple[Any, int, int]:
+    """Build (and cache) the switching-time NLP of one arc structure.
 
-    Decision variables: the durations of the merged pieces and, if there are
-    singular rate arcs, the unit vector ``(a, b, c, d)`` of the costate line
+    ``signature`` lists the merged pieces as ``(thrust kind, rate kind,
+    singular arc id or -1)``.  The target and final angle are NLP
+    parameters, so one solver serves every target with this structure.
+
+    Decision variables: the piece durations and, if there are singular rate
+    arcs, the unit vector ``v = (a, b, c, d)`` of the costate line
     ``n(t) = (a + b t, c + d t)``.  On a singular arc entered at ``t_e`` the
     attitude is ``theta(t) = theta(t_e) + angle(n(t_e) -> n(t))`` and
     ``n(t_e)`` must be parallel to ``(sin theta, cos theta)`` (junction
     constraint); the rate ``(b c - a d) / |n(t)|^2`` is bounded on each piece
-    through the minimum of ``|n(t)|^2``.
+    through the minimum of ``|n(t)|^2``.  Objective: ``T = sum(d)``.
     """
     import casadi as ca
 
+    f_min, f_max, wmax, g = limits_key
     bang, sing = _piece_functions()
-    lim = st.lim
-    g = lim.gravity_m_s2
-    wmax = lim.max_rate_rad_s
-    npc = len(st.pieces)
+    npc = len(signature)
+    has_singular = any(sid >= 0 for _, _, sid in signature)
     d = ca.MX.sym("d", npc)
-    nl = 4 if st.has_singular else 0
+    nl = 4 if has_singular else 0
     v = ca.MX.sym("v", nl)
+    par = ca.MX.sym("p", 3)  # target y, target z, final angle
     xk = ca.MX.zeros(5)
     t_abs = ca.MX(0.0)
     entry: dict[int, tuple[Any, Any]] = {}
     eq: list[Any] = []
     ineq: list[Any] = []
-    if st.has_singular:
-        k_rate = v[1] * v[2] - v[0] * v[3]
-    for k, (i, j) in enumerate(st.pieces):
-        f = st.thrust_value(i)
-        if st.rate_kinds[j] != "singular":
-            xk = bang(xk, f, st.rate_value(j), d[k], g)
+    k_rate = v[1] * v[2] - v[0] * v[3] if has_singular else None
+    for k, (fk, rk, sid) in enumerate(signature):
+        f = f_max if fk == "max" else f_min
+        if sid < 0:
+            xk = bang(xk, f, wmax if rk == "max" else -wmax, d[k], g)
         else:
-            if j not in entry:
-                entry[j] = (xk[4], t_abs)
+            if sid not in entry:
+                entry[sid] = (xk[4], t_abs)
                 pe, qe = v[0] + v[1] * t_abs, v[2] + v[3] * t_abs
                 eq.append(ca.sin(xk[4]) * qe - ca.cos(xk[4]) * pe)  # junction: n(t_e) || e(theta)
-            th_e, t_e = entry[j]
+            th_e, t_e = entry[sid]
             xk, qq = sing(xk, f, d[k], g, v, t_abs, th_e, t_e)
             ineq += [wmax * qq - k_rate, wmax * qq + k_rate]
         t_abs = t_abs + d[k]
-    eq = [xk[0] - target[0], xk[1] - target[1], xk[2], xk[3], xk[4] - final_angle] + eq
-    if st.has_singular:
+    eq = [xk[0] - par[0], xk[1] - par[1], xk[2], xk[3], xk[4] - par[2]] + eq
+    if has_singular:
         eq.append(ca.sumsqr(v) - 1.0)
     gexp = ca.vertcat(*eq, *ineq)
-    n_eq, n_in = len(eq), int(gexp.shape[0]) - len(eq)
-    x = ca.vertcat(d, v)
-    scale_t = float(np.sum(st.d0))
-    nlp = {"x": x, "f": ca.sum1(d) / scale_t, "g": gexp}
+    nlp = {"x": ca.vertcat(d, v), "p": par, "f": ca.sum1(d), "g": gexp}
     opts = {
         "ipopt.print_level": 0,
         "ipopt.sb": "yes",
@@ -849,22 +876,40 @@ def _refine_once(
         "ipopt.constr_viol_tol": 1e-13,
         "ipopt.acceptable_tol": 1e-10,
         "ipopt.acceptable_constr_viol_tol": 1e-11,
-        "ipopt.max_iter": 500,
+        "ipopt.max_iter": 300,
         "ipopt.bound_relax_factor": 0.0,
     }
-    solver = ca.nlpsol("refine", "ipopt", nlp, opts)
+    return ca.nlpsol("refine", "ipopt", nlp, opts), len(eq), int(gexp.shape[0]) - len(eq)
+
+
+def _refine_once(
+    st: _Structure, target: tuple[float, float], final_angle: float
+) -> tuple[bool, str, np.ndarray, np.ndarray | None, np.ndarray]:
+    """One switching-time optimisation for a fixed arc structure.
+
+    Returns success flag, IPOPT status, piece durations, costate line and
+    ``nu``: the multipliers of the five final-state constraints, i.e. the
+    adjoint ``lambda(T)`` normalised to ``lambda_0 = 1``.
+    """
+    signature = tuple(
+        (st.thrust_kinds[i], st.rate_kinds[j], j if st.rate_kinds[j] == "singular" else -1)
+        for i, j in st.pieces
+    )
+    solver, n_eq, n_in = _refine_solver(signature, st.lim._key())
+    npc = len(st.pieces)
+    nl = 4 if st.has_singular else 0
     lbg = np.zeros(n_eq + n_in)
     ubg = np.concatenate([np.zeros(n_eq), np.full(n_in, np.inf)])
     lbx = np.concatenate([np.zeros(npc), np.full(nl, -1.0)])
     ubx = np.concatenate([np.full(npc, np.inf), np.full(nl, 1.0)])
     x0 = np.concatenate([st.d0, st.line0 if st.has_singular else []])
-    res = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+    res = solver(
+        x0=x0, p=[target[0], target[1], final_angle], lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg
+    )
     stats = solver.stats()
     xopt = np.asarray(res["x"], dtype=float).ravel()
     line_opt = xopt[npc:] if st.has_singular else None
-    # multipliers of the five final-state constraints = adjoint lambda(T) of the
-    # problem "minimise T / scale_t" (Lagrangian f + lam_g^T g)
-    nu = np.asarray(res["lam_g"], dtype=float).ravel()[:5] * scale_t
+    nu = np.asarray(res["lam_g"], dtype=float).ravel()[:5].copy()
     return bool(stats["success"]), str(stats["return_status"]), xopt[:npc], line_opt, nu
 
 
@@ -950,10 +995,11 @@ def _refine(
             line = line_opt if "singular" in [a[0] for a in rate] else None
             continue
         t_opt = float(np.sum(d))
-        if best is None or t_opt < best[0] - 1e-12:
-            best = (t_opt, thrust, rate, line_opt, nu)
-        elif t_opt > best[0] + 1e-12:
-            break  # re-initialisation made it worse: keep the best
+        if best is not None and t_opt > best[0] - 1e-10:
+            if t_opt < best[0]:
+                best = (t_opt, thrust, rate, line_opt, nu)
+            break  # re-initialisation did not help: keep the best
+        best = (t_opt, thrust, rate, line_opt, nu)
         if line_opt is None:
             break
         line_nu = _line_from_adjoint(nu, t_opt)
@@ -1122,11 +1168,28 @@ def _simulate(
         tm = 0.5 * (t0 + t1)
         th_arc = next(a for a in thrust_arcs if a.start_s <= tm <= a.end_s)
         r_arc = next(a for a in rate_arcs if a.start_s <= tm <= a.end_s)
-        f = th_arc.value
+        f = float(th_arc.value)
+        if r_arc.tangent_law is None:
+            w_const = float(r_arc.value)
 
-        def rhs(t: float, x: np.ndarray, f: float = f, r_arc: InputArc = r_arc) -> np.ndarray:
-            w = float(r_arc.evaluate(t))
-            return np.array([x[2], x[3], f * math.sin(x[4]), f * math.cos(x[4]) - g, w])
+            def rhs(t: float, x: np.ndarray, f: float = f, w: float = w_const) -> np.ndarray:
+                th = x[4]
+                return np.array([x[2], x[3], f * math.sin(th), f * math.cos(th) - g, w])
+
+        else:
+            alpha, beta = (float(v) for v in r_arc.tangent_law)
+            ts = float(r_arc.start_s)
+
+            def rhs(
+                t: float, x: np.ndarray, f: float = f, al: float = alpha, be: float = beta, ts: float = ts
+            ) -> np.ndarray:
+                s_ = t - ts
+                c = 1.0 + al * s_
+                b = be * s_
+                th = x[4]
+                return np.array(
+                    [x[2], x[3], f * math.sin(th), f * math.cos(th) - g, be / (c * c + b * b)]
+                )
 
         m = max(2, int(math.ceil((t1 - t0) / step_s)) + 1)
         t_eval = np.linspace(t0, t1, m)
@@ -1422,10 +1485,10 @@ def solve_translation(
         )
     t_trans = math.nan
     try:
-        t_trans, xs, us, _ = _best_transcription(
+        t_trans, xs, us, lam = _best_transcription(
             target, angle, limits, int(intervals), int(ipopt_max_iter)
         )
-        thrust, rate, line = _detect_structure(t_trans, xs, us, limits)
+        thrust, rate, line = _detect_structure(t_trans, xs, us, limits, lam)
     except _SolveFailure as exc:
         return _failed(str(exc), target, angle, limits, t_trans)
     dt = t_trans / int(intervals)

@@ -105,7 +105,8 @@ class Arena:
         kwargs: dict = {}
         if p.disturbances.enabled:
             d = p.disturbances
-            gains = gains * (1.0 + d.thrust_gain_jitter * self.rng.standard_normal(4))
+            common = d.thrust_gain_jitter * self.rng.standard_normal()
+            gains = gains * (1.0 + common + d.motor_gain_jitter * self.rng.standard_normal(4))
             kwargs.update(
                 wind_m_s=tuple(d.wind_std_m_s * self.rng.standard_normal(3)),
                 gust_amplitude_m_s=tuple(d.gust_amplitude_std_m_s * self.rng.standard_normal(3)),
@@ -128,6 +129,84 @@ class Arena:
     def reset_drift(self) -> None:
         """A fresh battery and propellers: thrust capacity back to 100 %."""
         self.capacity = 1.0
+
+    def get_state(self) -> dict[str, object]:
+        """Everything that changes from trial to trial, as JSON-ready plain values.
+
+        With the constructor arguments (``config``, ``params``, ``seed``) this fixes
+        every later trial: a fresh arena given this state with :meth:`set_state`
+        flies the next trials bit for bit like this one would.
+
+        Returns
+        -------
+        dict
+            ``rng`` (the generator's ``bit_generator.state``, integers only),
+            ``trials_flown``, ``capacity``, ``tick``, and the arrays ``x`` (true
+            vehicle state), ``gyro_prev``, ``radio_cmd``, ``integral``, ``plant``,
+            ``start_m`` as lists of floats.
+        """
+        rng = self.rng.bit_generator.state
+        state: dict[str, object] = {
+            "format": 1,
+            "rng": {key: (dict(value) if isinstance(value, dict) else value) for key, value in rng.items()},
+            "trials_flown": int(self.trials_flown),
+            "capacity": float(self.capacity),
+            "tick": int(self.tick),
+        }
+        for name in ("x", "gyro_prev", "radio_cmd", "integral", "plant", "start_m"):
+            state[name] = [float(v) for v in getattr(self, name)]
+        return state
+
+    def set_state(self, state: dict[str, object]) -> None:
+        """Restore a state from :meth:`get_state` (of an arena built with the same arguments).
+
+        Raises
+        ------
+        ValueError
+            A field is missing, of the wrong type or length, or the generator kind differs.
+        """
+        from collections.abc import Mapping
+
+        if not isinstance(state, Mapping):
+            raise ValueError(f"arena state: expected a table, got {type(state).__name__}")
+        array_names = ("x", "gyro_prev", "radio_cmd", "integral", "plant", "start_m")
+        missing = [k for k in ("format", "rng", "trials_flown", "capacity", "tick", *array_names) if k not in state]
+        if missing:
+            raise ValueError(f"arena state: missing field(s) {', '.join(missing)}")
+        if state["format"] != 1:
+            raise ValueError(f"arena state.format = {state['format']!r}: this aerobat reads format 1")
+        rng = state["rng"]
+        kind = self.rng.bit_generator.state["bit_generator"]
+        if not isinstance(rng, Mapping) or rng.get("bit_generator") != kind:
+            raise ValueError(f"arena state.rng: expected a {kind} generator state")
+        arrays = {}
+        for name in array_names:
+            current = getattr(self, name)
+            try:
+                values = np.array(state[name], dtype=np.float64)
+            except (TypeError, ValueError):
+                raise ValueError(f"arena state.{name}: expected a list of numbers") from None
+            if values.shape != current.shape:
+                raise ValueError(f"arena state.{name}: expected {current.shape[0]} values, got {values.size}")
+            arrays[name] = values
+        counters = {}
+        for name in ("trials_flown", "tick"):
+            count = state[name]
+            if isinstance(count, bool) or not isinstance(count, int) or count < 0:
+                raise ValueError(f"arena state.{name} = {count!r}: expected an integer >= 0")
+            counters[name] = count
+        capacity = state["capacity"]
+        if isinstance(capacity, bool) or not isinstance(capacity, int | float) or not 0.0 < capacity <= 1.0:
+            raise ValueError(f"arena state.capacity = {capacity!r}: expected a number in (0, 1]")
+        try:
+            self.rng.bit_generator.state = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in rng.items()}
+        except (TypeError, ValueError, KeyError) as exc:
+            raise ValueError(f"arena state.rng: {exc}") from None
+        self.trials_flown = counters["trials_flown"]
+        self.capacity = float(capacity)
+        self.tick = counters["tick"]
+        for name, values in arrays.items():
+            setattr(self, name, values)
 
     # ------------------------------------------------------------ simulation
     def _mocap_noise(self, rows: int) -> np.ndarray:

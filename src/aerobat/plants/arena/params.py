@@ -106,19 +106,29 @@ class Drift:
 
 @dataclass(frozen=True, kw_only=True)
 class Disturbances:
-    """Per-trial random effects: gusts and start-state error left by the hover controller."""
+    """Per-trial random effects (the start-state error comes from the real hover loop).
+
+    Attributes
+    ----------
+    wind_std_m_s : std of a constant wind per trial, per axis [m/s].
+    gust_amplitude_std_m_s, gust_frequency_hz : a sinusoidal gust per trial, random amplitude and phase.
+    thrust_gain_jitter : std of a common-mode thrust gain change per trial (battery voltage, temperature).
+    motor_gain_jitter : std of an independent per-motor thrust gain change per trial.
+    """
 
     enabled: bool = True
     wind_std_m_s: float = 0.03
     gust_amplitude_std_m_s: float = 0.03
     gust_frequency_hz: float = 1.5
-    thrust_gain_jitter: float = 0.007
+    thrust_gain_jitter: float = 0.0035
+    motor_gain_jitter: float = 0.001
 
     def __post_init__(self) -> None:
         check_range("wind_std_m_s", self.wind_std_m_s, low=0.0, high=5.0, unit="m/s")
         check_range("gust_amplitude_std_m_s", self.gust_amplitude_std_m_s, low=0.0, high=5.0, unit="m/s")
         check_range("gust_frequency_hz", self.gust_frequency_hz, low=0.0, high=50.0, unit="Hz")
         check_range("thrust_gain_jitter", self.thrust_gain_jitter, low=0.0, high=0.1)
+        check_range("motor_gain_jitter", self.motor_gain_jitter, low=0.0, high=0.1)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -7,7 +7,6 @@ Each figure is the median of several repeats after JIT warm-up unless noted.
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import platform
 import statistics

@@ -60,8 +60,9 @@ def main() -> None:
                 (OUT / "learning.png").rename(OUT / "triple_flip_3d_learning.png")
         lates = np.array([r[2] for r in rows])
         print(f"| {kind} | " + " | ".join(f"{r[2]:.3f}" for r in rows) +
-              f" | {lates.mean():.3f} | first {np.mean([r[1] for r in rows]):.2f} m; max angle "
-              f"{max(r[3] for r in rows):.1f}°; p8 {np.mean([r[4] for r in rows]):+.3f}; pinned {sum(r[5] for r in rows)} |")
+              f" | {lates.mean():.3f} | first {np.mean([r[1] for r in rows]):.2f} m; "
+              f"max angle {max(r[3] for r in rows):.1f}°; p8 {np.mean([r[4] for r in rows]):+.3f}; "
+              f"pinned {sum(r[5] for r in rows)} |")
     print("\n## 2D single flip at 800°/s on the arena (Fig. 11)")
     m1 = MultiFlip(vehicle=CONFIG.vehicle, flips=1, max_rate_rad_s=math.radians(800), dims=2)
     d1 = design(m1, MODEL)

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from aerobat import Program, Switch, hummingbird, load_program, simulate
+from aerobat.config import ConfigError
 from aerobat.dynamics import euler_zyx
 from aerobat.maneuvers import MultiFlip
 from aerobat.plants import Arena, ArenaParams, NominalPlant, Plant, load_arena
 from aerobat.plants.arena import save_arena
-from aerobat.config import ConfigError
 
 CONFIG = hummingbird()
 TRIPLE = load_program("examples/triple_flip_1800.toml")

@@ -67,8 +67,10 @@ def test_3d_triple_flip_learns_on_the_arena(arena_session):
     pos = position_errors(s)
     late = pos[20:30]
     errors = np.array([it.error for it in s.measured])
-    print(f"first {pos[0]:.3f} m, mean 21-30 {late.mean():.3f} m, ratio {late.mean() / pos[0]:.2f}, "
-          f"max |angle| 21-30 {np.degrees(np.abs(errors[20:30][:, ANGLES]).max(axis=0))} deg, p8 {s.final_params[8]:.3f}")
+    print(f"first {pos[0]:.3f} m, mean 21-30 {late.mean():.3f} m, "
+          f"ratio {late.mean() / pos[0]:.2f}, "
+          f"max |angle| 21-30 {np.degrees(np.abs(errors[20:30][:, ANGLES]).max(axis=0))} deg, "
+          f"p8 {s.final_params[8]:.3f}")
     assert pos[0] >= 0.3
     assert late.mean() <= 0.12
     assert late.mean() <= 0.2 * pos[0]

@@ -59,7 +59,8 @@ def check_range(
     if high is not None:
         ok &= value <= high if high_inclusive else value < high
     if not ok:
-        raise ValueError(f"{name} = {value:g} is out of range: allowed {_describe(low, high, low_inclusive, high_inclusive)}{_unit(unit)}")
+        allowed = _describe(low, high, low_inclusive, high_inclusive)
+        raise ValueError(f"{name} = {value:g} is out of range: allowed {allowed}{_unit(unit)}")
 
 
 def _describe(low: float | None, high: float | None, lo_inc: bool, hi_inc: bool) -> str:

@@ -274,7 +274,9 @@ def program_from_table(data: dict[str, Any], *, source: str) -> Program:
     allowed = {"name", "duration_s", "hover_collective_m_s2", "ramp_down"}
     bad = sorted(set(header) - allowed)
     if bad:
-        raise ConfigError(f"{source}: [program] unknown field(s) {', '.join(bad)}; allowed: {', '.join(sorted(allowed))}")
+        raise ConfigError(
+            f"{source}: [program] unknown field(s) {', '.join(bad)}; allowed: {', '.join(sorted(allowed))}"
+        )
     if "duration_s" not in header:
         raise ConfigError(f"{source}: [program] missing required field duration_s")
     ramp_table = header.get("ramp_down", {})
@@ -282,7 +284,9 @@ def program_from_table(data: dict[str, Any], *, source: str) -> Program:
         raise ConfigError(f"{source}: [program.ramp_down] must be a table")
     bad = sorted(set(ramp_table) - {"collective_s", "rates_s"})
     if bad:
-        raise ConfigError(f"{source}: [program.ramp_down] unknown field(s) {', '.join(bad)}; allowed: collective_s, rates_s")
+        raise ConfigError(
+            f"{source}: [program.ramp_down] unknown field(s) {', '.join(bad)}; allowed: collective_s, rates_s"
+        )
     switches_raw = data.get("switch", [])
     if not isinstance(switches_raw, list):
         raise ConfigError(f"{source}: 'switch' must be an array of tables ([[switch]])")

@@ -84,7 +84,8 @@ class VehicleParams:
         lo = 4.0 * self.rotor_thrust_min_n / self.mass_kg
         hi = 4.0 * self.rotor_thrust_max_n / self.mass_kg
         check_range("collective_reduced_min_m_s2", self.collective_reduced_min_m_s2, low=lo,
-                    high=self.gravity_m_s2, low_inclusive=False, high_inclusive=False, unit="m/s², eq 24: 4 f_min/m < β̲ < g")
+                    high=self.gravity_m_s2, low_inclusive=False, high_inclusive=False,
+                    unit="m/s², eq 24: 4 f_min/m < β̲ < g")
         check_range("collective_reduced_max_m_s2", self.collective_reduced_max_m_s2, low=self.gravity_m_s2,
                     high=hi, low_inclusive=False, high_inclusive=False, unit="m/s², eq 24: g < β̄ < 4 f_max/m")
 

@@ -195,3 +195,38 @@ def translation_from_solution(vehicle: VehicleParams, solution: Any, *, ramp_s: 
         guess_times_s=tuple(times),
         ramp_s=ramp_s,
     )
+
+
+def _translation_from_spec(spec: Any, source: str) -> Translation:
+    """Rebuild a :class:`Translation` from its ``spec()`` (registered with the maneuver registry)."""
+    from ..config import ConfigError, dataclass_from_table
+
+    allowed = {"kind", "target_yz", "final_angle_rad", "interval_inputs", "guess_times_s", "ramp_s", "vehicle"}
+    unknown = sorted(set(spec) - allowed)
+    if unknown:
+        raise ConfigError(f"{source}: unknown field(s) {', '.join(unknown)}; allowed: {', '.join(sorted(allowed))}")
+    missing = sorted(allowed - set(spec))
+    if missing:
+        raise ConfigError(f"{source}: missing required field(s) {', '.join(missing)}")
+    try:
+        return Translation(
+            vehicle=dataclass_from_table(VehicleParams, spec["vehicle"], source=f"{source}.vehicle"),
+            target_yz=(float(spec["target_yz"][0]), float(spec["target_yz"][1])),
+            final_angle_rad=float(spec["final_angle_rad"]),
+            interval_inputs=tuple((float(a), float(b)) for a, b in spec["interval_inputs"]),
+            guess_times_s=tuple(float(t) for t in spec["guess_times_s"]),
+            ramp_s=float(spec["ramp_s"]),
+        )
+    except ConfigError:
+        raise
+    except (TypeError, ValueError, IndexError) as exc:
+        raise ConfigError(f"{source}: {exc}") from None
+
+
+def _register() -> None:
+    from .registry import register_maneuver
+
+    register_maneuver("translation", _translation_from_spec, replace=True)
+
+
+_register()

@@ -20,7 +20,7 @@ from ...dynamics import N_STATE, controller_vector, hover_state, plant_vector
 from ...program import Program
 from ...vehicle import VehicleConfig, VehicleParams
 from ..base import Trial
-from .kernel import MOCAP_COLUMNS, advance, pd_command
+from .kernel import MOCAP_COLUMNS, supervise
 from .params import ArenaParams
 
 __all__ = ["Arena"]
@@ -126,6 +126,19 @@ class Arena:
             vec[30:38] = 0.0
         return vec
 
+    def _hover_residual(self) -> None:
+        """Perturb the true state by the configured hover residual (see ``Disturbances``)."""
+        d = self.params.disturbances
+        self.x[3:6] += d.start_velocity_std_m_s * self.rng.standard_normal(3)
+        tilt = d.start_tilt_std_rad * self.rng.standard_normal(2)
+        half = 0.5 * np.array([tilt[0], tilt[1], 0.0])
+        dq = np.array([math.sqrt(max(0.0, 1.0 - half @ half)), *half])
+        w, x, y, z = self.x[6:10]
+        a, b, c, e = dq  # q ⊗ dq: a small body-frame rotation
+        q = np.array([w * a - x * b - y * c - z * e, w * b + x * a + y * e - z * c,
+                      w * c - x * e + y * a + z * b, w * e + x * c - y * b + z * a])
+        self.x[6:10] = q / np.linalg.norm(q)
+
     def reset_drift(self) -> None:
         """A fresh battery and propellers: thrust capacity back to 100 %."""
         self.capacity = 1.0
@@ -216,55 +229,17 @@ class Arena:
         noise[:, 3:] = mc.attitude_noise_rad * self.rng.standard_normal((rows, 3)) if mc.attitude_noise_rad else 0.0
         return noise
 
-    def _run(self, n_ticks: int, log: _Log, program=None, man_start_tick: int = -1) -> bool:
-        """Advance the vehicle; returns False if the state went non-finite."""
-        if n_ticks <= 0:
-            return True
-        first = self.tick
-        rows = (first + n_ticks - 1) // self.mocap_every - (first - 1) // self.mocap_every
-        if log.count + rows > log.rows.shape[0]:
-            grown = np.empty((max(2 * log.rows.shape[0], log.count + rows), MOCAP_COLUMNS))
-            grown[: log.count] = log.rows[: log.count]
-            log.rows = grown
-        noise = self._mocap_noise(rows)
-        compiled = program if program is not None else self._empty_program
-        nseg = len(compiled.breakpoints_s) - 1
-        duration = compiled.duration_s if program is not None else 0.0
-        written, bad = advance(
-            self.x, self.gyro_prev, first, n_ticks, self.tick_s, self.plant, self.ctrl, self.sensor,
-            self.params.onboard.gyro_latency_samples, self.radio_cmd, compiled.breakpoints_s,
-            compiled.coefficients, nseg, man_start_tick, duration, self.mocap_every, noise,
-            log.rows[log.count :],
-        )
-        log.count += written
-        self.tick += n_ticks
-        return bad == 0
-
-    def _estimate(self, log: _Log, now_tick: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """Position, velocity (line fit over ~40 ms) and attitude available to the supervisor now."""
-        available_time = (now_tick - self.mocap_delay_ticks) * self.tick_s
-        rows = log.view()
-        if rows.shape[0] == 0:
-            return None
-        last = int(np.searchsorted(rows[:, 0], available_time + 1e-12, side="right"))
-        if last == 0:
-            return None
-        window = rows[max(0, last - 20) : last]
-        t = window[:, 0] - window[-1, 0]
-        pos = window[-1, 1:4]
-        if window.shape[0] >= 3:
-            tc = t - t.mean()
-            vel = (tc[:, None] * (window[:, 1:4] - window[:, 1:4].mean(axis=0))).sum(axis=0) / (tc @ tc)
-        else:
-            vel = np.zeros(3)
-        return pos, vel, window[-1, 4:8]
-
     def _supervise(self, n_ticks: int, log: _Log, target: np.ndarray, *, closed_loop: bool = True,
-                   program=None, man_start_tick: int = -1) -> str | None:
-        """Fly ``n_ticks`` with radio commands every link period; returns a failure message or None."""
+                   program=None, man_start_tick: int = -1, settle: np.ndarray | None = None) -> str | None:
+        """Fly ``n_ticks`` with radio commands every link period; returns a failure message or None.
+
+        With ``settle`` = (hold ticks, position, velocity, tilt tolerances) it returns early,
+        with the message "settled", once the vehicle has stayed within tolerance.
+        """
+        if n_ticks <= 0:
+            return None
         p = self.params
         period = 1.0 / p.links.command_rate_hz
-        end_tick = self.tick + n_ticks
         gains = np.array([p.supervisor.position_gain_per_s2, p.supervisor.velocity_gain_per_s,
                           p.supervisor.attitude_gain_per_s, p.supervisor.yaw_gain_per_s, 3.0])
         v = self.config.vehicle
@@ -272,67 +247,55 @@ class Arena:
                            8.0, v.gravity_m_s2])
         # open-loop placeholder: hover with the supervisor's learned thrust trim
         hover_cmd = np.array([v.gravity_m_s2 + gains[4] * self.integral[2], 0.0, 0.0, 0.0])
-        cmd = np.empty(4)
-        while self.tick < end_tick:
-            now = self.tick * self.tick_s
-            next_send = (math.floor(now / period + 1e-9) + 1) * period
-            send_tick = min(end_tick, math.ceil(next_send / self.tick_s - 1e-9))
-            if closed_loop:
-                est = self._estimate(log, self.tick)
-                if est is None:
-                    cmd[:] = hover_cmd
-                else:
-                    pd_command(est[0], est[1], est[2], target, self.integral, gains, limits, period, cmd)
-            else:
-                cmd[:] = hover_cmd
-            delivered = self.rng.random() >= p.links.command_drop_probability
-            arrival = self.tick + self.link_delay_ticks
-            if not self._run(min(arrival, send_tick) - self.tick, log, program, man_start_tick):
-                return "non-finite vehicle state"
-            if delivered and arrival <= send_tick:
-                self.radio_cmd = cmd.copy()
-            if not self._run(send_tick - self.tick, log, program, man_start_tick):
-                return "non-finite vehicle state"
-            crash = self._volume_violation(log)
-            if crash:
-                return crash
+        rows = n_ticks // self.mocap_every + 2
+        periods = int(math.ceil(n_ticks * self.tick_s / period)) + 2
+        if log.count + rows > log.rows.shape[0]:
+            grown = np.empty((max(2 * log.rows.shape[0], log.count + rows), MOCAP_COLUMNS))
+            grown[: log.count] = log.rows[: log.count]
+            log.rows = grown
+        noise = self._mocap_noise(rows)
+        drops = self.rng.random(periods)
+        compiled = program if program is not None else self._empty_program
+        duration = compiled.duration_s if program is not None else 0.0
+        vol = p.volume
+        volume = np.array([*vol.x_m, *vol.y_m, *vol.z_m], dtype=float)
+        out = np.zeros(6, dtype=np.int64)
+        supervise(self.x, self.gyro_prev, self.tick, self.tick + n_ticks, self.tick_s, self.plant, self.ctrl,
+                  self.sensor, p.onboard.gyro_latency_samples, self.radio_cmd, compiled.breakpoints_s,
+                  compiled.coefficients, len(compiled.breakpoints_s) - 1, man_start_tick, duration,
+                  self.mocap_every, self.mocap_delay_ticks, noise, log.rows, log.count, period,
+                  self.link_delay_ticks, drops, p.links.command_drop_probability, closed_loop,
+                  np.asarray(target, dtype=float), self.integral, gains, limits, hover_cmd, volume,
+                  np.zeros(4) if settle is None else settle, out)
+        self.tick = int(out[0])
+        log.count = int(out[1])
+        status = int(out[4])
+        if status == 1:
+            return "non-finite vehicle state"
+        if status == 2:
+            return self._volume_message(log.rows[int(out[5])])
+        if status == 3:
+            return "settled"
         return None
 
-    def _volume_violation(self, log: _Log) -> str | None:
-        rows = log.view()
-        if rows.shape[0] == 0:
-            return None
+    def _volume_message(self, row: np.ndarray) -> str:
         vol = self.params.volume
-        recent = rows[-8:]
         for axis, (lo, hi), name in ((0, vol.x_m, "x"), (1, vol.y_m, "y"), (2, vol.z_m, "z")):
-            rel = recent[:, 1 + axis] - self.start_m[axis]
-            bad = np.nonzero((rel < lo) | (rel > hi))[0]
-            if bad.size:
-                r = recent[bad[0]]
-                where = "the floor" if (axis == 2 and rel[bad[0]] < lo) else f"the {name} limits [{lo:g}, {hi:g}] m"
-                return f"left the arena volume at t = {r[0]:.3f} s: {name} = {rel[bad[0]]:+.3f} m beyond {where}"
-        return None
+            rel = row[1 + axis] - self.start_m[axis]
+            if rel < lo or rel > hi:
+                where = "the floor" if (axis == 2 and rel < lo) else f"the {name} limits [{lo:g}, {hi:g}] m"
+                return f"left the arena volume at t = {row[0]:.3f} s: {name} = {rel:+.3f} m beyond {where}"
+        return "left the arena volume"  # pragma: no cover - the kernel only reports real violations
 
     def _settle(self, log: _Log) -> str | None:
         """Fly to the start until within tolerance for the hold time; message on timeout."""
         s = self.params.supervisor
         hold_ticks = max(1, round(s.settle_hold_s / self.tick_s))
-        deadline = self.tick + round(s.settle_timeout_s / self.tick_s)
-        calm = 0
-        step = max(1, round(1.0 / self.params.links.command_rate_hz / self.tick_s))
-        while self.tick < deadline:
-            failure = self._supervise(step, log, self.start_m)
-            if failure:
-                return failure
-            est = self._estimate(log, self.tick)
-            if est is not None and np.linalg.norm(est[0] - self.start_m) < s.settle_position_m and \
-                    np.linalg.norm(est[1]) < s.settle_velocity_m_s and _tilt(est[2]) < s.settle_tilt_rad:
-                calm += step
-                if calm >= hold_ticks:
-                    return None
-            else:
-                calm = 0
-        return f"did not settle at the start within {s.settle_timeout_s:g} s"
+        settle = np.array([hold_ticks, s.settle_position_m, s.settle_velocity_m_s, s.settle_tilt_rad], dtype=float)
+        outcome = self._supervise(round(s.settle_timeout_s / self.tick_s), log, self.start_m, settle=settle)
+        if outcome == "settled":
+            return None
+        return outcome or f"did not settle at the start within {s.settle_timeout_s:g} s"
 
     def _upload(self, program: Program, log: _Log) -> tuple[str | None, int]:
         """Send the switch list in packets, each acknowledged; retries cost a timeout each."""
@@ -377,6 +340,8 @@ class Arena:
         if failure:
             return self._abort("crashed" if "volume" in failure else "aborted", failure, log)
         triggered = self.rng.random() >= p.links.command_drop_probability
+        if p.disturbances.enabled:
+            self._hover_residual()
         start_tick = self.tick + self.link_delay_ticks  # measured link delay: the supervisor knows it
         man_start = start_tick if triggered else -1
         self.radio_cmd = np.array([self.config.vehicle.gravity_m_s2, 0.0, 0.0, 0.0])
@@ -481,12 +446,6 @@ def _rotation_vector(q: np.ndarray) -> np.ndarray:
     if s < 1e-12:
         return 2.0 * q[1:]
     return q[1:] / s * 2.0 * math.atan2(s, q[0])
-
-
-def _tilt(quat: np.ndarray) -> float:
-    """Angle between the body z axis and the world z axis [rad]."""
-    w, x, y, _ = quat
-    return math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y))))
 
 
 def _relative_rotation_angles(quats: np.ndarray) -> np.ndarray:

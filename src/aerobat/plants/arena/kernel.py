@@ -18,7 +18,7 @@ import numpy as np
 from ...dynamics import controller_thrusts
 from ...simulate import rk4_plant_step
 
-__all__ = ["advance", "pd_command"]
+__all__ = ["advance", "pd_command", "supervise"]
 
 # mocap record columns: t, x, y, z, qw, qx, qy, qz
 MOCAP_COLUMNS = 8
@@ -172,3 +172,135 @@ def pd_command(pos, vel, quat, target, integral, gains, limits, dt, out):  # pra
     out[1] = min(max(-katt * ex, -limits[3]), limits[3])
     out[2] = min(max(-katt * ey, -limits[3]), limits[3])
     out[3] = min(max(-kyaw * ez, -limits[3]), limits[3])
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def _estimate(log, available, est_pos, est_vel, est_quat):  # pragma: no cover - compiled
+    """Supervisor's estimate from the first ``available`` mocap rows: last pose, line-fit velocity."""
+    if available <= 0:
+        return False
+    first = max(0, available - 20)
+    count = available - first
+    last = available - 1
+    for i in range(3):
+        est_pos[i] = log[last, 1 + i]
+        est_vel[i] = 0.0
+    for i in range(4):
+        est_quat[i] = log[last, 4 + i]
+    if count >= 3:
+        tm = 0.0
+        for k in range(first, available):
+            tm += log[k, 0]
+        tm /= count
+        den = 0.0
+        for k in range(first, available):
+            den += (log[k, 0] - tm) ** 2
+        for i in range(3):
+            pm = 0.0
+            for k in range(first, available):
+                pm += log[k, 1 + i]
+            pm /= count
+            num = 0.0
+            for k in range(first, available):
+                num += (log[k, 0] - tm) * (log[k, 1 + i] - pm)
+            est_vel[i] = num / den
+    return True
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def supervise(x, gyro_prev, tick0, end_tick, tick_s, plant, ctrl, sensor, latency, radio_cmd,
+              bp, coeffs, nseg, man_start_tick, duration_s, mocap_every, mocap_delay_ticks, mocap_noise,
+              log, log_count, period_s, link_delay_ticks, drops, drop_probability, closed_loop, target,
+              integral, gains, limits, hover_cmd, volume, settle, out):  # pragma: no cover - compiled
+    """The supervisor's radio loop (70 Hz) around the vehicle's onboard loop, in one compiled call.
+
+    Every radio period: estimate the state from the motion-capture samples available
+    (``mocap_delay_ticks`` old), compute a PD command (or the open-loop placeholder),
+    drop it with ``drops[j] < drop_probability``, deliver it after ``link_delay_ticks``,
+    check the volume (relative to ``target``, which is always the start position). With ``settle = (hold_ticks, pos, vel, tilt)`` and hold_ticks > 0
+    it returns as soon as the estimate has stayed within tolerance for hold_ticks.
+
+    ``out`` receives (tick, log_count, noise_used, drops_used, status, bad_row) with status
+    0 = ran to end_tick, 1 = non-finite state, 2 = left the volume (row bad_row), 3 = settled.
+    """
+    tick = tick0
+    noise_used = 0
+    drops_used = 0
+    status = 0
+    bad_row = -1
+    cmd = np.empty(4)
+    est_pos = np.empty(3)
+    est_vel = np.empty(3)
+    est_quat = np.empty(4)
+    calm = 0
+    available = 0
+    while tick < end_tick:
+        period_start = tick
+        now = tick * tick_s
+        next_send = (math.floor(now / period_s + 1e-9) + 1.0) * period_s
+        send_tick = min(end_tick, int(math.ceil(next_send / tick_s - 1e-9)))
+        avail_time = (tick - mocap_delay_ticks) * tick_s + 1e-12
+        while available < log_count and log[available, 0] <= avail_time:
+            available += 1
+        have = _estimate(log, available, est_pos, est_vel, est_quat)
+        if closed_loop and have:
+            pd_command(est_pos, est_vel, est_quat, target, integral, gains, limits, period_s, cmd)
+        else:
+            for i in range(4):
+                cmd[i] = hover_cmd[i]
+        delivered = drops[drops_used] >= drop_probability
+        drops_used += 1
+        arrival = tick + link_delay_ticks
+        first_written = log_count
+        for leg in range(2):
+            stop = min(arrival, send_tick) if leg == 0 else send_tick
+            if stop > tick:
+                rows, bad = advance(x, gyro_prev, tick, stop - tick, tick_s, plant, ctrl, sensor, latency,
+                                    radio_cmd, bp, coeffs, nseg, man_start_tick, duration_s, mocap_every,
+                                    mocap_noise[noise_used:], log[log_count:])
+                noise_used += rows
+                log_count += rows
+                tick = stop
+                if bad != 0:
+                    status = 1
+                    break
+            if leg == 0 and delivered and arrival <= send_tick:
+                for i in range(4):
+                    radio_cmd[i] = cmd[i]
+        if status != 0:
+            break
+        for k in range(first_written, log_count):
+            for axis in range(3):
+                rel = log[k, 1 + axis] - target[axis]
+                if rel < volume[2 * axis] or rel > volume[2 * axis + 1]:
+                    status = 2
+                    bad_row = k
+                    break
+            if status == 2:
+                break
+        if status != 0:
+            break
+        if settle[0] > 0:
+            avail_time = (tick - mocap_delay_ticks) * tick_s + 1e-12
+            while available < log_count and log[available, 0] <= avail_time:
+                available += 1
+            if _estimate(log, available, est_pos, est_vel, est_quat):
+                dp = math.sqrt((est_pos[0] - target[0]) ** 2 + (est_pos[1] - target[1]) ** 2
+                               + (est_pos[2] - target[2]) ** 2)
+                dv = math.sqrt(est_vel[0] ** 2 + est_vel[1] ** 2 + est_vel[2] ** 2)
+                qx = est_quat[1]
+                qy = est_quat[2]
+                tilt = math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (qx * qx + qy * qy))))
+                if dp < settle[1] and dv < settle[2] and tilt < settle[3]:
+                    calm += tick - period_start
+                    if calm >= settle[0]:
+                        status = 3
+                        break
+                else:
+                    calm = 0
+    out[0] = tick
+    out[1] = log_count
+    out[2] = noise_used
+    out[3] = drops_used
+    out[4] = status
+    out[5] = bad_row

@@ -114,6 +114,10 @@ class Disturbances:
     gust_amplitude_std_m_s, gust_frequency_hz : a sinusoidal gust per trial, random amplitude and phase.
     thrust_gain_jitter : std of a common-mode thrust gain change per trial (battery voltage, temperature).
     motor_gain_jitter : std of an independent per-motor thrust gain change per trial.
+    start_velocity_std_m_s, start_tilt_std_rad : hover residual at the trigger beyond what the
+        simulated hover loop leaves (prop-wash turbulence, ground effect of a real arena): a random
+        velocity per axis and a random roll/pitch error, applied to the true state when the trigger
+        is sent. The supervisor does not know them; it measures them like any start error.
     """
 
     enabled: bool = True
@@ -122,6 +126,8 @@ class Disturbances:
     gust_frequency_hz: float = 1.5
     thrust_gain_jitter: float = 0.0035
     motor_gain_jitter: float = 0.001
+    start_velocity_std_m_s: float = 0.015
+    start_tilt_std_rad: float = 0.003
 
     def __post_init__(self) -> None:
         check_range("wind_std_m_s", self.wind_std_m_s, low=0.0, high=5.0, unit="m/s")
@@ -129,6 +135,8 @@ class Disturbances:
         check_range("gust_frequency_hz", self.gust_frequency_hz, low=0.0, high=50.0, unit="Hz")
         check_range("thrust_gain_jitter", self.thrust_gain_jitter, low=0.0, high=0.1)
         check_range("motor_gain_jitter", self.motor_gain_jitter, low=0.0, high=0.1)
+        check_range("start_velocity_std_m_s", self.start_velocity_std_m_s, low=0.0, high=1.0, unit="m/s")
+        check_range("start_tilt_std_rad", self.start_tilt_std_rad, low=0.0, high=0.2, unit="rad")
 
 
 @dataclass(frozen=True, kw_only=True)

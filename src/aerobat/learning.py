@@ -225,6 +225,7 @@ def learn(
     max_attempts: int | None = None,
     absurd_limit: float = 200.0,
     pinned_warning_after: int = 8,
+    hold_pinned: bool = True,
     on_iteration: Callable[[Iteration], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
 ) -> Session:
@@ -241,6 +242,8 @@ def learn(
     max_attempts : cap on trials including lost and rejected ones (default 3 × iterations).
     absurd_limit : a measured error beyond this many error scales is rejected, not learned from.
     pinned_warning_after : warn once a parameter sits at a bound for this many corrections in a row.
+    hold_pinned : hold parameters that sit at a bound and are pushed further out, instead of letting
+        them scale the whole correction to zero (``False`` is the paper's literal Sect. 4.2 rule).
     on_iteration : called with every record as soon as it exists (stores, progress bars).
     should_stop : polled between trials; True ends the session as ``interrupted``.
     """
@@ -300,9 +303,16 @@ def learn(
         measured += 1
         correction += 1
         step, gamma = rule.propose(correction, params, error, trial)
+        note = trial.message
+        if hold_pinned:
+            # a parameter already at a bound, pushed further out, would make the Sect. 4.2 scale
+            # zero for the whole correction; hold just that parameter and correct with the rest
+            held = ((params <= lower) & (step < 0)) | ((params >= upper) & (step > 0))
+            if held.any() and not held.all():
+                step = np.where(held, 0.0, step)
+                note += "; held at a bound: " + ", ".join(maneuver.parameters[k].name for k in np.nonzero(held)[0])
         scale = constraint_scale(maneuver, params, step)
         applied = scale * step
-        note = trial.message
         at_bound = (np.abs(params + applied - lower) < 1e-9 * np.maximum(1.0, np.abs(lower))) | (
             np.abs(params + applied - upper) < 1e-9 * np.maximum(1.0, np.abs(upper)))
         pinned_streak = np.where(at_bound, pinned_streak + 1, 0)

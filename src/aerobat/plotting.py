@@ -92,9 +92,16 @@ def plot_trajectory(times_s: np.ndarray, states: np.ndarray, commands: np.ndarra
 
 
 def plot_side_views(panels: Sequence[tuple[str, np.ndarray, np.ndarray]], path: str | Path, *,
-                    plane: str = "yz", title: str = "", spacing_m: float = 1.2,
+                    plane: str = "yz", title: str = "", spacing_m: float | None = None,
                     target: Sequence[float] = (0.0, 0.0)) -> None:
-    """Figs. 9/11/12: side views of several trajectories (label, times, states), offset for clarity."""
+    """Figs. 9/11/12: side views of several trajectories (label, times, states), offset for clarity.
+
+    ``spacing_m`` defaults to the horizontal extent of the widest trajectory plus a margin.
+    """
+    h = 1 if plane == "yz" else 0
+    if spacing_m is None:
+        widths = [float(np.ptp(s[:, h])) for _, _, s in panels if s.shape[0]]
+        spacing_m = max(1.2, 1.25 * max(widths, default=0.0) + 0.5)
     fig, ax = plt.subplots(figsize=(4.0 * len(panels), 4.5), constrained_layout=True)
     for k, (label, times, states) in enumerate(panels):
         if states.shape[0] == 0:

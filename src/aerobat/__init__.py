@@ -2,11 +2,15 @@
 
 Implements and extends Lupashin & D'Andrea, *Adaptive fast open-loop maneuvers
 for quadrocopters*, Autonomous Robots 2012.
+
+The names below are imported lazily, on first use, so that commands which never
+simulate (``aerobat sessions``, ``aerobat show``) start without loading numba.
 """
 
-from .program import Program, RampDown, Switch, load_program, save_program
-from .simulate import Trajectory, simulate, simulate_batch
-from .vehicle import ControllerParams, VehicleConfig, VehicleParams, hummingbird, load_vehicle, save_vehicle
+from __future__ import annotations
+
+import importlib
+from typing import Any
 
 __all__ = [
     "ControllerParams",
@@ -26,3 +30,23 @@ __all__ = [
 ]
 
 __version__ = "0.1.0"
+
+_HOME = {
+    "Program": "program", "RampDown": "program", "Switch": "program", "load_program": "program",
+    "save_program": "program", "Trajectory": "simulate", "simulate": "simulate", "simulate_batch": "simulate",
+    "ControllerParams": "vehicle", "VehicleConfig": "vehicle", "VehicleParams": "vehicle",
+    "hummingbird": "vehicle", "load_vehicle": "vehicle", "save_vehicle": "vehicle",
+}
+
+
+def __getattr__(name: str) -> Any:
+    module = _HOME.get(name)
+    if module is None:
+        raise AttributeError(f"module 'aerobat' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

@@ -42,13 +42,14 @@ class Job:
         return json.dumps({"key": self.key, "kind": self.kind, "spec": self.spec}, sort_keys=True)
 
 
-_KINDS: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] = {}
+JobFunction = Callable[[dict[str, Any]], dict[str, Any]]
+_KINDS: dict[str, JobFunction] = {}
 
 
-def job_kind(name: str) -> Callable[[Callable[[dict[str, Any]], dict[str, Any]]], Callable[[dict[str, Any]], dict[str, Any]]]:
+def job_kind(name: str) -> Callable[[JobFunction], JobFunction]:
     """Register a job function under ``name`` (module import registers the built-in kinds)."""
 
-    def decorate(fn: Callable[[dict[str, Any]], dict[str, Any]]) -> Callable[[dict[str, Any]], dict[str, Any]]:
+    def decorate(fn: JobFunction) -> JobFunction:
         _KINDS[name] = fn
         return fn
 

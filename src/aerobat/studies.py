@@ -306,3 +306,176 @@ def summarize_robustness(results: list[dict[str, Any]]) -> RobustnessSummary:
         final_errors_m=[float(r.get("final_error_m", math.nan)) for r in done],
         predictors=predictors,
     )
+
+
+# ------------------------------------------------------------------ rules study
+
+MODEL_FREE = ("cma", "bayesopt")
+
+
+def _weighted_cost(maneuver: Any, error: np.ndarray) -> float:
+    scales = np.array([e.scale for e in maneuver.errors])
+    return float(np.linalg.norm(error / scales))
+
+
+def _fly_measured(plant: Any, maneuver: Any, params: np.ndarray, max_retries: int = 20):
+    """Fly until a trial is measured (lost triggers are retried, as learning does); None on crash."""
+    for _ in range(max_retries):
+        trial = plant.fly(maneuver.program(params))
+        if trial.status == "ok":
+            error = maneuver.error(trial.final_state)
+            if np.all(np.isfinite(error)):
+                return error
+        elif trial.status in ("crashed", "aborted"):
+            return None
+    return None
+
+
+def _model_free(method: str, maneuver: Any, design: Any, plant: Any, trials: int, seed: int) -> dict[str, Any]:
+    """CMA-ES or Bayesian optimization of the weighted final-state error, one trial per evaluation.
+
+    Both search in scaled coordinates (parameter / its scale) around p⁰ within the
+    parameter bounds, with their libraries' default settings (CMA-ES: default population
+    4 + 3 ln n, σ₀ = 1 scale; Bayesian optimization: default GP and acquisition, a box of
+    ±5 scales around p⁰ clipped to the bounds, p⁰ probed first).
+    """
+    from .maneuvers.base import bounds_arrays
+
+    lower, upper = bounds_arrays(maneuver.parameters)
+    scales = np.array([p.scale for p in maneuver.parameters])
+    p0 = np.asarray(design.p_nominal, dtype=float)
+    lo = np.maximum((lower - p0) / scales, -5.0)
+    hi = np.minimum((upper - p0) / scales, 5.0)
+    errors: list[np.ndarray] = []
+    status = "completed"
+
+    def evaluate(z: np.ndarray) -> float | None:
+        params = np.clip(p0 + scales * np.asarray(z, dtype=float), lower, upper)
+        error = _fly_measured(plant, maneuver, params)
+        if error is None:
+            return None
+        errors.append(error)
+        return _weighted_cost(maneuver, error)
+
+    if method == "cma":
+        import cma
+
+        es = cma.CMAEvolutionStrategy(np.zeros(p0.size), 1.0, {"bounds": [list(lo), list(hi)], "seed": seed + 1,
+                                                              "verbose": -9})
+        while len(errors) < trials and not es.stop():
+            candidates = es.ask()
+            values = []
+            for z in candidates:
+                if len(errors) >= trials:
+                    break
+                v = evaluate(z)
+                if v is None:
+                    status = "crashed"
+                    break
+                values.append(v)
+            if status != "completed" or len(values) < len(candidates):
+                break
+            es.tell(candidates, values)
+    elif method == "bayesopt":
+        from bayes_opt import BayesianOptimization
+
+        names = [p.name for p in maneuver.parameters]
+        optimizer = BayesianOptimization(f=None, pbounds={n: (float(a), float(b)) for n, a, b in zip(names, lo, hi,
+                                                                                                   strict=True)},
+                                         random_state=seed, verbose=0, allow_duplicate_points=True)
+        point = {n: 0.0 for n in names}
+        while len(errors) < trials:
+            v = evaluate(np.array([point[n] for n in names]))
+            if v is None:
+                status = "crashed"
+                break
+            optimizer.register(params=point, target=-v)
+            point = optimizer.suggest()
+    else:
+        raise ValueError(f"unknown model-free method {method!r}")
+    return {"errors": errors, "status": status}
+
+
+@job_kind("rule_run")
+def rule_run_job(spec: dict[str, Any]) -> dict[str, Any]:
+    """One method (update rule or model-free baseline) learning one maneuver on one arena seed."""
+    from .learning import learn
+    from .maneuvers.registry import from_spec
+    from .plants.arena import Arena
+    from .plants.arena.params import ArenaParams
+    from .vehicle import ControllerParams, VehicleConfig
+
+    start = time.perf_counter()
+    maneuver = from_spec(spec["maneuver"])
+    design = _design_from_table(maneuver, spec["design"])
+    vehicle = maneuver.vehicle  # type: ignore[attr-defined]
+    config = VehicleConfig(vehicle=vehicle, controller=ControllerParams.nominal_for(vehicle))
+    params = dataclass_from_table(ArenaParams, spec["arena"], source="job arena")
+    plant = Arena(config, params, seed=int(spec["seed"]))
+    method = spec["method"]
+    trials = int(spec["trials"])
+    if method in MODEL_FREE:
+        outcome = _model_free(method, maneuver, design, plant, trials, int(spec["seed"]))
+        errors, status = outcome["errors"], outcome["status"]
+    else:
+        from .rules import make_rule
+
+        options: dict[str, Any] = {}
+        if method.endswith("+isc"):
+            from .rules_quadrotor import quadrotor_isc
+
+            options["sensitivity"], options["deviation"] = quadrotor_isc(maneuver, config, design.p_nominal)
+        session = learn(maneuver, design, plant, iterations=trials, rule=make_rule(method, design, **options))
+        errors, status = [it.error for it in session.measured], session.status
+    idx = position_indices(maneuver)
+    pos = [float(np.linalg.norm(np.asarray(e)[idx])) for e in errors]
+    tol = float(spec.get("tolerance_m", 0.12))
+    first = next((k + 1 for k, e in enumerate(pos) if e < tol), None)
+    later = pos[first:] if first is not None else []
+    last = pos[-10:] if pos else [math.nan]
+    diverged = bool(pos and np.mean(last) > pos[0])
+    return {
+        "method": method,
+        "status": status,
+        "position_errors_m": pos,
+        "trials_to_tolerance": first,
+        "share_below_after": float(np.mean([e < tol for e in later])) if later else (math.nan if first is None else 1.0),
+        "last10_mean_m": float(np.mean(last)),
+        "failed": bool(status != "completed" or diverged or len(pos) < trials),
+        "wall_s": time.perf_counter() - start,
+    }
+
+
+def rules_study_jobs(maneuver: Any, design: Any, *, methods: list[str], seeds: int, trials: int, seed: int = 0,
+                     arena: dict[str, Any] | None = None, tolerance_m: float = 0.12) -> list[Job]:
+    """Every method on the same ``seeds`` arena seeds (seed, seed + 1, …)."""
+    from .plants.arena.params import ArenaParams
+
+    arena = arena if arena is not None else dataclass_to_table(ArenaParams())
+    design_table = {k: v for k, v in design.to_json_dict().items() if k != "maneuver"}
+    return [
+        Job(key=f"{method}-seed-{seed + k:04d}", kind="rule_run", spec={
+            "maneuver": maneuver.spec(), "design": design_table, "arena": arena, "method": method,
+            "seed": seed + k, "trials": trials, "tolerance_m": tolerance_m})
+        for method in methods for k in range(seeds)
+    ]
+
+
+def summarize_rules(results: list[dict[str, Any]], trials: int) -> list[dict[str, Any]]:
+    """Per method: median trials to tolerance, share staying below, last-10 mean, failures, wall time."""
+    rows = []
+    for method in dict.fromkeys(r["method"] for r in results):
+        runs = [r for r in results if r["method"] == method]
+        ttt = [r["trials_to_tolerance"] if r["trials_to_tolerance"] is not None else math.inf for r in runs]
+        shares = [r["share_below_after"] for r in runs if not math.isnan(r["share_below_after"])]
+        rows.append({
+            "method": method,
+            "runs": len(runs),
+            "median_trials_to_tolerance": float(np.median(ttt)),
+            "reached": sum(1 for t in ttt if math.isfinite(t)),
+            "share_below_after": float(np.mean(shares)) if shares else math.nan,
+            "last10_mean_m": float(np.mean([r["last10_mean_m"] for r in runs])),
+            "failures": sum(1 for r in runs if r["failed"]),
+            "wall_s": float(np.mean([r["wall_s"] for r in runs])),
+        })
+    return rows

@@ -79,6 +79,10 @@ class Maneuver(Protocol):
         """The input program U(t, p) for parameters ``params`` (what a plant flies)."""
         ...
 
+    def initial_state(self) -> np.ndarray:
+        """The desired initial state x(0) (what the plant starts from)."""
+        ...
+
     def error(self, final_state: np.ndarray) -> np.ndarray:
         """Error vector e = x − x* of a (measured or simulated) final state."""
         ...

@@ -100,3 +100,19 @@ def test_fly_nominal_matches_simulate(capsys):
     _, out, _ = run(capsys, "simulate", "examples/single_flip.toml", "--json")
     sim = json.loads(out)["final_state"]
     assert fly["position_m"] == pytest.approx(sim["position_m"], abs=1e-12)
+
+
+@pytest.mark.parametrize("rule", ["tsvd", "kalman", "broyden"])
+def test_learn_with_another_rule(capsys, tmp_path, rule):
+    code, out, _ = run(capsys, "learn", "flip", "--flips", "1", "--max-rate-deg-s", "800", "--dims", "2",
+                       "--plant", "arena", "--seed", "2", "--iterations", "4", "--rule", rule,
+                       "--db", str(tmp_path / "db.sqlite"), "--out", str(tmp_path), "--json")
+    assert code == 0
+    data = json.loads(out)
+    assert len([it for it in data["iterations"] if it["status"] == "ok"]) == 4
+
+
+def test_learn_unknown_rule_is_bad_input(capsys, tmp_path):
+    code, _, err = run(capsys, "learn", "flip", "--dims", "2", "--rule", "magic", "--db", str(tmp_path / "d.sqlite"),
+                       "--out", str(tmp_path))
+    assert code == 2 and "magic" in err

@@ -252,17 +252,47 @@ def _schedule_table(text: str) -> dict[str, Any]:
     return {"kind": "constant", "value": _gamma_value(text)}
 
 
-def _rule_from_table(table: dict[str, Any], correction, source: str):
+def _rule_from_table(table: dict[str, Any], design, source: str, *, maneuver=None, config=None):
+    """The update rule a session uses: ``{"name": rule, "schedule": {...}}`` (see docs/method.md)."""
     from .learning import ConstantSchedule, CorrectionRule, PaperSchedule
 
     schedule = table.get("schedule", {}) if isinstance(table, dict) else None
-    if not isinstance(schedule, dict) or table.get("name") != "paper":
-        raise ConfigError(f"{source}: update rule {table!r}: this aerobat resumes only the paper's rule")
+    name = table.get("name") if isinstance(table, dict) else None
+    if not isinstance(schedule, dict) or not isinstance(name, str):
+        raise ConfigError(f"{source}: update rule {table!r}: expected a name and a schedule")
     if schedule.get("kind") == "paper":
-        return CorrectionRule(correction, PaperSchedule(float(schedule.get("minimum", 0.1))))
-    if schedule.get("kind") == "constant":
-        return CorrectionRule(correction, ConstantSchedule(float(schedule["value"])))
-    raise ConfigError(f"{source}: step-size schedule {schedule!r}: expected kind 'paper' or 'constant'")
+        fixed = PaperSchedule(float(schedule.get("minimum", 0.1)))
+    elif schedule.get("kind") == "constant":
+        fixed = ConstantSchedule(float(schedule["value"]))
+    elif schedule.get("kind") == "rule":
+        fixed = None  # the rule's own step sizes
+    else:
+        raise ConfigError(f"{source}: step-size schedule {schedule!r}: expected kind 'paper', 'constant' or 'rule'")
+    if name == "paper":
+        return CorrectionRule(design.correction, fixed or PaperSchedule())
+    from .rules import RULE_NAMES, make_rule
+
+    base = name.removesuffix("+isc")
+    if base not in RULE_NAMES:
+        raise ConfigError(f"{source}: unknown update rule {name!r}; allowed: {', '.join(RULE_NAMES)} "
+                          f"(optionally with '+isc')")
+    options: dict[str, Any] = {}
+    if name.endswith("+isc"):
+        from .rules_quadrotor import quadrotor_isc
+
+        options["sensitivity"], options["deviation"] = quadrotor_isc(maneuver, config, design.p_nominal)
+    try:
+        return make_rule(name, design, schedule=fixed, **options)
+    except ValueError as exc:
+        raise ConfigError(f"{source}: {exc}") from None
+
+
+def _rule_table(args: argparse.Namespace) -> dict[str, Any]:
+    """``--rule`` and ``--gamma`` as stored: the paper's rule defaults to the paper's schedule,
+    the other rules to their own step sizes unless ``--gamma`` is given."""
+    if args.rule == "paper" or args.gamma != "paper":
+        return {"name": args.rule, "schedule": _schedule_table(args.gamma)}
+    return {"name": args.rule, "schedule": {"kind": "rule"}}
 
 
 def _gamma_value(text: str) -> float:
@@ -354,13 +384,14 @@ def _new_run(store, args, db: str, config, maneuver, schedule, plant_kind, plant
     result = _design_from_args(args, config, maneuver)
     if not result.converged:
         raise CommandFailed(f"design failed, nothing to learn: {result.message}")
-    rule = _rule_from_table({"name": "paper", "schedule": schedule}, result.correction, "--gamma")
+    rule_table = _rule_table(args)
+    rule = _rule_from_table(rule_table, result, "--rule", maneuver=maneuver, config=config)
     plant = _build_plant(plant_kind, plant_config, config, args.seed, f"--plant {plant_kind}")
     target = args.iterations if args.iterations is not None else 30
     start = result.p_nominal if start_params is None else start_params
     session_id = store.create_session(
         vehicle=_vehicle_table(config), plant_kind=plant_kind, plant_config=plant_config, maneuver=maneuver,
-        design=result, seed=args.seed, rule={"name": "paper", "schedule": schedule}, target_iterations=target,
+        design=result, seed=args.seed, rule=rule_table, target_iterations=target,
         start_params=start, warm_start_from=warm_from, command=getattr(args, "argv", ()),
     )
     return _LearnRun(session_id, db, maneuver, result, config, plant, args.seed, rule, start, 0, 0, 0, target,
@@ -395,7 +426,9 @@ def _resumed_run(store, args, db: str) -> _LearnRun:
         singular_values=drec.singular_values, condition_number=drec.condition_number, rank=drec.rank,
         duration_s=drec.duration_s, compute_s=drec.compute_s, evaluations=drec.evaluations,
     )
-    rule = _rule_from_table(rec.rule, design.correction, f"{where} rule")
+    rule = _rule_from_table(rec.rule, design, f"{where} rule", maneuver=maneuver, config=model_config)
+    if rec.rule.get("name") != "paper":
+        _replay(rule, store.iterations(session_id), f"{where} rule")
     plant = _build_plant(prec.kind, prec.config, plant_vehicle, rec.seed, f"{where} plant")
     last = store.last_iteration(session_id)
     exact = True
@@ -436,13 +469,32 @@ def _check_same_session(args, session_id: int, rec, stored_spec, drec, prec, pla
         differences.append(f"--vehicle {args.vehicle} differs from the stored vehicle")
     if args.seed != rec.seed:
         differences.append(f"--seed {args.seed} (stored: {rec.seed})")
-    if {"name": "paper", "schedule": _schedule_table(args.gamma)} != rec.rule:
-        differences.append(f"--gamma {args.gamma} (stored: {rec.rule.get('schedule')})")
+    if _rule_table(args) != rec.rule:
+        differences.append(f"--rule {args.rule} --gamma {args.gamma} (stored: {rec.rule})")
     if args.correction != drec.correction_kind:
         differences.append(f"--correction {args.correction} (stored: {drec.correction_kind})")
     if differences:
         raise ValueError(f"--resume {session_id}: the command line describes another session: "
                          f"{'; '.join(differences)}; give only --resume {session_id} to use the stored settings")
+
+
+def _replay(rule, iterations, source: str) -> None:
+    """Bring a stateful rule to where it was: feed it the stored history, trial by trial.
+
+    Rules are deterministic functions of their history (proposals and applied steps), so
+    this reproduces their state exactly. Initial-state compensation needs the measured
+    trajectories, which replay does not have.
+    """
+    import numpy as np
+
+    if rule.name.endswith("+isc"):
+        raise ConfigError(f"{source}: a '+isc' rule cannot be resumed exactly (it needs every trial's "
+                          f"measured trajectory); start a new session with --from-session instead")
+    for it in iterations:
+        if it.status != "ok":
+            continue
+        rule.propose(it.correction, np.asarray(it.params), np.asarray(it.error), None)
+        rule.observe(np.asarray(it.params), np.asarray(it.error), np.asarray(it.next_params) - np.asarray(it.params))
 
 
 class _RecordingRule:
@@ -1009,6 +1061,8 @@ def build_parser() -> argparse.ArgumentParser:
     lrn.add_argument("--iterations", type=int, default=None,
                      help="measured iterations (default 30; with --resume the stored target)")
     lrn.add_argument("--gamma", default="paper", help="'paper' (max(1/i, 0.1)) or a constant in (0, 1]")
+    lrn.add_argument("--rule", default="paper",
+                     help="update rule: paper, tsvd, damped, kalman, broyden, or <rule>+isc (docs/method.md)")
     lrn.add_argument("--out", default="out/learn", help="directory for figures and session.json")
     lrn.add_argument("--resume", metavar="SESSION", type=_session_ref,
                      help="continue a stored session (id or 'last') with its parameters, counters and plant state")

@@ -260,6 +260,7 @@ def _rule_from_table(table: dict[str, Any], design, source: str, *, maneuver=Non
     name = table.get("name") if isinstance(table, dict) else None
     if not isinstance(schedule, dict) or not isinstance(name, str):
         raise ConfigError(f"{source}: update rule {table!r}: expected a name and a schedule")
+    fixed: PaperSchedule | ConstantSchedule | None
     if schedule.get("kind") == "paper":
         fixed = PaperSchedule(float(schedule.get("minimum", 0.1)))
     elif schedule.get("kind") == "constant":

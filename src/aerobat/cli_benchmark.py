@@ -39,10 +39,12 @@ def _cmd_translation(args: argparse.Namespace) -> int:
         print(json.dumps(solution.to_json_dict()))
     else:
         console = _console(False)
-        console.print(f"time-optimal hover-to-hover (0, 0) → ({y:g}, {z:g}) m, final angle {args.final_angle_rad:g} rad")
+        console.print(f"time-optimal hover-to-hover (0, 0) → ({y:g}, {z:g}) m, "
+                      f"final angle {args.final_angle_rad:g} rad")
         console.print(f"status: {solution.status} — {solution.message}")
         if solution.ok:
-            console.print(f"T* = {solution.duration_s:.4f} s (transcription {solution.transcription_duration_s:.4f} s), "
+            console.print(f"T* = {solution.duration_s:.4f} s "
+                          f"(transcription {solution.transcription_duration_s:.4f} s), "
                           f"boundary error {solution.boundary_error:.1e}")
             for title, arcs, unit in (("thrust", solution.thrust_arcs, "m/s²"), ("rate", solution.rate_arcs, "rad/s")):
                 table = Table(title=f"{title} arcs")

@@ -125,7 +125,7 @@ def _robustness_figures(results, summary, out: Path, tolerance_m: float) -> None
     ttt = [t for t in summary.trials_to_tolerance if t is not None]
     fig, ax = plt.subplots(figsize=(6, 4), constrained_layout=True)
     if ttt:
-        ax.hist(ttt, bins=np.arange(0.5, max(ttt) + 1.5), color="C0")
+        ax.hist(ttt, bins=[float(b) for b in np.arange(0.5, max(ttt) + 1.5)], color="C0")
     never = sum(1 for t in summary.trials_to_tolerance if t is None)
     ax.set_xlabel(f"trials until the position error first falls below {tolerance_m:g} m")
     ax.set_ylabel("vehicles")

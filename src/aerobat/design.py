@@ -188,7 +188,7 @@ def design(
     message = ""
     # Newton in two passes: first ignoring nearly unobservable directions (they send a full
     # Newton step wandering along a valley), then a polishing pass with all of them
-    coarse = _newton(maneuver, model, x0, lower, upper, p_scales, e_scales, 1e3 * tolerance, rcond=1e-4,
+    coarse = _newton(maneuver, model, x0, lower, upper, p_scales, e_scales, 1e5 * tolerance, rcond=1e-4,
                      max_iterations=15)[0]
     p0, solver_message, ok = _newton(maneuver, model, coarse, lower, upper, p_scales, e_scales, tolerance)
     if not ok:

@@ -217,23 +217,26 @@ def _compile(program: Program) -> CompiledProgram:
     g = program.hover_collective_m_s2
     value = {"collective": g, "rate_p": 0.0, "rate_q": 0.0, "rate_r": 0.0,
              "accel_p": 0.0, "accel_q": 0.0, "accel_r": 0.0}
-    integral = np.zeros(3)  # ∫ accel up to the current segment start
-    coeffs = np.zeros((K, 4, 3))
+    integral = [0.0, 0.0, 0.0]  # ∫ accel up to the current segment start
+    rows: list[list[float]] = []  # plain floats: this runs inside every design iteration
+    breaks = bp.tolist()
     j = 0
     for k in range(K):
-        t0, t1 = bp[k], bp[k + 1]
+        t0, t1 = breaks[k], breaks[k + 1]
         while j < len(ordered) and ordered[j].time_s <= t0:
             value[ordered[j].channel] = float(ordered[j].value)
             j += 1
-        accel = np.array([value["accel_p"], value["accel_q"], value["accel_r"]])
-        rate0 = np.array([value["rate_p"], value["rate_q"], value["rate_r"]]) + integral
         wc0, wc1 = _envelope(t0, T, ramp_c)
         wr0, wr1 = _envelope(t0, T, ramp_r)
         raw_c = value["collective"]
-        coeffs[k, 0] = (g + wc0 * (raw_c - g), wc1 * (raw_c - g), 0.0)
-        for axis in range(3):
-            coeffs[k, 1 + axis] = (wr0 * rate0[axis], wr0 * accel[axis] + wr1 * rate0[axis], wr1 * accel[axis])
-        integral = integral + accel * (t1 - t0)
+        row = [g + wc0 * (raw_c - g), wc1 * (raw_c - g), 0.0]
+        for axis, name in enumerate("pqr"):
+            accel = value["accel_" + name]
+            rate0 = value["rate_" + name] + integral[axis]
+            row += [wr0 * rate0, wr0 * accel + wr1 * rate0, wr1 * accel]
+            integral[axis] += accel * (t1 - t0)
+        rows.append(row)
+    coeffs = np.array(rows, dtype=float).reshape(K, 4, 3)
     return CompiledProgram(bp, coeffs, np.array([g, 0.0, 0.0, 0.0]))
 
 

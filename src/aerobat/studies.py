@@ -89,8 +89,10 @@ def sample_arena(ranges: RobustnessRanges, seed: int) -> tuple[dict[str, Any], d
 
     base = ArenaParams()
     ixx, iyy, izz = u(ranges.inertia_scale), u(ranges.inertia_scale), u(ranges.inertia_zz_scale)
-    gains = tuple(float(g) for g in 1.0 + ranges.thrust_gain_spread * rng.uniform(-1, 1, 4))
-    com = tuple(float(c) for c in ranges.com_offset_m * rng.uniform(-1, 1, 2)) + (0.0,)
+    g = 1.0 + ranges.thrust_gain_spread * rng.uniform(-1, 1, 4)
+    gains = (float(g[0]), float(g[1]), float(g[2]), float(g[3]))
+    c = ranges.com_offset_m * rng.uniform(-1, 1, 2)
+    com = (float(c[0]), float(c[1]), 0.0)
     aero = u(ranges.aerodynamics_scale)
     noise = u(ranges.noise_scale)
     props = {
@@ -114,7 +116,8 @@ def sample_arena(ranges: RobustnessRanges, seed: int) -> tuple[dict[str, Any], d
             motor_rate_down_per_s=props["motor_rate_down_per_s"], thrust_gains=gains, com_offset_m=com),
         aerodynamics=dataclasses.replace(
             a, body_drag_n_s2_m2=a.body_drag_n_s2_m2 * aero, rotor_drag_s_m=a.rotor_drag_s_m * aero,
-            rotational_damping_n_m_s=tuple(c * aero for c in a.rotational_damping_n_m_s)),
+            rotational_damping_n_m_s=(a.rotational_damping_n_m_s[0] * aero, a.rotational_damping_n_m_s[1] * aero,
+                                      a.rotational_damping_n_m_s[2] * aero)),
         disturbances=dataclasses.replace(
             d, wind_std_m_s=d.wind_std_m_s * noise, gust_amplitude_std_m_s=d.gust_amplitude_std_m_s * noise,
             thrust_gain_jitter=d.thrust_gain_jitter * noise, motor_gain_jitter=d.motor_gain_jitter * noise),
@@ -385,7 +388,7 @@ def _model_free(method: str, maneuver: Any, design: Any, plant: Any, trials: int
         optimizer = BayesianOptimization(f=None, pbounds={n: (float(a), float(b)) for n, a, b in zip(names, lo, hi,
                                                                                                    strict=True)},
                                          random_state=seed, verbose=0, allow_duplicate_points=True)
-        point = {n: 0.0 for n in names}
+        point: dict[str, Any] = {n: 0.0 for n in names}
         while len(errors) < trials:
             v = evaluate(np.array([point[n] for n in names]))
             if v is None:
@@ -441,7 +444,8 @@ def rule_run_job(spec: dict[str, Any]) -> dict[str, Any]:
         "status": status,
         "position_errors_m": pos,
         "trials_to_tolerance": first,
-        "share_below_after": float(np.mean([e < tol for e in later])) if later else (math.nan if first is None else 1.0),
+        "share_below_after": (float(np.mean([e < tol for e in later])) if later
+                              else (math.nan if first is None else 1.0)),
         "last10_mean_m": float(np.mean(last)),
         "failed": bool(status != "completed" or diverged or len(pos) < trials),
         "wall_s": time.perf_counter() - start,

@@ -152,7 +152,11 @@ class MultiFlip:
     # ---------------------------------------------------------------- helpers
     @property
     def envelope(self) -> ReducedEnvelope:
-        return ReducedEnvelope.for_axis(self.vehicle, self.axis)
+        cached = self.__dict__.get("_envelope")
+        if cached is None:  # built once: program() runs inside every design iteration
+            cached = ReducedEnvelope.for_axis(self.vehicle, self.axis)
+            object.__setattr__(self, "_envelope", cached)
+        return cached
 
     @property
     def target_flip_angle_rad(self) -> float:

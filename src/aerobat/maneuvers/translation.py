@@ -226,7 +226,7 @@ def _translation_from_spec(spec: Any, source: str) -> Translation:
 def _register() -> None:
     from .registry import register_maneuver
 
-    register_maneuver("translation", _translation_from_spec, replace=True)
+    register_maneuver("translation", _translation_from_spec, replace=True)  # type: ignore[arg-type]
 
 
 _register()

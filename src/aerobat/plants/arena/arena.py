@@ -132,7 +132,7 @@ class Arena:
         self.x[3:6] += d.start_velocity_std_m_s * self.rng.standard_normal(3)
         tilt = d.start_tilt_std_rad * self.rng.standard_normal(2)
         half = 0.5 * np.array([tilt[0], tilt[1], 0.0])
-        dq = np.array([math.sqrt(max(0.0, 1.0 - half @ half)), *half])
+        dq = np.array([math.sqrt(max(0.0, 1.0 - float(half @ half))), *half])
         w, x, y, z = self.x[6:10]
         a, b, c, e = dq  # q ⊗ dq: a small body-frame rotation
         q = np.array([w * a - x * b - y * c - z * e, w * b + x * a + y * e - z * c,
@@ -303,7 +303,7 @@ class Arena:
         packets = max(1, math.ceil(len(program.switches) / links.upload_switches_per_packet))
         attempts_total = 0
         for packet in range(packets):
-            for attempt in range(1, links.upload_max_attempts + 1):
+            for _attempt in range(links.upload_max_attempts):
                 attempts_total += 1
                 sent = self.rng.random() >= links.upload_drop_probability
                 acked = sent and self.rng.random() >= links.upload_drop_probability
@@ -390,7 +390,8 @@ class Arena:
             times, states = _measured_states(log.view(), start_time, self.tick * self.tick_s, self.start_m)
         else:
             times, states = np.empty(0), np.empty((0, N_STATE))
-        self.x = hover_state(self.true_vehicle, tuple(self.start_m))
+        self.x = hover_state(self.true_vehicle, (float(self.start_m[0]), float(self.start_m[1]),
+                                                 float(self.start_m[2])))
         self.gyro_prev[:] = 0.0
         self.integral[:] = 0.0
         self.radio_cmd = np.array([self.config.vehicle.gravity_m_s2, 0.0, 0.0, 0.0])
@@ -418,7 +419,8 @@ class Arena:
         measured_disp = now[1:4] - ref[1:4]
         measured_rot = _rotation_vector(_quat_multiply(_quat_conjugate(ref[4:8]), now[4:8]))
         lever = 0.2  # metres of "pose distance" per radian
-        d_triggered = np.linalg.norm(measured_disp - predicted_disp) + lever * np.linalg.norm(measured_rot - predicted_rot)
+        d_triggered = (np.linalg.norm(measured_disp - predicted_disp)
+                       + lever * np.linalg.norm(measured_rot - predicted_rot))
         d_lost = np.linalg.norm(measured_disp) + lever * np.linalg.norm(measured_rot)
         return bool(d_triggered < d_lost)
 

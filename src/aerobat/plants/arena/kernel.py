@@ -217,7 +217,8 @@ def supervise(x, gyro_prev, tick0, end_tick, tick_s, plant, ctrl, sensor, latenc
     Every radio period: estimate the state from the motion-capture samples available
     (``mocap_delay_ticks`` old), compute a PD command (or the open-loop placeholder),
     drop it with ``drops[j] < drop_probability``, deliver it after ``link_delay_ticks``,
-    check the volume (relative to ``target``, which is always the start position). With ``settle = (hold_ticks, pos, vel, tilt)`` and hold_ticks > 0
+    check the volume (relative to ``target``, which is always the start position). With
+    ``settle = (hold_ticks, pos, vel, tilt)`` and hold_ticks > 0
     it returns as soon as the estimate has stayed within tolerance for hold_ticks.
 
     ``out`` receives (tick, log_count, noise_used, drops_used, status, bad_row) with status

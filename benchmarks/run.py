@@ -31,6 +31,7 @@ from aerobat.plants import Arena  # noqa: E402
 from aerobat.simulate import _batch_continuous, _run_continuous, _steps  # noqa: E402
 
 CONFIG = hummingbird()
+OTHER_MARKER = "<!-- other benchmarks: kept by make bench -->"
 TRIPLE = load_program(ROOT / "examples" / "triple_flip_1800.toml")
 
 
@@ -196,7 +197,12 @@ def main() -> None:
     report = "\n".join(lines)
     print(report)
     if args.write:
-        Path(args.write).write_text(report)
+        # keep the hand-measured sections that follow the marker (other benchmark scripts)
+        target = Path(args.write)
+        kept = ""
+        if target.exists() and OTHER_MARKER in target.read_text():
+            kept = target.read_text()[target.read_text().index(OTHER_MARKER):]
+        target.write_text(report + ("\n" + kept if kept else ""))
         print(f"written to {args.write}")
 
 

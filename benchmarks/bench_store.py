@@ -217,7 +217,7 @@ def main_bench() -> None:
         with Store(old) as store:
             migrated = store.migrated_from
         migrate_s = time.perf_counter() - start
-        assert migrated == [1]
+        assert migrated == [1, 2]  # version 1 → 2 → 3
     print(f"Machine: {platform.machine()}, {os.cpu_count()} CPUs, {platform.system()} {platform.release()}, "
           f"Python {platform.python_version()}, SQLite {sqlite3.sqlite_version}\n")
     print("| storing one iteration | trajectory rows | synchronous | median [ms] | p95 [ms] | mean [ms] | "

@@ -321,6 +321,37 @@ def euler_zyx(states: np.ndarray) -> np.ndarray:
     return np.stack([phi, theta, psi], axis=-1)
 
 
+def quaternion_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product a ⊗ b of (w, x, y, z) quaternions."""
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    return np.array([
+        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+    ])
+
+
+def quaternion_from_rotation_vector(v: np.ndarray) -> np.ndarray:
+    """Unit quaternion of the rotation by |v| [rad] about v/|v|."""
+    angle = float(np.linalg.norm(v))
+    if angle < 1e-15:
+        return np.array([1.0, 0.5 * v[0], 0.5 * v[1], 0.5 * v[2]]) / np.sqrt(1.0 + 0.25 * angle**2)
+    return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * (v / angle)])
+
+
+def rotation_vector_from_quaternion(q: np.ndarray) -> np.ndarray:
+    """Rotation vector [rad] of a (not necessarily normalized) quaternion, shortest way round."""
+    q = q / np.linalg.norm(q)
+    if q[0] < 0:  # q and −q are the same attitude
+        q = -q
+    s = float(np.linalg.norm(q[1:]))
+    if s < 1e-12:
+        return 2.0 * q[1:]
+    return q[1:] / s * 2.0 * np.arctan2(s, q[0])
+
+
 def rotation_angles(states: np.ndarray) -> np.ndarray:
     """Unwrapped rotation angles about body x, y, z [rad], (…, N_STATE) → (…, 3).
 

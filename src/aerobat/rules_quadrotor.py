@@ -22,7 +22,15 @@ from collections.abc import Callable
 import numpy as np
 
 from .design import FinalStateModel
-from .dynamics import OMEGA, POS, QUAT, VEL
+from .dynamics import (
+    OMEGA,
+    POS,
+    QUAT,
+    VEL,
+    quaternion_from_rotation_vector,
+    quaternion_multiply,
+    rotation_vector_from_quaternion,
+)
 from .maneuvers.base import Maneuver
 
 __all__ = [
@@ -38,41 +46,12 @@ DEVIATION_NAMES = ("x", "y", "z", "vx", "vy", "vz", "rot_x", "rot_y", "rot_z", "
 DEVIATION_SCALES = np.array([0.01] * 3 + [0.02] * 3 + [0.005] * 3 + [0.02] * 3)
 
 
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    w1, x1, y1, z1 = a
-    w2, x2, y2, z2 = b
-    return np.array([
-        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-    ])
-
-
-def _rotvec_to_quat(v: np.ndarray) -> np.ndarray:
-    angle = float(np.linalg.norm(v))
-    if angle < 1e-15:
-        return np.array([1.0, 0.5 * v[0], 0.5 * v[1], 0.5 * v[2]]) / np.sqrt(1.0 + 0.25 * angle**2)
-    axis = v / angle
-    return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * axis])
-
-
-def _quat_to_rotvec(q: np.ndarray) -> np.ndarray:
-    q = q / np.linalg.norm(q)
-    if q[0] < 0:  # q and −q are the same attitude
-        q = -q
-    s = float(np.linalg.norm(q[1:]))
-    if s < 1e-12:
-        return 2.0 * q[1:]
-    return q[1:] / s * 2.0 * np.arctan2(s, q[0])
-
-
 def apply_deviation(nominal: np.ndarray, deviation: np.ndarray) -> np.ndarray:
     """The state ``nominal`` moved by a 12-component deviation (attitude: body-frame rotation)."""
     x = np.array(nominal, dtype=float)
     x[POS] += deviation[0:3]
     x[VEL] += deviation[3:6]
-    x[QUAT] = _quat_mul(x[QUAT], _rotvec_to_quat(deviation[6:9]))
+    x[QUAT] = quaternion_multiply(x[QUAT], quaternion_from_rotation_vector(deviation[6:9]))
     x[OMEGA] += deviation[9:12]
     return x
 
@@ -88,7 +67,8 @@ def start_state_deviation(measured: np.ndarray, nominal: np.ndarray) -> np.ndarr
     d[3:6] = m[VEL] - nominal[VEL]
     q = m[QUAT]
     if np.all(np.isfinite(q)) and np.linalg.norm(q) > 0.5:
-        d[6:9] = _quat_to_rotvec(_quat_mul(nominal[QUAT] * np.array([1.0, -1.0, -1.0, -1.0]), q))
+        conjugate = nominal[QUAT] * np.array([1.0, -1.0, -1.0, -1.0])
+        d[6:9] = rotation_vector_from_quaternion(quaternion_multiply(conjugate, q))
     else:
         d[6:9] = np.nan
     d[9:12] = m[OMEGA] - nominal[OMEGA]
@@ -205,7 +185,8 @@ def early_trajectory_deviation(
     idx = np.clip(np.searchsorted(traj.times_s, t), 0, len(traj.times_s) - 1)
     nom_q = traj.states[idx][:, QUAT]
     conj = np.array([1.0, -1.0, -1.0, -1.0])
-    rot = np.stack([_quat_to_rotvec(_quat_mul(nq * conj, mq)) for nq, mq in zip(nom_q, meas[:, QUAT], strict=True)])
+    rot = np.stack([rotation_vector_from_quaternion(quaternion_multiply(nq * conj, mq))
+                    for nq, mq in zip(nom_q, meas[:, QUAT], strict=True)])
     A = np.stack([np.ones_like(t), t], axis=1)
     pos_fit, *_ = np.linalg.lstsq(A, meas[:, POS] - nom_pos, rcond=None)
     rot_fit, *_ = np.linalg.lstsq(A, rot, rcond=None)

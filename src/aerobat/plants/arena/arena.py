@@ -16,7 +16,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...dynamics import N_STATE, controller_vector, hover_state, plant_vector
+from ...dynamics import (
+    N_STATE,
+    controller_vector,
+    hover_state,
+    plant_vector,
+    quaternion_from_rotation_vector,
+    quaternion_multiply,
+    rotation_vector_from_quaternion,
+)
 from ...program import Program
 from ...vehicle import VehicleConfig, VehicleParams
 from ..base import Trial
@@ -131,12 +139,7 @@ class Arena:
         d = self.params.disturbances
         self.x[3:6] += d.start_velocity_std_m_s * self.rng.standard_normal(3)
         tilt = d.start_tilt_std_rad * self.rng.standard_normal(2)
-        half = 0.5 * np.array([tilt[0], tilt[1], 0.0])
-        dq = np.array([math.sqrt(max(0.0, 1.0 - float(half @ half))), *half])
-        w, x, y, z = self.x[6:10]
-        a, b, c, e = dq  # q ⊗ dq: a small body-frame rotation
-        q = np.array([w * a - x * b - y * c - z * e, w * b + x * a + y * e - z * c,
-                      w * c - x * e + y * a + z * b, w * e + x * c - y * b + z * a])
+        q = quaternion_multiply(self.x[6:10], quaternion_from_rotation_vector(np.array([tilt[0], tilt[1], 0.0])))
         self.x[6:10] = q / np.linalg.norm(q)
 
     def reset_drift(self) -> None:
@@ -415,39 +418,15 @@ class Arena:
         nominal = simulate(program, self.config, record=True)
         k = min(int(np.searchsorted(nominal.times_s, now[0] - start_time)), len(nominal.times_s) - 1)
         predicted_disp = nominal.states[k, 0:3]
-        predicted_rot = _rotation_vector(nominal.states[k, 6:10])
+        predicted_rot = rotation_vector_from_quaternion(nominal.states[k, 6:10])
         measured_disp = now[1:4] - ref[1:4]
-        measured_rot = _rotation_vector(_quat_multiply(_quat_conjugate(ref[4:8]), now[4:8]))
+        measured_rot = rotation_vector_from_quaternion(
+            quaternion_multiply(ref[4:8] * np.array([1.0, -1.0, -1.0, -1.0]), now[4:8]))
         lever = 0.2  # metres of "pose distance" per radian
         d_triggered = (np.linalg.norm(measured_disp - predicted_disp)
                        + lever * np.linalg.norm(measured_rot - predicted_rot))
         d_lost = np.linalg.norm(measured_disp) + lever * np.linalg.norm(measured_rot)
         return bool(d_triggered < d_lost)
-
-
-def _quat_conjugate(q: np.ndarray) -> np.ndarray:
-    return np.array([q[0], -q[1], -q[2], -q[3]])
-
-
-def _quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    w1, x1, y1, z1 = a
-    w2, x2, y2, z2 = b
-    return np.array([
-        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-    ])
-
-
-def _rotation_vector(q: np.ndarray) -> np.ndarray:
-    q = q / np.linalg.norm(q)
-    if q[0] < 0:
-        q = -q
-    s = np.linalg.norm(q[1:])
-    if s < 1e-12:
-        return 2.0 * q[1:]
-    return q[1:] / s * 2.0 * math.atan2(s, q[0])
 
 
 def _relative_rotation_angles(quats: np.ndarray) -> np.ndarray:
@@ -512,7 +491,8 @@ def _estimate_final_state(rows: np.ndarray, t_start: float, t_end: float, start:
     angle_fit, *_ = np.linalg.lstsq(Aw, turns[in_window], rcond=None)
     rates = angle_fit[1]
     dt = t_end - track[k, 0]
-    q = _rotate_quaternion(track[k, 4:8], rates * dt)
+    q = quaternion_multiply(track[k, 4:8], quaternion_from_rotation_vector(rates * dt))
+    q = q / np.linalg.norm(q)
     state[6:10] = q
     state[10:13] = rates
     state[13:17] = np.nan
@@ -523,18 +503,3 @@ def _estimate_final_state(rows: np.ndarray, t_start: float, t_end: float, start:
     return state
 
 
-def _rotate_quaternion(q: np.ndarray, rotvec_body: np.ndarray) -> np.ndarray:
-    angle = float(np.linalg.norm(rotvec_body))
-    if angle < 1e-12:
-        return q / np.linalg.norm(q)
-    axis = rotvec_body / angle
-    dw = math.cos(angle / 2)
-    dx, dy, dz = axis * math.sin(angle / 2)
-    w, x, y, z = q
-    out = np.array([
-        w * dw - x * dx - y * dy - z * dz,
-        w * dx + x * dw + y * dz - z * dy,
-        w * dy - x * dz + y * dw + z * dx,
-        w * dz + x * dy - y * dx + z * dw,
-    ])
-    return out / np.linalg.norm(out)

@@ -10,7 +10,7 @@ Benchmarks, not tests: they measure and report, they never fail on a number.
 through ``Multirotor.step`` at 800 Hz with every integrator and compares each trajectory with a
 tight DOP853 reference; then it times whole supervised trials. ``learn`` runs the 40-iteration
 triple flip and a 2D single flip on the RotorPy plant and draws the figures for
-docs/results_rotorpy.md. Needs the ``rotorpy`` extra.
+the RotorPy section of docs/results.md. Needs the ``rotorpy`` extra.
 """
 
 from __future__ import annotations

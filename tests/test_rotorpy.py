@@ -347,11 +347,10 @@ def test_triple_flip_3d_at_1800_learns_on_rotorpy_in_40_iterations(rp, triple_fl
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason=(
-    "known (docs/results_rotorpy.md): with RotorPy's aerodynamics the first attempt falls ~4 m short and "
-    "learning stalls near 0.9 m once interval 6 (p5) reaches its 0 s bound, because the paper's constraint "
-    "rule scales the whole correction to 0; with aero off the same run learns to ~0.1 m"))
 def test_translation_5_5_learns_on_rotorpy(rp):
+    """The first attempt falls ~4 m short (rotor drag); the tsvd rule learns it (docs/results.md)."""
+    from aerobat.rules import make_rule
+
     translation = pytest.importorskip(
         "aerobat.maneuvers.translation",
         reason="aerobat.maneuvers.translation (the (5, 5) translation maneuver) does not exist yet",
@@ -359,8 +358,10 @@ def test_translation_5_5_learns_on_rotorpy(rp):
     maneuver = translation.translation_maneuver(CONFIG, (5.0, 5.0))
     result = design(maneuver, NominalModel(CONFIG))
     assert result.converged, result.message
-    session = learn(maneuver, result, rp.RotorPyPlant(CONFIG, seed=0), iterations=30)
+    session = learn(maneuver, result, rp.RotorPyPlant(CONFIG, seed=0), iterations=30,
+                    rule=make_rule("tsvd", result))
     assert session.status == "completed", session.message
     position = [k for k, e in enumerate(maneuver.errors) if e.unit == "m" and not e.name.startswith("v")]
     pos = np.array([np.linalg.norm(it.error[position]) for it in session.measured])
-    assert pos[-10:].mean() <= 0.15 and pos[-10:].mean() <= 0.5 * pos[0], pos
+    assert pos[0] >= 1.0
+    assert pos[-10:].mean() <= 0.15 and pos[-10:].mean() <= 0.2 * pos[0], pos

@@ -20,7 +20,7 @@ from aerobat.execution import DaskExecutor, Job, LocalExecutor, run_job
 from aerobat.maneuvers import MultiFlip
 from aerobat.simulate import NominalModel
 from aerobat.store import Store
-from aerobat.studies import robustness_jobs, sample_arena, summarize_robustness, RobustnessRanges
+from aerobat.studies import RobustnessRanges, robustness_jobs, sample_arena, summarize_robustness
 
 CONFIG = hummingbird()
 FLIP = MultiFlip(vehicle=CONFIG.vehicle, flips=1, max_rate_rad_s=np.radians(800), dims=2)

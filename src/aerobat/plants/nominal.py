@@ -13,18 +13,32 @@ __all__ = ["NominalPlant"]
 
 
 class NominalPlant:
-    """The paper's model as a plant: ``fly`` returns the simulated final state exactly."""
+    """The paper's model as a plant: ``fly`` returns the simulated final state exactly.
+
+    Like every plant, it reports its trajectory at a measurement rate (``sample_rate_hz``,
+    default 200 Hz like the arena's motion capture, start and end included), not at every
+    integration step; the final state is the integrator's, unrounded.
+    """
 
     name = "nominal"
 
-    def __init__(self, config: VehicleConfig, *, max_step_s: float = DEFAULT_MAX_STEP_S) -> None:
+    def __init__(self, config: VehicleConfig, *, max_step_s: float = DEFAULT_MAX_STEP_S,
+                 sample_rate_hz: float = 200.0) -> None:
+        if not sample_rate_hz > 0:
+            raise ValueError(f"sample_rate_hz = {sample_rate_hz} must be > 0 (Hz)")
         self.config = config
         self.max_step_s = max_step_s
+        self.sample_rate_hz = sample_rate_hz
 
     def fly(self, program: Program) -> Trial:
         traj = simulate(program, self.config, max_step_s=self.max_step_s)
         final = traj.final_state
+        picks = np.unique(np.concatenate([
+            np.searchsorted(traj.times_s, np.arange(0.0, traj.times_s[-1], 1.0 / self.sample_rate_hz)),
+            [len(traj.times_s) - 1],
+        ]))
+        times, states = traj.times_s[picks], traj.states[picks]
         if not np.all(np.isfinite(final)):
             return Trial("aborted", "non-finite state in the nominal simulation", np.full_like(final, np.nan),
-                         traj.times_s, traj.states, traj.states[0])
-        return Trial("ok", "nominal model", final.copy(), traj.times_s, traj.states, traj.states[0].copy())
+                         times, states, traj.states[0])
+        return Trial("ok", "nominal model", final.copy(), times, states, traj.states[0].copy())

@@ -275,10 +275,14 @@ def _cmd_rules(args: argparse.Namespace) -> int:
         from .plants.arena import load_arena
 
         arena = dataclass_to_table(load_arena(args.arena))
+    if args.plant == "rotorpy":
+        from .plants.rotorpy import RotorPyPlant
+
+        RotorPyPlant(config, seed=0)  # fails now, with the install hint, if RotorPy is missing
     jobs = rules_study_jobs(maneuver, nominal, methods=methods, seeds=args.seeds, trials=args.trials,
-                            seed=args.seed, arena=arena, tolerance_m=args.tolerance_m)
+                            seed=args.seed, arena=arena, tolerance_m=args.tolerance_m, plant=args.plant)
     spec = {"maneuver": maneuver.spec(), "methods": methods, "seeds": args.seeds, "trials": args.trials,
-            "seed": args.seed, "tolerance_m": args.tolerance_m, "arena": arena}
+            "seed": args.seed, "tolerance_m": args.tolerance_m, "arena": arena, "plant": args.plant}
 
     def record(store, study_id, job, result) -> None:
         store.record_study_job(study_id, job.key, job.spec, result)
@@ -377,6 +381,7 @@ def register(sub) -> None:
     rules.add_argument("--seed", type=int, default=1, help="first arena seed")
     rules.add_argument("--tolerance-m", type=float, default=0.12)
     rules.add_argument("--arena", metavar="FILE.toml", help="arena configuration")
+    rules.add_argument("--plant", choices=("arena", "rotorpy"), default="arena", help="the vehicle the runs fly on")
     common(rules)
     rules.set_defaults(func=_cmd_rules)
 

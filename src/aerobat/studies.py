@@ -415,8 +415,13 @@ def rule_run_job(spec: dict[str, Any]) -> dict[str, Any]:
     design = _design_from_table(maneuver, spec["design"])
     vehicle = maneuver.vehicle  # type: ignore[attr-defined]
     config = VehicleConfig(vehicle=vehicle, controller=ControllerParams.nominal_for(vehicle))
-    params = dataclass_from_table(ArenaParams, spec["arena"], source="job arena")
-    plant = Arena(config, params, seed=int(spec["seed"]))
+    if spec.get("plant", "arena") == "rotorpy":
+        from .plants.rotorpy import RotorPyPlant
+
+        plant: Any = RotorPyPlant(config, seed=int(spec["seed"]))
+    else:
+        params = dataclass_from_table(ArenaParams, spec["arena"], source="job arena")
+        plant = Arena(config, params, seed=int(spec["seed"]))
     method = spec["method"]
     trials = int(spec["trials"])
     if method in MODEL_FREE:
@@ -453,8 +458,9 @@ def rule_run_job(spec: dict[str, Any]) -> dict[str, Any]:
 
 
 def rules_study_jobs(maneuver: Any, design: Any, *, methods: list[str], seeds: int, trials: int, seed: int = 0,
-                     arena: dict[str, Any] | None = None, tolerance_m: float = 0.12) -> list[Job]:
-    """Every method on the same ``seeds`` arena seeds (seed, seed + 1, …)."""
+                     arena: dict[str, Any] | None = None, tolerance_m: float = 0.12,
+                     plant: str = "arena") -> list[Job]:
+    """Every method on the same ``seeds`` plant seeds (seed, seed + 1, …); ``plant`` is arena or rotorpy."""
     from .plants.arena.params import ArenaParams
 
     arena = arena if arena is not None else dataclass_to_table(ArenaParams())
@@ -462,7 +468,7 @@ def rules_study_jobs(maneuver: Any, design: Any, *, methods: list[str], seeds: i
     return [
         Job(key=f"{method}-seed-{seed + k:04d}", kind="rule_run", spec={
             "maneuver": maneuver.spec(), "design": design_table, "arena": arena, "method": method,
-            "seed": seed + k, "trials": trials, "tolerance_m": tolerance_m})
+            "seed": seed + k, "trials": trials, "tolerance_m": tolerance_m, "plant": plant})
         for method in methods for k in range(seeds)
     ]
 

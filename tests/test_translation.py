@@ -81,8 +81,14 @@ def test_cli_benchmark_bad_target(capsys):
 
 def test_cli_benchmark_map_writes_csv_and_plot(capsys, tmp_path):
     out = tmp_path / "map.csv"
-    assert main(["benchmark", "map", "--y", "1:3:2", "--z", "0:2:2", "--workers", "2", "--out", str(out)]) == 0
+    assert main(["benchmark", "map", "--y", "1:3:2", "--z", "0:2:2", "--workers", "2", "--out", str(out),
+                 "--db", str(tmp_path / "m.sqlite")]) == 0
     lines = out.read_text().strip().splitlines()
     assert lines[0] == "y_m,z_m,duration_s" and len(lines) == 5
     assert all(float(line.split(",")[2]) > 0 for line in lines[1:])
     assert out.with_suffix(".png").stat().st_size > 5_000
+    # the map ran on the execution layer and lives in the store: resuming solves nothing again
+    capsys.readouterr()
+    assert main(["benchmark", "map", "--y", "1:3:2", "--z", "0:2:2", "--workers", "1", "--out", str(out),
+                 "--db", str(tmp_path / "m.sqlite"), "--resume", "1"]) == 0
+    assert "0 solved now, 4 already done" in capsys.readouterr().out

@@ -72,29 +72,44 @@ def _parse_range(text: str, option: str) -> tuple[float, float, int]:
 
 
 def _cmd_map(args: argparse.Namespace) -> int:
-    import numpy as np
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+    """Minimum time over a grid of targets, one job per target on the execution layer
+    (local pool or Dask), each result committed to the store as it arrives (``--resume``)."""
+    import dataclasses
 
-    from .timeoptimal import benchmark_map, plot_map, write_map_csv
+    import numpy as np
+
+    from .cli_study import _run_jobs
+    from .execution import Job
+    from .store import Store
+    from .timeoptimal import plot_map, write_map_csv
 
     ya, yb, yn = _parse_range(args.y, "--y")
     za, zb, zn = _parse_range(args.z, "--z")
-    if not 1 <= args.workers <= 256:
-        raise ValueError(f"--workers {args.workers}: allowed 1 … 256")
     ys, zs = np.linspace(ya, yb, yn), np.linspace(za, zb, zn)
+    limits = dataclasses.asdict(_limits(args))
+    jobs = [Job(key=f"y{i:03d}-z{j:03d}", kind="benchmark", spec={"y_m": float(y), "z_m": float(z), "limits": limits})
+            for j, z in enumerate(zs) for i, y in enumerate(ys)]
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    console = _console(False)
-    with Progress(TextColumn("benchmark map"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                  console=console, transient=True) as progress:
-        task = progress.add_task("map", total=yn * zn)
-        grid = benchmark_map(ys, zs, limits=_limits(args), workers=args.workers,
-                             progress=lambda done, total: progress.update(task, completed=done))
+    spec = {"ys_m": ys.tolist(), "zs_m": zs.tolist(), "limits": limits}
+
+    def record(store, study_id, job, result) -> None:
+        store.record_study_job(study_id, job.key, job.spec, result)
+
+    study_id, ran, skipped = _run_jobs(args, "map", spec, jobs, record)
+    with Store(args.db) as store:
+        results = store.study_results(study_id)
+    grid = np.full((zn, yn), np.nan)
+    for j in range(zn):
+        for i in range(yn):
+            value = results.get(f"y{i:03d}-z{j:03d}", {}).get("duration_s")
+            grid[j, i] = value if isinstance(value, float) else np.nan
     write_map_csv(out, ys, zs, grid)
     figure = out.with_suffix(".png")
     plot_map(figure, ys, zs, grid)
     failed = int(np.isnan(grid).sum())
-    console.print(f"{yn * zn} targets, {failed} failed; CSV {out}, contour plot {figure}")
+    _console(False).print(f"study {study_id}: {yn * zn} targets ({ran} solved now, {skipped} already done), "
+                          f"{failed} failed; CSV {out}, contour plot {figure}")
     return EXIT_OK
 
 
@@ -118,7 +133,11 @@ def register(sub) -> None:
     mp = bsub.add_parser("map", help="minimum time over a grid of targets")
     mp.add_argument("--y", required=True, help="A:B:N grid of Y targets [m]")
     mp.add_argument("--z", required=True, help="A:B:N grid of Z targets [m]")
-    mp.add_argument("--workers", type=int, default=2)
+    mp.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
+    mp.add_argument("--scheduler", default=None,
+                    help="Dask scheduler address tcp://HOST:PORT (default: $DASK_SCHEDULER_ADDRESS, else local)")
+    mp.add_argument("--db", default=None, help="experiment store (default ./aerobat.sqlite)")
+    mp.add_argument("--resume", default=None, metavar="STUDY", help="continue a map: solve only the missing targets")
     mp.add_argument("--out", default="out/benchmark_map.csv", help="CSV file (a .png contour plot goes beside it)")
     limits(mp)
     mp.set_defaults(func=_cmd_map)

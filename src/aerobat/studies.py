@@ -159,22 +159,34 @@ def position_indices(maneuver: Any) -> list[int]:
     return [k for k, e in enumerate(maneuver.errors) if e.unit == "m"]
 
 
-@job_kind("learn")
-def learn_job(spec: dict[str, Any]) -> dict[str, Any]:
-    """Design-free learning run: the design travels in the spec (computed once per study)."""
-    from .learning import learn
+def _learning_setup(spec: dict[str, Any]) -> tuple[Any, Any, Any, Any]:
+    """(maneuver, design, nominal config, plant) of a learning job; the design travels in the spec."""
     from .maneuvers.registry import from_spec
     from .plants.arena import Arena
     from .plants.arena.params import ArenaParams
     from .vehicle import ControllerParams, VehicleConfig
 
-    start = time.perf_counter()
     maneuver = from_spec(spec["maneuver"])
     design = _design_from_table(maneuver, spec["design"])
     vehicle = maneuver.vehicle  # type: ignore[attr-defined]
     config = VehicleConfig(vehicle=vehicle, controller=ControllerParams.nominal_for(vehicle))
-    params = dataclass_from_table(ArenaParams, spec["arena"], source="job arena")
-    plant = Arena(config, params, seed=int(spec["seed"]))
+    if spec.get("plant", "arena") == "rotorpy":
+        from .plants.rotorpy import RotorPyPlant
+
+        plant: Any = RotorPyPlant(config, seed=int(spec["seed"]))
+    else:
+        params = dataclass_from_table(ArenaParams, spec["arena"], source="job arena")
+        plant = Arena(config, params, seed=int(spec["seed"]))
+    return maneuver, design, config, plant
+
+
+@job_kind("learn")
+def learn_job(spec: dict[str, Any]) -> dict[str, Any]:
+    """Design-free learning run: the design travels in the spec (computed once per study)."""
+    from .learning import learn
+
+    start = time.perf_counter()
+    maneuver, design, _, plant = _learning_setup(spec)
     rule = None
     if spec.get("rule", "paper") != "paper":
         from .rules import make_rule
@@ -403,25 +415,11 @@ def _model_free(method: str, maneuver: Any, design: Any, plant: Any, trials: int
 
 @job_kind("rule_run")
 def rule_run_job(spec: dict[str, Any]) -> dict[str, Any]:
-    """One method (update rule or model-free baseline) learning one maneuver on one arena seed."""
+    """One method (update rule or model-free baseline) learning one maneuver on one plant seed."""
     from .learning import learn
-    from .maneuvers.registry import from_spec
-    from .plants.arena import Arena
-    from .plants.arena.params import ArenaParams
-    from .vehicle import ControllerParams, VehicleConfig
 
     start = time.perf_counter()
-    maneuver = from_spec(spec["maneuver"])
-    design = _design_from_table(maneuver, spec["design"])
-    vehicle = maneuver.vehicle  # type: ignore[attr-defined]
-    config = VehicleConfig(vehicle=vehicle, controller=ControllerParams.nominal_for(vehicle))
-    if spec.get("plant", "arena") == "rotorpy":
-        from .plants.rotorpy import RotorPyPlant
-
-        plant: Any = RotorPyPlant(config, seed=int(spec["seed"]))
-    else:
-        params = dataclass_from_table(ArenaParams, spec["arena"], source="job arena")
-        plant = Arena(config, params, seed=int(spec["seed"]))
+    maneuver, design, config, plant = _learning_setup(spec)
     method = spec["method"]
     trials = int(spec["trials"])
     if method in MODEL_FREE:

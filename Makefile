@@ -10,7 +10,7 @@ OUT ?= out
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[test,dev,rotorpy,dask]"
+	$(PY) -m pip install --quiet -e ".[test,dev,rotorpy,dask,baselines]"
 	touch $(STAMP)
 
 setup: $(STAMP)

@@ -9,8 +9,8 @@ import pytest
 
 from aerobat import Program, Switch, hummingbird, load_program, simulate
 from aerobat.config import ConfigError
-from aerobat.dynamics import euler_zyx
-from aerobat.maneuvers import MultiFlip
+from aerobat.quadrotor.dynamics import euler_zyx
+from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.plants import Arena, ArenaParams, NominalPlant, Plant, load_arena
 from aerobat.plants.arena import save_arena
 

@@ -70,7 +70,7 @@ def test_learn_on_nominal_plant_table(capsys, tmp_path):
     (["learn", "flip", "--gamma", "2"], "--gamma"),
     (["learn", "flip", "--gamma", "fast"], "--gamma"),
     (["design", "flip", "--flips", "0"], "flips"),
-    (["design", "flip", "--max-rate-deg-s", "nan"], "max_rate_rad_s"),
+    (["design", "flip", "--max-rate-deg-s", "nan"], "--max-rate-deg-s"),
     (["design", "flip", "--vehicle", "nonexistent"], "unknown vehicle"),
     (["fly", "examples/hover.toml", "--trials", "0"], "--trials"),
     (["fly", "missing.toml"], "missing.toml"),

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from aerobat import hummingbird
-from aerobat.correction import correction_matrix
-from aerobat.design import DesignFailed, design
-from aerobat.maneuvers import MultiFlip
-from aerobat.simulate import NominalModel, simulate
-from aerobat.vehicle import VehicleConfig, VehicleParams
+from aerobat.core.correction import correction_matrix
+from aerobat.core.design import DesignFailed, design
+from aerobat.quadrotor.maneuvers import MultiFlip
+from aerobat.quadrotor.simulate import NominalModel, simulate
+from aerobat.quadrotor.vehicle import VehicleConfig, VehicleParams
 
 CONFIG = hummingbird()
 MODEL = NominalModel(CONFIG)
@@ -49,7 +49,7 @@ def test_2d_flips_converge(flips, rate_deg):
 def test_triple_flip_ends_at_six_pi():
     m = flip(flips=3, dims=2)
     d = design(m, MODEL)
-    from aerobat.dynamics import rotation_angles
+    from aerobat.quadrotor.dynamics import rotation_angles
 
     final = simulate(m.program(d.p_nominal), CONFIG).final_state
     assert rotation_angles(final)[0] == pytest.approx(6 * math.pi, abs=1e-6)

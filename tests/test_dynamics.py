@@ -1,4 +1,4 @@
-"""Model kernels of aerobat.dynamics.
+"""Model kernels of aerobat.quadrotor.dynamics.
 
 Controller inversion (eqs 14–21), plant (eqs 8–12), motors, attitude output.
 """
@@ -13,7 +13,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from aerobat.dynamics import (
+from aerobat.quadrotor.dynamics import (
     N_PLANT,
     N_STATE,
     OMEGA,
@@ -31,8 +31,8 @@ from aerobat.dynamics import (
     rotation_angles,
     rotation_matrices,
 )
-from aerobat.simulate import rk4_plant_step
-from aerobat.vehicle import ControllerParams, VehicleParams
+from aerobat.quadrotor.simulate import rk4_plant_step
+from aerobat.quadrotor.vehicle import ControllerParams, VehicleParams
 
 V = VehicleParams()
 

@@ -8,12 +8,13 @@ import numpy as np
 import pytest
 
 from aerobat import hummingbird
-from aerobat.design import design
-from aerobat.learning import ConstantSchedule, CorrectionRule, PaperSchedule, constraint_scale, learn
-from aerobat.maneuvers import MultiFlip
-from aerobat.maneuvers.base import bounds_arrays
+from aerobat.core.design import design
+from aerobat.core.learning import constraint_scale, learn
+from aerobat.core.rules import ConstantSchedule, PaperRule, PaperSchedule
+from aerobat.quadrotor.maneuvers import MultiFlip
+from aerobat.core.maneuver import bounds_arrays
 from aerobat.plants import Arena, ArenaParams, NominalPlant
-from aerobat.simulate import NominalModel
+from aerobat.quadrotor.simulate import NominalModel
 
 CONFIG = hummingbird()
 FLIP3 = MultiFlip(vehicle=CONFIG.vehicle, flips=3, dims=3)
@@ -39,7 +40,7 @@ def test_nominal_plant_converges_in_one_step():
     assert np.linalg.norm(session.measured[0].error) < 1e-6
     # from a perturbed start, one full step (γ = 1) lands within 1e-6
     start = d.p_nominal + np.array([5e-4, 2.5e-6, -2.5e-6, -5e-4, 2.5e-6])
-    rule = CorrectionRule(d.correction, ConstantSchedule(1.0))
+    rule = PaperRule(d.correction, ConstantSchedule(1.0))
     session = learn(m, d, plant, iterations=2, rule=rule, start_params=start)
     first, second = (np.linalg.norm(it.error) for it in session.measured)
     assert first > 1e-5

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from aerobat.config import ConfigError
-from aerobat.program import CHANNELS, Program, RampDown, Switch, load_program, save_program
+from aerobat.quadrotor.program import CHANNELS, Program, RampDown, Switch, load_program, save_program
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 G = 9.81

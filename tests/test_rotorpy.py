@@ -15,12 +15,12 @@ import pytest
 
 from aerobat import Program, Switch, hummingbird
 from aerobat.config import ConfigError
-from aerobat.design import design
-from aerobat.learning import learn
-from aerobat.maneuvers import MultiFlip
+from aerobat.core.design import design
+from aerobat.core.learning import learn
+from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.plants import Plant
 from aerobat.plants.arena.params import MotionCapture
-from aerobat.simulate import NominalModel
+from aerobat.quadrotor.simulate import NominalModel
 
 CONFIG = hummingbird()
 HOVER_2S = Program(switches=(), duration_s=2.0)
@@ -349,11 +349,11 @@ def test_triple_flip_3d_at_1800_learns_on_rotorpy_in_40_iterations(rp, triple_fl
 @pytest.mark.slow
 def test_translation_5_5_learns_on_rotorpy(rp):
     """The first attempt falls ~4 m short (rotor drag); the tsvd rule learns it (docs/results.md)."""
-    from aerobat.rules import make_rule
+    from aerobat.core.rules import make_rule
 
     translation = pytest.importorskip(
-        "aerobat.maneuvers.translation",
-        reason="aerobat.maneuvers.translation (the (5, 5) translation maneuver) does not exist yet",
+        "aerobat.quadrotor.maneuvers.translation",
+        reason="aerobat.quadrotor.maneuvers.translation (the (5, 5) translation maneuver) does not exist yet",
     )
     maneuver = translation.translation_maneuver(CONFIG, (5.0, 5.0))
     result = design(maneuver, NominalModel(CONFIG))

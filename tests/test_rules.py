@@ -17,15 +17,19 @@ import numpy as np
 import pytest
 
 from aerobat import VehicleConfig, hummingbird
-from aerobat.design import Design, design
-from aerobat.learning import ConstantSchedule, learn
-from aerobat.maneuvers import MultiFlip
-from aerobat.maneuvers.base import ErrorSpec, ParameterSpec, bounds_arrays, check_parameters
+from aerobat.core.design import Design, design
+from aerobat.core.learning import learn
+from aerobat.core.rules import ConstantSchedule
+from aerobat.quadrotor.maneuvers import MultiFlip
+from aerobat.core.maneuver import ErrorSpec, ParameterSpec, bounds_arrays, check_parameters
 from aerobat.plants import Arena, ArenaParams
-from aerobat.plants.base import Trial
-from aerobat.rules import (
-    RULE_NAMES,
+from aerobat.core.plant import Trial
+from aerobat.core.rules import (
+    RULES,
     BroydenJacobian,
+    IscModel,
+    RuleChoice,
+    ScheduleChoice,
     BroydenRule,
     InitialStateCompensation,
     KalmanRule,
@@ -34,13 +38,13 @@ from aerobat.rules import (
     filter_factors,
     make_rule,
 )
-from aerobat.rules_quadrotor import (
+from aerobat.quadrotor.isc import (
     early_trajectory_deviation,
     initial_state_sensitivity,
     quadrotor_isc,
     start_state_deviation,
 )
-from aerobat.simulate import NominalModel
+from aerobat.quadrotor.simulate import NominalModel
 
 # ------------------------------------------------------------------ synthetic plant
 
@@ -138,17 +142,18 @@ def dist(session) -> np.ndarray:
 
 
 def test_factory_builds_every_rule_by_name():
-    assert set(SYNTHETIC) == set(RULE_NAMES)
+    assert set(SYNTHETIC) == set(RULES.names())
     kinds = {"paper": PaperRule, "tsvd": RegularizedRule, "damped": RegularizedRule, "kalman": KalmanRule,
              "broyden": BroydenRule}
     for name, cls in kinds.items():
         rule = make_rule(name, D_LIN)
         assert isinstance(rule, cls) and rule.name == name
         json.dumps(rule.state())
-    wrapped = make_rule("kalman+isc", D_LIN, sensitivity=np.zeros((4, 2)), deviation=lambda t, p: t.start_state)
+    wrapped = make_rule("kalman+isc", D_LIN, isc=IscModel(np.zeros((4, 2)), lambda t, p: t.start_state))
     assert isinstance(wrapped, InitialStateCompensation) and wrapped.name == "kalman+isc"
-    assert isinstance(make_rule("paper", D_LIN, schedule=ConstantSchedule(0.5)).schedule, ConstantSchedule)
-    with pytest.raises(ValueError, match="unknown rule"):
+    half = RuleChoice("paper", schedule=ScheduleChoice("constant", value=0.5))
+    assert isinstance(make_rule(half, D_LIN).schedule, ConstantSchedule)
+    with pytest.raises(ValueError, match="unknown update rule"):
         make_rule("newton", D_LIN)
     with pytest.raises(ValueError, match="sensitivity"):
         make_rule("tsvd+isc", D_LIN)
@@ -214,7 +219,7 @@ def test_parameters_stay_within_bounds_and_keep_learning_at_one(name):
 @pytest.mark.parametrize("name", ["tsvd", "damped", "kalman", "broyden", "kalman+isc", "tsvd+isc"])
 def test_state_is_json_and_resumes_exactly(name):
     S = np.array([[1.0, 0.0], [0.0, 2.0], [0.5, 0.5], [0.0, 0.0]])
-    isc = {"sensitivity": S, "deviation": lambda trial, p: trial.start_state} if name.endswith("+isc") else {}
+    isc = {"isc": IscModel(S, lambda trial, p: trial.start_state)} if name.endswith("+isc") else {}
     plant = LinearPlant(J_LIN, P_STAR, S=S, start_std=0.1, seed=6)
     rule = make_rule(name, D_LIN, **isc)
     s = learn(LIN, D_LIN, plant, iterations=8, rule=rule)
@@ -294,7 +299,8 @@ def isc_runs(inner: str, wrap: bool, center: bool = True, seeds: int = 6) -> flo
     finals = []
     for seed in range(seeds):
         plant = LinearPlant(J_LIN, P_STAR, noise=0.01, S=S, start_std=0.3, seed=seed)
-        rule = make_rule(inner, D_LIN, schedule=ConstantSchedule(0.5) if inner == "paper" else None)
+        schedule = ScheduleChoice("constant", value=0.5) if inner == "paper" else None
+        rule = make_rule(RuleChoice(inner, schedule=schedule), D_LIN)
         if wrap:
             rule = InitialStateCompensation(rule, S, lambda trial, p: trial.start_state, center=center)
         finals.append(np.mean(dist(learn(LIN, D_LIN, plant, iterations=20, rule=rule))[-10:]))
@@ -372,11 +378,12 @@ def test_initial_state_sensitivity_is_physical(design3):
 
 @pytest.fixture(scope="module")
 def default_sessions(design3):
-    S, dev = quadrotor_isc(FLIP3, CONFIG, design3.p_nominal)
+    isc = quadrotor_isc(FLIP3, CONFIG, design3.p_nominal)
+    S, dev = isc.sensitivity, isc.deviation
     out = {}
     for seed in (1, 2, 3):
         for name in ("paper", BEST):
-            options = {"sensitivity": S, "deviation": dev} if name.endswith("+isc") else {}
+            options = {"isc": isc} if name.endswith("+isc") else {}
             rule = make_rule(name, design3, **options)
             out[name, seed] = learn(FLIP3, design3, Arena(CONFIG, seed=seed), iterations=30, rule=rule)
     return out
@@ -454,13 +461,15 @@ def test_initial_state_compensation_with_fivefold_start_error(design3):
     # that forgets fast (γ = 0.5) compensation halves it. Averaging rules see no measurable
     # change (docs/rules.md, 20 seeds).
     params = ArenaParams().replace(**START5)
-    S, dev = quadrotor_isc(FLIP3, CONFIG, design3.p_nominal)
+    isc = quadrotor_isc(FLIP3, CONFIG, design3.p_nominal)
+    S, dev = isc.sensitivity, isc.deviation
     corrected: dict[str, list[float]] = {"plain": [], "isc": []}
     raw: dict[str, list[float]] = {"plain": [], "isc": []}
     for seed in range(1, 7):
         for label, name in (("plain", "paper"), ("isc", "paper+isc")):
-            options = {"sensitivity": S, "deviation": dev} if label == "isc" else {}
-            rule = make_rule(name, design3, schedule=ConstantSchedule(0.5), **options)
+            options = {"isc": isc} if label == "isc" else {}
+            choice = RuleChoice.parse(name, schedule=ScheduleChoice("constant", value=0.5))
+            rule = make_rule(choice, design3, **options)
             s = learn(FLIP3, design3, Arena(CONFIG, params, seed=seed), iterations=30, rule=rule)
             devs = np.array([dev(it.trial, it.params) for it in s.measured])
             devs -= devs.mean(axis=0)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from aerobat.dynamics import (
+from aerobat.quadrotor.dynamics import (
     N_STATE,
     OMEGA,
     POS,
@@ -24,8 +24,8 @@ from aerobat.dynamics import (
     rotation_angles,
     rotation_matrices,
 )
-from aerobat.program import Program, RampDown, Switch, load_program
-from aerobat.simulate import (
+from aerobat.quadrotor.program import Program, RampDown, Switch, load_program
+from aerobat.quadrotor.simulate import (
     DEFAULT_MAX_STEP_S,
     DEFAULT_TICK_S,
     Trajectory,
@@ -34,7 +34,7 @@ from aerobat.simulate import (
     simulate,
     simulate_batch,
 )
-from aerobat.vehicle import ControllerParams, VehicleConfig, VehicleParams, hummingbird
+from aerobat.quadrotor.vehicle import ControllerParams, VehicleConfig, VehicleParams, hummingbird
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 CFG = hummingbird()

@@ -22,12 +22,12 @@ from hypothesis.extra import numpy as hnp
 from aerobat import hummingbird
 from aerobat.cli import main
 from aerobat.config import ConfigError, dataclass_to_table
-from aerobat.design import design
-from aerobat.learning import Iteration, Session
-from aerobat.maneuvers import MultiFlip
-from aerobat.maneuvers.registry import from_spec, register_maneuver, registered_kinds
+from aerobat.core.design import design
+from aerobat.core.learning import Iteration, Session
+from aerobat.quadrotor.maneuvers import MultiFlip
+from aerobat.core.registry import from_spec, register_maneuver, registered_kinds
 from aerobat.plants import Arena, NominalPlant, Trial
-from aerobat.simulate import NominalModel
+from aerobat.quadrotor.simulate import NominalModel
 from aerobat.store import (
     SessionInUse,
     SessionNotFound,
@@ -40,7 +40,7 @@ from aerobat.store import (
     decode_trajectory,
     encode_trajectory,
 )
-from aerobat.store_migrations import APPLICATION_ID, SCHEMA_V1, SCHEMA_VERSION
+from aerobat.store.migrations import APPLICATION_ID, SCHEMA_V1, SCHEMA_VERSION
 
 CONFIG = hummingbird()
 FLIP = MultiFlip(vehicle=CONFIG.vehicle, flips=1, max_rate_rad_s=math.radians(800), dims=2)
@@ -97,7 +97,7 @@ def assert_one_line(err: str, code: int, expected: int = 2, *fragments: str) -> 
 def test_new_store_has_current_schema_wal_and_foreign_keys(tmp_path):
     path = tmp_path / "a.sqlite"
     with Store(path) as store:
-        assert store.schema_version == SCHEMA_VERSION == 3
+        assert store.schema_version == SCHEMA_VERSION == 4
         assert store.integrity_check() == []
         conn = store._db
         assert conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
@@ -360,7 +360,7 @@ def test_a_version_1_store_is_migrated_in_place_with_its_data_intact(tmp_path, c
     path = tmp_path / "old.sqlite"
     expected = _v1_fixture(path)
     with Store(path) as store:
-        assert store.migrated_from == [1, 2]  # version 1 → 2 → 3
+        assert store.migrated_from == [1, 2, 3]  # version 1 → 2 → 3 → 4
         assert store.schema_version == SCHEMA_VERSION
         assert store.integrity_check() == []
         for (sid, idx), (params, nxt, error, status) in expected.items():
@@ -386,7 +386,7 @@ def test_a_version_1_store_is_migrated_in_place_with_its_data_intact(tmp_path, c
 
 
 def test_a_failed_migration_leaves_version_1(tmp_path, monkeypatch):
-    from aerobat import store_migrations
+    from aerobat.store import migrations as store_migrations
 
     path = tmp_path / "old.sqlite"
     _v1_fixture(path)
@@ -468,7 +468,9 @@ def test_learn_stores_everything_and_sessions_show_plot_export_read_it(tmp_path,
     code, out, _ = run(capsys, "sessions", "--db", db, "--json")
     assert json.loads(out)[0]["iterations"] == 3
     code, out, _ = run(capsys, "show", "last", "--db", db)
-    assert code == 0 and "session 1:" in out and "flip_angle" in out and "learned:" in out
+    assert code == 0 and "session 1:" in out and "position error [m]" in out and "learned:" in out
+    code, out, _ = run(capsys, "show", "last", "--full", "--db", db)
+    assert code == 0 and "flip_angle" in out
     code, out, _ = run(capsys, "show", "1", "--db", db, "--json")
     shown = json.loads(out)
     assert [it["i"] for it in shown["iterations"]] == [1, 2, 3]
@@ -515,7 +517,7 @@ def test_resume_and_warm_start_refuse_what_does_not_fit(tmp_path, capsys):
     cases = [
         (["learn", "--resume", "1", "--db", db], "already has 2 of 2"),
         (["learn", "--resume", "9", "--db", db], "no session 9"),
-        (["learn", "--resume", "abc", "--db", db], "expected a session id"),
+        (["learn", "--resume", "abc", "--db", db], "expected an id"),
         (["learn", *SMALL, "--resume", "1", "--from-session", "1", "--db", db], "exclude each other"),
         (["learn", *SMALL, "--plant", "arena", "--resume", "1", "--iterations", "4", "--db", db],
          "--plant arena (stored: nominal)"),
@@ -565,9 +567,9 @@ class _FlakyPlant:
 
 
 def test_rejected_measurements_are_stored_without_an_update(tmp_path, capsys, monkeypatch):
-    import aerobat.cli as cli
+    from aerobat.plants import PlantChoice
 
-    monkeypatch.setattr(cli, "_build_plant", lambda kind, table, config, seed, source: _FlakyPlant(config))
+    monkeypatch.setattr(PlantChoice, "build", lambda self, config: _FlakyPlant(config))
     db = str(tmp_path / "a.sqlite")
     code, out, err = run(capsys, "learn", *SMALL, "--plant", "nominal", "--iterations", "3", "--db", db,
                          "--out", str(tmp_path / "o"))
@@ -585,22 +587,21 @@ def test_rejected_measurements_are_stored_without_an_update(tmp_path, capsys, mo
 
 
 def test_pinned_parameters_are_warned_about_in_the_output(tmp_path, capsys, monkeypatch):
-    import aerobat.learning as learning
+    import dataclasses
 
-    def fake_learn(maneuver, design, plant, *, iterations, rule, start_params, on_iteration, **_):
-        params = np.array(start_params)
-        error = np.full(len(maneuver.errors), 0.01)
-        records = []
-        for i in range(1, iterations + 1):
-            step, gamma = rule.propose(i, params, error, None)
-            message = "ok" if i < 2 else ("ok; warning: p1 (accelerate duration) pinned at a bound for 8 "
-                                          "corrections: maneuver poorly formulated or infeasible here")
-            rec = Iteration(i, i, "ok", params.copy(), error, gamma, 0.0, message, None)
-            on_iteration(rec)
-            records.append(rec)
-        return Session(maneuver, design, "nominal", tuple(records), params, "completed", "done", 0.0)
+    from aerobat.core.learning import Learner
 
-    monkeypatch.setattr(learning, "learn", fake_learn)
+    tell = Learner.tell
+
+    def tell_with_warning(self, trial):  # as if p1 sat at a bound for 8 corrections
+        record = tell(self, trial)
+        if record.index == 2:
+            record = dataclasses.replace(record, message=record.message + "; warning: p1 (accelerate duration) "
+                                         "pinned at a bound for 8 corrections: maneuver poorly formulated or "
+                                         "infeasible here")
+        return record
+
+    monkeypatch.setattr(Learner, "tell", tell_with_warning)
     code, out, err = run(capsys, "learn", *SMALL, "--plant", "nominal", "--iterations", "2",
                          "--db", str(tmp_path / "a.sqlite"), "--out", str(tmp_path / "o"))
     assert code == 0, err

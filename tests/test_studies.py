@@ -15,12 +15,12 @@ import pytest
 
 from aerobat import hummingbird
 from aerobat.cli import main
-from aerobat.design import design
-from aerobat.execution import DaskExecutor, Job, LocalExecutor, run_job
-from aerobat.maneuvers import MultiFlip
-from aerobat.simulate import NominalModel
+from aerobat.core.design import design
+from aerobat.experiments.execution import DaskExecutor, Job, LocalExecutor, run_job
+from aerobat.quadrotor.maneuvers import MultiFlip
+from aerobat.quadrotor.simulate import NominalModel
 from aerobat.store import Store
-from aerobat.studies import RobustnessRanges, robustness_jobs, sample_arena, summarize_robustness
+from aerobat.experiments.studies import RobustnessRanges, robustness_jobs, sample_arena, summarize_robustness
 
 CONFIG = hummingbird()
 FLIP = MultiFlip(vehicle=CONFIG.vehicle, flips=1, max_rate_rad_s=np.radians(800), dims=2)
@@ -29,7 +29,7 @@ FLIP = MultiFlip(vehicle=CONFIG.vehicle, flips=1, max_rate_rad_s=np.radians(800)
 @pytest.fixture(scope="module")
 def jobs():
     d = design(FLIP, NominalModel(CONFIG))
-    return robustness_jobs(FLIP, d, vehicles=4, iterations=5, seed=3)
+    return robustness_jobs(FLIP, d, CONFIG, vehicles=4, iterations=5, seed=3)
 
 
 def test_sampling_is_reproducible_and_varied():
@@ -44,21 +44,25 @@ def test_sampling_is_reproducible_and_varied():
 
 def test_jobs_are_pure(jobs):
     first, again = run_job(jobs[0]), run_job(jobs[0])
-    assert first["position_errors_m"] == again["position_errors_m"]
-    assert first["final_params"] == again["final_params"]
-    assert run_job(Job("x", "no-such-kind", {}))["status"] == "error"
+    assert first.done and again.done
+    assert first.result["position_errors_m"] == again.result["position_errors_m"]
+    assert first.result["final_params"] == again.result["final_params"]
+    unknown = run_job(Job("x", "no-such-kind", {}))
+    assert not unknown.done and "unknown job kind" in unknown.error
+    broken = run_job(Job("y", "learn", {"maneuver": {"kind": "flip"}}))  # a job that raises is a failed result
+    assert not broken.done and broken.error and broken.result == {}
 
 
 def test_local_pool_equals_dask_scheduler(jobs):
     distributed = pytest.importorskip("distributed")
     pool = LocalExecutor(2)
     try:
-        local = {job.key: result for job, result in pool.run(jobs)}
+        local = {job.key: outcome.result for job, outcome in pool.run(jobs)}
     finally:
         pool.close()
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
                                   dashboard_address=None) as cluster, distributed.Client(cluster) as client:
-        remote = {job.key: result for job, result in DaskExecutor(client=client).run(jobs)}
+        remote = {job.key: outcome.result for job, outcome in DaskExecutor(client=client).run(jobs)}
         address = cluster.scheduler_address
         assert address.startswith("tcp://127.0.0.1")
     assert set(local) == set(remote) == {job.key for job in jobs}
@@ -79,9 +83,11 @@ def test_cli_study_through_a_scheduler_address(tmp_path, capsys):
                      "--scheduler", cluster.scheduler_address, "--out", str(tmp_path / "out"), "--json"])
     assert code == 0
     report = json.loads(capsys.readouterr().out)
-    assert report["vehicles"] == 3 and report["ran"] == 3
+    assert report["vehicles"] == 3 and report["ran"] == 3 and report["failed_jobs"] == []
     with Store(db) as store:
         results = store.study_results(report["study"])
+        sessions = store.study_sessions(report["study"])  # every vehicle's learning run is a session
+        assert len(sessions) == 3 and all(s.n_measured == 4 for s in sessions)
     assert len(results) == 3
     assert (tmp_path / "out" / "trials_to_tolerance.png").exists()
     assert (tmp_path / "out" / "success_vs_property.png").exists()
@@ -91,13 +97,13 @@ def test_killed_study_resumes_only_unfinished_jobs(tmp_path):
     db = tmp_path / "k.sqlite"
     exe = Path(sys.executable).with_name("aerobat")
     argv = [str(exe), "study", "robustness", "flip", "--flips", "1", "--max-rate-deg-s", "800", "--dims", "2",
-            "--vehicles", "12", "--iterations", "6", "--seed", "2", "--workers", "1", "--db", str(db),
+            "--vehicles", "40", "--iterations", "6", "--seed", "2", "--workers", "1", "--db", str(db),
             "--out", str(tmp_path / "out")]
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=dict(os.environ))
     finished = 0
     deadline = time.time() + 120
     while time.time() < deadline and finished < 3:
-        time.sleep(0.3)
+        time.sleep(0.02)
         if db.exists():
             try:
                 with Store(db) as store:
@@ -108,13 +114,14 @@ def test_killed_study_resumes_only_unfinished_jobs(tmp_path):
     proc.wait()
     with Store(db) as store:
         done_before = store.finished_study_jobs(1)
-    assert 3 <= len(done_before) < 12
+    assert 3 <= len(done_before) < 40
     out = subprocess.run([*argv, "--resume", "1", "--json"], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     report = json.loads(out.stdout)
-    assert report["ran"] == 12 - len(done_before) and report["skipped"] == len(done_before)
+    assert report["ran"] == 40 - len(done_before) and report["skipped"] == len(done_before)
     with Store(db) as store:
-        assert len(store.study_results(1)) == 12
+        assert len(store.study_results(1)) == 40
+        assert len(store.study_sessions(1)) == 40  # a killed job left no half-stored session behind
 
 
 def test_envelope_study(tmp_path, capsys):

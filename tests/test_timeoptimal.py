@@ -11,17 +11,18 @@ import pytest
 
 casadi = pytest.importorskip("casadi")
 
-from aerobat.timeoptimal import (  # noqa: E402
+from aerobat.experiments import LocalExecutor, run_study  # noqa: E402
+from aerobat.experiments.studies import map_csv, map_grid, map_jobs  # noqa: E402
+from aerobat.plotting import save_figure  # noqa: E402
+from aerobat.plotting.benchmarks import plot_map, plot_solution  # noqa: E402
+from aerobat.quadrotor.timeoptimal import (  # noqa: E402
     BenchmarkLimits,
     InputArc,
     TimeOptimalSolution,
-    benchmark_map,
-    plot_map,
-    plot_solution,
     solve_translation,
     switch_times,
-    write_map_csv,
 )
+from aerobat.store import Store  # noqa: E402
 
 LIM = BenchmarkLimits()
 G = LIM.gravity_m_s2
@@ -346,7 +347,7 @@ def test_solver_failure_is_reported_not_raised():
     assert d["duration_s"] is None and d["status"] == "failed"
     json.dumps(d, allow_nan=False)
     with pytest.raises(ValueError, match="status"):
-        plot_solution(sol, "unused.png")
+        plot_solution(sol)
 
 
 @pytest.mark.parametrize(
@@ -401,30 +402,35 @@ def test_frozen_dataclasses(sol55):
 # map, CSV and plots
 # --------------------------------------------------------------------------
 def test_benchmark_map_parallel_csv_and_plots(tmp_path, sol55):
+    import dataclasses
+
     ys = np.array([0.0, 5.0])
     zs = np.array([0.0, 5.0])
     calls = []
-    grid = benchmark_map(ys, zs, workers=2, progress=lambda done, total: calls.append((done, total)))
+    jobs = map_jobs(ys, zs, dataclasses.asdict(BenchmarkLimits()))
+    pool = LocalExecutor(2)
+    with Store(tmp_path / "m.sqlite") as store:
+        outcome = run_study(store, "map", {"ys": ys.tolist(), "zs": zs.tolist()}, jobs, executor=pool,
+                            progress=lambda done, total, job, result: calls.append((done, total)))
+    pool.close()
+    assert outcome.ok and outcome.ran == 4
+    grid = map_grid(outcome.results, ys, zs)
     assert grid.shape == (2, 2)
     assert grid[0, 0] == 0.0
     assert grid[1, 1] == pytest.approx(sol55.duration_s, abs=1e-9)
     assert grid[0, 1] == pytest.approx(grid[1, 0], rel=0.5)  # both finite, same order
     assert np.all(np.isfinite(grid))
     assert [c[0] for c in calls] == [1, 2, 3, 4] and all(c[1] == 4 for c in calls)
-    serial = benchmark_map(ys[1:], zs[1:], workers=1)
-    assert serial[0, 0] == pytest.approx(sol55.duration_s, abs=1e-9)
 
-    csv_path = tmp_path / "map.csv"
-    write_map_csv(csv_path, ys, zs, grid)
-    rows = list(csv.DictReader(open(csv_path)))
+    rows = list(csv.DictReader(map_csv(ys, zs, grid).splitlines()))
     assert list(rows[0]) == ["y_m", "z_m", "duration_s"]
     assert len(rows) == 4
     row = next(r for r in rows if float(r["y_m"]) == 5.0 and float(r["z_m"]) == 5.0)
     assert float(row["duration_s"]) == grid[1, 1]
 
-    map_png = tmp_path / "map.png"
-    plot_map(map_png, ys, zs, grid)
+    map_png = save_figure(plot_map(ys, zs, grid), tmp_path / "map.png")
     assert map_png.stat().st_size > 1000
-    sol_png = tmp_path / "sol.png"
-    plot_solution(sol55, sol_png)
+    one_row = save_figure(plot_map(ys, zs[:1], grid[:1]), tmp_path / "row.png")  # no contour for one row
+    assert one_row.stat().st_size > 1000
+    sol_png = save_figure(plot_solution(sol55), tmp_path / "sol.png")
     assert sol_png.stat().st_size > 1000

@@ -9,12 +9,12 @@ import pytest
 
 from aerobat import hummingbird
 from aerobat.cli import main
-from aerobat.design import design
-from aerobat.learning import learn
-from aerobat.maneuvers.registry import from_spec
-from aerobat.maneuvers.translation import translation_maneuver
+from aerobat.core.design import design
+from aerobat.core.learning import learn
+from aerobat.core.registry import from_spec
+from aerobat.quadrotor.maneuvers.translation import translation_maneuver
 from aerobat.plants import Arena
-from aerobat.simulate import NominalModel
+from aerobat.quadrotor.simulate import NominalModel
 
 CONFIG = hummingbird()
 
@@ -80,13 +80,13 @@ def test_cli_benchmark_bad_target(capsys):
 
 
 def test_cli_benchmark_map_writes_csv_and_plot(capsys, tmp_path):
-    out = tmp_path / "map.csv"
+    out = tmp_path / "map"
     assert main(["benchmark", "map", "--y", "1:3:2", "--z", "0:2:2", "--workers", "2", "--out", str(out),
                  "--db", str(tmp_path / "m.sqlite")]) == 0
-    lines = out.read_text().strip().splitlines()
+    lines = (out / "benchmark_map.csv").read_text().strip().splitlines()
     assert lines[0] == "y_m,z_m,duration_s" and len(lines) == 5
     assert all(float(line.split(",")[2]) > 0 for line in lines[1:])
-    assert out.with_suffix(".png").stat().st_size > 5_000
+    assert (out / "benchmark_map.png").stat().st_size > 5_000
     # the map ran on the execution layer and lives in the store: resuming solves nothing again
     capsys.readouterr()
     assert main(["benchmark", "map", "--y", "1:3:2", "--z", "0:2:2", "--workers", "1", "--out", str(out),

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from aerobat.config import ConfigError
-from aerobat.vehicle import (
+from aerobat.quadrotor.vehicle import (
     ControllerParams,
     VehicleConfig,
     VehicleParams,
@@ -80,7 +80,7 @@ def test_derived_quantities():
 
 def test_the_example_flip_uses_the_eq_27_acceleration():
     """The shipped flip programs use the eq 27 bound: their peak accel_p equals it."""
-    from aerobat.program import load_program
+    from aerobat.quadrotor.program import load_program
 
     root = Path(__file__).resolve().parents[1] / "examples"
     for name in ("single_flip.toml", "triple_flip_1800.toml"):

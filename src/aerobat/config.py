@@ -17,6 +17,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
+from aerobat.errors import ConfigError
+
 __all__ = [
     "ConfigError",
     "check_finite",
@@ -24,21 +26,18 @@ __all__ = [
     "dataclass_from_table",
     "dataclass_to_table",
     "read_toml",
+    "table_field",
 ]
 
 T = TypeVar("T")
 
 
-class ConfigError(ValueError):
-    """A configuration file or value is invalid; the message names where and why."""
-
-
 def check_finite(name: str, value: float, unit: str = "") -> None:
-    """Raise ``ValueError`` unless ``value`` is a finite real number."""
+    """Raise :class:`ConfigError` unless ``value`` is a finite real number."""
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ValueError(f"{name} must be a number, got {type(value).__name__} {value!r}")
+        raise ConfigError(f"{name} must be a number, got {type(value).__name__} {value!r}")
     if not math.isfinite(value):
-        raise ValueError(f"{name} = {value} must be finite{_unit(unit)}")
+        raise ConfigError(f"{name} = {value} must be finite{_unit(unit)}")
 
 
 def check_range(
@@ -51,7 +50,7 @@ def check_range(
     high_inclusive: bool = True,
     unit: str = "",
 ) -> None:
-    """Raise ``ValueError`` naming ``name``, ``value`` and the allowed range if out of it."""
+    """Raise :class:`ConfigError` naming ``name``, ``value`` and the allowed range if out of it."""
     check_finite(name, value, unit)
     ok = True
     if low is not None:
@@ -60,7 +59,7 @@ def check_range(
         ok &= value <= high if high_inclusive else value < high
     if not ok:
         allowed = _describe(low, high, low_inclusive, high_inclusive)
-        raise ValueError(f"{name} = {value:g} is out of range: allowed {allowed}{_unit(unit)}")
+        raise ConfigError(f"{name} = {value:g} is out of range: allowed {allowed}{_unit(unit)}")
 
 
 def _describe(low: float | None, high: float | None, lo_inc: bool, hi_inc: bool) -> str:
@@ -164,10 +163,9 @@ def dataclass_from_table(cls: type[T], table: Mapping[str, Any], *, source: str)
         raise ConfigError(f"{source}: missing required field(s) {', '.join(missing)}")
     try:
         return cls(**kwargs)
-    except ConfigError:
-        raise
-    except ValueError as exc:
-        raise ConfigError(f"{source}: {exc}") from None
+    except ValueError as exc:  # the dataclass's own validation (ConfigError included)
+        text = str(exc)
+        raise ConfigError(text if text.startswith(source) else f"{source}: {text}") from None
 
 
 def dataclass_to_table(obj: Any) -> dict[str, Any]:
@@ -182,3 +180,21 @@ def dataclass_to_table(obj: Any) -> dict[str, Any]:
         else:
             out[field.name] = value
     return out
+
+
+def table_field(table: Mapping[str, Any], name: str, source: str, expected: type | tuple[type, ...],
+                what: str) -> Any:
+    """``table[name]``, checked against ``expected`` (bool is never a number), finite if a float.
+
+    Raises :class:`ConfigError` naming ``source.name``, what was expected and what was found.
+    """
+    if name not in table:
+        raise ConfigError(f"{source}: missing required field {name}")
+    value = table[name]
+    if isinstance(value, bool) and bool not in (expected if isinstance(expected, tuple) else (expected,)):
+        raise ConfigError(f"{source}.{name}: expected {what}, got {type(value).__name__} {value!r}")
+    if not isinstance(value, expected):
+        raise ConfigError(f"{source}.{name}: expected {what}, got {type(value).__name__} {value!r}")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ConfigError(f"{source}.{name} = {value}: must be finite")
+    return value

@@ -1,7 +1,85 @@
-"""Plants: things that fly programs and report trials (the learning loop sees only this)."""
+"""Plants: things that fly programs and report trials (the learning loop sees only this).
 
-from .arena import Arena, ArenaParams, load_arena
-from .base import Plant, Trial, TrialStatus
-from .nominal import NominalPlant
+====================  ===============================================================
+``nominal``           the design model itself (:class:`NominalPlant`)
+``arena``             a simulated flying-machine arena whose vehicle is not the model
+                      (:class:`~aerobat.plants.arena.Arena`, settings ``--arena FILE``)
+``rotorpy``           RotorPy's Hummingbird, supervised like the arena
+                      (:class:`~aerobat.plants.rotorpy.RotorPyPlant`, ``--rotorpy FILE``)
+====================  ===============================================================
 
-__all__ = ["Arena", "ArenaParams", "NominalPlant", "Plant", "Trial", "TrialStatus", "load_arena"]
+Each is a :class:`~aerobat.plants.spec.PlantSpec` in :data:`PLANTS`; a package adds its own
+through the ``aerobat.plants`` entry-point group.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from aerobat.config import dataclass_from_table, dataclass_to_table
+from aerobat.core.plant import Plant, StatefulPlant, Trial, TrialStatus
+from aerobat.plants.arena import Arena, ArenaParams, load_arena
+from aerobat.plants.nominal import NominalPlant
+from aerobat.plants.spec import PLANTS, PlantChoice, PlantSpec
+from aerobat.quadrotor.vehicle import VehicleConfig
+
+__all__ = [
+    "PLANTS",
+    "Arena",
+    "ArenaParams",
+    "NominalPlant",
+    "Plant",
+    "PlantChoice",
+    "PlantSpec",
+    "StatefulPlant",
+    "Trial",
+    "TrialStatus",
+    "load_arena",
+]
+
+
+def _rotorpy(config: VehicleConfig, settings: Any, seed: int) -> Plant:
+    from aerobat.plants.rotorpy import RotorPyPlant
+
+    return RotorPyPlant(config, settings=settings, seed=seed)
+
+
+def _rotorpy_load(path: str | Path) -> Any:
+    from aerobat.plants.rotorpy import load_rotorpy_settings
+
+    return load_rotorpy_settings(path)
+
+
+def _rotorpy_from_table(table: Any, source: str) -> Any:
+    from aerobat.plants.rotorpy import settings_from_table
+
+    return settings_from_table(table, source=source)
+
+
+def _rotorpy_to_table(settings: Any) -> dict[str, Any]:
+    from aerobat.plants.rotorpy import settings_to_table
+
+    return settings_to_table(settings)
+
+
+def _rotorpy_default() -> Any:
+    from aerobat.plants.rotorpy import RotorPySettings
+
+    return RotorPySettings()
+
+
+PLANTS.register("nominal", PlantSpec(
+    "nominal", "the design model itself: continuous time, no noise",
+    lambda config, settings, seed: NominalPlant(config)))
+PLANTS.register("arena", PlantSpec(
+    "arena", "a simulated arena: a true vehicle unlike the model, sensors, lossy links, the Fig. 8 supervisor",
+    lambda config, settings, seed: Arena(config, settings, seed=seed),
+    load_settings=load_arena,
+    settings_from_table=lambda table, source: dataclass_from_table(ArenaParams, table, source=source),
+    settings_to_table=dataclass_to_table, default_settings=ArenaParams, option="--arena"))
+PLANTS.register("rotorpy", PlantSpec(
+    "rotorpy", "RotorPy's Hummingbird (an independent simulator), supervised like the arena",
+    _rotorpy, load_settings=_rotorpy_load, settings_from_table=_rotorpy_from_table,
+    settings_to_table=_rotorpy_to_table, default_settings=_rotorpy_default,
+    requires=(("rotorpy", "rotorpy"),), option="--rotorpy"))

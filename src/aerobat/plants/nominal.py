@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..program import Program
-from ..simulate import DEFAULT_MAX_STEP_S, simulate
-from ..vehicle import VehicleConfig
-from .base import Trial
+from aerobat.core.plant import Trial, TrialStatus
+from aerobat.errors import ConfigError
+from aerobat.quadrotor.program import Program
+from aerobat.quadrotor.simulate import DEFAULT_MAX_STEP_S, simulate
+from aerobat.quadrotor.vehicle import VehicleConfig
 
 __all__ = ["NominalPlant"]
 
@@ -25,7 +26,7 @@ class NominalPlant:
     def __init__(self, config: VehicleConfig, *, max_step_s: float = DEFAULT_MAX_STEP_S,
                  sample_rate_hz: float = 200.0) -> None:
         if not sample_rate_hz > 0:
-            raise ValueError(f"sample_rate_hz = {sample_rate_hz} must be > 0 (Hz)")
+            raise ConfigError(f"sample_rate_hz = {sample_rate_hz} must be > 0 (Hz)")
         self.config = config
         self.max_step_s = max_step_s
         self.sample_rate_hz = sample_rate_hz
@@ -39,6 +40,6 @@ class NominalPlant:
         ]))
         times, states = traj.times_s[picks], traj.states[picks]
         if not np.all(np.isfinite(final)):
-            return Trial("aborted", "non-finite state in the nominal simulation", np.full_like(final, np.nan),
+            return Trial(TrialStatus.ABORTED, "non-finite state in the nominal simulation", np.full_like(final, np.nan),
                          times, states, traj.states[0])
-        return Trial("ok", "nominal model", final.copy(), times, states, traj.states[0].copy())
+        return Trial(TrialStatus.OK, "nominal model", final.copy(), times, states, traj.states[0].copy())

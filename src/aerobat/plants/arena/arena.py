@@ -16,7 +16,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...dynamics import (
+from aerobat.core.plant import Trial, TrialStatus
+from aerobat.plants.arena.kernel import MOCAP_COLUMNS, supervise
+from aerobat.plants.arena.params import ArenaParams
+from aerobat.plants.mocap import estimate_final_state, measured_states
+from aerobat.quadrotor.dynamics import (
     N_STATE,
     controller_vector,
     hover_state,
@@ -25,13 +29,23 @@ from ...dynamics import (
     quaternion_multiply,
     rotation_vector_from_quaternion,
 )
-from ...program import Program
-from ...vehicle import VehicleConfig, VehicleParams
-from ..base import Trial
-from .kernel import MOCAP_COLUMNS, supervise
-from .params import ArenaParams
+from aerobat.quadrotor.program import Program
+from aerobat.quadrotor.simulate import simulate
+from aerobat.quadrotor.vehicle import VehicleConfig, VehicleParams
 
 __all__ = ["Arena"]
+
+
+@dataclass(frozen=True)
+class _Failure:
+    """Why a stretch of flight ended early: the trial status it means and the supervisor's words."""
+
+    status: TrialStatus
+    message: str
+
+
+_SETTLED = _Failure(TrialStatus.OK, "settled")
+"""Returned by a settling flight that reached its tolerance (not a failure)."""
 
 
 @dataclass
@@ -233,11 +247,11 @@ class Arena:
         return noise
 
     def _supervise(self, n_ticks: int, log: _Log, target: np.ndarray, *, closed_loop: bool = True,
-                   program=None, man_start_tick: int = -1, settle: np.ndarray | None = None) -> str | None:
-        """Fly ``n_ticks`` with radio commands every link period; returns a failure message or None.
+                   program=None, man_start_tick: int = -1, settle: np.ndarray | None = None) -> _Failure | None:
+        """Fly ``n_ticks`` with radio commands every link period; returns the failure, or None.
 
         With ``settle`` = (hold ticks, position, velocity, tilt tolerances) it returns early,
-        with the message "settled", once the vehicle has stayed within tolerance.
+        with :data:`_SETTLED`, once the vehicle has stayed within tolerance.
         """
         if n_ticks <= 0:
             return None
@@ -274,11 +288,11 @@ class Arena:
         log.count = int(out[1])
         status = int(out[4])
         if status == 1:
-            return "non-finite vehicle state"
+            return _Failure(TrialStatus.ABORTED, "non-finite vehicle state")
         if status == 2:
-            return self._volume_message(log.rows[int(out[5])])
+            return _Failure(TrialStatus.CRASHED, self._volume_message(log.rows[int(out[5])]))
         if status == 3:
-            return "settled"
+            return _SETTLED
         return None
 
     def _volume_message(self, row: np.ndarray) -> str:
@@ -290,17 +304,17 @@ class Arena:
                 return f"left the arena volume at t = {row[0]:.3f} s: {name} = {rel:+.3f} m beyond {where}"
         return "left the arena volume"  # pragma: no cover - the kernel only reports real violations
 
-    def _settle(self, log: _Log) -> str | None:
-        """Fly to the start until within tolerance for the hold time; message on timeout."""
+    def _settle(self, log: _Log) -> _Failure | None:
+        """Fly to the start until within tolerance for the hold time; a failure on timeout."""
         s = self.params.supervisor
         hold_ticks = max(1, round(s.settle_hold_s / self.tick_s))
         settle = np.array([hold_ticks, s.settle_position_m, s.settle_velocity_m_s, s.settle_tilt_rad], dtype=float)
         outcome = self._supervise(round(s.settle_timeout_s / self.tick_s), log, self.start_m, settle=settle)
-        if outcome == "settled":
+        if outcome is _SETTLED:
             return None
-        return outcome or f"did not settle at the start within {s.settle_timeout_s:g} s"
+        return outcome or _Failure(TrialStatus.ABORTED, f"did not settle at the start within {s.settle_timeout_s:g} s")
 
-    def _upload(self, program: Program, log: _Log) -> tuple[str | None, int]:
+    def _upload(self, program: Program, log: _Log) -> tuple[_Failure | None, int]:
         """Send the switch list in packets, each acknowledged; retries cost a timeout each."""
         links = self.params.links
         packets = max(1, math.ceil(len(program.switches) / links.upload_switches_per_packet))
@@ -317,8 +331,8 @@ class Arena:
                 if acked:
                     break
             else:
-                return (f"upload of packet {packet + 1}/{packets} not acknowledged after "
-                        f"{links.upload_max_attempts} attempts"), attempts_total
+                return _Failure(TrialStatus.ABORTED, f"upload of packet {packet + 1}/{packets} not acknowledged "
+                                                     f"after {links.upload_max_attempts} attempts"), attempts_total
         return None, attempts_total
 
     # ----------------------------------------------------------------- trial
@@ -330,10 +344,10 @@ class Arena:
         self.plant = self._plant_vector()
         failure = self._settle(log)
         if failure:
-            return self._abort("crashed" if "volume" in failure else "aborted", failure, log)
+            return self._abort(failure, log)
         failure, attempts = self._upload(program, log)
         if failure:
-            return self._abort("crashed" if "volume" in failure else "aborted", failure, log)
+            return self._abort(failure, log)
         compiled = program.compile()
         duration = compiled.duration_s
         # the trigger: exactly one packet on the command link, sent at the next link period
@@ -341,7 +355,7 @@ class Arena:
         send_tick = math.ceil((math.floor(self.tick * self.tick_s / period + 1e-9) + 1) * period / self.tick_s - 1e-9)
         failure = self._supervise(send_tick - self.tick, log, self.start_m)
         if failure:
-            return self._abort("crashed" if "volume" in failure else "aborted", failure, log)
+            return self._abort(failure, log)
         triggered = self.rng.random() >= p.links.command_drop_probability
         if p.disturbances.enabled:
             self._hover_residual()
@@ -356,10 +370,10 @@ class Arena:
         failure = self._supervise(check_tick - self.tick, log, self.start_m, closed_loop=False,
                                   program=compiled, man_start_tick=man_start)
         if failure:
-            return self._abort("crashed" if "volume" in failure else "aborted", failure, log, start_time)
+            return self._abort(failure, log, start_time)
         if not self._maneuver_started(log, program, start_time, check_tick):
             failure = self._supervise(round(p.supervisor.return_time_s / self.tick_s), log, self.start_m)
-            return Trial("no_trigger", "trigger lost: no maneuver motion within the timeout; no correction",
+            return Trial(TrialStatus.NO_TRIGGER, "trigger lost: no maneuver motion within the timeout; no correction",
                          nan_state, np.empty(0), np.empty((0, N_STATE)), nan_state.copy(),
                          {"upload_attempts": attempts})
         # the rest of the maneuver (placeholder commands are ignored by the vehicle)
@@ -367,30 +381,30 @@ class Arena:
         failure = self._supervise(end_tick + margin - self.tick, log, self.start_m, closed_loop=False,
                                   program=compiled, man_start_tick=man_start)
         if failure:
-            return self._abort("crashed" if "volume" in failure else "aborted", failure, log, start_time)
+            return self._abort(failure, log, start_time)
         # recover and return under closed-loop control
         failure = self._supervise(round(p.supervisor.return_time_s / self.tick_s), log, self.start_m,
                                   program=compiled, man_start_tick=man_start)
         if p.drift.enabled:
             self.capacity *= 1.0 - p.drift.thrust_loss_per_trial
         if failure:
-            return self._abort("crashed" if "volume" in failure else "aborted", failure, log, start_time)
+            return self._abort(failure, log, start_time)
         end_time = start_time + duration
-        times, states = _measured_states(log.view(), start_time, end_time, self.start_m)
-        final = _estimate_final_state(log.view(), start_time, end_time, self.start_m)
-        start_state = _estimate_final_state(log.view(), start_time - 0.06, start_time, self.start_m)
+        times, states = measured_states(log.view(), start_time, end_time, self.start_m)
+        final = estimate_final_state(log.view(), start_time, end_time, self.start_m)
+        start_state = estimate_final_state(log.view(), start_time - 0.06, start_time, self.start_m)
         if final is None or not (np.all(np.isfinite(final[:13])) and np.all(np.isfinite(final[17:]))):
-            return Trial("aborted", "too few motion-capture samples to estimate the final state", nan_state,
+            return Trial(TrialStatus.ABORTED, "too few motion-capture samples to estimate the final state", nan_state,
                          times, states, start_state if start_state is not None else nan_state.copy())
-        return Trial("ok", f"maneuver flown ({attempts} upload packet attempts)", final, times, states,
+        return Trial(TrialStatus.OK, f"maneuver flown ({attempts} upload packet attempts)", final, times, states,
                      start_state if start_state is not None else nan_state.copy(),
                      {"upload_attempts": attempts, "start_time_s": start_time})
 
-    def _abort(self, status, message: str, log: _Log, start_time: float | None = None) -> Trial:
+    def _abort(self, failure: _Failure, log: _Log, start_time: float | None = None) -> Trial:
         """Report a failed trial and put the vehicle back at the start (picked up, restarted)."""
         nan_state = np.full(N_STATE, np.nan)
         if start_time is not None:
-            times, states = _measured_states(log.view(), start_time, self.tick * self.tick_s, self.start_m)
+            times, states = measured_states(log.view(), start_time, self.tick * self.tick_s, self.start_m)
         else:
             times, states = np.empty(0), np.empty((0, N_STATE))
         self.x = hover_state(self.true_vehicle, (float(self.start_m[0]), float(self.start_m[1]),
@@ -398,7 +412,7 @@ class Arena:
         self.gyro_prev[:] = 0.0
         self.integral[:] = 0.0
         self.radio_cmd = np.array([self.config.vehicle.gravity_m_s2, 0.0, 0.0, 0.0])
-        return Trial(status, message, nan_state, times, states, nan_state.copy())
+        return Trial(failure.status, failure.message, nan_state, times, states, nan_state.copy())
 
     def _maneuver_started(self, log: _Log, program: Program, start_time: float, check_tick: int) -> bool:
         """Did the vehicle start the maneuver? Nearest of two hypotheses at the check time.
@@ -406,8 +420,6 @@ class Arena:
         The measured pose change since the trigger is compared with the nominal model's
         prediction (triggered) and with no change at all (trigger lost).
         """
-        from ...simulate import simulate
-
         rows = log.view()
         check_time = check_tick * self.tick_s - self.mocap_delay_ticks * self.tick_s
         available = rows[rows[:, 0] <= check_time + 1e-12]
@@ -427,79 +439,3 @@ class Arena:
                        + lever * np.linalg.norm(measured_rot - predicted_rot))
         d_lost = np.linalg.norm(measured_disp) + lever * np.linalg.norm(measured_rot)
         return bool(d_triggered < d_lost)
-
-
-def _relative_rotation_angles(quats: np.ndarray) -> np.ndarray:
-    """Accumulated body-axis rotation between consecutive attitude samples, (M, 3) [rad]."""
-    from ...dynamics import QUAT, rotation_matrices
-
-    states = np.zeros((quats.shape[0], N_STATE))
-    states[:, QUAT] = quats
-    R = rotation_matrices(states)
-    dR = np.einsum("kji,kjl->kil", R[:-1], R[1:])  # R_kᵀ R_{k+1}
-    cos = np.clip((np.trace(dR, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
-    angle = np.arccos(cos)
-    axis = np.stack([dR[:, 2, 1] - dR[:, 1, 2], dR[:, 0, 2] - dR[:, 2, 0], dR[:, 1, 0] - dR[:, 0, 1]], axis=1)
-    sin = np.sin(angle)
-    scale = np.where(sin > 1e-9, angle / (2.0 * np.where(sin > 1e-9, sin, 1.0)), 0.5)
-    rotvec = axis * scale[:, None]
-    return np.vstack([np.zeros(3), np.cumsum(rotvec, axis=0)])
-
-
-def _measured_states(rows: np.ndarray, t0: float, t1: float, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Motion-capture samples in [t0, t1] as states (velocity by central differences)."""
-    sel = rows[(rows[:, 0] >= t0 - 1e-9) & (rows[:, 0] <= t1 + 1e-9)]
-    states = np.zeros((sel.shape[0], N_STATE))
-    if sel.shape[0] == 0:
-        return np.empty(0), states
-    states[:, 0:3] = sel[:, 1:4] - start
-    states[:, 6:10] = sel[:, 4:8]
-    if sel.shape[0] > 2:
-        states[:, 3:6] = np.gradient(sel[:, 1:4], sel[:, 0], axis=0)
-    states[:, 17:20] = _relative_rotation_angles(sel[:, 4:8])
-    states[:, 13:17] = np.nan  # motor thrusts are not measured
-    states[:, 10:13] = np.nan  # nor body rates
-    return sel[:, 0] - t0, states
-
-
-def _estimate_final_state(rows: np.ndarray, t_start: float, t_end: float, start: np.ndarray) -> np.ndarray | None:
-    """The state at ``t_end`` from mocap samples only.
-
-    Position and velocity: quadratic least-squares fit over [t_end − 40 ms, t_end + 10 ms].
-    Attitude: the sample nearest ``t_end`` rotated by the fitted body rate; whole turns
-    counted by accumulating relative rotations from ``t_start``.
-    """
-    from ...dynamics import euler_zyx
-
-    window = rows[(rows[:, 0] >= t_end - 0.040 - 1e-9) & (rows[:, 0] <= t_end + 0.010 + 1e-9)]
-    if window.shape[0] < 5:
-        return None
-    t = window[:, 0] - t_end
-    A = np.stack([np.ones_like(t), t, t * t], axis=1)
-    coef, *_ = np.linalg.lstsq(A, window[:, 1:4], rcond=None)
-    state = np.zeros(N_STATE)
-    state[0:3] = coef[0] - start
-    state[3:6] = coef[1]
-    track = rows[(rows[:, 0] >= t_start - 1e-9) & (rows[:, 0] <= t_end + 0.010 + 1e-9)]
-    turns = _relative_rotation_angles(track[:, 4:8])
-    # attitude at t_end: fit each accumulated body angle linearly over the window and apply the
-    # residual rotation to the nearest sample
-    k = int(np.argmin(np.abs(track[:, 0] - t_end)))
-    in_window = track[:, 0] >= t_end - 0.040 - 1e-9
-    tw = track[in_window, 0] - t_end
-    Aw = np.stack([np.ones_like(tw), tw], axis=1)
-    angle_fit, *_ = np.linalg.lstsq(Aw, turns[in_window], rcond=None)
-    rates = angle_fit[1]
-    dt = t_end - track[k, 0]
-    q = quaternion_multiply(track[k, 4:8], quaternion_from_rotation_vector(rates * dt))
-    q = q / np.linalg.norm(q)
-    state[6:10] = q
-    state[10:13] = rates
-    state[13:17] = np.nan
-    integral = turns[k] + rates * dt
-    state[17:20] = integral
-    euler = euler_zyx(state)
-    state[17:20] = euler + 2.0 * np.pi * np.round((integral - euler) / (2.0 * np.pi))
-    return state
-
-

@@ -15,10 +15,10 @@ import math
 import numba as nb
 import numpy as np
 
-from ...dynamics import controller_thrusts
-from ...simulate import rk4_plant_step
+from aerobat.quadrotor.dynamics import controller_thrusts
+from aerobat.quadrotor.simulate import rk4_plant_step
 
-__all__ = ["advance", "pd_command", "supervise"]
+__all__ = ["MOCAP_COLUMNS", "advance", "estimate_pose", "mocap_sample", "pd_command", "supervise"]
 
 # mocap record columns: t, x, y, z, qw, qx, qy, qz
 MOCAP_COLUMNS = 8
@@ -45,7 +45,7 @@ def advance(x, gyro_prev, tick0, n_ticks, tick_s, plant, ctrl, sensor, latency, 
         tick = tick0 + i
         t = tick * tick_s
         if tick % mocap_every == 0 and rows < mocap_out.shape[0]:
-            _mocap(x, t, mocap_noise[rows], mocap_out[rows])
+            mocap_sample(x, t, mocap_noise[rows], mocap_out[rows])
             rows += 1
         running = False
         if man_start_tick >= 0 and tick >= man_start_tick:
@@ -78,7 +78,7 @@ def advance(x, gyro_prev, tick0, n_ticks, tick_s, plant, ctrl, sensor, latency, 
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _mocap(x, t, noise, out):  # pragma: no cover - compiled
+def mocap_sample(x, t, noise, out):  # pragma: no cover - compiled
     out[0] = t
     out[1] = x[0] + noise[0]
     out[2] = x[1] + noise[1]
@@ -175,7 +175,7 @@ def pd_command(pos, vel, quat, target, integral, gains, limits, dt, out):  # pra
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
-def _estimate(log, available, est_pos, est_vel, est_quat):  # pragma: no cover - compiled
+def estimate_pose(log, available, est_pos, est_vel, est_quat):  # pragma: no cover - compiled
     """Supervisor's estimate from the first ``available`` mocap rows: last pose, line-fit velocity."""
     if available <= 0:
         return False
@@ -243,7 +243,7 @@ def supervise(x, gyro_prev, tick0, end_tick, tick_s, plant, ctrl, sensor, latenc
         avail_time = (tick - mocap_delay_ticks) * tick_s + 1e-12
         while available < log_count and log[available, 0] <= avail_time:
             available += 1
-        have = _estimate(log, available, est_pos, est_vel, est_quat)
+        have = estimate_pose(log, available, est_pos, est_vel, est_quat)
         if closed_loop and have:
             pd_command(est_pos, est_vel, est_quat, target, integral, gains, limits, period_s, cmd)
         else:
@@ -285,7 +285,7 @@ def supervise(x, gyro_prev, tick0, end_tick, tick_s, plant, ctrl, sensor, latenc
             avail_time = (tick - mocap_delay_ticks) * tick_s + 1e-12
             while available < log_count and log[available, 0] <= avail_time:
                 available += 1
-            if _estimate(log, available, est_pos, est_vel, est_quat):
+            if estimate_pose(log, available, est_pos, est_vel, est_quat):
                 dp = math.sqrt((est_pos[0] - target[0]) ** 2 + (est_pos[1] - target[1]) ** 2
                                + (est_pos[2] - target[2]) ** 2)
                 dv = math.sqrt(est_vel[0] ** 2 + est_vel[1] ** 2 + est_vel[2] ** 2)

@@ -15,7 +15,7 @@ from typing import Any
 
 import tomli_w
 
-from ...config import ConfigError, check_range, dataclass_from_table, dataclass_to_table, read_toml
+from aerobat.config import check_range, dataclass_from_table, dataclass_to_table, read_toml
 
 __all__ = [
     "Aerodynamics",
@@ -271,4 +271,3 @@ def save_arena(params: ArenaParams, path: str | Path) -> None:
     Path(path).write_text(tomli_w.dumps(dataclass_to_table(params)))
 
 
-__all__ += ["ConfigError"]

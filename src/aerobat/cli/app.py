@@ -1,0 +1,150 @@
+"""The ``aerobat`` command: the parser, and the one table from exceptions to exit statuses.
+
+=======  ==================================================================
+status   meaning
+=======  ==================================================================
+0        done
+1        it ran and failed: a design or solve did not converge, a trial
+         crashed, a study job failed, an optional package is missing (its
+         install hint is printed), the disk is full, the store is locked
+2        bad input: an option, a file, a field or a value out of range; a
+         store that is not an aerobat store, a session that does not exist
+70       an internal error (a bug): one line, ``--debug`` shows the traceback
+128+n    stopped by signal n (130 for Ctrl-C) after storing what was done
+=======  ==================================================================
+
+Every error is one line on stderr: ``aerobat: error: …`` (status 2) or
+``aerobat: failed: …`` (1 and 70). Nothing here is imported by the library.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import sys
+from collections.abc import Sequence
+
+from aerobat.cli.common import CommandFailed, Parser
+from aerobat.errors import (
+    ConfigError,
+    DesignFailed,
+    DiskFull,
+    MissingDependency,
+    OutputError,
+    PlantError,
+    SessionInUse,
+    SessionNotFound,
+    SolveFailed,
+    StoreAccessError,
+    StoreError,
+    StoreFormatError,
+    StoreVersionError,
+)
+
+__all__ = ["EXIT_FAILED", "EXIT_INTERNAL", "EXIT_OK", "EXIT_USAGE", "build_parser", "exit_status", "main"]
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_USAGE = 2
+EXIT_INTERNAL = 70
+
+_USAGE = (ConfigError, StoreAccessError, StoreFormatError, StoreVersionError, SessionNotFound, SessionInUse)
+_FAILED = (DesignFailed, SolveFailed, PlantError, MissingDependency, DiskFull, StoreError, CommandFailed)
+
+
+def exit_status(exc: BaseException) -> int:
+    """The documented exit status of an exception (see the module's table)."""
+    if isinstance(exc, DiskFull):
+        return EXIT_FAILED
+    if isinstance(exc, _USAGE) or isinstance(exc, OutputError):
+        return EXIT_USAGE
+    if isinstance(exc, _FAILED):
+        return EXIT_FAILED
+    return EXIT_INTERNAL
+
+
+def _commands() -> list:
+    from aerobat.cli import benchmark, design, learn, sessions, simulate, study
+
+    return [simulate, design, learn, sessions, benchmark, study]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from aerobat import __version__
+
+    parser = Parser(prog="aerobat", description="Design and learn fast open-loop quadrocopter maneuvers "
+                    "(Lupashin & D'Andrea 2012).", formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("--debug", action="store_true", help="show tracebacks for errors (accepted anywhere)")
+    parser.add_argument("--version", action="version", version=f"aerobat {__version__}")
+    sub = parser.add_subparsers(dest="command", parser_class=Parser, metavar="COMMAND")
+    for module in _commands():
+        module.register(sub)
+    return parser
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split("\n")) or type(exc).__name__
+
+
+def _negative_values(argv: list[str]) -> list[str]:
+    """``--to -2,4`` → ``--to=-2,4``: a value that starts with a minus sign is a value, not an option."""
+    out: list[str] = []
+    k = 0
+    while k < len(argv):
+        token = argv[k]
+        following = argv[k + 1] if k + 1 < len(argv) else ""
+        if (token.startswith("--") and "=" not in token and len(following) > 1 and following[0] == "-"
+                and (following[1].isdigit() or following[1] == ".")):
+            out.append(f"{token}={following}")
+            k += 2
+            continue
+        out.append(token)
+        k += 1
+    return out
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit status (see the module's table)."""
+    import matplotlib
+
+    matplotlib.use("Agg")  # the command line draws into files; only here is a backend chosen
+    standalone = argv is None
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv
+    argv = _negative_values([a for a in argv if a != "--debug"])
+    parser = build_parser()
+    if not argv:  # bare `aerobat`: what it can do
+        parser.print_help()
+        return EXIT_OK
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a usage error already printed: a status, not an exception
+        return exc.code if isinstance(exc.code, int) else EXIT_USAGE
+    args.debug = debug
+    args.argv = argv
+    args.standalone = standalone
+    if getattr(args, "func", None) is None:  # a command group without its subcommand: show its commands
+        with contextlib.suppress(SystemExit):
+            parser.parse_args([*argv, "--help"])
+        return EXIT_USAGE
+    try:
+        return int(args.func(args))
+    except KeyboardInterrupt:
+        print("aerobat: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:  # `aerobat … | head`: the reader left; nothing more to say
+        return EXIT_FAILED
+    except Exception as exc:
+        if debug:
+            raise
+        status = exit_status(exc)
+        if isinstance(exc, MissingDependency):
+            print(f"aerobat: failed: {_one_line(exc)}", file=sys.stderr)
+        elif status == EXIT_USAGE:
+            print(f"aerobat: error: {_one_line(exc)}", file=sys.stderr)
+        elif status == EXIT_FAILED:
+            print(f"aerobat: failed: {_one_line(exc)}", file=sys.stderr)
+        else:
+            print(f"aerobat: failed: internal error: {type(exc).__name__}: {_one_line(exc)} "
+                  f"(--debug shows a traceback)", file=sys.stderr)
+        return status

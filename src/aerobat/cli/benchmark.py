@@ -1,0 +1,139 @@
+"""``aerobat benchmark``: time-optimal translation benchmarks (Sect. 9; Ritz et al. 2011)."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+from typing import Any
+
+import numpy as np
+
+from aerobat.cli.common import console, finite_float, parse_pair
+from aerobat.cli.study import add_execution_options, report_failures, run_cli_study
+from aerobat.errors import ConfigError, SolveFailed
+
+__all__ = ["register"]
+
+
+def _limits(args: argparse.Namespace) -> Any:
+    from aerobat.quadrotor.timeoptimal import BenchmarkLimits
+
+    defaults = BenchmarkLimits()
+    return BenchmarkLimits(
+        f_min_m_s2=defaults.f_min_m_s2 if args.f_min is None else args.f_min,
+        f_max_m_s2=defaults.f_max_m_s2 if args.f_max is None else args.f_max,
+        max_rate_rad_s=args.max_rate_rad_s,
+        gravity_m_s2=defaults.gravity_m_s2,
+    )
+
+
+def _cmd_translation(args: argparse.Namespace) -> int:
+    from rich.table import Table
+
+    from aerobat.plotting import save_figure
+    from aerobat.plotting.benchmarks import plot_solution
+    from aerobat.quadrotor.timeoptimal import solve_translation
+
+    y, z = parse_pair(args.to, "--to")
+    if abs(y) < 1e-9 and abs(z) < 1e-9 and abs(args.final_angle_rad) < 1e-9:
+        raise ConfigError(f"--to {args.to!r}: the target is the start (hover to the same hover takes no time)")
+    solution = solve_translation(y, z, final_angle_rad=args.final_angle_rad, limits=_limits(args))
+    if args.plot and solution.ok:
+        save_figure(plot_solution(solution), args.plot)
+    if args.json:
+        print(json.dumps(solution.to_json_dict()))
+    else:
+        out = console()
+        out.print(f"time-optimal hover-to-hover (0, 0) → ({y:g}, {z:g}) m, final angle {args.final_angle_rad:g} rad")
+        out.print(f"status: {solution.status.value} — {solution.message}")
+        if solution.ok:
+            out.print(f"T* = {solution.duration_s:.4f} s (transcription {solution.transcription_duration_s:.4f} s), "
+                      f"boundary error {solution.boundary_error:.1e}")
+            for title, arcs, unit in (("thrust", solution.thrust_arcs, "m/s²"), ("rate", solution.rate_arcs, "rad/s")):
+                table = Table(title=f"{title} arcs")
+                for col in ("kind", "start [s]", "end [s]", f"value [{unit}]"):
+                    table.add_column(col)
+                for arc in arcs:
+                    table.add_row(arc.kind, f"{arc.start_s:.4f}", f"{arc.end_s:.4f}", f"{arc.value:+.4f}")
+                out.print(table)
+        if args.plot and solution.ok:
+            out.print(f"plot written to {args.plot}")
+    if not solution.ok:
+        raise SolveFailed(solution.message, solution)
+    return 0
+
+
+def _parse_range(text: str, option: str) -> tuple[float, float, int]:
+    parts = text.split(":")
+    try:
+        a, b, n = float(parts[0]), float(parts[1]), int(parts[2])
+    except (ValueError, IndexError):
+        raise ConfigError(f"{option} {text!r}: expected A:B:N (metres, metres, count)") from None
+    if len(parts) != 3 or not (math.isfinite(a) and math.isfinite(b)) or not 1 <= n <= 200:
+        raise ConfigError(f"{option} {text!r}: expected finite A:B and 1 <= N <= 200")
+    if max(abs(a), abs(b)) > 100.0:
+        raise ConfigError(f"{option} {text!r}: targets are limited to ±100 m")
+    return a, b, n
+
+
+def _cmd_map(args: argparse.Namespace) -> int:
+    """Minimum time over a grid of targets, one job per target, each result committed as it arrives."""
+    from aerobat.experiments.studies import map_csv, map_grid, map_jobs
+    from aerobat.plotting import save_figure, write_text
+    from aerobat.plotting.benchmarks import plot_map
+
+    ya, yb, yn = _parse_range(args.y, "--y")
+    za, zb, zn = _parse_range(args.z, "--z")
+    ys, zs = np.linspace(ya, yb, yn), np.linspace(za, zb, zn)
+    limits = dataclasses.asdict(_limits(args))
+    jobs = map_jobs(ys, zs, limits)
+    spec = {"ys_m": ys.tolist(), "zs_m": zs.tolist(), "limits": limits}
+    outcome, out = run_cli_study(args, "map", spec, jobs)
+    grid = map_grid(outcome.results, ys, zs)
+    csv_path = out / "benchmark_map.csv"
+    write_text(csv_path, map_csv(ys, zs, grid))
+    figure = save_figure(plot_map(ys, zs, grid), out / "benchmark_map.png")
+    failed = int(np.isnan(grid).sum())
+    report = {"study": outcome.study_id, "targets": yn * zn, "solved": yn * zn - failed, "csv": str(csv_path),
+              "figure": str(figure)}
+    if args.json:
+        print(json.dumps(report))
+    else:
+        console().print(f"study {outcome.study_id}: {yn * zn} targets ({outcome.ran} solved now, {outcome.skipped} "
+                        f"already done), {failed} without a time; CSV {csv_path}, contour plot {figure}")
+    report_failures(outcome)
+    return 0
+
+
+def register(sub: Any) -> None:
+    fmt = argparse.ArgumentDefaultsHelpFormatter
+    bench = sub.add_parser("benchmark", help="time-optimal translation benchmarks", formatter_class=fmt)
+    bsub = bench.add_subparsers(dest="benchmark", parser_class=type(bench), metavar="BENCHMARK")
+
+    def limits(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--f-min", type=finite_float(0.0, 1000.0, "m/s²"), default=None,
+                       help="minimum collective [m/s²] (default eq 47: 4.80)")
+        p.add_argument("--f-max", type=finite_float(0.0, 1000.0, "m/s²"), default=None,
+                       help="maximum collective [m/s²] (default eq 47: 20.70)")
+        p.add_argument("--max-rate-rad-s", type=finite_float(0.01, 100.0, "rad/s"), default=10.0,
+                       help="rate limit [rad/s]")
+
+    tr = bsub.add_parser("translation", help="minimum-time hover-to-hover motion to one target", formatter_class=fmt)
+    tr.add_argument("--to", required=True, help="target Y,Z [m] (required)")
+    tr.add_argument("--final-angle-rad", type=finite_float(-40.0, 40.0, "rad"), default=0.0,
+                    help="final attitude (2π: translate with a flip)")
+    limits(tr)
+    tr.add_argument("--json", action="store_true", help="print one JSON object")
+    tr.add_argument("--plot", metavar="FILE.png", help="write a figure (default: none)")
+    tr.set_defaults(func=_cmd_translation)
+
+    mp = bsub.add_parser("map", help="minimum time over a grid of targets", formatter_class=fmt)
+    mp.add_argument("--y", required=True, help="A:B:N grid of Y targets [m] (required)")
+    mp.add_argument("--z", required=True, help="A:B:N grid of Z targets [m] (required)")
+    limits(mp)
+    mp.add_argument("--json", action="store_true", help="print one JSON object")
+    add_execution_options(mp)
+    mp.set_defaults(func=_cmd_map)
+

@@ -1,0 +1,231 @@
+"""What every command shares: options, the store resolver, output folders and printing.
+
+Strings become objects here and nowhere deeper: a ``--plant arena --arena f.toml --seed 3``
+becomes a :class:`~aerobat.plants.PlantChoice`, a ``--rule tsvd+isc`` a
+:class:`~aerobat.core.rules.RuleChoice`, a ``--db`` (or its default) an open
+:class:`~aerobat.store.Store`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+from typing import Any, NoReturn
+
+from aerobat.errors import AerobatError, ConfigError, OutputError
+
+__all__ = [
+    "CommandFailed",
+    "Parser",
+    "add_db_option",
+    "add_maneuver_options",
+    "add_plant_options",
+    "console",
+    "maneuver_from_args",
+    "open_store",
+    "output_dir",
+    "parse_pair",
+    "plant_choice_from_args",
+    "rule_choice_from_args",
+    "session_ref",
+]
+
+EXIT_USAGE = 2
+
+
+class CommandFailed(AerobatError):
+    """A command ran but its result is a failure (a session that did not complete, failed study jobs…)."""
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors and the documented exit status for bad usage."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_USAGE, f"aerobat: error: {message}\n")
+
+
+def console(json_mode: bool = False) -> Any:
+    """A rich console on stdout (stderr when stdout carries JSON); 100 columns when not a terminal."""
+    from rich.console import Console
+
+    stream = sys.stderr if json_mode else sys.stdout
+    try:
+        tty = stream.isatty()
+    except (ValueError, OSError):  # a closed stream
+        tty = False
+    return Console(file=stream, highlight=False, markup=False, width=None if tty else 100, soft_wrap=True)
+
+
+# ------------------------------------------------------------------ parsing
+
+
+def parse_pair(text: str, option: str) -> tuple[float, float]:
+    """``Y,Z`` in metres, finite and within ±1000 m."""
+    parts = str(text).split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        raise ConfigError(f"{option} {text!r}: expected two numbers Y,Z in metres") from None
+    if len(values) != 2 or not all(math.isfinite(v) and abs(v) <= 1000.0 for v in values):
+        raise ConfigError(f"{option} {text!r}: expected two finite numbers Y,Z within ±1000 m")
+    return values  # type: ignore[return-value]
+
+
+def session_ref(text: str) -> str:
+    """A session or study reference: a positive id or ``last``."""
+    value = text.strip().lower()
+    if value == "last" or (value.isdigit() and 1 <= int(value) < 2**63):
+        return value
+    raise argparse.ArgumentTypeError(f"{text!r}: expected an id (1, 2, …) or 'last'")
+
+
+def bounded_int(low: int, high: int) -> Any:
+    """An argparse type: an integer in [low, high] (no floats, no huge numbers)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r}: expected an integer in {low} … {high}") from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{value}: allowed {low} … {high}")
+        return value
+
+    return parse
+
+
+def finite_float(low: float, high: float, unit: str = "") -> Any:
+    """An argparse type: a finite number in [low, high]."""
+    suffix = f" {unit}" if unit else ""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r}: expected a number in [{low:g}, {high:g}]{suffix}") from None
+        if not (math.isfinite(value) and low <= value <= high):
+            raise argparse.ArgumentTypeError(f"{text}: allowed [{low:g}, {high:g}]{suffix}")
+        return value
+
+    return parse
+
+
+# ------------------------------------------------------------------ options
+
+
+def add_maneuver_options(p: argparse.ArgumentParser, *, optional: bool = False, families: tuple[str, ...] = (
+        "flip", "translation")) -> None:
+    """The maneuver family and its options, the design vehicle and the correction matrix."""
+    if optional:
+        p.add_argument("maneuver", nargs="?", choices=families,
+                       help="maneuver family (omit with --resume to use the stored session's)")
+    else:
+        p.add_argument("maneuver", choices=families, help="maneuver family")
+    p.add_argument("--flips", type=bounded_int(1, 10), default=3, help="number of flips c_N (flip)")
+    p.add_argument("--max-rate-deg-s", type=finite_float(30.0, 5700.0, "deg/s"), default=1800.0,
+                   help="coast rate c_pmax [deg/s] (flip)")
+    p.add_argument("--dims", type=int, choices=(2, 3), default=3, help="2D (5 parameters) or 3D (9) (flip)")
+    p.add_argument("--axis", choices=("roll", "pitch"), default="roll", help="flip axis (flip)")
+    p.add_argument("--coast", choices=("min", "max"), default="min", help="coast collective β̲ or β̄ (flip)")
+    p.add_argument("--ramp-s", type=finite_float(0.0, 1.0, "s"), default=0.1,
+                   help="thrust ramp-down duration [s] (flip)")
+    p.add_argument("--to", default="5,5", help="target Y,Z [m] (translation)")
+    p.add_argument("--final-angle-rad", type=finite_float(-40.0, 40.0, "rad"), default=0.0,
+                   help="final roll angle [rad] (translation)")
+    p.add_argument("--vehicle", default="hummingbird", help="design vehicle: a preset name or a vehicle TOML file")
+    p.add_argument("--correction", choices=("tsvd", "inverse", "damped"), default="tsvd",
+                   help="right inverse used for C (see docs/results.md)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | None = None,
+                      default: str = "arena") -> None:
+    """``--plant`` and each plant's settings file, and ``--seed``."""
+    from aerobat.plants import PLANTS
+
+    choices = kinds or PLANTS.names()
+    p.add_argument("--plant", choices=choices, default=default, help="what flies the program")
+    for name, spec in PLANTS.items():
+        if spec.option is not None and name in choices:
+            p.add_argument(spec.option, metavar="FILE.toml", help=f"{name} settings (only with --plant {name})")
+    p.add_argument("--seed", type=bounded_int(0, 2**63 - 1), default=0, help="seed of the plant's random generator")
+
+
+def add_db_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--db", metavar="PATH", help="experiment store (default: $AEROBAT_DB or ./aerobat.sqlite)")
+
+
+# ------------------------------------------------------------------ objects from options
+
+
+def maneuver_from_args(args: argparse.Namespace, config: Any) -> Any:
+    """The maneuver the options describe, designed for ``config``."""
+    if args.maneuver == "flip":
+        from aerobat.quadrotor.maneuvers import MultiFlip
+
+        return MultiFlip(vehicle=config.vehicle, flips=args.flips, max_rate_rad_s=math.radians(args.max_rate_deg_s),
+                         axis=args.axis, dims=args.dims, coast_collective=args.coast, ramp_collective_s=args.ramp_s)
+    from aerobat.quadrotor.maneuvers import translation_maneuver
+
+    return translation_maneuver(config, parse_pair(args.to, "--to"), final_angle_rad=args.final_angle_rad)
+
+
+def plant_choice_from_args(args: argparse.Namespace) -> Any:
+    """``--plant``, its settings file and ``--seed`` as a :class:`~aerobat.plants.PlantChoice`.
+
+    A settings option of another plant is refused rather than ignored.
+    """
+    from aerobat.plants import PLANTS, PlantChoice
+
+    path = None
+    for name, spec in PLANTS.items():
+        if spec.option is None:
+            continue
+        given = getattr(args, spec.option.lstrip("-").replace("-", "_"), None)
+        if given is None:
+            continue
+        if name != args.plant:
+            raise ConfigError(f"{spec.option} applies only with --plant {name} (got --plant {args.plant})")
+        path = given
+    return PlantChoice.from_file(args.plant, path, seed=args.seed)
+
+
+def rule_choice_from_args(args: argparse.Namespace) -> Any:
+    """``--rule`` and ``--gamma`` as a :class:`~aerobat.core.rules.RuleChoice`."""
+    from aerobat.core.rules import RuleChoice, ScheduleChoice
+
+    schedule = None
+    if args.gamma != "paper":
+        try:
+            value = float(args.gamma)
+        except ValueError:
+            raise ConfigError(f"--gamma {args.gamma!r}: use 'paper' or a number in (0, 1]") from None
+        if not 0.0 < value <= 1.0:
+            raise ConfigError(f"--gamma {args.gamma}: allowed (0, 1]")
+        schedule = ScheduleChoice("constant", value=value)
+    return RuleChoice.parse(args.rule, schedule=schedule, source="--rule")
+
+
+# ------------------------------------------------------------------ store and files
+
+
+def open_store(args: argparse.Namespace, *, create: bool = True, **options: Any) -> Any:
+    """The store ``--db`` names, or ``$AEROBAT_DB``, or ``./aerobat.sqlite`` — one resolver for every command."""
+    from aerobat.store import Store, default_path
+
+    db = getattr(args, "db", None)
+    return Store(default_path() if db is None else db, create=create, **options)
+
+
+def output_dir(path: str | Path) -> Path:
+    """Create (if needed) and return an output folder; :class:`OutputError` naming it if that is impossible."""
+    out = Path(path)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise OutputError(f"--out {out}: exists and is not a folder") from None
+    except OSError as exc:
+        raise OutputError(f"--out {out}: cannot create the folder: {exc.strerror or exc}") from None
+    return out

@@ -1,0 +1,242 @@
+"""``aerobat learn``: design, then learn on a plant, every trial committed to the store.
+
+The session logic is :mod:`aerobat.experiments.sessions`; this module turns options
+into its arguments, prints progress, handles Ctrl-C (the first stops after the
+trial in flight, a second abandons it) and writes figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import signal
+import sys
+import threading
+from collections.abc import Iterator
+from typing import Any
+
+from aerobat.cli.common import (
+    CommandFailed,
+    add_db_option,
+    add_maneuver_options,
+    add_plant_options,
+    bounded_int,
+    console,
+    maneuver_from_args,
+    open_store,
+    output_dir,
+    plant_choice_from_args,
+    rule_choice_from_args,
+    session_ref,
+)
+from aerobat.cli.show import print_stored_session
+from aerobat.errors import ConfigError
+
+__all__ = ["register"]
+
+
+class Interrupts:
+    """SIGINT/SIGTERM while learning: the first lets the trial in flight finish, then stops; a second aborts it."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+        self._critical = 0
+        self._pending = False
+        self._previous: dict[int, Any] = {}
+
+    def install(self) -> None:
+        if threading.current_thread() is not threading.main_thread():
+            return
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            self._previous[sig] = signal.signal(sig, self._handle)
+
+    def restore(self, *, ignore: bool = False) -> None:
+        """Put the previous handlers back, or with ``ignore`` ignore further signals (the process is ending)."""
+        for sig, handler in self._previous.items():
+            signal.signal(sig, signal.SIG_IGN if ignore else handler)
+        self._previous.clear()
+
+    def _handle(self, signum: int, frame: Any) -> None:
+        if self.signum is None:
+            self.signum = signum
+            os.write(2, b"aerobat: stopping after the trial in flight (interrupt again to abort it)\n")
+            return
+        if self._critical:
+            self._pending = True
+            return
+        raise KeyboardInterrupt
+
+    def requested(self) -> bool:
+        return self.signum is not None
+
+    @contextlib.contextmanager
+    def critical(self) -> Iterator[None]:
+        """A store commit: a second interrupt waits until it is done."""
+        self._critical += 1
+        try:
+            yield
+        finally:
+            self._critical -= 1
+            if self._pending and not self._critical:
+                self._pending = False
+                raise KeyboardInterrupt
+
+
+def _cmd_learn(args: argparse.Namespace) -> int:
+    from aerobat.experiments.sessions import resume_session, start_session, warm_start
+    from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
+
+    if args.resume is not None and args.from_session is not None:
+        raise ConfigError("--resume and --from-session exclude each other: --resume continues a session, "
+                          "--from-session starts a new one from another session's learned parameters")
+    if args.resume is None and args.maneuver is None:
+        raise ConfigError("learn: name a maneuver (flip or translation), or continue a stored session with "
+                          "--resume SESSION")
+    if args.resume is None:
+        # everything cheap is checked before the store is touched and before the (long) design
+        config = vehicle_from_name_or_file(args.vehicle)
+        maneuver = maneuver_from_args(args, config)
+        plant = plant_choice_from_args(args)
+        rule = rule_choice_from_args(args)
+        plant.spec.check_available()
+    with open_store(args, synchronous="full" if args.fsync else "normal") as store:
+        if args.out is not None:
+            output_dir(args.out)  # an unusable --out fails now, not after learning
+        if args.resume is None:
+            start, source = None, None
+            if args.from_session is not None:
+                start, source = warm_start(store, args.from_session, maneuver)
+            run = start_session(store, maneuver, model=config, plant=plant, rule=rule,
+                                iterations=args.iterations if args.iterations is not None else 30,
+                                correction=args.correction, start_params=start, warm_start_from=source,
+                                force=args.force, command=args.argv)
+        else:
+            run = resume_session(store, args.resume, iterations=args.iterations)
+            if args.maneuver is not None:
+                _check_same_session(args, store, run)
+        return _run(store, run, args)
+
+
+def _check_same_session(args: argparse.Namespace, store: Any, run: Any) -> None:
+    """With --resume, a full command line must describe the stored session."""
+    from aerobat.experiments.sessions import spec_difference
+    from aerobat.quadrotor.vehicle import vehicle_from_name_or_file, vehicle_table
+
+    config = vehicle_from_name_or_file(args.vehicle)
+    given_spec = json.loads(json.dumps(maneuver_from_args(args, config).spec()))
+    stored_spec = json.loads(json.dumps(run.maneuver.spec()))
+    differences = []
+    if json.dumps(stored_spec, sort_keys=True) != json.dumps(given_spec, sort_keys=True):
+        differences.append(f"maneuver: {spec_difference(stored_spec, given_spec)}")
+    plant = plant_choice_from_args(args)
+    if plant.kind != run.plant_choice.kind:
+        differences.append(f"--plant {plant.kind} (stored: {run.plant_choice.kind})")
+    elif plant.settings_table() != run.plant_choice.settings_table():
+        differences.append("the plant's settings differ from the stored plant's")
+    if plant.seed != run.plant_choice.seed:
+        differences.append(f"--seed {plant.seed} (stored: {run.plant_choice.seed})")
+    if vehicle_table(config) != vehicle_table(run.model):
+        differences.append(f"--vehicle {args.vehicle} differs from the stored vehicle")
+    if rule_choice_from_args(args).to_table() != run.rule_choice.to_table():
+        differences.append(f"--rule {args.rule} --gamma {args.gamma} (stored: {run.rule_choice.to_table()})")
+    if args.correction != run.design.correction_kind:
+        differences.append(f"--correction {args.correction} (stored: {run.design.correction_kind})")
+    if differences:
+        raise ConfigError(f"--resume {run.id}: the command line describes another session: "
+                          f"{'; '.join(differences)}; give only --resume {run.id} to use the stored settings")
+
+
+def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
+    from aerobat.experiments.reports import session_figures, session_json
+    from aerobat.experiments.sessions import position_error_m
+    from aerobat.plotting import write_text
+
+    sid = run.id
+    hint = f"aerobat learn --resume {sid} --db {store.path}"
+    out_console = console(args.json)
+
+    def say(text: str) -> None:
+        out_console.print(text, soft_wrap=True)
+        out_console.file.flush()
+
+    verb = "resumed" if run.resumed else "started"
+    say(f"session {sid} {verb} in {store.path}: {run.maneuver.name} on {run.plant_choice.kind} "
+        f"(seed {run.plant_choice.seed}, rule {run.rule_choice.label}), {run.measured} of {run.target} measured "
+        f"iterations done")
+    if not run.exact:
+        say(f"  note: the {run.plant_choice.kind} plant's state was not stored; resumed trials will not repeat an "
+            f"uninterrupted run exactly")
+
+    def on_iteration(it: Any) -> None:  # printed only once committed: every line is a stored iteration
+        if it.measured:
+            say(f"  {it.index:3d}  ok          position error {position_error_m(run.maneuver, it.error):7.3f} m  "
+                f"γ={it.gamma:.2f}  scale={it.scale:.2f}")
+        else:
+            say(f"  {it.index:3d}  {it.status.value:10s}  {it.message}")
+        for part in it.message.split(";"):
+            if part.strip().startswith("warning:"):
+                say(f"  {part.strip()}")
+
+    interrupts = Interrupts()
+    interrupts.install()
+    try:
+        outcome = run.run(on_iteration=on_iteration, should_stop=interrupts.requested, critical=interrupts.critical)
+    except Exception as exc:
+        from aerobat.errors import StoreError
+
+        if isinstance(exc, StoreError):
+            raise CommandFailed(f"{exc}; session {sid} keeps every iteration stored before this one: resume with "
+                                f"`{hint}` once fixed") from None
+        raise
+    finally:
+        # once stopped by a signal, the program only closes the session and exits: a repeated Ctrl-C must
+        # not kill it by signal while the interpreter shuts down (in-process callers get their handlers back)
+        interrupts.restore(ignore=interrupts.requested() and getattr(args, "standalone", False))
+    if outcome.status.value == "interrupted":
+        signum = interrupts.signum or signal.SIGINT
+        print(f"aerobat: interrupted: session {sid} stopped after iteration {outcome.last_index} "
+              f"({outcome.measured} of {outcome.target} measured iterations stored); resume with: {hint}",
+              file=sys.stderr, flush=True)
+        return 128 + int(signum)
+    out = output_dir(args.out if args.out is not None else f"out/session-{sid}")
+    data = session_json(store, sid)
+    data["wall_s"] = outcome.wall_s
+    write_text(out / "session.json", json.dumps(data, indent=1))
+    notes = session_figures(store, sid, out)
+    if args.json:
+        print(json.dumps({k: data[k] for k in ("error_names", "parameter_names", "iterations", "final_params",
+                                                "status", "message", "plant", "session_id", "db")}))
+    else:
+        print_stored_session(store, sid, iterations=True)
+        for warning in outcome.warnings:
+            out_console.print(f"warning: {warning}")
+        for note in notes:
+            out_console.print(note)
+        out_console.print(f"figures and session.json in {out}/")
+    if not outcome.completed:
+        raise CommandFailed(f"{outcome.message}; session {sid} is stored: resume with `{hint}`")
+    return 0
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser("learn", help="design, then learn on a plant (every iteration goes to the store)",
+                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    add_maneuver_options(p, optional=True)
+    add_plant_options(p)
+    p.add_argument("--iterations", type=bounded_int(1, 10000), default=None,
+                   help="measured iterations (default 30; with --resume the stored target)")
+    p.add_argument("--gamma", default="paper", help="'paper' (max(1/i, 0.1)) or a constant in (0, 1]")
+    p.add_argument("--rule", default="paper",
+                   help="update rule: paper, tsvd, damped, kalman, broyden, or <rule>+isc (docs/method.md)")
+    p.add_argument("--out", default=None, help="folder for figures and session.json (default: out/session-ID)")
+    p.add_argument("--resume", metavar="SESSION", type=session_ref,
+                   help="continue a stored session (id or 'last') with its parameters, counters and plant state")
+    p.add_argument("--from-session", metavar="SESSION", type=session_ref,
+                   help="start a new session from another session's learned parameters (same maneuver)")
+    p.add_argument("--force", action="store_true", help="learn even if the design did not converge")
+    p.add_argument("--fsync", action="store_true",
+                   help="make every commit survive power loss too (an fsync per iteration)")
+    add_db_option(p)
+    p.set_defaults(func=_cmd_learn)

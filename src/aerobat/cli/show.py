@@ -1,0 +1,81 @@
+"""Printing a stored session: a header, a table of its iterations that reads at 80 columns, its parameters."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from aerobat.cli.common import console
+
+__all__ = ["print_stored_session"]
+
+
+def print_stored_session(store: Any, session_id: int, *, iterations: bool, header: bool = False,
+                         full: bool = False) -> None:
+    """Print a stored session; ``full`` adds one column per error component (wide)."""
+    from rich.table import Table
+
+    rec = store.session(session_id)
+    mrec = store.maneuver(rec.maneuver_id)
+    drec = store.design(rec.design_id)
+    out = console()
+    if header:
+        prec = store.plant(rec.plant_id)
+        lines = [
+            f"session {rec.id}: {mrec.name} on {prec.kind} (seed {rec.seed}) — {rec.display_state}",
+            f"  message:    {rec.message}",
+            f"  started:    {rec.started_at}   updated: {rec.updated_at}   ended: {rec.ended_at or '—'}",
+            f"  iterations: {rec.n_measured} measured of {rec.target_iterations} ({rec.n_records} trials, "
+            f"last index {rec.last_index}, {rec.last_correction} corrections)",
+            f"  rule:       {rec.rule.get('name')} with schedule {rec.rule.get('schedule')}",
+            f"  design:     {drec.status}, residual {drec.residual_norm:.3g}, correction {drec.correction_kind}, "
+            f"condition number {drec.condition_number:.3g}",
+        ]
+        if rec.study_id is not None:
+            lines.append(f"  study:      {rec.study_id}")
+        if rec.warm_start_from is not None:
+            lines.append(f"  warm start: from session {rec.warm_start_from}")
+        if rec.last_position_error_m is not None:
+            lines.append(f"  last position error: {rec.last_position_error_m:.4f} m")
+        if rec.command:
+            lines.append(f"  command:    aerobat {' '.join(rec.command)}")
+        for line in lines:
+            out.print(line)
+    if iterations:
+        records = store.iterations(session_id)
+        table = Table(title=f"{mrec.name} on {rec.plant_kind}: {rec.display_state}")
+        table.add_column("i", justify="right")
+        table.add_column("status")
+        table.add_column("γ", justify="right")
+        table.add_column("scale", justify="right")
+        position = np.array(mrec.position_mask, dtype=bool)
+        angles = np.array([k == "angle" for k in mrec.error_kinds], dtype=bool)
+        if full:
+            for name, unit in zip(mrec.error_names, mrec.error_units, strict=True):
+                table.add_column(f"{name} [{'°' if unit == 'rad' else unit}]", justify="right")
+        else:
+            table.add_column("position error [m]", justify="right")
+            table.add_column("largest angle error [°]", justify="right")
+        for it in records:
+            if it.status != "ok":
+                cells = ["—"] * (len(mrec.error_names) if full else 2)
+            elif full:
+                cells = [f"{np.degrees(v):+.2f}" if unit == "rad" else f"{v:+.3f}"
+                         for unit, v in zip(mrec.error_units, it.error, strict=True)]
+            else:
+                pos = float(np.linalg.norm(it.error[position])) if position.any() else float("nan")
+                ang = float(np.degrees(np.max(np.abs(it.error[angles])))) if angles.any() else float("nan")
+                cells = [f"{pos:.3f}", f"{ang:.2f}"]
+            table.add_row(str(it.index), it.status, f"{it.gamma:.2f}", f"{it.scale:.2f}", *cells)
+        out.print(table)
+        measured = [it for it in records if it.status == "ok"]
+        if measured and position.any():
+            errors = np.array([np.linalg.norm(it.error[position]) for it in measured])
+            last = errors[-10:]
+            out.print(f"position error: first {errors[0]:.3f} m, last {len(last)} mean {last.mean():.3f} m "
+                      f"(std {last.std():.3f} m), best {errors.min():.3f} m")
+    names = mrec.parameter_names
+    out.print("p⁰:      " + "  ".join(f"{n}={v:.4g}" for n, v in zip(names, drec.p_nominal, strict=True)))
+    out.print("learned: " + "  ".join(f"{n}={v:.4g}" for n, v in zip(names, rec.current_params, strict=True)))
+    out.print(f"{rec.message}")

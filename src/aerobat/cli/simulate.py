@@ -1,0 +1,141 @@
+"""``aerobat simulate`` (a program on the nominal model) and ``aerobat fly`` (a program on a plant)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aerobat.cli.common import (
+    CommandFailed,
+    add_plant_options,
+    bounded_int,
+    console,
+    plant_choice_from_args,
+)
+
+__all__ = ["register"]
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    from aerobat.plotting import save_figure
+    from aerobat.plotting.vehicle import plot_trajectory
+    from aerobat.quadrotor.program import load_program
+    from aerobat.quadrotor.simulate import final_state_summary, simulate
+    from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
+
+    program = load_program(args.program)
+    config = vehicle_from_name_or_file(args.vehicle)
+    traj = simulate(program, config, mode=args.mode)
+    if not np.all(np.isfinite(traj.final_state)):
+        raise CommandFailed("simulation produced non-finite states")
+    summary = final_state_summary(traj.final_state, traj.duration_s)
+    if args.plot:
+        save_figure(plot_trajectory(traj.times_s, traj.states, traj.commands,
+                                    title=f"{program.name or Path(args.program).stem} on {config.name}"), args.plot)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        _print_state_table(summary, title=f"{args.program} on {config.name} ({args.mode})")
+        if args.plot:
+            print(f"plot written to {args.plot}")
+    return 0
+
+
+def _print_state_table(summary: dict[str, Any], *, title: str) -> None:
+    from rich.table import Table
+
+    fs = summary["final_state"]
+    table = Table(title=title)
+    table.add_column("quantity")
+    for axis in ("x / φ", "y / θ", "z / ψ"):
+        table.add_column(axis, justify="right")
+    table.add_row("position [m]", *(f"{v:+.4f}" for v in fs["position_m"]))
+    table.add_row("velocity [m/s]", *(f"{v:+.4f}" for v in fs["velocity_m_s"]))
+    table.add_row("Euler ZYX [°]", *(f"{math.degrees(v):+.2f}" for v in fs["euler_zyx_rad"]))
+    table.add_row("rotation, unwrapped [°]", *(f"{math.degrees(v):+.2f}" for v in fs["rotation_angle_rad"]))
+    console().print(table)
+    print(f"duration: {summary['duration_s']:.4f} s")
+
+
+def _cmd_fly(args: argparse.Namespace) -> int:
+    from aerobat.plotting import save_figure
+    from aerobat.plotting.vehicle import plot_side_views
+    from aerobat.quadrotor.program import load_program
+    from aerobat.quadrotor.simulate import final_state_summary
+    from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
+
+    program = load_program(args.program)
+    config = vehicle_from_name_or_file(args.vehicle)
+    plant = plant_choice_from_args(args).build(config)
+    trials = []
+    panels = []
+    for k in range(args.trials):
+        trial = plant.fly(program)
+        entry: dict[str, Any] = {"status": trial.status.value, "message": trial.message}
+        entry.update(final_state_summary(trial.final_state, program.duration_s) if trial.ok else
+                     {"final_state": None})
+        trials.append(entry)
+        if not args.json:
+            _print_trial(k + 1, entry)
+        if args.plot and trial.states.shape[0] and len(panels) < 6:
+            panels.append((f"trial {k + 1}", trial.times_s, trial.states))
+    if args.plot and panels:
+        save_figure(plot_side_views(panels, title=str(args.program)), args.plot, dpi=130)
+    ok = [t for t in trials if t["final_state"] is not None]
+    stats = _statistics(ok)
+    if args.json:
+        print(json.dumps({"trials": trials, "statistics": stats}))
+    elif stats:
+        mean, std = stats["position_m"]["mean"], stats["position_m"]["std"]
+        print(f"{len(ok)} of {len(trials)} trials measured; final position mean "
+              f"[{', '.join(f'{v:+.3f}' for v in mean)}] m, spread (std) [{', '.join(f'{v:.3f}' for v in std)}] m")
+    if not ok:
+        raise CommandFailed(f"no trial of {len(trials)} was measured")
+    return 0
+
+
+def _statistics(entries: list[dict[str, Any]]) -> dict[str, Any]:
+    if not entries:
+        return {}
+    out = {}
+    for key in ("position_m", "velocity_m_s", "rotation_angle_rad"):
+        values = np.array([e["final_state"][key] for e in entries], dtype=float)
+        out[key] = {"mean": values.mean(axis=0).tolist(), "std": values.std(axis=0).tolist()}
+    return out
+
+
+def _print_trial(k: int, entry: dict[str, Any]) -> None:
+    if entry["final_state"] is None:
+        print(f"trial {k}: {entry['status']}: {entry['message']}")
+        return
+    fs = entry["final_state"]
+    pos = ", ".join(f"{v:+.3f}" for v in fs["position_m"])
+    vel = ", ".join(f"{v:+.3f}" for v in fs["velocity_m_s"])
+    ang = ", ".join(f"{math.degrees(v):+.1f}" for v in fs["rotation_angle_rad"])
+    print(f"trial {k}: ok  position [{pos}] m  velocity [{vel}] m/s  rotation [{ang}] °")
+
+
+def register(sub: Any) -> None:
+    sim = sub.add_parser("simulate", help="play a program on the nominal model",
+                         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    sim.add_argument("program", help="program TOML file (required)")
+    sim.add_argument("--vehicle", default="hummingbird", help="preset name or vehicle TOML file")
+    sim.add_argument("--mode", choices=("continuous", "sampled"), default="continuous",
+                     help="continuous-time model or 800 Hz onboard zero-order hold")
+    sim.add_argument("--plot", metavar="FILE.png", help="write a figure (default: none)")
+    sim.add_argument("--json", action="store_true", help="print one JSON object")
+    sim.set_defaults(func=_cmd_simulate)
+
+    fly = sub.add_parser("fly", help="fly a program on a plant", formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    fly.add_argument("program", help="program TOML file (required)")
+    fly.add_argument("--vehicle", default="hummingbird", help="design vehicle: preset name or vehicle TOML file")
+    add_plant_options(fly)
+    fly.add_argument("--trials", type=bounded_int(1, 100000), default=1, help="how many times to fly it")
+    fly.add_argument("--json", action="store_true", help="print one JSON object")
+    fly.add_argument("--plot", metavar="FILE.png", help="side views of the trials (up to 6) (default: none)")
+    fly.set_defaults(func=_cmd_fly)

@@ -1,0 +1,318 @@
+"""``aerobat study``: robustness over sampled vehicles, update rules side by side, design envelopes.
+
+Every study: its id is printed before the first job runs; progress is one line per
+finished job (with an ETA) whether or not the output is a terminal; each job's
+outcome is committed as it arrives; failed jobs are listed with their errors and
+make the command exit 1; ``--resume STUDY`` runs what is not done (failed jobs
+included) and writes where the study wrote.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aerobat.cli.common import (
+    CommandFailed,
+    add_db_option,
+    add_maneuver_options,
+    add_plant_options,
+    bounded_int,
+    console,
+    finite_float,
+    maneuver_from_args,
+    open_store,
+    output_dir,
+    plant_choice_from_args,
+    session_ref,
+)
+from aerobat.errors import ConfigError, DesignFailed
+
+__all__ = ["add_execution_options", "register", "report_failures", "run_cli_study"]
+
+
+def run_cli_study(args: argparse.Namespace, kind: str, spec: dict[str, Any], jobs: list[Any]) -> tuple[Any, Path]:
+    """Run a study with progress lines; returns (outcome, output folder). Failed jobs are the caller's to report."""
+    from aerobat.experiments.studies import run_study
+
+    out_console = console(getattr(args, "json", False))
+    started = time.perf_counter()
+    state: dict[str, Any] = {"first": 0}
+
+    def on_start(study_id: int, todo: int, done: int) -> None:
+        state["first"] = done
+        out_console.print(f"study {study_id} ({kind}): {todo} jobs to run, {done} already done "
+                          f"(resume with --resume {study_id})", soft_wrap=True)
+        out_console.file.flush()
+
+    def progress(done: int, total: int, job: Any, outcome: Any) -> None:
+        ran = done - state["first"]
+        elapsed = time.perf_counter() - started
+        eta = elapsed / ran * (total - done) if ran else math.nan
+        note = "" if outcome.done else f" FAILED: {outcome.error}"
+        out_console.print(f"  [{done}/{total}] {job.key} {outcome.status.value}{note} "
+                          f"(elapsed {elapsed:.0f} s, about {eta:.0f} s left)", soft_wrap=True)
+        out_console.file.flush()
+
+    with open_store(args) as store:
+        outcome = run_study(store, kind, spec, jobs, resume=args.resume, workers=args.workers,
+                            scheduler=args.scheduler, progress=progress, on_start=on_start, command=args.argv)
+        stored = store.study(outcome.study_id).out_dir
+        out = output_dir(args.out or stored or f"out/study-{outcome.study_id}")
+        store.set_study_out_dir(outcome.study_id, str(out))
+    return outcome, out
+
+
+def report_failures(outcome: Any) -> None:
+    if outcome.failed:
+        lines = "; ".join(f"{f.key}: {f.error}" for f in outcome.failed[:5])
+        more = f" (and {len(outcome.failed) - 5} more)" if len(outcome.failed) > 5 else ""
+        raise CommandFailed(f"study {outcome.study_id}: {len(outcome.failed)} of {outcome.total} jobs failed: "
+                            f"{lines}{more}; run them again with --resume {outcome.study_id}")
+
+
+def _design(args: argparse.Namespace) -> tuple[Any, Any, Any]:
+    from aerobat.core.design import design
+    from aerobat.quadrotor.simulate import NominalModel
+    from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
+
+    config = vehicle_from_name_or_file(args.vehicle)
+    maneuver = maneuver_from_args(args, config)
+    result = design(maneuver, NominalModel(config), correction=args.correction)
+    if not result.converged:
+        raise DesignFailed(f"design failed: {result.message}", result)
+    return config, maneuver, result
+
+
+# ----------------------------------------------------------------- robustness
+
+
+def _cmd_robustness(args: argparse.Namespace) -> int:
+    from aerobat.core.rules import RuleChoice
+    from aerobat.experiments.studies import RobustnessRanges, load_ranges, robustness_jobs, summarize_robustness
+    from aerobat.experiments.studies.robustness import SAMPLED_PROPERTIES
+    from aerobat.plotting import save_figure, write_text
+    from aerobat.plotting.studies import plot_success_by_property, plot_trials_to_tolerance
+
+    rule = RuleChoice.parse(args.rule, source="--rule")
+    ranges = load_ranges(args.ranges) if args.ranges else RobustnessRanges()
+    config, maneuver, nominal = _design(args)
+    jobs = robustness_jobs(maneuver, nominal, config, vehicles=args.vehicles, iterations=args.iterations,
+                           seed=args.seed, ranges=ranges, rule=rule, tolerance_m=args.tolerance_m)
+    spec = {"maneuver": maneuver.spec(), "vehicles": args.vehicles, "iterations": args.iterations,
+            "seed": args.seed, "rule": rule.label, "tolerance_m": args.tolerance_m,
+            "ranges": {k: list(v) if isinstance(v, tuple) else v for k, v in ranges.__dict__.items()}}
+    outcome, out = run_cli_study(args, "robustness", spec, jobs)
+    results = [r for _, r in sorted(outcome.results.items())]
+    summary = summarize_robustness(results)
+    save_figure(plot_trials_to_tolerance(summary.trials_to_tolerance, args.tolerance_m),
+                out / "trials_to_tolerance.png")
+    with_props = [r for r in results if r.get("properties")]
+    if with_props:
+        save_figure(plot_success_by_property([r["properties"] for r in with_props],
+                                             [bool(r.get("success")) for r in with_props], SAMPLED_PROPERTIES),
+                    out / "success_vs_property.png")
+    report = {
+        "study": outcome.study_id, "vehicles": args.vehicles, "learned": summary.completed,
+        "failed_jobs": [{"key": f.key, "error": f.error} for f in outcome.failed],
+        "success_rate": summary.success_rate, "median_trials_to_tolerance": summary.median_trials_to_tolerance,
+        "median_final_error_m": float(np.nanmedian(summary.final_errors_m)) if summary.final_errors_m else None,
+        "predictors": summary.predictors, "ran": outcome.ran, "skipped": outcome.skipped,
+    }
+    write_text(out / "robustness.json", json.dumps(report, indent=1))
+    if args.json:
+        print(json.dumps(report))
+    else:
+        c = console()
+        c.print(f"study {outcome.study_id}: {summary.completed}/{args.vehicles} vehicles learned "
+                f"({outcome.ran} run now, {outcome.skipped} already done, {len(outcome.failed)} failed)")
+        c.print(f"success (mean of the last 10 position errors ≤ {args.tolerance_m:g} m): "
+                f"{100 * summary.success_rate:.1f} % of the vehicles learned")
+        c.print(f"median trials to {args.tolerance_m:g} m: {summary.median_trials_to_tolerance:g}")
+        if summary.predictors:
+            c.print("properties most correlated with failure: " + ", ".join(
+                f"{name} ({corr:+.2f})" for name, corr in summary.predictors[:4]))
+        c.print(f"figures and robustness.json in {out}/")
+    report_failures(outcome)
+    return 0
+
+
+# ------------------------------------------------------------------ envelope
+
+
+def _parse_list(text: str, option: str, cast: Any) -> list:
+    try:
+        if ":" in text:
+            a, b, n = text.split(":")
+            if cast is float:
+                values = list(np.linspace(float(a), float(b), int(n)))
+            else:
+                values = list(range(int(a), int(b) + 1, max(1, int(n))))
+        else:
+            values = [cast(v) for v in text.split(",")]
+    except ValueError:
+        raise ConfigError(f"{option} {text!r}: expected a comma list or A:B:N") from None
+    if not values or len(values) > 500 or not all(math.isfinite(float(v)) for v in values):
+        raise ConfigError(f"{option} {text!r}: expected 1 … 500 finite values")
+    return values
+
+
+def _cmd_envelope(args: argparse.Namespace) -> int:
+    from aerobat.experiments.studies import envelope_grid, envelope_jobs
+    from aerobat.plotting import save_figure, write_text
+    from aerobat.plotting.studies import plot_envelope
+    from aerobat.quadrotor.maneuvers import MultiFlip
+    from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
+
+    flips = _parse_list(args.flips, "--flips", int)
+    if not all(1 <= n <= 10 for n in flips):
+        raise ConfigError(f"--flips {args.flips!r}: flip counts must be 1 … 10")
+    rates = _parse_list(args.rates_deg_s, "--rates-deg-s", float)
+    if not all(30.0 <= r <= 5700.0 for r in rates):
+        raise ConfigError(f"--rates-deg-s {args.rates_deg_s!r}: rates must be 30 … 5700 deg/s")
+    config = vehicle_from_name_or_file(args.vehicle)
+    base = MultiFlip(vehicle=config.vehicle, dims=args.dims, axis=args.axis).spec()
+    jobs = envelope_jobs(base, config, flips, rates)
+    spec = {"base": base, "flips": flips, "rates_deg_s": rates}
+    outcome, out = run_cli_study(args, "envelope", spec, jobs)
+    feasible, grid, rows = envelope_grid(outcome.results, flips, rates)
+    write_text(out / "envelope.json", json.dumps(rows, indent=1))
+    for name, values in (("feasible", feasible), *grid.items()):
+        save_figure(plot_envelope(name, flips, rates, values), out / f"envelope_{name}.png")
+    report = {"study": outcome.study_id, "feasible": int(np.nansum(feasible)), "designs": int(feasible.size),
+              "failed_jobs": len(outcome.failed), "cells": rows}
+    if args.json:
+        print(json.dumps(report))
+    else:
+        console().print(f"study {outcome.study_id}: {int(np.nansum(feasible))}/{feasible.size} designs feasible "
+                        f"({outcome.ran} run now, {outcome.skipped} already done, {len(outcome.failed)} failed); "
+                        f"figures and envelope.json in {out}/")
+    report_failures(outcome)
+    return 0
+
+
+# ------------------------------------------------------------------ rules
+
+
+def _cmd_rules(args: argparse.Namespace) -> int:
+    import csv
+
+    from aerobat.experiments.baselines import check_methods
+    from aerobat.experiments.studies import parse_methods, rules_study_jobs, summarize_rules
+    from aerobat.plotting import save_figure
+    from aerobat.plotting.studies import plot_rules
+
+    methods = parse_methods(args.methods)
+    plant = plant_choice_from_args(args)
+    check_methods(methods)  # every method's package is there before a single job runs
+    plant.spec.check_available()
+    config, maneuver, nominal = _design(args)
+    jobs = rules_study_jobs(maneuver, nominal, config, methods=methods, seeds=args.seeds, trials=args.trials,
+                            plant=plant, tolerance_m=args.tolerance_m)
+    spec = {"maneuver": maneuver.spec(), "methods": methods, "seeds": args.seeds, "trials": args.trials,
+            "plant": plant.to_table(), "tolerance_m": args.tolerance_m}
+    outcome, out = run_cli_study(args, "rules", spec, jobs)
+    results = [r for _, r in sorted(outcome.results.items()) if "method" in r]
+    failed: dict[str, list[str]] = {}
+    by_key = {job.key: job for job in jobs}
+    for f in outcome.failed:
+        method = by_key[f.key].spec["method"] if f.key in by_key else f.label
+        failed.setdefault(method, []).append(f.error)
+    rows = summarize_rules(results, methods, failed)
+    with (out / "rules.csv").open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows({**r, "job_errors": " | ".join(r["job_errors"])} for r in rows)
+    curves = {m: [r["position_errors_m"] for r in results if r["method"] == m] for m in methods}
+    save_figure(plot_rules(curves, args.trials, args.tolerance_m), out / "rules.png")
+    if args.json:
+        print(json.dumps({"study": outcome.study_id, "methods": rows}))
+    else:
+        from rich.table import Table
+
+        table = Table(title=f"study {outcome.study_id}: {maneuver.name}, {args.seeds} seeds × {args.trials} trials")
+        for col in ("method", f"median trials to {args.tolerance_m:g} m", "reached", "below after",
+                    "last-10 [m]", "failed", "s/run"):
+            table.add_column(col, justify="right" if col != "method" else "left")
+        for r in rows:
+            share = r["share_below_after"]
+            table.add_row(r["method"], f"{r['median_trials_to_tolerance']:g}", f"{r['reached']}/{r['runs']}",
+                          "—" if math.isnan(share) else f"{100 * share:.0f} %", f"{r['last10_mean_m']:.3f}",
+                          str(r["failures"]), f"{r['wall_s']:.1f}")
+        c = console()
+        c.print(table)
+        for r in rows:
+            for error in r["job_errors"]:
+                c.print(f"{r['method']}: a job failed: {error}")
+        c.print(f"({outcome.ran} runs now, {outcome.skipped} already done); rules.csv and rules.png in {out}/")
+    report_failures(outcome)
+    return 0
+
+
+# ------------------------------------------------------------------ parser
+
+
+def add_execution_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--scheduler", default=None,
+                   help="Dask scheduler address tcp://HOST:PORT (default: $DASK_SCHEDULER_ADDRESS, else local)")
+    p.add_argument("--workers", type=bounded_int(1, 1024), default=None,
+                   help="local worker processes (default: all cores)")
+    p.add_argument("--resume", default=None, metavar="STUDY", type=session_ref,
+                   help="continue a study (id or 'last'): run only the jobs not done, failed ones included")
+    p.add_argument("--out", default=None, help="folder for figures and the report (default: out/study-ID)")
+    add_db_option(p)
+
+
+def register(sub: Any) -> None:
+    fmt = argparse.ArgumentDefaultsHelpFormatter
+    study = sub.add_parser("study", help="robustness, update-rule and envelope studies (local pool or Dask)",
+                           formatter_class=fmt)
+    ssub = study.add_subparsers(dest="study", parser_class=type(study), metavar="STUDY")
+
+    rob = ssub.add_parser("robustness", help="learn one maneuver on K sampled vehicles", formatter_class=fmt)
+    add_maneuver_options(rob)
+    rob.add_argument("--vehicles", type=bounded_int(1, 100000), default=100, help="number of sampled vehicles K")
+    rob.add_argument("--iterations", type=bounded_int(1, 1000), default=30, help="measured iterations per vehicle")
+    rob.add_argument("--seed", type=bounded_int(0, 2**40), default=0, help="seed of the vehicle sampling")
+    rob.add_argument("--rule", default="paper", help="update rule (see docs/method.md)")
+    rob.add_argument("--tolerance-m", type=finite_float(1e-6, 100.0, "m"), default=0.12,
+                     help="position tolerance of success [m]")
+    rob.add_argument("--ranges", metavar="FILE.toml", help="sampling ranges ([ranges] table)")
+    add_execution_options(rob)
+    rob.set_defaults(func=_cmd_robustness)
+
+    rules = ssub.add_parser("rules", help="every update rule and two model-free baselines, side by side",
+                            formatter_class=fmt)
+    add_maneuver_options(rules)
+    rules.add_argument("--methods", default=",".join(_default_methods()), help="comma list of rules and baselines")
+    rules.add_argument("--seeds", type=bounded_int(1, 1000), default=20, help="plant seeds per method")
+    rules.add_argument("--trials", type=bounded_int(2, 1000), default=30, help="measured trials per run")
+    rules.add_argument("--tolerance-m", type=finite_float(1e-6, 100.0, "m"), default=0.12,
+                       help="position tolerance [m]")
+    add_plant_options(rules, kinds=("arena", "rotorpy"))
+    rules.set_defaults(seed=1)
+    add_execution_options(rules)
+    rules.set_defaults(func=_cmd_rules)
+
+    env = ssub.add_parser("envelope", help="design a grid of flips and map feasibility, duration, height, "
+                          "conditioning", formatter_class=fmt)
+    env.add_argument("--flips", default="1,2,3,4", help="flip counts, e.g. 1,2,3,4")
+    env.add_argument("--rates-deg-s", default="600:2000:8", help="max rates A:B:N or a comma list [deg/s]")
+    env.add_argument("--dims", type=int, choices=(2, 3), default=2, help="2D or 3D flips")
+    env.add_argument("--axis", choices=("roll", "pitch"), default="roll", help="flip axis")
+    env.add_argument("--vehicle", default="hummingbird", help="design vehicle: preset or TOML file")
+    env.add_argument("--json", action="store_true", help="print one JSON object")
+    add_execution_options(env)
+    env.set_defaults(func=_cmd_envelope)
+
+
+def _default_methods() -> tuple[str, ...]:
+    from aerobat.experiments.studies.rules import DEFAULT_METHODS
+
+    return DEFAULT_METHODS

@@ -1,0 +1,404 @@
+"""Nominal design (Fig. 3, Sect. 5): p⁰ with Φ(p⁰) = x*, the Jacobian J and the correction C.
+
+Generic over maneuvers and models: a model only has to map a batch of
+programs to final states (the :class:`FinalStateModel` protocol).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import Any, Protocol
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from aerobat.core.correction import CorrectionKind, correction_matrix, svd_info
+from aerobat.core.maneuver import Maneuver, bounds_arrays, error_scales, parameter_scales
+from aerobat.errors import ConfigError, DesignFailed
+
+__all__ = ["Design", "DesignFailed", "DesignStatus", "FinalStateModel", "design", "finite_difference_jacobian"]
+
+
+class FinalStateModel(Protocol):
+    """A model that maps a batch of programs (and optional initial states) to final states."""
+
+    def final_states(self, programs: Sequence[Any], initial_states: np.ndarray | None = None) -> np.ndarray: ...
+
+
+class DesignStatus(StrEnum):
+    """How a nominal design ended."""
+
+    CONVERGED = "converged"
+    NOT_CONVERGED = "not_converged"
+    RANK_DEFICIENT = "rank_deficient"
+
+    @property
+    def meaning(self) -> str:
+        return {
+            DesignStatus.CONVERGED: "p⁰ reaches the target on the model and J has full row rank",
+            DesignStatus.NOT_CONVERGED: "no parameters within the bounds reach the target on the model",
+            DesignStatus.RANK_DEFICIENT: "p⁰ reaches the target but some errors cannot be corrected (J rank-deficient)",
+        }[self]
+
+
+@dataclass(frozen=True)
+class Design:
+    """Result of the nominal design.
+
+    Attributes
+    ----------
+    maneuver : the maneuver designed.
+    p_guess, p_nominal : (n_par,) initial guess p^g and solution p⁰.
+    residual : (n_err,) e(p⁰) on the nominal model; ``residual_norm`` its 2-norm (SI units mixed).
+    converged : True if the residual norm is below the tolerance and J has full row rank.
+    status : the outcome (:class:`DesignStatus`); ``message`` says why in words.
+    jacobian : (n_err, n_par) J = ∂e/∂p at p⁰ (central differences).
+    correction : (n_par, n_err) C, a right inverse of J.
+    correction_kind : how C was computed.
+    singular_values, condition_number, rank : of J in scaled coordinates.
+    duration_s : the nominal program's duration, ramps included.
+    compute_s : wall time of the design.
+    """
+
+    maneuver: Maneuver
+    p_guess: np.ndarray
+    p_nominal: np.ndarray
+    residual: np.ndarray
+    residual_norm: float
+    converged: bool
+    status: DesignStatus
+    message: str
+    jacobian: np.ndarray
+    correction: np.ndarray
+    correction_kind: str
+    singular_values: np.ndarray
+    condition_number: float
+    rank: int
+    duration_s: float
+    compute_s: float
+    evaluations: int
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "status", DesignStatus(self.status))
+
+    def __repr__(self) -> str:
+        return (f"Design({self.maneuver.name!r}, status={self.status.value!r}, "
+                f"residual_norm={self.residual_norm:.3g}, condition_number={self.condition_number:.3g})")
+
+    def summary(self) -> str:
+        """A few lines a person reads: parameters with meaning and unit, outcome, conditioning."""
+        m = self.maneuver
+        width = max(len(p.description) for p in m.parameters) if m.parameters else 0
+        lines = [f"design of {m.name}: {self.status.value} — {self.message}"]
+        lines.append(f"  {'':4s} {'meaning':{width}s}  {'guess p^g':>11s}  {'nominal p⁰':>11s}  unit")
+        for spec, g, p in zip(m.parameters, self.p_guess, self.p_nominal, strict=True):
+            lines.append(f"  {spec.name:4s} {spec.description:{width}s}  {g:11.5g}  {p:11.5g}  {spec.unit}")
+        lines.append(f"  residual norm {self.residual_norm:.3g}; duration {self.duration_s:.4f} s (ramps included)")
+        lines.append(f"  condition number of the scaled J {self.condition_number:.3g} (rank {self.rank}); "
+                     f"correction {self.correction_kind}; {self.evaluations} simulations in "
+                     f"{self.compute_s * 1e3:.0f} ms")
+        return "\n".join(lines)
+
+    @classmethod
+    def from_json_dict(cls, maneuver: Maneuver, table: dict[str, Any]) -> Design:
+        """The design that :meth:`to_json_dict` wrote, for ``maneuver`` (arrays exact)."""
+        try:
+            return cls(
+                maneuver=maneuver,
+                p_guess=np.asarray(table["p_guess"], dtype=float),
+                p_nominal=np.asarray(table["p_nominal"], dtype=float),
+                residual=np.asarray(table["residual"], dtype=float),
+                residual_norm=float(table["residual_norm"]),
+                converged=bool(table["converged"]),
+                status=DesignStatus(table["status"]),
+                message=str(table["message"]),
+                jacobian=np.asarray(table["jacobian"], dtype=float),
+                correction=np.asarray(table["correction"], dtype=float),
+                correction_kind=str(table["correction_kind"]),
+                singular_values=np.asarray(table["singular_values"], dtype=float),
+                condition_number=float(table["condition_number"]),
+                rank=int(table["rank"]),
+                duration_s=float(table["duration_s"]),
+                compute_s=float(table.get("compute_s", math.nan)),
+                evaluations=int(table.get("evaluations", 0)),
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ConfigError(f"design table: {type(exc).__name__}: {exc}") from None
+
+    def to_json_dict(self) -> dict[str, Any]:
+        return {
+            "maneuver": self.maneuver.spec(),
+            "parameter_names": [p.name for p in self.maneuver.parameters],
+            "parameter_units": [p.unit for p in self.maneuver.parameters],
+            "error_names": [e.name for e in self.maneuver.errors],
+            "p_guess": self.p_guess.tolist(),
+            "p_nominal": self.p_nominal.tolist(),
+            "residual": self.residual.tolist(),
+            "residual_norm": self.residual_norm,
+            "converged": self.converged,
+            "status": self.status.value,
+            "message": self.message,
+            "duration_s": self.duration_s,
+            "jacobian": self.jacobian.tolist(),
+            "correction": self.correction.tolist(),
+            "correction_kind": self.correction_kind,
+            "singular_values": self.singular_values.tolist(),
+            "condition_number": self.condition_number,
+            "rank": self.rank,
+            "compute_s": self.compute_s,
+            "evaluations": self.evaluations,
+        }
+
+
+class _CountingModel:
+    """Counts simulations (for the design report)."""
+
+    def __init__(self, model: FinalStateModel) -> None:
+        self.model = model
+        self.count = 0
+
+    def final_states(self, programs: Sequence[Any], initial_states: np.ndarray | None = None) -> np.ndarray:
+        self.count += len(programs)
+        return self.model.final_states(programs, initial_states)
+
+
+def _errors(maneuver: Maneuver, model: FinalStateModel, params: np.ndarray) -> np.ndarray:
+    """(B, n_err) errors for a batch of parameter vectors (B, n_par)."""
+    programs = [maneuver.program(p) for p in params]
+    finals = model.final_states(programs)
+    return np.stack([maneuver.error(f) for f in finals])
+
+
+def finite_difference_jacobian(
+    maneuver: Maneuver, model: FinalStateModel, p: np.ndarray, *, relative_step: float = 1e-3
+) -> tuple[np.ndarray, np.ndarray]:
+    """Central-difference J at ``p`` with steps ``relative_step`` × each parameter's scale.
+
+    Steps are shrunk (one-sided if needed) to stay inside the parameter bounds.
+    Returns (J, e(p)). All 2·n + 1 simulations run as one parallel batch.
+    """
+    p = np.asarray(p, dtype=float)
+    n = p.size
+    lower, upper = bounds_arrays(maneuver.parameters)
+    h = relative_step * parameter_scales(maneuver.parameters)
+    plus = np.minimum(p + h, upper)
+    minus = np.maximum(p - h, lower)
+    batch = np.empty((2 * n + 1, n))
+    batch[0] = p
+    for i in range(n):
+        batch[1 + i] = p
+        batch[1 + i, i] = plus[i]
+        batch[1 + n + i] = p
+        batch[1 + n + i, i] = minus[i]
+    errs = _errors(maneuver, model, batch)
+    J = (errs[1 : n + 1] - errs[n + 1 :]).T / (plus - minus)[None, :]
+    return J, errs[0]
+
+
+def design(
+    maneuver: Maneuver,
+    model: FinalStateModel,
+    *,
+    p_guess: np.ndarray | None = None,
+    tolerance: float = 1e-6,
+    correction: CorrectionKind = "tsvd",
+    tsvd_rtol: float = 1e-3,
+    damping: float = 1e-3,
+    max_iterations: int = 100,
+    raise_on_failure: bool = False,
+) -> Design:
+    """Find p⁰ with e(p⁰) = 0 on ``model`` from the guess, then J and C (Sect. 3 step 2).
+
+    A bounded trust-region least-squares solve on scaled errors, with batched
+    finite-difference Jacobians. The result says whether it converged and why
+    not; with ``raise_on_failure`` a failure raises :class:`DesignFailed`.
+    """
+    start = time.perf_counter()
+    model = _CountingModel(model)
+    guess = np.array(maneuver.guess() if p_guess is None else p_guess, dtype=float)
+    lower, upper = bounds_arrays(maneuver.parameters)
+    p_scales = parameter_scales(maneuver.parameters)
+    e_scales = error_scales(maneuver.errors)
+    x0 = np.clip(guess, lower, upper)
+    cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+    def both(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        key = p.tobytes()
+        if key not in cache:
+            J, e = finite_difference_jacobian(maneuver, model, p)
+            cache.clear()
+            cache[key] = (J, e)
+        return cache[key]
+
+    def residual(p: np.ndarray) -> np.ndarray:
+        key = p.tobytes()
+        if key in cache:
+            return cache[key][1] / e_scales
+        return _errors(maneuver, model, p[None, :])[0] / e_scales
+
+    def jac(p: np.ndarray) -> np.ndarray:
+        return both(p)[0] / e_scales[:, None]
+
+    status = DesignStatus.CONVERGED
+    message = ""
+    # Newton in two passes: first ignoring nearly unobservable directions (they send a full
+    # Newton step wandering along a valley), then a polishing pass with all of them
+    coarse = _newton(maneuver, model, x0, lower, upper, p_scales, e_scales, 1e5 * tolerance, rcond=1e-4,
+                     max_iterations=15)[0]
+    p0, solver_message, ok = _newton(maneuver, model, coarse, lower, upper, p_scales, e_scales, tolerance)
+    if not ok:
+        # Newton did not get there: a bounded trust-region solve finds the best reachable
+        # parameters, so the failure message can say which limits are in the way
+        try:
+            result = least_squares(
+                residual, x0, jac=jac, bounds=(lower, upper), x_scale=p_scales, method="trf",
+                xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=max_iterations,
+            )
+            p0 = result.x
+            solver_message = f"Newton failed ({solver_message}); trust region: {result.message}"
+        except (ValueError, FloatingPointError) as exc:  # non-finite model output
+            p0 = x0
+            solver_message = f"solver aborted: {exc}"
+    J, e0 = finite_difference_jacobian(maneuver, model, p0)
+    residual_norm = float(np.linalg.norm(e0))
+    converged = bool(np.all(np.isfinite(e0)) and residual_norm < tolerance)
+    pinned = _pinned(maneuver, p0, lower, upper)
+    info = svd_info(J, p_scales, e_scales)
+    n_err = len(maneuver.errors)
+    if not converged:
+        status = DesignStatus.NOT_CONVERGED
+        message = (
+            f"no parameters reach the target on the nominal model: residual norm {residual_norm:.3g} "
+            f"> tolerance {tolerance:g} ({solver_message})"
+        )
+        worst = int(np.argmax(np.abs(e0) / e_scales)) if np.all(np.isfinite(e0)) else 0
+        message += f"; largest error {maneuver.errors[worst].name} = {e0[worst]:+.4g} {maneuver.errors[worst].unit}"
+        if pinned:
+            # named limits first (the vehicle's envelope): they are what makes a maneuver infeasible
+            pinned.sort(key=lambda limit: not limit[0])
+            message += "; violated limits: " + "; ".join(text for _, text in pinned)
+    elif info.rank < n_err:
+        status = DesignStatus.RANK_DEFICIENT
+        message = (
+            f"the Jacobian has rank {info.rank} < {n_err} errors: some errors cannot be corrected "
+            f"with these parameters (scaled singular values {np.array2string(info.singular_values, precision=3)})"
+        )
+    else:
+        message = f"converged: residual norm {residual_norm:.3g} ({solver_message})"
+    usable = status is not DesignStatus.RANK_DEFICIENT and np.all(np.isfinite(J))
+    C = (
+        correction_matrix(J, p_scales, e_scales, kind=correction, tsvd_rtol=tsvd_rtol, damping=damping)
+        if usable
+        else np.full((J.shape[1], J.shape[0]), np.nan)
+    )
+    try:
+        duration = float(maneuver.duration_s(p0))
+    except ValueError:
+        duration = math.nan
+    result_design = Design(
+        maneuver=maneuver,
+        p_guess=guess,
+        p_nominal=p0,
+        residual=e0,
+        residual_norm=residual_norm,
+        converged=converged and status is DesignStatus.CONVERGED,
+        status=status,
+        message=message,
+        jacobian=J,
+        correction=C,
+        correction_kind=correction,
+        singular_values=info.singular_values,
+        condition_number=info.condition_number,
+        rank=info.rank,
+        duration_s=duration,
+        compute_s=time.perf_counter() - start,
+        evaluations=model.count,
+    )
+    if raise_on_failure and not result_design.converged:
+        raise DesignFailed(f"{maneuver.name}: design failed: {message}", result_design)
+    return result_design
+
+
+def _newton(
+    maneuver: Maneuver,
+    model: FinalStateModel,
+    x0: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    p_scales: np.ndarray,
+    e_scales: np.ndarray,
+    tolerance: float,
+    max_iterations: int = 25,
+    max_scaled_step: float = 5.0,
+    rcond: float = 1e-8,
+) -> tuple[np.ndarray, str, bool]:
+    """Bounded Newton iteration in scaled coordinates with backtracking.
+
+    A fresh finite-difference Jacobian whenever progress is slow, chord steps (reusing
+    it) while the residual falls fast. Returns (best p, message, converged).
+    """
+    x = x0.copy()
+    try:
+        J, e = finite_difference_jacobian(maneuver, model, x)
+    except ValueError as exc:
+        return x, f"Jacobian not computable at the initial guess: {exc}", False
+    if not np.all(np.isfinite(e)):
+        return x, "non-finite final state at the initial guess", False
+    for iteration in range(max_iterations):
+        norm = float(np.linalg.norm(e))
+        if norm < 0.01 * tolerance:
+            return x, f"Newton converged in {iteration} iterations", True
+        Js = (J / e_scales[:, None]) * p_scales[None, :]
+        scaled_step = np.linalg.lstsq(Js, e / e_scales, rcond=rcond)[0]
+        # active bounds: parameters at a bound that the step pushes further out are held fixed
+        blocked = ((x <= lower + 1e-12) & (scaled_step > 0)) | ((x >= upper - 1e-12) & (scaled_step < 0))
+        if blocked.any() and not blocked.all():
+            free = ~blocked
+            scaled_step = np.zeros_like(scaled_step)
+            scaled_step[free] = np.linalg.lstsq(Js[:, free], e / e_scales, rcond=rcond)[0]
+        longest = float(np.max(np.abs(scaled_step)))
+        if longest > max_scaled_step:  # stay where the linear model means something
+            scaled_step *= max_scaled_step / longest
+        step = -p_scales * scaled_step
+        t = 1.0
+        while True:
+            candidate = np.clip(x + t * step, lower, upper)
+            try:
+                e_new = _errors(maneuver, model, candidate[None, :])[0]
+            except ValueError:  # the step left the maneuver's valid set (e.g. absurd commands)
+                e_new = np.full_like(e, np.nan)
+            if np.all(np.isfinite(e_new)) and np.linalg.norm(e_new / e_scales) < np.linalg.norm(e / e_scales):
+                break
+            t *= 0.5
+            if t < 1.0 / 64:
+                return x, f"no descent after {iteration} Newton iterations (residual {norm:.3g})", norm < tolerance
+        slow = np.linalg.norm(e_new) > 0.1 * norm
+        x, e = candidate, e_new
+        if slow or t < 1.0:  # otherwise a chord step: keep the Jacobian
+            try:
+                J, e = finite_difference_jacobian(maneuver, model, x)
+            except ValueError as exc:
+                return x, f"Jacobian not computable near the iterate: {exc}", False
+    norm = float(np.linalg.norm(e))
+    return x, f"Newton stopped after {max_iterations} iterations (residual {norm:.3g})", norm < tolerance
+
+
+def _pinned(maneuver: Maneuver, p: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> list[tuple[bool, str]]:
+    """(has a named limit, description) of every parameter that sits on a bound."""
+    out = []
+    for spec, value, lo, hi in zip(maneuver.parameters, p, lower, upper, strict=True):
+        tol = 1e-6 * spec.scale
+        if math.isfinite(lo) and value <= lo + tol:
+            bound, side, limit = spec.bound_names[0], "lower", lo
+        elif math.isfinite(hi) and value >= hi - tol:
+            bound, side, limit = spec.bound_names[1], "upper", hi
+        else:
+            continue
+        name = f" = {bound}" if bound else ""
+        out.append((bool(bound), f"{spec.name} ({spec.description}) = {value:.4g} {spec.unit} at its {side} "
+                                 f"limit {limit:.4g}{name}"))
+    return out

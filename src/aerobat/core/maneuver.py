@@ -1,0 +1,163 @@
+"""The maneuver abstraction (Sect. 4), independent of any vehicle.
+
+A maneuver is an initial state, a desired final state (expressed as the error
+components it measures), a parameter vector with bounds, and a builder that
+turns parameters into whatever its plant flies (for quadrocopters, a
+:class:`~aerobat.quadrotor.program.Program`). Nothing here knows about quadrocopters.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from aerobat.errors import ConfigError
+
+__all__ = [
+    "ErrorKind",
+    "ErrorSpec",
+    "Maneuver",
+    "ParameterSpec",
+    "bounds_arrays",
+    "check_parameters",
+    "error_scales",
+    "parameter_scales",
+    "position_indices",
+]
+
+
+class ErrorKind(StrEnum):
+    """What an error component measures; reports group errors by it (e.g. the position error norm)."""
+
+    POSITION = "position"
+    VELOCITY = "velocity"
+    ANGLE = "angle"
+    RATE = "rate"
+    OTHER = "other"
+
+
+@dataclass(frozen=True, kw_only=True)
+class ParameterSpec:
+    """One learnable parameter.
+
+    Attributes
+    ----------
+    name : short identifier (``p0``…), shown in tables.
+    description : what it controls.
+    unit : its unit (``s``, ``m/s²``, ``rad``…).
+    lower, upper : allowed range (Sect. 4.2); ``±inf`` for none.
+    scale : typical magnitude of a meaningful change, used for finite-difference
+        steps and for scaling before regularized inverses.
+    bound_names : what the lower and upper limits are (named in failure messages).
+    """
+
+    name: str
+    description: str
+    unit: str
+    lower: float = -math.inf
+    upper: float = math.inf
+    scale: float = 1.0
+    bound_names: tuple[str, str] = ("", "")
+
+    def __post_init__(self) -> None:
+        if not self.lower < self.upper:
+            raise ConfigError(f"parameter {self.name}: lower = {self.lower} must be < upper = {self.upper}")
+        if not (math.isfinite(self.scale) and self.scale > 0):
+            raise ConfigError(f"parameter {self.name}: scale = {self.scale} must be finite and > 0")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ErrorSpec:
+    """One measured final-state error component e = x − x*.
+
+    Attributes
+    ----------
+    name : identifier (``y``, ``vy``, ``flip_angle``…).
+    unit : its unit.
+    scale : the size of an error that matters (weights and scaling).
+    kind : what it measures; position components make up the reported position error.
+    """
+
+    name: str
+    unit: str
+    scale: float = 1.0
+    kind: ErrorKind = ErrorKind.OTHER
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.scale) and self.scale > 0):
+            raise ConfigError(f"error {self.name}: scale = {self.scale} must be finite and > 0")
+        object.__setattr__(self, "kind", ErrorKind(self.kind))
+
+
+@runtime_checkable
+class Maneuver(Protocol):
+    """What the design and learning stages need from a maneuver."""
+
+    name: str
+    parameters: tuple[ParameterSpec, ...]
+    errors: tuple[ErrorSpec, ...]
+
+    def guess(self) -> np.ndarray:
+        """The initial parameter guess p^g (Sect. 4)."""
+        ...
+
+    def program(self, params: np.ndarray) -> Any:
+        """The input program U(t, p) for parameters ``params`` (what a plant flies)."""
+        ...
+
+    def initial_state(self) -> np.ndarray:
+        """The desired initial state x(0) (what the plant starts from)."""
+        ...
+
+    def error(self, final_state: np.ndarray) -> np.ndarray:
+        """Error vector e = x − x* of a (measured or simulated) final state."""
+        ...
+
+    def is_valid(self, params: np.ndarray) -> bool:
+        """True if ``params`` satisfies every constraint (bounds and any derived ones)."""
+        ...
+
+    def duration_s(self, params: np.ndarray) -> float:
+        """How long the program for ``params`` lasts [s] (NaN if it cannot be built)."""
+        ...
+
+    def spec(self) -> dict[str, Any]:
+        """A JSON-ready description that rebuilds the maneuver (for the store)."""
+        ...
+
+
+def bounds_arrays(parameters: tuple[ParameterSpec, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) arrays of the parameter bounds."""
+    return np.array([p.lower for p in parameters]), np.array([p.upper for p in parameters])
+
+
+def check_parameters(parameters: tuple[ParameterSpec, ...], params: np.ndarray) -> str | None:
+    """None if ``params`` is finite and inside the box bounds, else a message naming the offender."""
+    params = np.asarray(params, dtype=float)
+    if params.shape != (len(parameters),):
+        return f"expected {len(parameters)} parameters, got shape {params.shape}"
+    for spec, value in zip(parameters, params, strict=True):
+        if not math.isfinite(value):
+            return f"{spec.name} = {value} is not finite"
+        if not spec.lower <= value <= spec.upper:
+            return f"{spec.name} = {value:.6g} {spec.unit} is outside [{spec.lower:g}, {spec.upper:g}]"
+    return None
+
+
+def parameter_scales(parameters: tuple[ParameterSpec, ...]) -> np.ndarray:
+    """(n_par,) typical magnitudes of the parameters."""
+    return np.array([p.scale for p in parameters], dtype=float)
+
+
+def error_scales(errors: tuple[ErrorSpec, ...]) -> np.ndarray:
+    """(n_err,) sizes of errors that matter."""
+    return np.array([e.scale for e in errors], dtype=float)
+
+
+def position_indices(errors: tuple[ErrorSpec, ...]) -> list[int]:
+    """Indices of the position components (:attr:`ErrorKind.POSITION`) of an error vector."""
+    return [k for k, e in enumerate(errors) if e.kind is ErrorKind.POSITION]

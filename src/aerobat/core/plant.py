@@ -1,0 +1,106 @@
+"""The plant protocol: anything that can fly a program and report what happened.
+
+The learning loop only ever sees this: a program goes in, a :class:`Trial` comes
+out. Plants are the nominal model, the simulated arena, RotorPy, Betaflight's
+firmware in the loop, or hardware. A plant never raises for a trial that went
+wrong: the trial's :class:`TrialStatus` says what happened, its message why.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+__all__ = ["Plant", "StatefulPlant", "Trial", "TrialStatus"]
+
+
+class TrialStatus(StrEnum):
+    """How one flight ended."""
+
+    OK = "ok"
+    NO_TRIGGER = "no_trigger"
+    CRASHED = "crashed"
+    ABORTED = "aborted"
+    LOST = "lost"
+
+    @property
+    def meaning(self) -> str:
+        return _TRIAL_MEANINGS[self]
+
+    @property
+    def measured(self) -> bool:
+        """A final state was measured."""
+        return self is TrialStatus.OK
+
+    @property
+    def retry(self) -> bool:
+        """Nothing was learned and nothing is wrong with the parameters: fly them again."""
+        return self in (TrialStatus.NO_TRIGGER, TrialStatus.LOST)
+
+
+_TRIAL_MEANINGS = {
+    TrialStatus.OK: "the final state was measured",
+    TrialStatus.NO_TRIGGER: "the maneuver never started (lost trigger); no error available, flown again",
+    TrialStatus.CRASHED: "the vehicle left the flight volume or hit the ground",
+    TrialStatus.ABORTED: "the trial was aborted (upload failure, non-finite state, supervisor limit)",
+    TrialStatus.LOST: "the plant stopped answering (firmware or simulator died); restarted and flown again",
+}
+
+
+@dataclass(frozen=True)
+class Trial:
+    """Outcome of flying one program.
+
+    Attributes
+    ----------
+    status : how the flight ended (:class:`TrialStatus`).
+    message : human-readable explanation.
+    final_state : (N_STATE,) estimated state at the maneuver's end (NaN unless ``ok``).
+    times_s : (M,) measurement times relative to the maneuver start [s].
+    states : (M, N_STATE) measured states at those times (the measurement rate).
+    start_state : (N_STATE,) measured state at the maneuver start (for initial-state compensation).
+    info : plant-specific extras (attempts, latencies…), JSON-ready.
+    """
+
+    status: TrialStatus
+    message: str
+    final_state: np.ndarray
+    times_s: np.ndarray
+    states: np.ndarray
+    start_state: np.ndarray
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "status", TrialStatus(self.status))
+
+    @property
+    def ok(self) -> bool:
+        return self.status is TrialStatus.OK
+
+    def __repr__(self) -> str:
+        return f"Trial(status={self.status.value!r}, message={self.message!r}, samples={len(self.times_s)})"
+
+
+@runtime_checkable
+class Plant(Protocol):
+    """Flies programs. ``name`` identifies it in records."""
+
+    name: str
+
+    def fly(self, program: Any) -> Trial: ...
+
+
+@runtime_checkable
+class StatefulPlant(Plant, Protocol):
+    """A plant whose hidden state (random generators, drift, battery) can be saved and restored.
+
+    A resumed session restores the state saved after its last trial, so it flies the
+    same trials an uninterrupted session would have flown.
+    """
+
+    def get_state(self) -> dict[str, Any]: ...
+
+    def set_state(self, state: dict[str, Any]) -> None: ...

@@ -1,0 +1,200 @@
+"""Running independent jobs: a local process pool by default, a Dask cluster on request.
+
+A job is a pure function of its specification and seed (:class:`Job`), so it runs
+the same anywhere and its result can be checked against another run. Results are
+yielded as they complete, so callers can record them immediately (a study that is
+interrupted keeps everything that finished).
+
+Dask is optional (``pip install 'aerobat[dask]'``); it is imported only when a
+scheduler address is given (``--scheduler tcp://HOST:PORT`` or the environment
+variable ``DASK_SCHEDULER_ADDRESS``).
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import os
+import traceback
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any, Protocol
+
+from aerobat.errors import ConfigError
+
+__all__ = ["DaskExecutor", "Executor", "Job", "JobResult", "JobStatus", "LocalExecutor", "job_kind", "make_executor",
+           "run_job"]
+
+
+@dataclass(frozen=True)
+class Job:
+    """One unit of work: ``kind`` selects the function, ``spec`` (JSON-ready) says everything else.
+
+    Attributes
+    ----------
+    key : unique name within a study (used to resume: finished keys are skipped).
+    kind : a registered job kind (``"learn"``, ``"design"``, ``"benchmark"``, ``"rule_run"``).
+    spec : the job's full specification, including its seed.
+    """
+
+    key: str
+    kind: str
+    spec: dict[str, Any] = field(hash=False)
+
+    def to_json(self) -> str:
+        return json.dumps({"key": self.key, "kind": self.kind, "spec": self.spec}, sort_keys=True)
+
+
+class JobStatus(StrEnum):
+    """How one job ended: ``done`` (its result is valid) or ``failed`` (it raised; run again on resume)."""
+
+    DONE = "done"
+    FAILED = "failed"
+
+
+@dataclass(frozen=True)
+class JobResult:
+    """A job's outcome: its status, its JSON-ready result (empty if failed) and the error if it failed."""
+
+    status: JobStatus
+    result: dict[str, Any]
+    error: str | None = None
+
+    @property
+    def done(self) -> bool:
+        return self.status is JobStatus.DONE
+
+
+JobFunction = Callable[[dict[str, Any]], dict[str, Any]]
+_KINDS: dict[str, JobFunction] = {}
+
+
+def job_kind(name: str) -> Callable[[JobFunction], JobFunction]:
+    """Register a job function under ``name`` (:mod:`aerobat.experiments.jobs` registers the built-in kinds)."""
+
+    def decorate(fn: JobFunction) -> JobFunction:
+        _KINDS[name] = fn
+        return fn
+
+    return decorate
+
+
+def run_job(job: Job) -> JobResult:
+    """Run one job in this process; a job that raises is a :attr:`JobStatus.FAILED` result, never an exception."""
+    import aerobat.experiments.jobs  # noqa: F401  (registers the built-in job kinds)
+
+    fn = _KINDS.get(job.kind)
+    if fn is None:
+        return JobResult(JobStatus.FAILED, {}, f"unknown job kind {job.kind!r}")
+    try:
+        return JobResult(JobStatus.DONE, fn(job.spec))
+    except Exception as exc:  # a failed job is a result, not a crashed study
+        where = traceback.extract_tb(exc.__traceback__)[-1] if exc.__traceback__ else None
+        at = f" (at {where.filename.rsplit('/', 1)[-1]}:{where.lineno})" if where else ""
+        return JobResult(JobStatus.FAILED, {}, f"{type(exc).__name__}: {exc}{at}")
+
+
+def _collect(future: Any) -> JobResult:
+    """The result of a finished future; a worker that died or could not return is a failed job."""
+    try:
+        result = future.result()
+    except Exception as exc:  # the worker process died, or the result could not be sent back
+        return JobResult(JobStatus.FAILED, {}, f"the worker running it failed: {type(exc).__name__}: {exc}")
+    return result if isinstance(result, JobResult) else JobResult(JobStatus.FAILED, {}, f"bad job result {result!r}")
+
+
+class Executor(Protocol):
+    """Runs jobs, yielding (job, result) pairs as they complete."""
+
+    workers: int
+
+    def run(self, jobs: Iterable[Job]) -> Iterator[tuple[Job, JobResult]]: ...
+
+    def close(self) -> None: ...
+
+
+def _worker_init() -> None:
+    # one numba thread per worker process: the pool already uses every core
+    os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+    try:
+        import numba
+
+        numba.set_num_threads(1)
+    except (ImportError, ValueError):
+        pass
+
+
+class LocalExecutor:
+    """A process pool on this machine (spawned workers, one numba thread each)."""
+
+    def __init__(self, workers: int | None = None) -> None:
+        self.workers = workers or os.cpu_count() or 1
+        if isinstance(self.workers, bool) or not isinstance(self.workers, int) or not 1 <= self.workers <= 1024:
+            raise ConfigError(f"workers = {self.workers!r}: allowed integers 1 … 1024")
+        self._pool: ProcessPoolExecutor | None = None
+
+    def run(self, jobs: Iterable[Job]) -> Iterator[tuple[Job, JobResult]]:
+        jobs = list(jobs)
+        if not jobs:
+            return
+        if self.workers == 1:
+            _worker_init()
+            for job in jobs:
+                yield job, run_job(job)
+            return
+        if self._pool is None:
+            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
+                                             initializer=_worker_init)
+        futures = {self._pool.submit(run_job, job): job for job in jobs}
+        try:
+            for future in as_completed(futures):
+                yield futures[future], _collect(future)
+        finally:
+            for future in futures:
+                future.cancel()
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+
+
+class DaskExecutor:
+    """Jobs on a ``dask.distributed`` cluster (any scheduler address, or an in-process client)."""
+
+    def __init__(self, address: str | None = None, *, client: Any = None) -> None:
+        from aerobat.errors import require
+
+        Client = require("distributed", extra="dask", purpose="running studies on a Dask cluster").Client
+        self._own = client is None
+        self.client = client if client is not None else Client(address, timeout="10s")
+        self.workers = max(1, sum(w.get("nthreads", 1) for w in self.client.scheduler_info()["workers"].values()))
+
+    def run(self, jobs: Iterable[Job]) -> Iterator[tuple[Job, JobResult]]:
+        from distributed import as_completed as dask_completed
+
+        jobs = list(jobs)
+        if not jobs:
+            return
+        futures = self.client.map(run_job, jobs, key=[f"aerobat-{j.key}-{abs(hash(j.to_json()))}" for j in jobs],
+                                  pure=False)
+        index = {f.key: job for f, job in zip(futures, jobs, strict=True)}
+        try:
+            for future in dask_completed(futures):
+                yield index[future.key], _collect(future)
+        finally:
+            self.client.cancel(futures)
+
+    def close(self) -> None:
+        if self._own:
+            self.client.close()
+
+
+def make_executor(*, scheduler: str | None = None, workers: int | None = None) -> Executor:
+    """The Dask cluster at ``scheduler`` (or ``$DASK_SCHEDULER_ADDRESS``), else a local pool."""
+    address = scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS")
+    if address:
+        return DaskExecutor(address)
+    return LocalExecutor(workers)

@@ -1,0 +1,112 @@
+"""Reports of stored sessions: their JSON form, their figures, drawn from stored data alone."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+from aerobat.core.registry import from_spec
+from aerobat.errors import ConfigError
+from aerobat.plotting.files import save_figure
+from aerobat.plotting.learning import plot_learning
+from aerobat.plotting.vehicle import plot_side_views
+from aerobat.quadrotor.simulate import simulate
+from aerobat.quadrotor.vehicle import vehicle_from_table
+from aerobat.store import Store
+
+__all__ = ["finite_or_none", "session_figures", "session_json"]
+
+
+def finite_or_none(values: Any) -> list[float | None]:
+    """JSON-ready floats: non-finite values become None."""
+    return [float(v) if math.isfinite(v) else None for v in values]
+
+
+def session_json(store: Store, session_id: int, *, trajectories: bool = False, full: bool = False) -> dict[str, Any]:
+    """The session as JSON: the keys of ``session.json`` (and, with ``full``, everything stored)."""
+    rec = store.session(session_id)
+    mrec = store.maneuver(rec.maneuver_id)
+    drec = store.design(rec.design_id)
+    prec = store.plant(rec.plant_id)
+    iterations = []
+    for it in store.iterations(session_id, trajectories=trajectories):
+        entry: dict[str, Any] = {
+            "i": it.index, "correction": it.correction, "status": it.status,
+            "params": it.params.tolist(), "next_params": it.next_params.tolist(),
+            "error": finite_or_none(it.error), "gamma": it.gamma, "scale": it.scale, "message": it.message,
+        }
+        if full:
+            entry["final_state"] = None if it.final_state is None else finite_or_none(it.final_state)
+            entry["start_state"] = None if it.start_state is None else finite_or_none(it.start_state)
+            entry["recorded_at"] = it.recorded_at
+            entry["info"] = it.info
+        if trajectories:
+            entry["trajectory"] = None if it.times_s is None or it.states is None else {
+                "times_s": it.times_s.tolist(), "states": [finite_or_none(row) for row in it.states]}
+        iterations.append(entry)
+    data: dict[str, Any] = {
+        "session_id": session_id, "db": str(store.path),
+        "maneuver": mrec.spec, "maneuver_name": mrec.name, "plant": prec.kind,
+        "error_names": list(mrec.error_names), "error_units": list(mrec.error_units),
+        "error_kinds": list(mrec.error_kinds),
+        "parameter_names": list(mrec.parameter_names), "parameter_units": list(mrec.parameter_units),
+        "p_nominal": drec.p_nominal.tolist(), "start_params": rec.start_params.tolist(),
+        "iterations": iterations, "final_params": rec.current_params.tolist(),
+        "status": rec.display_state, "message": rec.message, "seed": rec.seed, "rule": rec.rule,
+        "target_iterations": rec.target_iterations, "started_at": rec.started_at, "ended_at": rec.ended_at,
+        "warm_start_from": rec.warm_start_from, "study_id": rec.study_id,
+    }
+    if full:
+        data["plant_config"] = prec.config
+        data["vehicle"] = store.vehicle(prec.vehicle_id).config
+        data["command"] = list(rec.command)
+        data["design"] = {
+            "p_guess": drec.p_guess.tolist(), "p_nominal": drec.p_nominal.tolist(),
+            "residual": finite_or_none(drec.residual), "residual_norm": drec.residual_norm,
+            "jacobian": [finite_or_none(r) for r in drec.jacobian],
+            "correction": [finite_or_none(r) for r in drec.correction], "correction_kind": drec.correction_kind,
+            "singular_values": finite_or_none(drec.singular_values), "condition_number": drec.condition_number,
+            "rank": drec.rank, "status": drec.status, "message": drec.message, "duration_s": drec.duration_s,
+            "vehicle": store.vehicle(drec.vehicle_id).config,
+        }
+    return data
+
+
+def session_figures(store: Store, session_id: int, out: Path) -> list[str]:
+    """Write ``learning.png`` and ``side_views.png`` from stored data alone; notes on what could not be drawn."""
+    rec = store.session(session_id)
+    mrec = store.maneuver(rec.maneuver_id)
+    drec = store.design(rec.design_id)
+    notes = []
+    panels = []
+    target = mrec.spec.get("target_yz", (0.0, 0.0))
+    try:
+        maneuver = from_spec(mrec.spec, source=f"session {session_id} maneuver")
+        config = vehicle_from_table(store.vehicle(drec.vehicle_id).config, source=f"session {session_id} vehicle")
+        nominal = simulate(maneuver.program(drec.p_nominal), config)
+        panels.append(("nominal (model)", nominal.times_s, nominal.states))
+        target = getattr(maneuver, "target_yz", target)
+    except ConfigError as exc:
+        notes.append(f"note: nominal trajectory not drawn: {exc}")
+    records = store.iterations(session_id)
+    measured = [it.index for it in records if it.status == "ok" and it.trajectory_rows > 0]
+    if measured:
+        loaded = store.iterations(session_id, trajectories=True, indices=[measured[0], measured[-1]])
+        by_index = {it.index: it for it in loaded}
+        first, last = by_index[measured[0]], by_index[measured[-1]]
+        panels.append((f"first attempt (iteration {first.index})", first.times_s, first.states))
+        panels.append((f"learned (iteration {last.index})", last.times_s, last.states))
+    plane = "xz" if mrec.spec.get("axis") == "pitch" else "yz"
+    if panels:
+        save_figure(plot_side_views(panels, plane=plane, title=mrec.name, target=tuple(target)),
+                    out / "side_views.png", dpi=130)
+    if records:
+        iterations = [{"i": it.index, "status": it.status, "params": it.params.tolist(),
+                       "error": finite_or_none(it.error)} for it in records]
+        save_figure(plot_learning(iterations, mrec.error_names, mrec.error_units, mrec.parameter_names,
+                                  mrec.parameter_units, title=f"{mrec.name} on {rec.plant_kind}"),
+                    out / "learning.png")
+    else:
+        notes.append(f"note: session {session_id} has no iterations: learning.png not drawn")
+    return notes

@@ -1,0 +1,68 @@
+"""Putting a learning run together: the rule, the plant and the design, from objects or from stored tables.
+
+One place for what the command line, durable sessions and study jobs all need,
+so each is built the same way everywhere: an update rule (with the vehicle
+layer's initial-state compensation when asked for), a plant from its stored
+form (today's and every earlier store's), and a design from its record.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from aerobat.core.design import Design, DesignStatus
+from aerobat.core.maneuver import Maneuver
+from aerobat.core.rules import RuleChoice, UpdateRule, make_rule
+from aerobat.errors import ConfigError
+from aerobat.plants import PlantChoice
+from aerobat.quadrotor.vehicle import VehicleConfig
+
+__all__ = ["build_rule", "design_from_record", "plant_choice_from_record", "plant_record_config"]
+
+
+def build_rule(choice: RuleChoice, design: Design, model: VehicleConfig) -> UpdateRule:
+    """The update rule ``choice`` for ``design``; ``+isc`` gets its sensitivity from ``model``."""
+    isc = None
+    if choice.isc:
+        from aerobat.quadrotor.isc import quadrotor_isc
+
+        isc = quadrotor_isc(design.maneuver, model, design.p_nominal)
+    return make_rule(choice, design, isc=isc)
+
+
+def plant_record_config(choice: PlantChoice) -> dict[str, Any]:
+    """What the store keeps of a plant besides its kind and vehicle: ``{"settings": {...}}``."""
+    return {"settings": choice.settings_table()}
+
+
+def plant_choice_from_record(kind: str, config: Mapping[str, Any], seed: int | None, *, source: str) -> PlantChoice:
+    """The plant a stored session flew, from today's form or an earlier store's.
+
+    Today: ``{"settings": {...}}``. Before schema 4: the arena as ``{"arena": {...}}``, RotorPy
+    as ``{"settings": path or null}`` (the file is read again; a missing file is an error).
+    """
+    settings_table: Any = config.get("settings") if isinstance(config, Mapping) else None
+    if kind == "arena" and isinstance(config, Mapping) and "arena" in config:
+        settings_table = config["arena"]
+    table = {"kind": kind, "settings": {}, "seed": int(seed or 0)}
+    if isinstance(settings_table, str):  # an old RotorPy session stored its settings file's path
+        return PlantChoice.from_file(kind, settings_table, seed=int(seed or 0))
+    if isinstance(settings_table, Mapping):
+        table["settings"] = dict(settings_table)
+    return PlantChoice.from_table(table, source=source)
+
+
+def design_from_record(maneuver: Maneuver, record: Any) -> Design:
+    """The :class:`Design` a :class:`~aerobat.store.DesignRecord` holds, arrays bit for bit."""
+    try:
+        status = DesignStatus(record.status)
+    except ValueError:
+        raise ConfigError(f"stored design {record.id}: unknown status {record.status!r}") from None
+    return Design(
+        maneuver=maneuver, p_guess=record.p_guess, p_nominal=record.p_nominal, residual=record.residual,
+        residual_norm=record.residual_norm, converged=record.converged, status=status, message=record.message,
+        jacobian=record.jacobian, correction=record.correction, correction_kind=record.correction_kind,
+        singular_values=record.singular_values, condition_number=record.condition_number, rank=record.rank,
+        duration_s=record.duration_s, compute_s=record.compute_s, evaluations=record.evaluations,
+    )

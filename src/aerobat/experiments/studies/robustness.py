@@ -1,0 +1,181 @@
+"""Robustness: learn one maneuver on many sampled vehicles (Monte Carlo over the arena's true vehicle)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aerobat.config import check_range, dataclass_from_table, dataclass_to_table, read_toml
+from aerobat.core.design import Design
+from aerobat.core.maneuver import Maneuver
+from aerobat.core.rules import RuleChoice
+from aerobat.errors import ConfigError
+from aerobat.experiments.execution import Job
+from aerobat.plants.arena.params import ArenaParams
+from aerobat.quadrotor.vehicle import VehicleConfig, vehicle_table
+
+__all__ = [
+    "SAMPLED_PROPERTIES",
+    "RobustnessRanges",
+    "RobustnessSummary",
+    "load_ranges",
+    "robustness_jobs",
+    "sample_arena",
+    "summarize_robustness",
+]
+
+
+@dataclass(frozen=True, kw_only=True)
+class RobustnessRanges:
+    """Uniform ranges from which each sampled vehicle's arena is drawn.
+
+    Scales multiply the arena defaults (``docs/plants.md``); "± x" ranges are
+    relative (0.05 = ±5 %). Units in field names.
+    """
+
+    mass_scale: tuple[float, float] = (0.98, 1.08)
+    inertia_scale: tuple[float, float] = (1.00, 1.25)
+    inertia_zz_scale: tuple[float, float] = (1.05, 1.35)
+    drag_constant_scale: tuple[float, float] = (1.00, 1.30)
+    motor_rate_up_per_s: tuple[float, float] = (62.0, 80.0)
+    motor_rate_down_per_s: tuple[float, float] = (40.0, 55.0)
+    thrust_gain_spread: float = 0.04
+    com_offset_m: float = 0.006
+    aerodynamics_scale: tuple[float, float] = (0.7, 1.3)
+    noise_scale: tuple[float, float] = (0.7, 1.3)
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, tuple):
+                lo, hi = value
+                check_range(f"{f.name}[0]", lo, low=0.0)
+                check_range(f"{f.name}[1]", hi, low=lo)
+            else:
+                check_range(f.name, value, low=0.0, high=0.5)
+
+
+def load_ranges(path: str | Path) -> RobustnessRanges:
+    """Read robustness ranges from a TOML file (a ``[ranges]`` table; omitted fields keep defaults)."""
+    data = read_toml(path)
+    unknown = sorted(set(data) - {"ranges"})
+    if unknown:
+        raise ConfigError(f"{path}: unknown table(s) {', '.join(unknown)}; allowed: [ranges]")
+    return dataclass_from_table(RobustnessRanges, data.get("ranges", {}), source=f"{path}: [ranges]")
+
+
+SAMPLED_PROPERTIES = (
+    "mass_scale", "inertia_xx_scale", "inertia_yy_scale", "inertia_zz_scale", "drag_constant_scale",
+    "motor_rate_up_per_s", "motor_rate_down_per_s", "thrust_gain_min", "com_offset_norm_m",
+    "aerodynamics_scale", "noise_scale",
+)
+
+
+def sample_arena(ranges: RobustnessRanges, seed: int) -> tuple[dict[str, Any], dict[str, float]]:
+    """One sampled vehicle: (arena table for :class:`ArenaParams`, the sampled properties)."""
+    rng = np.random.default_rng(seed)
+
+    def u(bounds: tuple[float, float]) -> float:
+        return float(rng.uniform(bounds[0], bounds[1]))
+
+    base = ArenaParams()
+    ixx, iyy, izz = u(ranges.inertia_scale), u(ranges.inertia_scale), u(ranges.inertia_zz_scale)
+    g = 1.0 + ranges.thrust_gain_spread * rng.uniform(-1, 1, 4)
+    gains = (float(g[0]), float(g[1]), float(g[2]), float(g[3]))
+    c = ranges.com_offset_m * rng.uniform(-1, 1, 2)
+    com = (float(c[0]), float(c[1]), 0.0)
+    aero = u(ranges.aerodynamics_scale)
+    noise = u(ranges.noise_scale)
+    props = {
+        "mass_scale": u(ranges.mass_scale),
+        "inertia_xx_scale": ixx,
+        "inertia_yy_scale": iyy,
+        "inertia_zz_scale": izz,
+        "drag_constant_scale": u(ranges.drag_constant_scale),
+        "motor_rate_up_per_s": u(ranges.motor_rate_up_per_s),
+        "motor_rate_down_per_s": u(ranges.motor_rate_down_per_s),
+        "thrust_gain_min": min(gains),
+        "com_offset_norm_m": float(np.hypot(com[0], com[1])),
+        "aerodynamics_scale": aero,
+        "noise_scale": noise,
+    }
+    a, d, mc = base.aerodynamics, base.disturbances, base.motion_capture
+    params = base.replace(
+        true_vehicle=dataclasses.replace(
+            base.true_vehicle, mass_scale=props["mass_scale"], inertia_scale=(ixx, iyy, izz),
+            drag_constant_scale=props["drag_constant_scale"], motor_rate_up_per_s=props["motor_rate_up_per_s"],
+            motor_rate_down_per_s=props["motor_rate_down_per_s"], thrust_gains=gains, com_offset_m=com),
+        aerodynamics=dataclasses.replace(
+            a, body_drag_n_s2_m2=a.body_drag_n_s2_m2 * aero, rotor_drag_s_m=a.rotor_drag_s_m * aero,
+            rotational_damping_n_m_s=(a.rotational_damping_n_m_s[0] * aero, a.rotational_damping_n_m_s[1] * aero,
+                                      a.rotational_damping_n_m_s[2] * aero)),
+        disturbances=dataclasses.replace(
+            d, wind_std_m_s=d.wind_std_m_s * noise, gust_amplitude_std_m_s=d.gust_amplitude_std_m_s * noise,
+            thrust_gain_jitter=d.thrust_gain_jitter * noise, motor_gain_jitter=d.motor_gain_jitter * noise),
+        motion_capture=dataclasses.replace(
+            mc, position_noise_m=mc.position_noise_m * noise, attitude_noise_rad=mc.attitude_noise_rad * noise),
+    )
+    return dataclass_to_table(params), props
+
+
+def robustness_jobs(maneuver: Maneuver, design: Design, model: VehicleConfig, *, vehicles: int, iterations: int,
+                    seed: int, ranges: RobustnessRanges | None = None, rule: RuleChoice | None = None,
+                    tolerance_m: float = 0.12) -> list[Job]:
+    """One learning job per sampled vehicle; vehicle k's sample and arena seed derive from ``seed`` and k."""
+    ranges = ranges or RobustnessRanges()
+    rule = rule or RuleChoice()
+    design_table = {k: v for k, v in design.to_json_dict().items() if k != "maneuver"}
+    jobs = []
+    for k in range(vehicles):
+        sample_seed = seed * 1_000_003 + k
+        arena, props = sample_arena(ranges, sample_seed)
+        plant = {"kind": "arena", "settings": arena, "seed": sample_seed}
+        jobs.append(Job(key=f"vehicle-{k:05d}", kind="learn", spec={
+            "maneuver": maneuver.spec(), "design": design_table, "model": vehicle_table(model), "plant": plant,
+            "properties": props, "iterations": iterations, "rule": rule.label, "tolerance_m": tolerance_m,
+        }))
+    return jobs
+
+
+@dataclass(frozen=True)
+class RobustnessSummary:
+    vehicles: int
+    completed: int
+    success_rate: float
+    median_trials_to_tolerance: float
+    trials_to_tolerance: list[int | None]
+    final_errors_m: list[float]
+    predictors: list[tuple[str, float]] = field(default_factory=list)
+
+
+def summarize_robustness(results: list[dict[str, Any]]) -> RobustnessSummary:
+    """Success rate, trials-to-tolerance distribution, and which properties predict failure.
+
+    A property's predictive strength is the (point-biserial) correlation between the
+    property and failure, listed strongest first.
+    """
+    done = list(results)
+    success = np.array([bool(r.get("success")) for r in done])
+    ttt = [r.get("trials_to_tolerance") for r in done]
+    reached = [t for t in ttt if t is not None]
+    predictors: list[tuple[str, float]] = []
+    if len(done) >= 3 and 0 < success.sum() < len(done):
+        for name in SAMPLED_PROPERTIES:
+            values = np.array([r["properties"].get(name, math.nan) for r in done], dtype=float)
+            if np.all(np.isfinite(values)) and values.std() > 0:
+                predictors.append((name, float(np.corrcoef(values, ~success)[0, 1])))
+        predictors.sort(key=lambda p: -abs(p[1]))
+    return RobustnessSummary(
+        vehicles=len(results),
+        completed=len(done),
+        success_rate=float(success.mean()) if len(done) else math.nan,
+        median_trials_to_tolerance=float(np.median(reached)) if reached else math.nan,
+        trials_to_tolerance=ttt,
+        final_errors_m=[float(r.get("final_error_m", math.nan)) for r in done],
+        predictors=predictors,
+    )

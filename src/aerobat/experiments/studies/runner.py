@@ -1,0 +1,170 @@
+"""Running a study: its jobs on an executor, every result (or failure) committed as it arrives.
+
+A study is a row in the store and a list of jobs. :func:`run_study` submits the
+jobs not yet done (failed ones run again), records each outcome as soon as it
+arrives — a learning run also as a session linked to the study — and returns a
+:class:`StudyOutcome` that lists every failure with its error. Nothing is
+filtered: a report built from it shows what ran, what was skipped and what failed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from aerobat.core.design import Design
+from aerobat.core.registry import from_spec
+from aerobat.core.rules import RuleChoice
+from aerobat.errors import ConfigError
+from aerobat.experiments.execution import Executor, Job, JobResult, make_executor
+from aerobat.experiments.setup import plant_record_config
+from aerobat.plants import PlantChoice
+from aerobat.store import Store
+
+__all__ = ["FailedJob", "StudyOutcome", "run_study"]
+
+
+@dataclass(frozen=True)
+class FailedJob:
+    """A job that raised: its key, its method or label, and the error."""
+
+    key: str
+    label: str
+    error: str
+
+
+@dataclass(frozen=True)
+class StudyOutcome:
+    """What :func:`run_study` did.
+
+    Attributes
+    ----------
+    study_id : the study's id in the store.
+    total : jobs in the study.
+    ran, skipped : jobs run now, and jobs already done before (resumed studies).
+    failed : every job that is failed now (run now or earlier), with its error.
+    results : results of every done job, by key.
+    """
+
+    study_id: int
+    total: int
+    ran: int
+    skipped: int
+    failed: tuple[FailedJob, ...]
+    results: dict[str, dict[str, Any]]
+
+    @property
+    def ok(self) -> bool:
+        return not self.failed
+
+
+Progress = Callable[[int, int, Job, JobResult], None]
+"""``progress(done, total, job, result)``, called as each job's outcome is committed."""
+
+
+def _label(job: Job) -> str:
+    return str(job.spec.get("method", job.kind))
+
+
+def _record(store: Store, study_id: int, job: Job, outcome: JobResult) -> None:
+    """Commit one job's outcome; a finished learning run also becomes a session, in the same transaction."""
+    iterations = outcome.result.get("iterations") if outcome.done else None
+    spec = job.spec
+    if not iterations or not all(k in spec for k in ("maneuver", "design", "model", "plant")):
+        store.record_study_job(study_id, job.key, spec, outcome.result, status=outcome.status.value,
+                               error=outcome.error)
+        return
+    source = f"study {study_id} job {job.key}"
+    maneuver = from_spec(spec["maneuver"], source=f"{source} maneuver")
+    design = Design.from_json_dict(maneuver, spec["design"])
+    plant = PlantChoice.from_table(spec["plant"], source=f"{source} plant")
+    rule = RuleChoice.parse(str(spec.get("rule") or spec.get("method", "paper")), source=f"{source} rule")
+    nan = float("nan")
+    status = str(outcome.result.get("status", "completed"))
+    store.record_study_run(
+        study_id, job.key, spec, outcome.result,
+        session={"vehicle": spec["model"], "plant_kind": plant.kind, "plant_config": plant_record_config(plant),
+                 "maneuver": maneuver, "design": design, "seed": plant.seed, "rule": rule.to_table(),
+                 "target_iterations": max(1, int(spec.get("iterations", spec.get("trials", 1)))),
+                 "start_params": design.p_nominal, "command": ("study", str(study_id), job.key),
+                 "study_id": study_id},
+        iterations=[{
+            "index": int(it["i"]), "correction": int(it["correction"]), "status": str(it["status"]),
+            "params": np.asarray(it["params"], dtype=float), "next_params": np.asarray(it["next_params"], dtype=float),
+            "error": np.array([nan if v is None else v for v in it["error"]], dtype=float),
+            "gamma": float(it["gamma"]), "scale": float(it["scale"]), "message": str(it["message"]),
+        } for it in iterations],
+        state=status if status in ("completed", "crashed", "aborted", "failed", "interrupted") else "failed",
+        message=str(outcome.result.get("message", status)))
+
+
+def run_study(
+    store: Store,
+    kind: str,
+    spec: Mapping[str, Any],
+    jobs: Sequence[Job],
+    *,
+    resume: int | str | None = None,
+    executor: Executor | None = None,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    progress: Progress | None = None,
+    on_start: Callable[[int, int, int], None] | None = None,
+    command: Sequence[str] = (),
+) -> StudyOutcome:
+    """Run the study's jobs that are not done yet; commit each outcome as it arrives.
+
+    Parameters
+    ----------
+    store : where the study, its jobs and their sessions go.
+    kind, spec : what the study is (``spec`` is compared on resume).
+    jobs : all of the study's jobs.
+    resume : continue this study (id or ``last``) instead of creating one.
+    executor : run the jobs here (default: :func:`make_executor` with ``workers``/``scheduler``).
+    progress : called after each committed outcome.
+    on_start : ``on_start(study_id, to_run, already_done)`` before the first job is submitted.
+    command : the command line, kept with the study.
+    """
+    keys = [job.key for job in jobs]
+    if len(set(keys)) != len(keys):
+        raise ConfigError(f"study {kind}: job keys repeat")
+    if resume is not None:
+        study_id = store.resolve_study(resume)
+        record = store.study(study_id)
+        if record.kind != kind:
+            raise ConfigError(f"--resume {study_id}: study {study_id} is a {record.kind} study, not {kind}")
+        if _canonical(record.spec) != _canonical(spec):
+            raise ConfigError(f"--resume {study_id}: the command line describes another {kind} study than "
+                              f"study {study_id}; give the same options (see `aerobat studies show {study_id}`)")
+    else:
+        study_id = store.create_study(kind, spec, command=command)
+    done = store.finished_study_jobs(study_id)
+    todo = [job for job in jobs if job.key not in done]
+    if on_start is not None:
+        on_start(study_id, len(todo), len(jobs) - len(todo))
+    own = executor is None
+    runner = make_executor(scheduler=scheduler, workers=workers) if executor is None else executor
+    count = len(jobs) - len(todo)
+    try:
+        for job, outcome in runner.run(todo):
+            _record(store, study_id, job, outcome)
+            count += 1
+            if progress is not None:
+                progress(count, len(jobs), job, outcome)
+    finally:
+        if own:
+            runner.close()
+    by_key = {job.key: job for job in jobs}
+    failed = tuple(FailedJob(j.key, _label(by_key[j.key]) if j.key in by_key else j.key, j.error or "failed")
+                   for j in store.study_jobs(study_id) if j.status == "failed")
+    return StudyOutcome(study_id, len(jobs), len(todo), len(jobs) - len(todo), failed,
+                        store.study_results(study_id))
+
+
+def _canonical(value: Any) -> str:
+    import json
+
+    return json.dumps(json.loads(json.dumps(value, default=str)), sort_keys=True)

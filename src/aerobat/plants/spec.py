@@ -1,0 +1,132 @@
+"""Plants by name: a :class:`PlantSpec` per kind, and :class:`PlantChoice`, the edge form users write.
+
+A choice is a plant kind, its settings (a dataclass, or None for none) and a seed.
+``PlantChoice.to_table()`` is what the store and the study jobs keep — the
+settings' *content*, never a path — so a stored session or a job on another
+machine builds the same plant.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from aerobat.core.plant import Plant
+from aerobat.core.registry import Registry
+from aerobat.errors import ConfigError, MissingDependency
+from aerobat.quadrotor.vehicle import VehicleConfig
+
+__all__ = ["PLANTS", "PlantChoice", "PlantSpec"]
+
+
+@dataclass(frozen=True)
+class PlantSpec:
+    """How to build one kind of plant.
+
+    Attributes
+    ----------
+    name : what users write (``"arena"``).
+    summary : one line for listings.
+    build : ``build(config, settings, seed) -> plant``; ``config`` is the nominal vehicle.
+    load_settings : ``load_settings(path) -> settings`` from a TOML file (None: the kind takes no file).
+    settings_from_table, settings_to_table : the settings' stored form and back (None: no settings).
+    default_settings : the settings used when no file is given.
+    requires : ``(module, extra)`` pairs of optional packages the plant needs.
+    option : the command-line option that takes the settings file (``--arena``).
+    """
+
+    name: str
+    summary: str
+    build: Callable[[VehicleConfig, Any, int], Plant]
+    load_settings: Callable[[str | Path], Any] | None = None
+    settings_from_table: Callable[[Mapping[str, Any], str], Any] | None = None
+    settings_to_table: Callable[[Any], dict[str, Any]] | None = None
+    default_settings: Callable[[], Any] | None = None
+    requires: tuple[tuple[str, str], ...] = ()
+    option: str | None = None
+
+    def check_available(self) -> None:
+        """Raise :class:`MissingDependency` with the install hint if a required package is missing."""
+        for module, extra in self.requires:
+            try:
+                importlib.import_module(module)
+            except ImportError as exc:
+                raise MissingDependency(module, extra=extra, purpose=f"the {self.name} plant",
+                                        detail=str(exc)) from None
+
+
+PLANTS: Registry[PlantSpec] = Registry("plant", "aerobat.plants")
+
+
+@dataclass(frozen=True)
+class PlantChoice:
+    """Which plant flies: its kind, its settings and its seed.
+
+    Attributes
+    ----------
+    kind : a registered plant (:data:`PLANTS`).
+    settings : the kind's settings (e.g. :class:`~aerobat.plants.arena.ArenaParams`), or None for defaults.
+    seed : seeds the plant's random generator.
+    """
+
+    kind: str = "arena"
+    settings: Any = field(default=None, compare=False)
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        spec = PLANTS.get(self.kind, source="plant")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed < 2**63:
+            raise ConfigError(f"plant seed {self.seed!r}: expected an integer in [0, 2^63)")
+        if self.settings is None and spec.default_settings is not None:
+            object.__setattr__(self, "settings", spec.default_settings())
+
+    @property
+    def spec(self) -> PlantSpec:
+        return PLANTS.get(self.kind, source="plant")
+
+    @classmethod
+    def from_file(cls, kind: str, path: str | Path | None, *, seed: int = 0) -> PlantChoice:
+        """The plant ``kind`` with settings read from ``path`` (None: defaults)."""
+        spec = PLANTS.get(kind, source="--plant")
+        if path is None:
+            return cls(kind, None, seed)
+        if spec.load_settings is None:
+            raise ConfigError(f"--plant {kind} takes no settings file (got {path})")
+        return cls(kind, spec.load_settings(path), seed)
+
+    def settings_table(self) -> dict[str, Any]:
+        """The settings as a JSON-ready table ({} when the kind has none)."""
+        spec = self.spec
+        if spec.settings_to_table is None or self.settings is None:
+            return {}
+        return spec.settings_to_table(self.settings)
+
+    def to_table(self) -> dict[str, Any]:
+        """``{"kind", "settings", "seed"}``, JSON-ready."""
+        return {"kind": self.kind, "settings": self.settings_table(), "seed": self.seed}
+
+    @classmethod
+    def from_table(cls, table: Mapping[str, Any], *, source: str) -> PlantChoice:
+        """Inverse of :meth:`to_table`."""
+        if not isinstance(table, Mapping) or not isinstance(table.get("kind"), str):
+            raise ConfigError(f"{source}: expected a plant table with a kind, got {table!r}")
+        spec = PLANTS.get(table["kind"], source=source)
+        settings = None
+        stored = table.get("settings") or {}
+        if stored:
+            if spec.settings_from_table is None:
+                raise ConfigError(f"{source}: plant {spec.name} takes no settings")
+            settings = spec.settings_from_table(stored, f"{source}.settings")
+        return cls(spec.name, settings, int(table.get("seed", 0)))
+
+    def build(self, config: VehicleConfig) -> Plant:
+        """The plant, flying a true vehicle around the nominal ``config``."""
+        spec = self.spec
+        spec.check_available()
+        return spec.build(config, self.settings, self.seed)
+
+    def __repr__(self) -> str:
+        return f"PlantChoice({self.kind!r}, seed={self.seed})"

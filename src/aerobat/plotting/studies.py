@@ -1,0 +1,98 @@
+"""Figures of studies: robustness over sampled vehicles, design envelopes, update rules side by side."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from aerobat.core.figures import new_axes
+from aerobat.plotting.files import new_figure
+
+__all__ = ["plot_envelope", "plot_rules", "plot_success_by_property", "plot_trials_to_tolerance"]
+
+
+def plot_trials_to_tolerance(trials_to_tolerance: Sequence[int | None], tolerance_m: float, *, ax: Any = None) -> Any:
+    """Histogram of the trial at which each vehicle first met the tolerance (None: never)."""
+    fig, ax = new_axes(ax, figsize=(6, 4))
+    reached = [t for t in trials_to_tolerance if t is not None]
+    if reached:
+        ax.hist(reached, bins=[float(b) for b in np.arange(0.5, max(reached) + 1.5)], color="C0")
+    never = sum(1 for t in trials_to_tolerance if t is None)
+    ax.set_xlabel(f"trials until the position error first falls below {tolerance_m:g} m")
+    ax.set_ylabel("vehicles")
+    ax.set_title(f"{len(reached)} reached the tolerance, {never} never did")
+    return fig
+
+
+def plot_success_by_property(properties: Sequence[Mapping[str, float]], success: Sequence[bool],
+                             names: Sequence[str]) -> Any:
+    """Success rate per quintile of each sampled property (one panel per property)."""
+    ok = np.asarray(success, dtype=bool)
+    cols = 4
+    rows = math.ceil(len(names) / cols)
+    fig = new_figure(figsize=(3.2 * cols, 2.6 * rows))
+    axes = np.ravel(fig.subplots(rows, cols))
+    for ax, name in zip(axes, names, strict=False):
+        values = np.array([p[name] for p in properties], dtype=float)
+        edges = np.unique(np.quantile(values, np.linspace(0, 1, 6))) if values.size else np.array([])
+        if len(edges) < 2:
+            ax.set_title(f"{name} (constant)", fontsize=8)
+            continue
+        which = np.clip(np.searchsorted(edges, values, side="right") - 1, 0, len(edges) - 2)
+        rate = [ok[which == k].mean() if np.any(which == k) else np.nan for k in range(len(edges) - 1)]
+        centers = 0.5 * (edges[1:] + edges[:-1])
+        ax.plot(centers, np.array(rate) * 100, "o-")
+        ax.set_title(name, fontsize=8)
+        ax.set_ylim(-5, 105)
+        ax.set_ylabel("success [%]", fontsize=8)
+    for ax in axes[len(names):]:
+        ax.axis("off")
+    return fig
+
+
+_ENVELOPE_TITLES = {"feasible": "design converged (1) or not (0)", "duration_s": "hover-to-hover duration [s]",
+                    "apex_m": "apex height above the start [m]",
+                    "condition_number": "condition number of J (log10)"}
+
+
+def plot_envelope(name: str, flips: Sequence[int], rates_deg_s: Sequence[float], values: np.ndarray, *,
+                  ax: Any = None) -> Any:
+    """One quantity of a design envelope over (flip count, max rate); ``name`` picks the title."""
+    fig, ax = new_axes(ax, figsize=(6, 3.5))
+    data = np.log10(values) if name == "condition_number" else np.asarray(values, dtype=float)
+    image = ax.imshow(data, origin="lower", aspect="auto", cmap="viridis",
+                      extent=(rates_deg_s[0], rates_deg_s[-1], flips[0] - 0.5, flips[-1] + 0.5))
+    fig.colorbar(image, ax=ax)
+    ax.set_xlabel("max rate [deg/s]")
+    ax.set_ylabel("flips")
+    ax.set_title(_ENVELOPE_TITLES.get(name, name))
+    return fig
+
+
+def plot_rules(curves: Mapping[str, Sequence[Sequence[float]]], trials: int, tolerance_m: float, *,
+               ax: Any = None) -> Any:
+    """Median and quartiles of the position error per trial, one line per method."""
+    fig, ax = new_axes(ax, figsize=(8, 5))
+    x = np.arange(1, trials + 1)
+    for k, (method, runs) in enumerate(curves.items()):
+        if not runs:
+            continue
+        data = np.full((len(runs), trials), np.nan)
+        for i, c in enumerate(runs):
+            data[i, : min(trials, len(c))] = c[:trials]
+        if np.all(np.isnan(data)):
+            continue
+        with np.errstate(all="ignore"):
+            med = np.nanmedian(data, axis=0)
+            q1, q3 = np.nanpercentile(data, 25, axis=0), np.nanpercentile(data, 75, axis=0)
+        ax.plot(x, med, color=f"C{k}", label=method)
+        ax.fill_between(x, q1, q3, color=f"C{k}", alpha=0.15)
+    ax.axhline(tolerance_m, color="k", lw=0.8, ls="--")
+    ax.set_yscale("log")
+    ax.set_xlabel("trial")
+    ax.set_ylabel("position error [m] (median, quartiles)")
+    ax.legend(fontsize=8)
+    return fig

@@ -1,0 +1,336 @@
+"""Command programs: the onboard "command generator" of Sect. 10.2.
+
+A program is a list of switches — time, channel, value — exactly as the paper's
+vehicles store maneuvers onboard. Channels:
+
+==================  =====  ==========================================================
+``collective``      m/s²   mass-normalized collective thrust command f̂/m
+``rate_p/q/r``      rad/s  body-rate command offsets p̂, q̂, r̂
+``accel_p/q/r``     rad/s² body angular accelerations, integrated from 0 into rates
+==================  =====  ==========================================================
+
+Each channel holds the value of its latest switch (zero-order). Before a
+channel's first switch it holds its hover value (collective g, everything else
+0). The body-rate command on an axis is ``rate_x(t) + ∫_0^t accel_x dτ`` (Sect. 8
+defines flips by accelerations, Sect. 9 translations by rates).
+
+Ramp-downs (Sect. 7.2) are envelopes over the last ``collective_s`` /
+``rates_s`` seconds of the program that pull the command linearly to its hover
+value, reaching it exactly at ``duration_s``:
+``cmd(t) = hover + w(t)·(raw(t) − hover)``, ``w(t) = min(1, (T − t)/T_ramp)``.
+
+For integration a program is compiled to *segments*: breakpoints
+``t_0 = 0 < … < t_K = T`` and, per segment and channel (collective, p̂, q̂, r̂),
+quadratic coefficients in local time ``τ = t − t_k``. Every command value the
+simulator uses comes from those coefficients, so continuous-time and sampled
+playback read the same program.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import tomli_w
+
+from aerobat.config import read_toml
+from aerobat.errors import ConfigError
+
+__all__ = [
+    "CHANNELS",
+    "CompiledProgram",
+    "Program",
+    "RampDown",
+    "Switch",
+    "load_program",
+    "save_program",
+]
+
+CHANNELS = ("collective", "rate_p", "rate_q", "rate_r", "accel_p", "accel_q", "accel_r")
+CHANNEL_UNITS = {
+    "collective": "m/s²",
+    "rate_p": "rad/s",
+    "rate_q": "rad/s",
+    "rate_r": "rad/s",
+    "accel_p": "rad/s²",
+    "accel_q": "rad/s²",
+    "accel_r": "rad/s²",
+}
+# Generous sanity bounds: a value outside them is a unit mistake, not a maneuver.
+CHANNEL_LIMITS = {"collective": (0.0, 200.0), "rate": (-100.0, 100.0), "accel": (-1e4, 1e4)}
+MAX_DURATION_S = 600.0
+
+
+def _channel_limits(channel: str) -> tuple[float, float]:
+    return CHANNEL_LIMITS[channel.split("_")[0]]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Switch:
+    """At ``time_s`` [s], set ``channel`` to ``value`` (units per channel, see module doc)."""
+
+    time_s: float
+    channel: str
+    value: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class RampDown:
+    """Ramp-down envelopes to hover over the program's last seconds (Sect. 7.2).
+
+    Attributes
+    ----------
+    collective_s : ramp duration for the collective command [s]; 0 disables it.
+    rates_s : ramp duration for the body-rate commands [s]; 0 disables it.
+    """
+
+    collective_s: float = 0.0
+    rates_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("collective_s", "rates_s"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise ConfigError(f"ramp_down.{name} must be a number, got {value!r}")
+            if not math.isfinite(value) or value < 0:
+                raise ConfigError(f"ramp_down.{name} = {value!r} is out of range: allowed >= 0 (s)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Program:
+    """A maneuver program: switches on command channels over ``[0, duration_s]``.
+
+    Attributes
+    ----------
+    switches : the switch list; order does not matter, it is sorted on compile.
+    duration_s : end of the maneuver [s]; after it the vehicle's supervisor takes over.
+    ramp_down : ramp-down envelopes (Sect. 7.2).
+    hover_collective_m_s2 : the collective hover value that ramps approach [m/s²].
+    name : free text.
+    """
+
+    switches: tuple[Switch, ...]
+    duration_s: float
+    ramp_down: RampDown = field(default_factory=RampDown)
+    hover_collective_m_s2: float = 9.81
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        if isinstance(self.duration_s, bool) or not isinstance(self.duration_s, int | float):
+            raise ConfigError(f"duration_s must be a number, got {self.duration_s!r}")
+        if not math.isfinite(self.duration_s) or not 0.0 < self.duration_s <= MAX_DURATION_S:
+            raise ConfigError(f"duration_s = {self.duration_s} is out of range: allowed (0, {MAX_DURATION_S:g}] (s)")
+        if isinstance(self.hover_collective_m_s2, bool) or not isinstance(self.hover_collective_m_s2, int | float):
+            raise ConfigError(f"hover_collective_m_s2 must be a number, got {self.hover_collective_m_s2!r}")
+        if not math.isfinite(self.hover_collective_m_s2) or self.hover_collective_m_s2 <= 0:
+            raise ConfigError(f"hover_collective_m_s2 = {self.hover_collective_m_s2} must be finite and > 0 (m/s²)")
+        seen: dict[tuple[str, float], int] = {}
+        for index, sw in enumerate(self.switches):
+            where = f"switch {index}"
+            if not isinstance(sw, Switch):
+                raise ConfigError(f"{where}: expected a Switch, got {type(sw).__name__}")
+            if sw.channel not in CHANNELS:
+                raise ConfigError(f"{where}: unknown channel {sw.channel!r}; allowed: {', '.join(CHANNELS)}")
+            for attr in ("time_s", "value"):
+                v = getattr(sw, attr)
+                if isinstance(v, bool) or not isinstance(v, int | float):
+                    raise ConfigError(f"{where}: {attr} must be a number, got {v!r}")
+                if not math.isfinite(v):
+                    raise ConfigError(f"{where} ({sw.channel}): {attr} = {v} is not finite")
+            if sw.time_s < 0:
+                raise ConfigError(f"{where} ({sw.channel}): time_s = {sw.time_s:g} is negative; "
+                                  f"allowed [0, duration_s)")
+            if sw.time_s >= self.duration_s:
+                raise ConfigError(
+                    f"{where} ({sw.channel}): time_s = {sw.time_s:g} is at or after the program end "
+                    f"duration_s = {self.duration_s:g}; allowed [0, duration_s)"
+                )
+            low, high = _channel_limits(sw.channel)
+            if not low <= sw.value <= high:
+                raise ConfigError(
+                    f"{where} ({sw.channel}): value = {sw.value:g} is out of range: allowed "
+                    f"[{low:g}, {high:g}] ({CHANNEL_UNITS[sw.channel]})"
+                )
+            key = (sw.channel, float(sw.time_s))
+            if key in seen:
+                raise ConfigError(
+                    f"{where} ({sw.channel}): overlaps switch {seen[key]} — two switches on one channel at "
+                    f"time_s = {sw.time_s:g}"
+                )
+            seen[key] = index
+
+    def compile(self) -> CompiledProgram:
+        """Segment breakpoints and per-segment polynomial command coefficients."""
+        return _compile(self)
+
+    def commands_at(self, times_s: np.ndarray) -> np.ndarray:
+        """Exact commands (collective, p̂, q̂, r̂) at ``times_s`` [s]; shape (N, 4). Hover after the end."""
+        return self.compile().evaluate(np.asarray(times_s, dtype=float))
+
+
+@dataclass(frozen=True)
+class CompiledProgram:
+    """Piecewise-polynomial form of a program, ready for the compiled kernels.
+
+    Attributes
+    ----------
+    breakpoints_s : (K+1,) segment boundaries, 0 … duration [s].
+    coefficients : (K, 4, 3) per segment, channel (collective, p̂, q̂, r̂) and power of τ.
+    hover : (4,) commands the supervisor holds after the program ends.
+    """
+
+    breakpoints_s: np.ndarray
+    coefficients: np.ndarray
+    hover: np.ndarray
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.breakpoints_s[-1])
+
+    def evaluate(self, times_s: np.ndarray) -> np.ndarray:
+        times_s = np.atleast_1d(times_s)
+        out = np.empty((times_s.size, 4))
+        bp = self.breakpoints_s
+        k = np.clip(np.searchsorted(bp, times_s, side="right") - 1, 0, len(bp) - 2)
+        tau = times_s - bp[k]
+        c = self.coefficients[k]
+        out[:] = c[:, :, 0] + tau[:, None] * (c[:, :, 1] + tau[:, None] * c[:, :, 2])
+        after = times_s >= bp[-1]
+        out[after] = self.hover
+        return out
+
+
+def _compile(program: Program) -> CompiledProgram:
+    T = float(program.duration_s)
+    ramp_c = float(program.ramp_down.collective_s)
+    ramp_r = float(program.ramp_down.rates_s)
+    times = {0.0, T}
+    for sw in program.switches:
+        times.add(float(sw.time_s))
+    for ramp in (ramp_c, ramp_r):
+        if 0.0 < ramp < T:
+            times.add(T - ramp)
+    bp = np.array(sorted(times))
+    K = len(bp) - 1
+    ordered = sorted(program.switches, key=lambda s: (s.time_s, CHANNELS.index(s.channel)))
+    g = program.hover_collective_m_s2
+    value = {"collective": g, "rate_p": 0.0, "rate_q": 0.0, "rate_r": 0.0,
+             "accel_p": 0.0, "accel_q": 0.0, "accel_r": 0.0}
+    integral = [0.0, 0.0, 0.0]  # ∫ accel up to the current segment start
+    rows: list[list[float]] = []  # plain floats: this runs inside every design iteration
+    breaks = bp.tolist()
+    j = 0
+    for k in range(K):
+        t0, t1 = breaks[k], breaks[k + 1]
+        while j < len(ordered) and ordered[j].time_s <= t0:
+            value[ordered[j].channel] = float(ordered[j].value)
+            j += 1
+        wc0, wc1 = _envelope(t0, T, ramp_c)
+        wr0, wr1 = _envelope(t0, T, ramp_r)
+        raw_c = value["collective"]
+        row = [g + wc0 * (raw_c - g), wc1 * (raw_c - g), 0.0]
+        for axis, name in enumerate("pqr"):
+            accel = value["accel_" + name]
+            rate0 = value["rate_" + name] + integral[axis]
+            row += [wr0 * rate0, wr0 * accel + wr1 * rate0, wr1 * accel]
+            integral[axis] += accel * (t1 - t0)
+        rows.append(row)
+    coeffs = np.array(rows, dtype=float).reshape(K, 4, 3)
+    return CompiledProgram(bp, coeffs, np.array([g, 0.0, 0.0, 0.0]))
+
+
+def _envelope(t0: float, T: float, ramp: float) -> tuple[float, float]:
+    """Ramp envelope w(t0 + τ) = w0 + w1 τ on a segment starting at t0 (breakpoints include T − ramp)."""
+    if ramp <= 0.0 or t0 < T - ramp - 1e-15:
+        return 1.0, 0.0
+    return (T - t0) / ramp, -1.0 / ramp
+
+
+# ---------------------------------------------------------------------------- TOML
+
+
+def program_to_table(program: Program) -> dict[str, Any]:
+    return {
+        "program": {
+            "name": program.name,
+            "duration_s": program.duration_s,
+            "hover_collective_m_s2": program.hover_collective_m_s2,
+            "ramp_down": {"collective_s": program.ramp_down.collective_s, "rates_s": program.ramp_down.rates_s},
+        },
+        "switch": [{"time_s": s.time_s, "channel": s.channel, "value": s.value} for s in program.switches],
+    }
+
+
+def save_program(program: Program, path: str | Path) -> None:
+    """Write ``program`` as TOML (``[program]`` header and ``[[switch]]`` entries)."""
+    Path(path).write_text(tomli_w.dumps(program_to_table(program)))
+
+
+def program_from_table(data: dict[str, Any], *, source: str) -> Program:
+    unknown = sorted(set(data) - {"program", "switch"})
+    if unknown:
+        raise ConfigError(f"{source}: unknown table(s) {', '.join(unknown)}; allowed: [program], [[switch]]")
+    header = data.get("program")
+    if not isinstance(header, dict):
+        raise ConfigError(f"{source}: missing required table [program] (with duration_s)")
+    allowed = {"name", "duration_s", "hover_collective_m_s2", "ramp_down"}
+    bad = sorted(set(header) - allowed)
+    if bad:
+        raise ConfigError(
+            f"{source}: [program] unknown field(s) {', '.join(bad)}; allowed: {', '.join(sorted(allowed))}"
+        )
+    if "duration_s" not in header:
+        raise ConfigError(f"{source}: [program] missing required field duration_s")
+    ramp_table = header.get("ramp_down", {})
+    if not isinstance(ramp_table, dict):
+        raise ConfigError(f"{source}: [program.ramp_down] must be a table")
+    bad = sorted(set(ramp_table) - {"collective_s", "rates_s"})
+    if bad:
+        raise ConfigError(
+            f"{source}: [program.ramp_down] unknown field(s) {', '.join(bad)}; allowed: collective_s, rates_s"
+        )
+    switches_raw = data.get("switch", [])
+    if not isinstance(switches_raw, list):
+        raise ConfigError(f"{source}: 'switch' must be an array of tables ([[switch]])")
+    switches = []
+    for index, entry in enumerate(switches_raw):
+        where = f"{source}: switch {index}"
+        if not isinstance(entry, dict):
+            raise ConfigError(f"{where}: expected a table")
+        missing = [k for k in ("time_s", "channel", "value") if k not in entry]
+        if missing:
+            raise ConfigError(f"{where}: missing required field(s) {', '.join(missing)}")
+        extra = sorted(set(entry) - {"time_s", "channel", "value"})
+        if extra:
+            raise ConfigError(f"{where}: unknown field(s) {', '.join(extra)}; allowed: time_s, channel, value")
+        for key in ("time_s", "value"):
+            if isinstance(entry[key], bool) or not isinstance(entry[key], int | float):
+                raise ConfigError(f"{where}: {key} must be a number, got {entry[key]!r}")
+        if not isinstance(entry["channel"], str):
+            raise ConfigError(f"{where}: channel must be a string, got {entry['channel']!r}")
+        switches.append(Switch(time_s=float(entry["time_s"]), channel=entry["channel"], value=float(entry["value"])))
+    try:
+        for key in ("duration_s", "hover_collective_m_s2"):
+            if key in header and (isinstance(header[key], bool) or not isinstance(header[key], int | float)):
+                raise ConfigError(f"[program] {key} must be a number, got {header[key]!r}")
+        name = header.get("name", "")
+        if not isinstance(name, str):
+            raise ConfigError(f"[program] name must be a string, got {name!r}")
+        return Program(
+            switches=tuple(switches),
+            duration_s=float(header["duration_s"]),
+            ramp_down=RampDown(**{k: float(v) if not isinstance(v, bool) and isinstance(v, int | float) else v
+                                  for k, v in ramp_table.items()}),
+            hover_collective_m_s2=float(header.get("hover_collective_m_s2", 9.81)),
+            name=name,
+        )
+    except (ValueError, TypeError) as exc:
+        raise ConfigError(f"{source}: {exc}") from None
+
+
+def load_program(path: str | Path) -> Program:
+    """Read a program TOML file; errors name the file, switch and field."""
+    return program_from_table(read_toml(path), source=str(path))

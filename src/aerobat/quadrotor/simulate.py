@@ -1,0 +1,388 @@
+"""Simulation: play a program on a vehicle and return its trajectory.
+
+Two playback modes of the same compiled program:
+
+* ``"continuous"`` — the paper's continuous-time model (Sect. 6): the rate
+  controller acts continuously and the program is evaluated exactly at every
+  RK4 stage. Integration steps land exactly on every breakpoint (switch times,
+  ramp starts). This is the design model.
+* ``"sampled"`` — what an onboard command generator does: every ``tick_s``
+  (1/800 s by default) the program is sampled, the controller computes motor
+  commands from the gyro, and both are held (zero-order hold) until the next tick.
+
+The kernels are compiled with numba and allocate nothing inside their loops;
+:func:`simulate_batch` runs many (program, vehicle) pairs in parallel threads.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numba as nb
+import numpy as np
+
+from aerobat.errors import ConfigError
+from aerobat.quadrotor.dynamics import (
+    N_PLANT,
+    N_STATE,
+    POS,
+    VEL,
+    controller_thrusts,
+    controller_vector,
+    euler_zyx,
+    hover_state,
+    normalize_quaternion,
+    plant_derivative,
+    plant_vector,
+    rotation_angles,
+)
+from aerobat.quadrotor.program import CompiledProgram, Program
+from aerobat.quadrotor.vehicle import VehicleConfig
+
+__all__ = ["NominalModel", "Trajectory", "final_state_summary", "simulate", "simulate_batch"]
+
+Mode = Literal["continuous", "sampled"]
+DEFAULT_MAX_STEP_S = 5e-4
+DEFAULT_TICK_S = 1.0 / 800.0
+
+
+# --------------------------------------------------------------------- kernels
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _command(coeffs, k, tau, cmd):  # pragma: no cover - compiled
+    for ch in range(4):
+        cmd[ch] = coeffs[k, ch, 0] + tau * (coeffs[k, ch, 1] + tau * coeffs[k, ch, 2])
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _closed_loop_derivative(t, x, cmd, plant, ctrl, ft, dx):  # pragma: no cover - compiled
+    controller_thrusts(cmd, x[10], x[11], x[12], ctrl, ft)
+    plant_derivative(t, x, ft, plant, dx)
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def _run_continuous(x, bp, coeffs, nseg, plant, ctrl, max_step, rec_t, rec_x, rec_u):  # pragma: no cover
+    """Continuous-time playback; ``x`` is advanced in place. Records every step if rec_t is non-empty."""
+    n = x.shape[0]
+    k1 = np.empty(n)
+    k2 = np.empty(n)
+    k3 = np.empty(n)
+    k4 = np.empty(n)
+    tmp = np.empty(n)
+    cmd0 = np.empty(4)
+    cmdm = np.empty(4)
+    cmd1 = np.empty(4)
+    ft = np.empty(4)
+    record = rec_t.shape[0] > 0
+    idx = 0
+    if record:
+        _command(coeffs, 0, 0.0, cmd0)
+        rec_t[0] = bp[0]
+        rec_x[0, :] = x
+        rec_u[0, :] = cmd0
+        idx = 1
+    for k in range(nseg):
+        t0 = bp[k]
+        length = bp[k + 1] - t0
+        m = max(1, int(math.ceil(length / max_step - 1e-9)))
+        h = length / m
+        for i in range(m):
+            tau = i * h
+            t = t0 + tau
+            _command(coeffs, k, tau, cmd0)
+            _command(coeffs, k, tau + 0.5 * h, cmdm)
+            _command(coeffs, k, tau + h, cmd1)
+            _closed_loop_derivative(t, x, cmd0, plant, ctrl, ft, k1)
+            for j in range(n):
+                tmp[j] = x[j] + 0.5 * h * k1[j]
+            _closed_loop_derivative(t + 0.5 * h, tmp, cmdm, plant, ctrl, ft, k2)
+            for j in range(n):
+                tmp[j] = x[j] + 0.5 * h * k2[j]
+            _closed_loop_derivative(t + 0.5 * h, tmp, cmdm, plant, ctrl, ft, k3)
+            for j in range(n):
+                tmp[j] = x[j] + h * k3[j]
+            _closed_loop_derivative(t + h, tmp, cmd1, plant, ctrl, ft, k4)
+            for j in range(n):
+                x[j] += h / 6.0 * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
+            normalize_quaternion(x)
+            if record:
+                rec_t[idx] = t0 + (i + 1) * h if i + 1 < m else bp[k + 1]
+                rec_x[idx, :] = x
+                rec_u[idx, :] = cmd1
+                idx += 1
+    return idx
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def rk4_plant_step(t, x, ft, plant, h, k1, k2, k3, k4, tmp):  # pragma: no cover - compiled
+    """One RK4 step of the plant with motor commands ``ft`` held constant."""
+    n = x.shape[0]
+    plant_derivative(t, x, ft, plant, k1)
+    for j in range(n):
+        tmp[j] = x[j] + 0.5 * h * k1[j]
+    plant_derivative(t + 0.5 * h, tmp, ft, plant, k2)
+    for j in range(n):
+        tmp[j] = x[j] + 0.5 * h * k2[j]
+    plant_derivative(t + 0.5 * h, tmp, ft, plant, k3)
+    for j in range(n):
+        tmp[j] = x[j] + h * k3[j]
+    plant_derivative(t + h, tmp, ft, plant, k4)
+    for j in range(n):
+        x[j] += h / 6.0 * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
+    normalize_quaternion(x)
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def _run_sampled(x, bp, coeffs, nseg, plant, ctrl, tick, substeps, rec_t, rec_x, rec_u):  # pragma: no cover
+    """Onboard playback: sample the program and run the controller every ``tick``; ZOH between."""
+    n = x.shape[0]
+    k1 = np.empty(n)
+    k2 = np.empty(n)
+    k3 = np.empty(n)
+    k4 = np.empty(n)
+    tmp = np.empty(n)
+    cmd = np.empty(4)
+    ft = np.empty(4)
+    end = bp[nseg]
+    record = rec_t.shape[0] > 0
+    idx = 0
+    k = 0
+    tick_index = 0
+    t = 0.0
+    while t < end - 1e-12:
+        while k < nseg - 1 and bp[k + 1] <= t + 1e-12:
+            k += 1
+        _command(coeffs, k, t - bp[k], cmd)
+        if record:
+            rec_t[idx] = t
+            rec_x[idx, :] = x
+            rec_u[idx, :] = cmd
+            idx += 1
+        controller_thrusts(cmd, x[10], x[11], x[12], ctrl, ft)
+        t_next = min((tick_index + 1) * tick, end)
+        h = (t_next - t) / substeps
+        for s in range(substeps):
+            rk4_plant_step(t + s * h, x, ft, plant, h, k1, k2, k3, k4, tmp)
+        tick_index += 1
+        t = t_next
+    if record:
+        rec_t[idx] = end
+        rec_x[idx, :] = x
+        rec_u[idx, :] = cmd
+        idx += 1
+    return idx
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", parallel=True)
+def _batch_continuous(x0, bp, coeffs, nseg, plant, ctrl, max_step, out):  # pragma: no cover - compiled
+    empty_t = np.empty(0)
+    empty_x = np.empty((0, x0.shape[1]))
+    empty_u = np.empty((0, 4))
+    for b in nb.prange(x0.shape[0]):
+        x = x0[b].copy()
+        _run_continuous(x, bp[b], coeffs[b], nseg[b], plant[b], ctrl[b], max_step, empty_t, empty_x, empty_u)
+        out[b, :] = x
+
+
+# ------------------------------------------------------------------- results
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """A simulated or measured trajectory.
+
+    Attributes
+    ----------
+    times_s : (N,) sample times [s].
+    states : (N, N_STATE) states (layout in :mod:`aerobat.dynamics`).
+    commands : (N, 4) commands at the samples: collective [m/s²], p̂, q̂, r̂ [rad/s].
+    mode : playback mode that produced it.
+    """
+
+    times_s: np.ndarray
+    states: np.ndarray
+    commands: np.ndarray
+    mode: str
+
+    @property
+    def final_state(self) -> np.ndarray:
+        return self.states[-1]
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.times_s[-1] - self.times_s[0])
+
+    def euler_zyx(self) -> np.ndarray:
+        """(N, 3) Euler angles φ, θ, ψ [rad] along the trajectory (eq 13)."""
+        return euler_zyx(self.states)
+
+    def rotation_angles(self) -> np.ndarray:
+        """(N, 3) unwrapped rotation angles about body x, y, z [rad]."""
+        return rotation_angles(self.states)
+
+
+def final_state_summary(state: np.ndarray, duration_s: float) -> dict:
+    """JSON-ready summary of one state: the keys ``aerobat simulate --json`` documents."""
+    state = np.asarray(state)
+    return {
+        "duration_s": float(duration_s),
+        "final_state": {
+            "position_m": [float(v) for v in state[POS]],
+            "velocity_m_s": [float(v) for v in state[VEL]],
+            "euler_zyx_rad": [float(v) for v in euler_zyx(state)],
+            "rotation_angle_rad": [float(v) for v in rotation_angles(state)],
+        },
+    }
+
+
+# --------------------------------------------------------------------- entry points
+
+
+def _steps(bp: np.ndarray, max_step: float) -> int:
+    lengths = np.diff(bp)
+    return int(np.maximum(1, np.ceil(lengths / max_step - 1e-9)).sum())
+
+
+def simulate(
+    program: Program | CompiledProgram,
+    config: VehicleConfig,
+    *,
+    initial_state: np.ndarray | None = None,
+    mode: Mode = "continuous",
+    max_step_s: float = DEFAULT_MAX_STEP_S,
+    tick_s: float = DEFAULT_TICK_S,
+    substeps: int = 1,
+    plant: np.ndarray | None = None,
+    record: bool = True,
+) -> Trajectory:
+    """Play ``program`` on ``config`` from ``initial_state`` (default: hover at the origin).
+
+    Parameters
+    ----------
+    program : the command program (or its compiled form).
+    config : vehicle constants and onboard controller.
+    initial_state : (N_STATE,) start state; default :func:`~aerobat.dynamics.hover_state`.
+    mode : ``"continuous"`` (design model) or ``"sampled"`` (800 Hz onboard ZOH).
+    max_step_s : largest RK4 step in continuous mode [s].
+    tick_s : command-generator period in sampled mode [s].
+    substeps : RK4 steps per tick in sampled mode.
+    plant : optional flat plant vector (:func:`~aerobat.dynamics.plant_vector`) overriding
+        ``config.vehicle`` — how testbeds with extra effects use this function.
+    record : keep every step (True) or only the start and final states (False).
+    """
+    compiled = program.compile() if isinstance(program, Program) else program
+    if not max_step_s > 0 or not math.isfinite(max_step_s):
+        raise ConfigError(f"max_step_s = {max_step_s} must be finite and > 0 (s)")
+    if not tick_s > 0 or not math.isfinite(tick_s):
+        raise ConfigError(f"tick_s = {tick_s} must be finite and > 0 (s)")
+    if substeps < 1:
+        raise ConfigError(f"substeps = {substeps} must be >= 1")
+    x = hover_state(config.vehicle) if initial_state is None else np.array(initial_state, dtype=float)
+    if x.shape != (N_STATE,):
+        raise ConfigError(f"initial_state must have shape ({N_STATE},), got {x.shape}")
+    if not np.all(np.isfinite(x)):
+        raise ConfigError("initial_state contains non-finite values")
+    start = x.copy()
+    plant_v = plant_vector(config.vehicle) if plant is None else np.asarray(plant, dtype=float)
+    ctrl_v = controller_vector(config.controller)
+    bp = compiled.breakpoints_s
+    coeffs = compiled.coefficients
+    nseg = len(bp) - 1
+    if mode == "continuous":
+        size = _steps(bp, max_step_s) + 1 if record else 0
+    elif mode == "sampled":
+        size = int(math.ceil(compiled.duration_s / tick_s - 1e-9)) + 2 if record else 0
+    else:
+        raise ConfigError(f"mode = {mode!r}: allowed 'continuous' or 'sampled'")
+    rec_t = np.empty(size)
+    rec_x = np.empty((size, N_STATE))
+    rec_u = np.empty((size, 4))
+    if mode == "continuous":
+        count = _run_continuous(x, bp, coeffs, nseg, plant_v, ctrl_v, max_step_s, rec_t, rec_x, rec_u)
+    else:
+        count = _run_sampled(x, bp, coeffs, nseg, plant_v, ctrl_v, tick_s, substeps, rec_t, rec_x, rec_u)
+    if not record:
+        cmds = compiled.evaluate(np.array([0.0, compiled.duration_s - 1e-12]))
+        return Trajectory(np.array([0.0, compiled.duration_s]), np.stack([start, x]), cmds, mode)
+    return Trajectory(rec_t[:count].copy(), rec_x[:count].copy(), rec_u[:count].copy(), mode)
+
+
+def simulate_batch(
+    programs: Sequence[Program | CompiledProgram],
+    configs: VehicleConfig | Sequence[VehicleConfig],
+    *,
+    initial_states: np.ndarray | None = None,
+    plants: np.ndarray | None = None,
+    max_step_s: float = DEFAULT_MAX_STEP_S,
+) -> np.ndarray:
+    """Final states of many (program, vehicle) pairs, continuous mode, on all cores.
+
+    Parameters
+    ----------
+    programs : B programs.
+    configs : one vehicle for all, or B vehicles.
+    initial_states : (B, N_STATE) or None for hover at the origin.
+    plants : optional (B, N_PLANT) plant vectors overriding the vehicles' own.
+
+    Returns
+    -------
+    (B, N_STATE) final states.
+    """
+    if not max_step_s > 0 or not math.isfinite(max_step_s):
+        raise ConfigError(f"max_step_s = {max_step_s} must be finite and > 0 (s)")
+    compiled = [p.compile() if isinstance(p, Program) else p for p in programs]
+    B = len(compiled)
+    if B == 0:
+        return np.empty((0, N_STATE))
+    cfgs = [configs] * B if isinstance(configs, VehicleConfig) else list(configs)
+    if len(cfgs) != B:
+        raise ConfigError(f"got {B} programs but {len(cfgs)} vehicles")
+    kmax = max(len(c.breakpoints_s) - 1 for c in compiled)
+    bp = np.zeros((B, kmax + 1))
+    coeffs = np.zeros((B, kmax, 4, 3))
+    nseg = np.zeros(B, dtype=np.int64)
+    for b, c in enumerate(compiled):
+        k = len(c.breakpoints_s) - 1
+        bp[b, : k + 1] = c.breakpoints_s
+        coeffs[b, :k] = c.coefficients
+        nseg[b] = k
+    if plants is None:
+        plants = np.stack([plant_vector(c.vehicle) for c in cfgs])
+    ctrl = np.stack([controller_vector(c.controller) for c in cfgs])
+    if initial_states is None:
+        initial_states = np.stack([hover_state(c.vehicle) for c in cfgs])
+    x0 = np.ascontiguousarray(initial_states, dtype=float)
+    plants = np.ascontiguousarray(plants, dtype=float)
+    if x0.shape != (B, N_STATE):
+        raise ConfigError(f"initial_states must have shape ({B}, {N_STATE}), got {x0.shape}")
+    if plants.shape != (B, N_PLANT):
+        raise ConfigError(f"plants must have shape ({B}, {N_PLANT}), got {plants.shape}")
+    if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(plants))):
+        raise ConfigError("initial_states and plants must be finite")
+    out = np.empty_like(x0)
+    _batch_continuous(x0, bp, coeffs, nseg, plants, ctrl, max_step_s, out)
+    return out
+
+
+class NominalModel:
+    """The design model Φ(p, ŝ) as a batch of final states (continuous mode, all cores).
+
+    Implements the ``FinalStateModel`` protocol of :mod:`aerobat.design`.
+    """
+
+    def __init__(self, config: VehicleConfig, *, max_step_s: float = DEFAULT_MAX_STEP_S) -> None:
+        self.config = config
+        self.max_step_s = max_step_s
+        self._plant = plant_vector(config.vehicle)
+
+    def final_states(self, programs: Sequence[Program], initial_states: np.ndarray | None = None) -> np.ndarray:
+        plants = np.tile(self._plant, (len(programs), 1))
+        return simulate_batch(programs, self.config, initial_states=initial_states, plants=plants,
+                              max_step_s=self.max_step_s)
+
+    def trajectory(self, program: Program, initial_state: np.ndarray | None = None) -> Trajectory:
+        return simulate(program, self.config, initial_state=initial_state, max_step_s=self.max_step_s)

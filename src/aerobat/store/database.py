@@ -1,0 +1,324 @@
+"""The experiment store's file: opening, checking, migrating and transactions (one SQLite file).
+
+A :class:`Database` opens a file only after a read-only look has shown that it is
+an aerobat store of a version this aerobat reads (foreign, newer and damaged files
+are refused and never modified), creates or migrates its schema in one transaction,
+and runs every write as one short ``BEGIN IMMEDIATE`` transaction, retried while
+another process holds the lock. SQLite errors become :mod:`aerobat.errors` store
+errors that name the file and what went wrong.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sqlite3
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any, Literal, Self
+from urllib.parse import quote
+
+from aerobat.errors import (
+    ConfigError,
+    StoreAccessError,
+    StoreBusyError,
+    StoreError,
+    StoreFormatError,
+    StoreVersionError,
+    StoreWriteError,
+)
+from aerobat.store.codec import utc_now
+from aerobat.store.migrations import APPLICATION_ID, SCHEMA, SCHEMA_VERSION, TABLES, TABLES_SINCE, migrate
+from aerobat.store.owners import owner_token
+
+__all__ = ["DEFAULT_PATH", "Database", "default_path", "rollback", "sql_statements"]
+
+DEFAULT_PATH = "aerobat.sqlite"
+"""Default database file, relative to the working directory (``AEROBAT_DB`` overrides it)."""
+
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+
+
+def default_path() -> str:
+    """The database used when ``--db`` is not given: ``$AEROBAT_DB`` or ``./aerobat.sqlite``."""
+    return os.environ.get("AEROBAT_DB") or DEFAULT_PATH
+
+
+class Database:
+    """An aerobat experiment database.
+
+    Parameters
+    ----------
+    path : the SQLite file; created (with its schema) if missing and ``create``.
+    create : create the file if it does not exist; otherwise a missing file is an error.
+    synchronous : ``"normal"`` (default): a committed iteration survives the process being
+        killed at any instant; an operating-system crash or power loss may lose the last
+        commits but never corrupts the file. ``"full"``: commits also survive power loss
+        (an fsync per commit, a few milliseconds on ordinary disks).
+    busy_timeout_s : how long a write waits for another process's transaction.
+
+    Raises
+    ------
+    StoreFormatError
+        The file is not SQLite, belongs to another application, or is corrupted.
+    StoreVersionError
+        The file was written by a newer aerobat.
+    StoreAccessError
+        The file or its directory cannot be opened, created or written.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], *, create: bool = True,
+                 synchronous: Literal["normal", "full"] = "normal", busy_timeout_s: float = 60.0) -> None:
+        if synchronous not in ("normal", "full"):
+            raise ConfigError(f"synchronous = {synchronous!r}: allowed 'normal' or 'full'")
+        if not str(path).strip():
+            raise StoreAccessError("--db: empty database path")
+        self.path = Path(path)
+        self.busy_timeout_s = float(busy_timeout_s)
+        self.owner = owner_token()
+        self.migrated_from: list[int] = []
+        self._conn: sqlite3.Connection | None = None
+        fresh = self._check_file(create)
+        try:
+            self._conn = sqlite3.connect(str(self.path), timeout=self.busy_timeout_s, isolation_level=None,
+                                         check_same_thread=False)
+        except sqlite3.Error as exc:
+            raise self._translate(exc, "opening the database") from None
+        try:
+            with self._guard("opening the database"):
+                self._conn.execute("PRAGMA foreign_keys = ON")
+                self._conn.execute(f"PRAGMA synchronous = {synchronous.upper()}")
+                if fresh:
+                    self._initialize()
+                else:
+                    self._upgrade_if_needed()
+        except BaseException:
+            self.close()
+            raise
+
+    # ---------------------------------------------------------- opening
+    def _check_file(self, create: bool) -> bool:
+        """Validate an existing file without writing to it; True if a schema must be created."""
+        path = self.path
+        if path.is_dir():
+            raise StoreAccessError(f"{path}: is a directory, expected a database file (--db PATH)")
+        if not path.exists():
+            if not create:
+                raise StoreAccessError(f"{path}: no such database (--db); `aerobat learn` creates one")
+            parent = path.parent if str(path.parent) else Path(".")
+            if not parent.is_dir():
+                raise StoreAccessError(f"{path}: cannot create the database: directory {parent} does not exist")
+            return True
+        if not path.is_file():
+            raise StoreAccessError(f"{path}: not a regular file, expected a database file (--db PATH)")
+        try:
+            with path.open("rb") as handle:
+                header = handle.read(100)
+        except OSError as exc:
+            raise StoreAccessError(f"{path}: cannot read the database: {exc.strerror or exc}") from None
+        if not header:
+            if not create:
+                raise StoreAccessError(f"{path}: empty file, no aerobat database yet; `aerobat learn` creates one")
+            return True  # an empty file is an empty database
+        if not header.startswith(_SQLITE_MAGIC) or len(header) < 100:
+            raise StoreFormatError(f"{path}: not an aerobat database (not an SQLite file); the file was not "
+                                   f"modified — choose another --db path")
+        return self._probe()
+
+    def _probe(self) -> bool:
+        """Read-only look inside an SQLite file: is it ours, and which version?"""
+        path = self.path
+        uri = f"file:{quote(str(path.resolve()))}?mode=ro"
+        with path.open("rb") as handle:
+            wal_format = handle.read(20)[18:20] == b"\x02\x02"
+        side_files = any(Path(f"{path}{suffix}").exists() for suffix in ("-wal", "-shm"))
+        if wal_format and not side_files:
+            # nobody has it open and its WAL is empty: read the file alone, so that refusing
+            # it leaves no -wal/-shm files behind
+            uri += "&immutable=1"
+        try:
+            probe = sqlite3.connect(uri, uri=True, timeout=self.busy_timeout_s, isolation_level=None)
+        except sqlite3.Error as exc:
+            raise StoreAccessError(f"{path}: cannot open the database for reading: {exc}") from None
+        try:
+            app_id = probe.execute("PRAGMA application_id").fetchone()[0]
+            version = probe.execute("PRAGMA user_version").fetchone()[0]
+            tables = [r[0] for r in probe.execute(
+                "SELECT name FROM sqlite_master WHERE type = 'table' AND name NOT LIKE 'sqlite_%' ORDER BY name")]
+            tagged = False
+            if "meta" in tables:
+                with contextlib.suppress(sqlite3.Error):
+                    row = probe.execute("SELECT value FROM meta WHERE key = 'application'").fetchone()
+                    tagged = bool(row and row[0] == "aerobat")
+        except sqlite3.DatabaseError as exc:
+            kind = getattr(exc, "sqlite_errorname", "")
+            if kind.startswith(("SQLITE_BUSY", "SQLITE_LOCKED")):
+                raise StoreBusyError(f"{path}: the database stayed locked by another process") from None
+            raise StoreFormatError(f"{path}: not a usable aerobat database ({exc}); the file was not modified — "
+                                   f"restore it from a backup or choose another --db path") from None
+        finally:
+            probe.close()
+        ours = app_id == APPLICATION_ID or tagged
+        if not ours:
+            if not tables and app_id == 0:
+                return True  # an empty SQLite database
+            listed = ", ".join(tables[:6]) + (", …" if len(tables) > 6 else "")
+            what = f"application_id {app_id:#x}" if app_id else f"tables {listed}"
+            raise StoreFormatError(f"{path}: not an aerobat database (an SQLite file of another application: "
+                                   f"{what}); the file was not modified — choose another --db path")
+        if version > SCHEMA_VERSION:
+            raise StoreVersionError(
+                f"{path}: written by a newer aerobat (schema version {version}; this aerobat reads versions "
+                f"1 to {SCHEMA_VERSION}); upgrade aerobat to use it — the file was not modified")
+        if version < 1:
+            raise StoreFormatError(f"{path}: aerobat database without a schema version (damaged); "
+                                   f"the file was not modified")
+        missing = [t for t in TABLES if t not in tables and TABLES_SINCE.get(t, 1) <= version]
+        if missing:
+            raise StoreFormatError(f"{path}: damaged aerobat database: missing table(s) {', '.join(missing)}; "
+                                   f"the file was not modified")
+        return False
+
+    def _initialize(self) -> None:
+        conn = self._db
+        conn.execute("PRAGMA journal_mode = WAL")
+        conn.execute("BEGIN IMMEDIATE")
+        try:
+            existing = conn.execute("SELECT count(*) FROM sqlite_master WHERE name NOT LIKE 'sqlite_%'").fetchone()[0]
+            if existing == 0:  # another process may have created it meanwhile
+                for statement in sql_statements(SCHEMA):
+                    conn.execute(statement)
+                conn.execute(f"PRAGMA application_id = {APPLICATION_ID}")
+                conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+                from aerobat import __version__
+
+                conn.executemany("INSERT INTO meta (key, value) VALUES (?, ?)", [
+                    ("application", "aerobat"), ("created_by", __version__), ("created_at", utc_now()),
+                ])
+            conn.execute("COMMIT")
+        except BaseException:
+            rollback(conn)
+            raise
+        if existing:
+            self._upgrade_if_needed()
+
+    def _upgrade_if_needed(self) -> None:
+        conn = self._db
+        version = conn.execute("PRAGMA user_version").fetchone()[0]
+        if version > SCHEMA_VERSION:  # changed since the probe
+            raise StoreVersionError(f"{self.path}: written by a newer aerobat (schema version {version}); "
+                                    f"upgrade aerobat to use it — the file was not modified")
+        if version < SCHEMA_VERSION:
+            conn.execute("BEGIN IMMEDIATE")
+            try:
+                version = conn.execute("PRAGMA user_version").fetchone()[0]  # another process may have migrated
+                self.migrated_from = migrate(conn, version)
+                if self.migrated_from:
+                    conn.execute("INSERT OR REPLACE INTO meta (key, value) VALUES (?, ?)",
+                                 (f"migrated_from_{version}", utc_now()))
+                conn.execute("COMMIT")
+            except BaseException:
+                rollback(conn)
+                raise
+        mode = conn.execute("PRAGMA journal_mode").fetchone()[0]
+        if mode != "wal":
+            with contextlib.suppress(sqlite3.OperationalError):  # read-only files stay as they are
+                conn.execute("PRAGMA journal_mode = WAL")
+
+    # ---------------------------------------------------------- plumbing
+    @property
+    def _db(self) -> sqlite3.Connection:
+        if self._conn is None:
+            raise StoreError(f"{self.path}: the store is closed")
+        return self._conn
+
+    def close(self) -> None:
+        """Close the connection (idempotent)."""
+        if self._conn is not None:
+            with contextlib.suppress(sqlite3.Error):
+                self._conn.close()
+            self._conn = None
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def schema_version(self) -> int:
+        """``PRAGMA user_version`` of the open database."""
+        with self._guard("reading the schema version"):
+            return int(self._db.execute("PRAGMA user_version").fetchone()[0])
+
+    def _translate(self, exc: sqlite3.Error, action: str) -> StoreError:
+        name = getattr(exc, "sqlite_errorname", "") or ""
+        text = str(exc)
+        where = f"{self.path}: {action} failed"
+        if name.startswith("SQLITE_FULL") or "disk is full" in text:
+            return StoreWriteError(f"{where}: the disk is full (or the file size limit was reached)")
+        if name.startswith("SQLITE_READONLY") or "readonly" in text:
+            return StoreAccessError(f"{where}: the database or its directory is read-only ({text})")
+        if name.startswith("SQLITE_CANTOPEN") or "unable to open" in text:
+            return StoreAccessError(f"{where}: cannot open or create the file; check that the directory "
+                                    f"exists and is writable ({text})")
+        if name.startswith(("SQLITE_BUSY", "SQLITE_LOCKED")) or "locked" in text:
+            return StoreBusyError(f"{where}: another process kept the database locked for more than "
+                                  f"{self.busy_timeout_s:g} s")
+        if name.startswith(("SQLITE_CORRUPT", "SQLITE_NOTADB")) or "malformed" in text or "not a database" in text:
+            return StoreFormatError(f"{where}: the database is corrupted ({text})")
+        if name.startswith("SQLITE_IOERR") or "I/O error" in text:
+            return StoreWriteError(f"{where}: disk I/O error ({name or text}): is the disk full or the file "
+                                   f"size limit reached?")
+        if name.startswith("SQLITE_PERM") or "permission" in text.lower():
+            return StoreAccessError(f"{where}: permission denied ({text})")
+        return StoreError(f"{where}: {text}")
+
+    @contextlib.contextmanager
+    def _guard(self, action: str) -> Iterator[None]:
+        try:
+            yield
+        except sqlite3.Error as exc:
+            raise self._translate(exc, action) from None
+
+    def _write(self, action: str, fn: Any, *, attempts: int = 5) -> Any:
+        """Run ``fn(conn)`` in one ``BEGIN IMMEDIATE`` transaction, retrying if the file stays busy."""
+        conn = self._db
+        for attempt in range(attempts):
+            try:
+                with self._guard(action):
+                    conn.execute("BEGIN IMMEDIATE")
+                    try:
+                        result = fn(conn)
+                        conn.execute("COMMIT")
+                    except BaseException:
+                        rollback(conn)
+                        raise
+                return result
+            except StoreBusyError:
+                if attempt == attempts - 1:
+                    raise
+                time.sleep(0.05 * 2**attempt)
+        raise AssertionError("unreachable")
+
+    def integrity_check(self) -> list[str]:
+        """``PRAGMA integrity_check`` and ``foreign_key_check``: an empty list if the file is sound."""
+        with self._guard("checking integrity"):
+            rows = [r[0] for r in self._db.execute("PRAGMA integrity_check")]
+            problems = [] if rows == ["ok"] else rows
+            problems += [f"foreign key: {r}" for r in self._db.execute("PRAGMA foreign_key_check")]
+        return problems
+
+
+
+def rollback(conn: sqlite3.Connection) -> None:
+    if conn.in_transaction:
+        with contextlib.suppress(sqlite3.Error):
+            conn.execute("ROLLBACK")
+
+
+def sql_statements(script: str) -> list[str]:
+    """Split a schema script into statements (no semicolons inside our DDL's strings)."""
+    lines = [line.split("--", 1)[0] for line in script.splitlines()]
+    return [s.strip() for s in "\n".join(lines).split(";") if s.strip()]

@@ -31,11 +31,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from aerobat import hummingbird, simulate  # noqa: E402
-from aerobat.design import design  # noqa: E402
-from aerobat.learning import learn  # noqa: E402
-from aerobat.maneuvers import MultiFlip  # noqa: E402
+from aerobat.core.design import design  # noqa: E402
+from aerobat.core.learning import learn  # noqa: E402
 from aerobat.plants.rotorpy import RotorPyPlant, RotorPySettings  # noqa: E402
-from aerobat.simulate import NominalModel  # noqa: E402
+from aerobat.quadrotor.maneuvers import MultiFlip  # noqa: E402
+from aerobat.quadrotor.simulate import NominalModel  # noqa: E402
 
 CONFIG = hummingbird()
 INTEGRATORS = ("RK45 (RotorPy default)", "RK45", "RK23", "LSODA", "rk4", "rk3")
@@ -123,7 +123,9 @@ def bench_trials(trials: int = 4) -> dict:
 
 
 def _figures(session, config, out: Path, stem: str) -> None:
-    from aerobat.plotting import plot_learning, plot_side_views
+    from aerobat.plotting import save_figure
+    from aerobat.plotting.learning import plot_learning
+    from aerobat.plotting.vehicle import plot_side_views
 
     m = session.maneuver
     nominal = simulate(m.program(session.design.p_nominal), config)
@@ -132,10 +134,12 @@ def _figures(session, config, out: Path, stem: str) -> None:
               (f"first attempt on RotorPy (iteration {measured[0].index})", measured[0].trial.times_s,
                measured[0].trial.states),
               (f"learned (iteration {measured[-1].index})", measured[-1].trial.times_s, measured[-1].trial.states)]
-    plot_side_views(panels, out / f"rotorpy_{stem}_side_views.png", plane="yz", title=f"{m.name} on RotorPy")
+    save_figure(plot_side_views(panels, plane="yz", title=f"{m.name} on RotorPy"),
+                out / f"rotorpy_{stem}_side_views.png", dpi=130)
     data = session.to_json_dict()
-    plot_learning(data["iterations"], data["error_names"], data["error_units"], data["parameter_names"],
-                  data["parameter_units"], out / f"rotorpy_{stem}_learning.png", title=f"{m.name} on RotorPy")
+    save_figure(plot_learning(data["iterations"], data["error_names"], data["error_units"], data["parameter_names"],
+                              data["parameter_units"], title=f"{m.name} on RotorPy"),
+                out / f"rotorpy_{stem}_learning.png")
 
 
 def _summary(session, position_idx: list[int], angle_idx: list[int], last: int) -> dict:

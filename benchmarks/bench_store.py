@@ -34,12 +34,12 @@ sys.path.insert(0, str(ROOT / "src"))
 from aerobat import hummingbird  # noqa: E402
 from aerobat.cli import main  # noqa: E402
 from aerobat.config import dataclass_to_table  # noqa: E402
-from aerobat.design import design  # noqa: E402
-from aerobat.maneuvers import MultiFlip  # noqa: E402
+from aerobat.core.design import design  # noqa: E402
 from aerobat.plants import Arena, NominalPlant  # noqa: E402
-from aerobat.simulate import NominalModel  # noqa: E402
+from aerobat.quadrotor.maneuvers import MultiFlip  # noqa: E402
+from aerobat.quadrotor.simulate import NominalModel  # noqa: E402
 from aerobat.store import Store  # noqa: E402
-from aerobat.store_migrations import APPLICATION_ID, SCHEMA_V1  # noqa: E402
+from aerobat.store.migrations import APPLICATION_ID, SCHEMA_V1  # noqa: E402
 
 CONFIG = hummingbird()
 VEHICLE = {"name": CONFIG.name, "vehicle": dataclass_to_table(CONFIG.vehicle),

@@ -1,4 +1,4 @@
-"""Timing benchmark of aerobat.timeoptimal (plain script, no pytest).
+"""Timing benchmark of aerobat.quadrotor.timeoptimal (plain script, no pytest).
 
 Usage::
 
@@ -21,7 +21,12 @@ from pathlib import Path
 
 import numpy as np
 
-from aerobat import timeoptimal as to
+import aerobat.quadrotor.timeoptimal as to
+from aerobat.experiments import LocalExecutor, run_study
+from aerobat.experiments.studies import map_csv, map_grid, map_jobs
+from aerobat.plotting import save_figure
+from aerobat.plotting.benchmarks import plot_map, plot_solution
+from aerobat.store import Store
 
 
 def _time_solves(n: int, cold: bool) -> tuple[list[float], to.TimeOptimalSolution]:
@@ -73,17 +78,26 @@ def main(argv: list[str] | None = None) -> int:
         zs = np.linspace(-10.0, 10.0, 21)
         done = [0]
 
-        def progress(k: int, total: int) -> None:
+        def progress(k: int, total: int, job: object, outcome: object) -> None:
             done[0] = k
             if k % 50 == 0 or k == total:
                 print(f"  map: {k}/{total}", file=sys.stderr)
 
+        import dataclasses
+        import tempfile
+
         t0 = time.perf_counter()
-        grid = to.benchmark_map(ys, zs, workers=args.workers, progress=progress)
+        pool = LocalExecutor(args.workers)
+        with tempfile.TemporaryDirectory() as tmp, Store(Path(tmp) / "map.sqlite") as store:
+            outcome = run_study(store, "map", {"ys": ys.tolist(), "zs": zs.tolist()},
+                                map_jobs(ys, zs, dataclasses.asdict(to.BenchmarkLimits())), executor=pool,
+                                progress=progress)
+        pool.close()
+        grid = map_grid(outcome.results, ys, zs)
         elapsed = time.perf_counter() - t0
         n_fail = int(np.sum(~np.isfinite(grid)))
         finite = grid[np.isfinite(grid)]
-        print("\n### benchmark_map 21 x 21 over [-10, 10]^2\n")
+        print("\n### benchmark map 21 x 21 over [-10, 10]^2 (a study on the execution layer)\n")
         print("| workers | targets | wall s | s / target | failed | T* min s | T* max s |")
         print("|---|---|---|---|---|---|---|")
         print(
@@ -92,9 +106,9 @@ def main(argv: list[str] | None = None) -> int:
         )
         if args.out is not None:
             args.out.mkdir(parents=True, exist_ok=True)
-            to.write_map_csv(args.out / "timeoptimal_map.csv", ys, zs, grid)
-            to.plot_map(args.out / "timeoptimal_map.png", ys, zs, grid)
-            to.plot_solution(sol, args.out / "timeoptimal_5_5.png")
+            (args.out / "timeoptimal_map.csv").write_text(map_csv(ys, zs, grid))
+            save_figure(plot_map(ys, zs, grid), args.out / "timeoptimal_map.png")
+            save_figure(plot_solution(sol), args.out / "timeoptimal_5_5.png")
             print(f"\nwrote {args.out}/timeoptimal_map.csv, timeoptimal_map.png, timeoptimal_5_5.png")
     return 0
 

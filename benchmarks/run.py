@@ -23,12 +23,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from aerobat import hummingbird, load_program, simulate  # noqa: E402
-from aerobat.design import design  # noqa: E402
-from aerobat.dynamics import N_STATE, controller_vector, hover_state, plant_vector  # noqa: E402
-from aerobat.learning import learn  # noqa: E402
-from aerobat.maneuvers import MultiFlip  # noqa: E402
+from aerobat.core.design import design  # noqa: E402
+from aerobat.core.learning import learn  # noqa: E402
 from aerobat.plants import Arena  # noqa: E402
-from aerobat.simulate import _batch_continuous, _run_continuous, _steps  # noqa: E402
+from aerobat.quadrotor.dynamics import N_STATE, controller_vector, hover_state, plant_vector  # noqa: E402
+from aerobat.quadrotor.maneuvers import MultiFlip  # noqa: E402
+from aerobat.quadrotor.simulate import _batch_continuous, _run_continuous, _steps  # noqa: E402
 
 CONFIG = hummingbird()
 OTHER_MARKER = "<!-- other benchmarks: kept by make bench -->"
@@ -112,7 +112,7 @@ def bench_design() -> dict:
     out = {}
     for dims in (2, 3):
         m = MultiFlip(vehicle=CONFIG.vehicle, flips=3, dims=dims)
-        from aerobat.simulate import NominalModel
+        from aerobat.quadrotor.simulate import NominalModel
 
         model = NominalModel(CONFIG)
         out[dims] = median_time(lambda m=m, model=model: design(m, model), 5)
@@ -128,7 +128,7 @@ def bench_arena() -> dict:
         arena.fly(TRIPLE)
         times.append(time.perf_counter() - start)
     m = MultiFlip(vehicle=CONFIG.vehicle, flips=3, dims=3)
-    from aerobat.simulate import NominalModel
+    from aerobat.quadrotor.simulate import NominalModel
 
     d = design(m, NominalModel(CONFIG))
     start = time.perf_counter()

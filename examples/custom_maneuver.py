@@ -15,14 +15,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from aerobat import Program, RampDown, Switch, hummingbird
-from aerobat.design import design
-from aerobat.dynamics import POS, VEL, hover_state
-from aerobat.learning import learn
-from aerobat.maneuvers.base import ErrorSpec, ParameterSpec, check_parameters
-from aerobat.plants import Arena
-from aerobat.simulate import NominalModel
-from aerobat.vehicle import VehicleParams
+from aerobat import Arena, NominalModel, Program, RampDown, Switch, VehicleParams, hummingbird, learn
+from aerobat.core.maneuver import ErrorKind, ErrorSpec, ParameterSpec, check_parameters
+from aerobat.core.testing import check_maneuver, check_plant
+from aerobat.quadrotor.dynamics import POS, VEL, hover_state
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -40,8 +36,8 @@ class VerticalHop:
             ParameterSpec(name="p1", description="brake duration", unit="s", lower=0.0, upper=2.0, scale=0.02),
         ))
         object.__setattr__(self, "errors", (
-            ErrorSpec(name="z", unit="m", scale=0.05),
-            ErrorSpec(name="vz", unit="m/s", scale=0.05),
+            ErrorSpec(name="z", unit="m", scale=0.05, kind=ErrorKind.POSITION),
+            ErrorSpec(name="vz", unit="m/s", scale=0.05, kind=ErrorKind.VELOCITY),
         ))
 
     def guess(self) -> np.ndarray:
@@ -49,6 +45,9 @@ class VerticalHop:
 
     def is_valid(self, params: np.ndarray) -> bool:
         return check_parameters(self.parameters, params) is None
+
+    def duration_s(self, params: np.ndarray) -> float:
+        return float(params[0] + params[1]) + 0.05
 
     def program(self, params: np.ndarray) -> Program:
         p0, p1 = params
@@ -75,8 +74,10 @@ class VerticalHop:
 def main() -> None:
     config = hummingbird()
     hop = VerticalHop(vehicle=config.vehicle)
-    nominal = design(hop, NominalModel(config))
-    print(nominal.message, "p0 =", np.round(nominal.p_nominal, 4))
+    nominal = check_maneuver(hop, model=NominalModel(config))  # the protocol's promises, and a design
+    assert nominal is not None
+    print(nominal.summary())
+    check_plant(Arena(config, seed=0), hop, params=nominal.p_nominal)
     session = learn(hop, nominal, Arena(config, seed=1), iterations=10)
     for it in session.measured:
         print(f"{it.index:2d}  z error {it.error[0]:+.3f} m   vz error {it.error[1]:+.3f} m/s")

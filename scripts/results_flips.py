@@ -12,11 +12,11 @@ import numpy as np
 
 from aerobat import hummingbird
 from aerobat.cli import _learning_figures
-from aerobat.design import design
-from aerobat.learning import learn
-from aerobat.maneuvers import MultiFlip
+from aerobat.core.design import design
+from aerobat.core.learning import learn
 from aerobat.plants import Arena
-from aerobat.simulate import NominalModel
+from aerobat.quadrotor.maneuvers import MultiFlip
+from aerobat.quadrotor.simulate import NominalModel
 
 OUT = Path(__file__).resolve().parents[1] / "docs" / "figures"
 CONFIG = hummingbird()

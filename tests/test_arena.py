@@ -9,10 +9,10 @@ import pytest
 
 from aerobat import Program, Switch, hummingbird, load_program, simulate
 from aerobat.config import ConfigError
-from aerobat.quadrotor.dynamics import euler_zyx
-from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.plants import Arena, ArenaParams, NominalPlant, Plant, load_arena
 from aerobat.plants.arena import save_arena
+from aerobat.quadrotor.dynamics import euler_zyx
+from aerobat.quadrotor.maneuvers import MultiFlip
 
 CONFIG = hummingbird()
 TRIPLE = load_program("examples/triple_flip_1800.toml")

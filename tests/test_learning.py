@@ -10,10 +10,10 @@ import pytest
 from aerobat import hummingbird
 from aerobat.core.design import design
 from aerobat.core.learning import constraint_scale, learn
-from aerobat.core.rules import ConstantSchedule, PaperRule, PaperSchedule
-from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.core.maneuver import bounds_arrays
+from aerobat.core.rules import ConstantSchedule, PaperRule, PaperSchedule
 from aerobat.plants import Arena, ArenaParams, NominalPlant
+from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel
 
 CONFIG = hummingbird()

@@ -17,9 +17,9 @@ from aerobat import Program, Switch, hummingbird
 from aerobat.config import ConfigError
 from aerobat.core.design import design
 from aerobat.core.learning import learn
-from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.plants import Plant
 from aerobat.plants.arena.params import MotionCapture
+from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel
 
 CONFIG = hummingbird()

@@ -19,31 +19,31 @@ import pytest
 from aerobat import VehicleConfig, hummingbird
 from aerobat.core.design import Design, design
 from aerobat.core.learning import learn
-from aerobat.core.rules import ConstantSchedule
-from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.core.maneuver import ErrorSpec, ParameterSpec, bounds_arrays, check_parameters
-from aerobat.plants import Arena, ArenaParams
 from aerobat.core.plant import Trial
 from aerobat.core.rules import (
     RULES,
     BroydenJacobian,
-    IscModel,
-    RuleChoice,
-    ScheduleChoice,
     BroydenRule,
+    ConstantSchedule,
     InitialStateCompensation,
+    IscModel,
     KalmanRule,
     PaperRule,
     RegularizedRule,
+    RuleChoice,
+    ScheduleChoice,
     filter_factors,
     make_rule,
 )
+from aerobat.plants import Arena, ArenaParams
 from aerobat.quadrotor.isc import (
     early_trajectory_deviation,
     initial_state_sensitivity,
     quadrotor_isc,
     start_state_deviation,
 )
+from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel
 
 # ------------------------------------------------------------------ synthetic plant
@@ -379,7 +379,6 @@ def test_initial_state_sensitivity_is_physical(design3):
 @pytest.fixture(scope="module")
 def default_sessions(design3):
     isc = quadrotor_isc(FLIP3, CONFIG, design3.p_nominal)
-    S, dev = isc.sensitivity, isc.deviation
     out = {}
     for seed in (1, 2, 3):
         for name in ("paper", BEST):

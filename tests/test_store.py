@@ -23,10 +23,9 @@ from aerobat import hummingbird
 from aerobat.cli import main
 from aerobat.config import ConfigError, dataclass_to_table
 from aerobat.core.design import design
-from aerobat.core.learning import Iteration, Session
-from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.core.registry import from_spec, register_maneuver, registered_kinds
 from aerobat.plants import Arena, NominalPlant, Trial
+from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel
 from aerobat.store import (
     SessionInUse,

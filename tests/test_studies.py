@@ -16,11 +16,12 @@ import pytest
 from aerobat import hummingbird
 from aerobat.cli import main
 from aerobat.core.design import design
-from aerobat.experiments.execution import DaskExecutor, Job, LocalExecutor, run_job
+from aerobat.experiments.execution import DaskExecutor, LocalExecutor
+from aerobat.experiments.jobs import Job, run_job
+from aerobat.experiments.studies import RobustnessRanges, robustness_jobs, sample_arena, summarize_robustness
 from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel
 from aerobat.store import Store
-from aerobat.experiments.studies import RobustnessRanges, robustness_jobs, sample_arena, summarize_robustness
 
 CONFIG = hummingbird()
 FLIP = MultiFlip(vehicle=CONFIG.vehicle, flips=1, max_rate_rad_s=np.radians(800), dims=2)

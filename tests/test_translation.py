@@ -12,8 +12,8 @@ from aerobat.cli import main
 from aerobat.core.design import design
 from aerobat.core.learning import learn
 from aerobat.core.registry import from_spec
-from aerobat.quadrotor.maneuvers.translation import translation_maneuver
 from aerobat.plants import Arena
+from aerobat.quadrotor.maneuvers.translation import translation_maneuver
 from aerobat.quadrotor.simulate import NominalModel
 
 CONFIG = hummingbird()

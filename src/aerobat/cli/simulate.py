@@ -73,7 +73,7 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     config = vehicle_from_name_or_file(args.vehicle)
     plant = plant_choice_from_args(args).build(config)
     trials = []
-    panels = []
+    panels: list[tuple[str, np.ndarray, np.ndarray]] = []
     for k in range(args.trials):
         trial = plant.fly(program)
         entry: dict[str, Any] = {"status": trial.status.value, "message": trial.message}

@@ -65,7 +65,7 @@ class Registry(Generic[T]):
         if self._scanned:
             return
         self._scanned = True
-        for ep in entry_points(group=self.group):
+        for ep in entry_points(group=self.group or ""):
             if ep.name not in self._items:
                 self._pending[ep.name] = ep
 

@@ -224,7 +224,7 @@ def check_maneuver(maneuver: Maneuver, *, model: FinalStateModel | None = None,
     duration = float(maneuver.duration_s(guess))
     _require(math.isfinite(duration) and duration > 0, what, f"duration_s(guess) = {duration}, expected > 0")
     x0 = np.asarray(maneuver.initial_state(), dtype=float)
-    _require(x0.ndim == 1 and np.all(np.isfinite(x0)), what, "initial_state() must be a finite vector")
+    _require(x0.ndim == 1 and bool(np.all(np.isfinite(x0))), what, "initial_state() must be a finite vector")
     e0 = np.asarray(maneuver.error(x0), dtype=float)
     _require(e0.shape == (len(maneuver.errors),), what,
              f"error(initial_state()) has shape {e0.shape}, expected ({len(maneuver.errors)},)")
@@ -281,8 +281,8 @@ def check_plant(plant: Plant, maneuver: Maneuver, *, params: np.ndarray | None =
         assert isinstance(plant, StatefulPlant)
         plant.set_state(saved)
         again = plant.fly(program)
-        _require(again.status == trial.status and np.array_equal(np.asarray(again.final_state),
-                                                                 np.asarray(trial.final_state), equal_nan=True),
+        _require(again.status == trial.status and bool(np.array_equal(np.asarray(again.final_state),
+                                                                 np.asarray(trial.final_state), equal_nan=True)),
                  what, "set_state(get_state()) does not repeat the trial exactly")
     return trial
 

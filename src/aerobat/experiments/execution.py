@@ -12,88 +12,16 @@ variable ``DASK_SCHEDULER_ADDRESS``).
 
 from __future__ import annotations
 
-import json
 import multiprocessing
 import os
-import traceback
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
-from enum import StrEnum
 from typing import Any, Protocol
 
 from aerobat.errors import ConfigError
+from aerobat.experiments.jobs import Job, JobResult, JobStatus, run_job
 
-__all__ = ["DaskExecutor", "Executor", "Job", "JobResult", "JobStatus", "LocalExecutor", "job_kind", "make_executor",
-           "run_job"]
-
-
-@dataclass(frozen=True)
-class Job:
-    """One unit of work: ``kind`` selects the function, ``spec`` (JSON-ready) says everything else.
-
-    Attributes
-    ----------
-    key : unique name within a study (used to resume: finished keys are skipped).
-    kind : a registered job kind (``"learn"``, ``"design"``, ``"benchmark"``, ``"rule_run"``).
-    spec : the job's full specification, including its seed.
-    """
-
-    key: str
-    kind: str
-    spec: dict[str, Any] = field(hash=False)
-
-    def to_json(self) -> str:
-        return json.dumps({"key": self.key, "kind": self.kind, "spec": self.spec}, sort_keys=True)
-
-
-class JobStatus(StrEnum):
-    """How one job ended: ``done`` (its result is valid) or ``failed`` (it raised; run again on resume)."""
-
-    DONE = "done"
-    FAILED = "failed"
-
-
-@dataclass(frozen=True)
-class JobResult:
-    """A job's outcome: its status, its JSON-ready result (empty if failed) and the error if it failed."""
-
-    status: JobStatus
-    result: dict[str, Any]
-    error: str | None = None
-
-    @property
-    def done(self) -> bool:
-        return self.status is JobStatus.DONE
-
-
-JobFunction = Callable[[dict[str, Any]], dict[str, Any]]
-_KINDS: dict[str, JobFunction] = {}
-
-
-def job_kind(name: str) -> Callable[[JobFunction], JobFunction]:
-    """Register a job function under ``name`` (:mod:`aerobat.experiments.jobs` registers the built-in kinds)."""
-
-    def decorate(fn: JobFunction) -> JobFunction:
-        _KINDS[name] = fn
-        return fn
-
-    return decorate
-
-
-def run_job(job: Job) -> JobResult:
-    """Run one job in this process; a job that raises is a :attr:`JobStatus.FAILED` result, never an exception."""
-    import aerobat.experiments.jobs  # noqa: F401  (registers the built-in job kinds)
-
-    fn = _KINDS.get(job.kind)
-    if fn is None:
-        return JobResult(JobStatus.FAILED, {}, f"unknown job kind {job.kind!r}")
-    try:
-        return JobResult(JobStatus.DONE, fn(job.spec))
-    except Exception as exc:  # a failed job is a result, not a crashed study
-        where = traceback.extract_tb(exc.__traceback__)[-1] if exc.__traceback__ else None
-        at = f" (at {where.filename.rsplit('/', 1)[-1]}:{where.lineno})" if where else ""
-        return JobResult(JobStatus.FAILED, {}, f"{type(exc).__name__}: {exc}{at}")
+__all__ = ["DaskExecutor", "Executor", "LocalExecutor", "make_executor"]
 
 
 def _collect(future: Any) -> JobResult:

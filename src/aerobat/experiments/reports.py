@@ -95,8 +95,10 @@ def session_figures(store: Store, session_id: int, out: Path) -> list[str]:
         loaded = store.iterations(session_id, trajectories=True, indices=[measured[0], measured[-1]])
         by_index = {it.index: it for it in loaded}
         first, last = by_index[measured[0]], by_index[measured[-1]]
-        panels.append((f"first attempt (iteration {first.index})", first.times_s, first.states))
-        panels.append((f"learned (iteration {last.index})", last.times_s, last.states))
+        for label, it in ((f"first attempt (iteration {first.index})", first),
+                          (f"learned (iteration {last.index})", last)):
+            if it.times_s is not None and it.states is not None:
+                panels.append((label, it.times_s, it.states))
     plane = "xz" if mrec.spec.get("axis") == "pitch" else "yz"
     if panels:
         save_figure(plot_side_views(panels, plane=plane, title=mrec.name, target=tuple(target)),

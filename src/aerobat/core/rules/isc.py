@@ -10,6 +10,7 @@ import numpy as np
 from aerobat.core.plant import Trial
 from aerobat.core.rules.base import UpdateRule
 from aerobat.core.rules.scaled import json_array, json_floats, required_array
+from aerobat.errors import ConfigError
 
 __all__ = ["DeviationFn", "InitialStateCompensation"]
 
@@ -68,11 +69,13 @@ class InitialStateCompensation:
         self.last_compensation = comp
         return np.asarray(error, dtype=float) - comp
 
-    def propose(self, i: int, params: np.ndarray, error: np.ndarray, trial: Trial) -> tuple[np.ndarray, float]:
+    def propose(self, i: int, params: np.ndarray, error: np.ndarray, trial: Trial | None) -> tuple[np.ndarray, float]:
+        if trial is None:
+            raise ConfigError(f"{self.name}: initial-state compensation needs each trial's measured start")
         native = getattr(self.inner, "propose_compensated", None)
         if native is not None and self.center:
             # the inner rule keeps its history and re-centres all of it on the latest mean
-            delta = np.asarray(self.deviation(trial, np.asarray(params, dtype=float)), dtype=float)
+            delta = np.array(self.deviation(trial, np.asarray(params, dtype=float)), dtype=np.float64)
             self.last_deviation = delta
             ok = delta.shape == (self.S.shape[1],) and bool(np.all(np.isfinite(delta)))
             comp = self.S @ (self.gain * delta) if ok else None

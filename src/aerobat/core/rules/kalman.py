@@ -94,10 +94,10 @@ class KalmanRule:
                 y = y - (np.asarray(c) - mean_c)
             self._filter_step(y, R)
 
-    def propose(self, i: int, params: np.ndarray, error: np.ndarray, trial: Trial) -> tuple[np.ndarray, float]:
+    def propose(self, i: int, params: np.ndarray, error: np.ndarray, trial: Trial | None) -> tuple[np.ndarray, float]:
         return self.propose_compensated(i, params, error, trial, None)
 
-    def propose_compensated(self, i: int, params: np.ndarray, error: np.ndarray, trial: Trial,
+    def propose_compensated(self, i: int, params: np.ndarray, error: np.ndarray, trial: Trial | None,
                             compensation: np.ndarray | None) -> tuple[np.ndarray, float]:
         """As :meth:`propose`, with this trial's start-state term S·δ (None: unknown)."""
         params = np.asarray(params, dtype=float)

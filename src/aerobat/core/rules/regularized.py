@@ -80,7 +80,7 @@ class RegularizedRule:
         if self.jacobian is not None and not self.sc.touches_bound(self.last_params, params):
             self.jacobian.update(dx, de, self.noise.sigma() / self.sc.e_scales)
 
-    def propose(self, i: int, params: np.ndarray, error: np.ndarray, trial: Trial) -> tuple[np.ndarray, float]:
+    def propose(self, i: int, params: np.ndarray, error: np.ndarray, trial: Trial | None) -> tuple[np.ndarray, float]:
         params = np.asarray(params, dtype=float)
         error = np.asarray(error, dtype=float)
         self._learn_from_pair(params, error)

@@ -9,22 +9,25 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.experiments.execution import Job
+from aerobat.experiments.jobs import Job
 
 __all__ = ["map_csv", "map_grid", "map_jobs"]
+
+Grid = Sequence[float] | np.ndarray
+"""Target coordinates along one axis [m]."""
 
 
 def _key(i: int, j: int) -> str:
     return f"y{i:03d}-z{j:03d}"
 
 
-def map_jobs(ys_m: Sequence[float], zs_m: Sequence[float], limits: Mapping[str, float]) -> list[Job]:
+def map_jobs(ys_m: Grid, zs_m: Grid, limits: Mapping[str, float]) -> list[Job]:
     """One benchmark solve per target (y, z)."""
     return [Job(key=_key(i, j), kind="benchmark", spec={"y_m": float(y), "z_m": float(z), "limits": dict(limits)})
             for j, z in enumerate(zs_m) for i, y in enumerate(ys_m)]
 
 
-def map_grid(results: Mapping[str, Mapping[str, Any]], ys_m: Sequence[float], zs_m: Sequence[float]) -> np.ndarray:
+def map_grid(results: Mapping[str, Mapping[str, Any]], ys_m: Grid, zs_m: Grid) -> np.ndarray:
     """(len(zs), len(ys)) minimum times; NaN where the solve failed or its job did not finish."""
     grid = np.full((len(zs_m), len(ys_m)), np.nan)
     for j in range(len(zs_m)):
@@ -34,7 +37,7 @@ def map_grid(results: Mapping[str, Mapping[str, Any]], ys_m: Sequence[float], zs
     return grid
 
 
-def map_csv(ys_m: Sequence[float], zs_m: Sequence[float], durations: np.ndarray) -> str:
+def map_csv(ys_m: Grid, zs_m: Grid, durations: np.ndarray) -> str:
     """The map as CSV text with columns ``y_m, z_m, duration_s`` (``nan`` where no time)."""
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")

@@ -19,7 +19,8 @@ from aerobat.core.design import Design
 from aerobat.core.registry import from_spec
 from aerobat.core.rules import RuleChoice
 from aerobat.errors import ConfigError
-from aerobat.experiments.execution import Executor, Job, JobResult, make_executor
+from aerobat.experiments.execution import Executor, make_executor
+from aerobat.experiments.jobs import Job, JobResult
 from aerobat.experiments.setup import plant_record_config
 from aerobat.plants import PlantChoice
 from aerobat.store import Store

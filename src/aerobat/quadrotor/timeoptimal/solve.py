@@ -10,7 +10,7 @@ import numpy as np
 from aerobat.errors import ConfigError
 from aerobat.quadrotor.timeoptimal.refinement import piece_functions, refine_solver
 from aerobat.quadrotor.timeoptimal.repair import refine_with_structure_search, vertical_candidate
-from aerobat.quadrotor.timeoptimal.solution import BenchmarkLimits, StageFailure, TimeOptimalSolution
+from aerobat.quadrotor.timeoptimal.solution import BenchmarkLimits, SolveStatus, StageFailure, TimeOptimalSolution
 from aerobat.quadrotor.timeoptimal.structure import detect_structure
 from aerobat.quadrotor.timeoptimal.transcription import best_transcription, transcription_solver
 
@@ -33,7 +33,7 @@ def _failed(
     t_trans: float = math.nan,
 ) -> TimeOptimalSolution:
     return TimeOptimalSolution(
-        status="failed",
+        status=SolveStatus.FAILED,
         message=message,
         target_m=target,
         final_angle_rad=final_angle,
@@ -110,7 +110,7 @@ def solve_translation(
     target = (y_t, z_t)
     if y_t == 0.0 and z_t == 0.0 and angle == 0.0:
         return TimeOptimalSolution(
-            status="optimal",
+            status=SolveStatus.OPTIMAL,
             message="target equals the start state: zero-duration solution",
             target_m=target,
             final_angle_rad=angle,
@@ -170,7 +170,7 @@ def solve_translation(
             f"faster tilted motion; minimum-principle certificate not evaluated); boundary error {err:.1e}"
         )
     return TimeOptimalSolution(
-        status="optimal",
+        status=SolveStatus.OPTIMAL,
         message=msg,
         target_m=target,
         final_angle_rad=angle,

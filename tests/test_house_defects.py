@@ -60,6 +60,29 @@ def test_store_commands_work_without_db(tmp_path, monkeypatch, argv):
         assert db.execute("SELECT count(*) FROM studies").fetchone()[0] == 1
 
 
+def test_every_store_subcommand_works_without_db(tmp_path, monkeypatch):
+    """Every command that touches the store uses ./aerobat.sqlite (or $AEROBAT_DB) when --db is not given."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("AEROBAT_DB", raising=False)
+    steps = [
+        ["learn", *SMALL_FLIP, "--plant", "nominal", "--iterations", "2"],
+        ["learn", "--resume", "last", "--iterations", "3"],
+        ["sessions"], ["sessions", "--json"], ["show", "last"], ["show", "1", "--json"], ["plot", "1"],
+        ["export", "1"], ["export", "1", "--format", "json", "--output", "s1.json"],
+        ["study", "envelope", "--flips", "1", "--rates-deg-s", "800", "--workers", "1"],
+        ["studies"], ["studies", "last"], ["sessions", "--study", "1"],
+    ]
+    for argv in steps:
+        code, out, err = call(argv)
+        assert code == 0, (argv, err)
+    assert (tmp_path / "aerobat.sqlite").is_file() and (tmp_path / "s1.json").is_file()
+    assert (tmp_path / "out" / "session-1" / "learning.png").is_file()  # per-session default output folder
+    monkeypatch.setenv("AEROBAT_DB", str(tmp_path / "other.sqlite"))
+    code, out, err = call(["learn", *SMALL_FLIP, "--plant", "nominal", "--iterations", "1"])
+    assert code == 0, err
+    assert (tmp_path / "other.sqlite").is_file()
+
+
 # ------------------------------------------------------------------ defect 2
 
 

@@ -63,8 +63,9 @@ def plot_envelope(name: str, flips: Sequence[int], rates_deg_s: Sequence[float],
     """One quantity of a design envelope over (flip count, max rate); ``name`` picks the title."""
     fig, ax = new_axes(ax, figsize=(6, 3.5))
     data = np.log10(values) if name == "condition_number" else np.asarray(values, dtype=float)
+    half = 0.5 * (rates_deg_s[1] - rates_deg_s[0]) if len(rates_deg_s) > 1 else 50.0  # cells centred on samples
     image = ax.imshow(data, origin="lower", aspect="auto", cmap="viridis",
-                      extent=(rates_deg_s[0], rates_deg_s[-1], flips[0] - 0.5, flips[-1] + 0.5))
+                      extent=(rates_deg_s[0] - half, rates_deg_s[-1] + half, flips[0] - 0.5, flips[-1] + 0.5))
     fig.colorbar(image, ax=ax)
     ax.set_xlabel("max rate [deg/s]")
     ax.set_ylabel("flips")

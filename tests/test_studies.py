@@ -17,7 +17,7 @@ from aerobat import hummingbird
 from aerobat.cli import main
 from aerobat.core.design import design
 from aerobat.experiments.execution import DaskExecutor, LocalExecutor
-from aerobat.experiments.jobs import Job, run_job
+from aerobat.experiments.job import Job, run_job
 from aerobat.experiments.studies import RobustnessRanges, robustness_jobs, sample_arena, summarize_robustness
 from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel

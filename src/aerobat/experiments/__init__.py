@@ -7,7 +7,7 @@ stored, :func:`~aerobat.experiments.studies.run_study` for studies.
 """
 
 from aerobat.experiments.execution import DaskExecutor, LocalExecutor, make_executor
-from aerobat.experiments.jobs import Job, JobResult, JobStatus
+from aerobat.experiments.job import Job, JobResult, JobStatus
 from aerobat.experiments.sessions import SessionOutcome, StoredSession, resume_session, start_session, warm_start
 from aerobat.experiments.studies import StudyOutcome, run_study
 

@@ -14,12 +14,13 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import sys
 from collections.abc import Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any, Protocol
 
 from aerobat.errors import ConfigError
-from aerobat.experiments.jobs import Job, JobResult, JobStatus, run_job
+from aerobat.experiments.job import Job, JobResult, JobStatus, run_job
 
 __all__ = ["DaskExecutor", "Executor", "LocalExecutor", "make_executor"]
 
@@ -44,8 +45,11 @@ class Executor(Protocol):
 
 
 def _worker_init() -> None:
-    # one numba thread per worker process: the pool already uses every core
-    os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+    # one numba thread per worker process: the pool already uses every core. The variable is set
+    # only before numba is imported: numba re-reads it when it compiles, and a value that differs
+    # from the one its thread pool started with is an error
+    if "numba" not in sys.modules:
+        os.environ["NUMBA_NUM_THREADS"] = "1"
     try:
         import numba
 

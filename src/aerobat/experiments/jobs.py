@@ -1,4 +1,4 @@
-"""Jobs and the built-in job kinds: pure functions of a JSON specification, so a job runs the same anywhere.
+"""The built-in job kinds: pure functions of a JSON specification, so a job runs the same anywhere.
 
 A learning job's specification carries everything it needs — the maneuver's spec,
 the design (computed once per study), the nominal vehicle, the plant with its
@@ -8,13 +8,8 @@ study's process stores each run as a session, linked to the study.
 
 from __future__ import annotations
 
-import json
 import math
 import time
-import traceback
-from collections.abc import Callable
-from dataclasses import dataclass, field
-from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -25,92 +20,14 @@ from aerobat.core.maneuver import Maneuver, position_indices
 from aerobat.core.registry import from_spec
 from aerobat.core.rules import RuleChoice
 from aerobat.experiments.baselines import BASELINES, run_baseline
+from aerobat.experiments.job import job_kind
 from aerobat.experiments.setup import build_rule
 from aerobat.plants import PlantChoice
 from aerobat.quadrotor.dynamics import POS
 from aerobat.quadrotor.simulate import NominalModel, simulate
 from aerobat.quadrotor.vehicle import VehicleConfig, vehicle_from_table
 
-__all__ = [
-    "Job",
-    "JobResult",
-    "JobStatus",
-    "benchmark_job",
-    "design_job",
-    "job_kind",
-    "learn_job",
-    "learning_setup",
-    "rule_run_job",
-    "run_job",
-]
-
-
-@dataclass(frozen=True)
-class Job:
-    """One unit of work: ``kind`` selects the function, ``spec`` (JSON-ready) says everything else.
-
-    Attributes
-    ----------
-    key : unique name within a study (used to resume: finished keys are skipped).
-    kind : a registered job kind (``"learn"``, ``"design"``, ``"benchmark"``, ``"rule_run"``).
-    spec : the job's full specification, including its seed.
-    """
-
-    key: str
-    kind: str
-    spec: dict[str, Any] = field(hash=False)
-
-    def to_json(self) -> str:
-        return json.dumps({"key": self.key, "kind": self.kind, "spec": self.spec}, sort_keys=True)
-
-
-class JobStatus(StrEnum):
-    """How one job ended: ``done`` (its result is valid) or ``failed`` (it raised; run again on resume)."""
-
-    DONE = "done"
-    FAILED = "failed"
-
-
-@dataclass(frozen=True)
-class JobResult:
-    """A job's outcome: its status, its JSON-ready result (empty if failed) and the error if it failed."""
-
-    status: JobStatus
-    result: dict[str, Any]
-    error: str | None = None
-
-    @property
-    def done(self) -> bool:
-        return self.status is JobStatus.DONE
-
-
-JobFunction = Callable[[dict[str, Any]], dict[str, Any]]
-_KINDS: dict[str, JobFunction] = {}
-
-
-def job_kind(name: str) -> Callable[[JobFunction], JobFunction]:
-    """Register a job function under ``name`` (:mod:`aerobat.experiments.jobs` registers the built-in kinds)."""
-
-    def decorate(fn: JobFunction) -> JobFunction:
-        _KINDS[name] = fn
-        return fn
-
-    return decorate
-
-
-def run_job(job: Job) -> JobResult:
-    """Run one job in this process; a job that raises is a :attr:`JobStatus.FAILED` result, never an exception."""
-    fn = _KINDS.get(job.kind)
-    if fn is None:
-        return JobResult(JobStatus.FAILED, {}, f"unknown job kind {job.kind!r}")
-    try:
-        return JobResult(JobStatus.DONE, fn(job.spec))
-    except Exception as exc:  # a failed job is a result, not a crashed study
-        where = traceback.extract_tb(exc.__traceback__)[-1] if exc.__traceback__ else None
-        at = f" (at {where.filename.rsplit('/', 1)[-1]}:{where.lineno})" if where else ""
-        return JobResult(JobStatus.FAILED, {}, f"{type(exc).__name__}: {exc}{at}")
-
-
+__all__ = ["benchmark_job", "design_job", "learn_job", "learning_setup", "rule_run_job"]
 
 
 def learning_setup(spec: dict[str, Any]) -> tuple[Maneuver, Design, VehicleConfig, PlantChoice]:

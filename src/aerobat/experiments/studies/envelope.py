@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.experiments.jobs import Job
+from aerobat.experiments.job import Job
 from aerobat.quadrotor.vehicle import VehicleConfig, vehicle_table
 
 __all__ = ["ENVELOPE_QUANTITIES", "envelope_grid", "envelope_jobs", "envelope_key"]

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.experiments.jobs import Job
+from aerobat.experiments.job import Job
 
 __all__ = ["map_csv", "map_grid", "map_jobs"]
 

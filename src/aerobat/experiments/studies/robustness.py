@@ -15,7 +15,7 @@ from aerobat.core.design import Design
 from aerobat.core.maneuver import Maneuver
 from aerobat.core.rules import RuleChoice
 from aerobat.errors import ConfigError
-from aerobat.experiments.jobs import Job
+from aerobat.experiments.job import Job
 from aerobat.plants.arena.params import ArenaParams
 from aerobat.quadrotor.vehicle import VehicleConfig, vehicle_table
 

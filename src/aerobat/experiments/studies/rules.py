@@ -12,7 +12,7 @@ from aerobat.core.maneuver import Maneuver
 from aerobat.core.rules import RULES, RuleChoice
 from aerobat.errors import ConfigError
 from aerobat.experiments.baselines import BASELINES
-from aerobat.experiments.jobs import Job
+from aerobat.experiments.job import Job
 from aerobat.plants import PlantChoice
 from aerobat.quadrotor.vehicle import VehicleConfig, vehicle_table
 

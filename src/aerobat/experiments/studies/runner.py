@@ -20,7 +20,7 @@ from aerobat.core.registry import from_spec
 from aerobat.core.rules import RuleChoice
 from aerobat.errors import ConfigError
 from aerobat.experiments.execution import Executor, make_executor
-from aerobat.experiments.jobs import Job, JobResult
+from aerobat.experiments.job import Job, JobResult
 from aerobat.experiments.setup import plant_record_config
 from aerobat.plants import PlantChoice
 from aerobat.store import Store

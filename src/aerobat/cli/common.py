@@ -46,16 +46,39 @@ class Parser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"aerobat: error: {message}\n")
 
 
+def _quiet_stdout() -> None:
+    """The reader of standard output left: send the rest to /dev/null so later writes cannot fail."""
+    import os
+
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+    finally:
+        os.close(devnull)
+
+
 def console(json_mode: bool = False) -> Any:
-    """A rich console on stdout (stderr when stdout carries JSON); 100 columns when not a terminal."""
+    """A rich console on stdout (stderr when stdout carries JSON); 100 columns when not a terminal.
+
+    When the reader of standard output leaves (``aerobat … | head``), the console raises
+    :class:`BrokenPipeError` once and sends everything after it to /dev/null (rich's default
+    would exit the process with status 1, in the middle of whatever it was doing).
+    """
     from rich.console import Console
+
+    class _Console(Console):
+        def on_broken_pipe(self) -> None:
+            _quiet_stdout()
+            raise BrokenPipeError("standard output was closed")
 
     stream = sys.stderr if json_mode else sys.stdout
     try:
         tty = stream.isatty()
     except (ValueError, OSError):  # a closed stream
         tty = False
-    return Console(file=stream, highlight=False, markup=False, width=None if tty else 100, soft_wrap=True)
+    return _Console(file=stream, highlight=False, markup=False, width=None if tty else 100, soft_wrap=True)
 
 
 # ------------------------------------------------------------------ parsing
@@ -115,29 +138,52 @@ def finite_float(low: float, high: float, unit: str = "") -> Any:
 # ------------------------------------------------------------------ options
 
 
+_FLIP_DEFAULTS = {"flips": 3, "max_rate_deg_s": 1800.0, "dims": 3, "axis": "roll", "coast": "min", "ramp_s": 0.1}
+_TRANSLATION_DEFAULTS = {"to": "5,5", "final_angle_rad": 0.0}
+
+
 def add_maneuver_options(p: argparse.ArgumentParser, *, optional: bool = False, families: tuple[str, ...] = (
         "flip", "translation")) -> None:
-    """The maneuver family and its options, the design vehicle and the correction matrix."""
+    """The maneuver family and its options, the design vehicle and the correction matrix.
+
+    Options of the other family are refused (not ignored): their defaults are applied by
+    :func:`maneuver_from_args`, which knows the family.
+    """
     if optional:
         p.add_argument("maneuver", nargs="?", choices=families,
                        help="maneuver family (omit with --resume to use the stored session's)")
     else:
-        p.add_argument("maneuver", choices=families, help="maneuver family")
-    p.add_argument("--flips", type=bounded_int(1, 10), default=3, help="number of flips c_N (flip)")
-    p.add_argument("--max-rate-deg-s", type=finite_float(30.0, 5700.0, "deg/s"), default=1800.0,
-                   help="coast rate c_pmax [deg/s] (flip)")
-    p.add_argument("--dims", type=int, choices=(2, 3), default=3, help="2D (5 parameters) or 3D (9) (flip)")
-    p.add_argument("--axis", choices=("roll", "pitch"), default="roll", help="flip axis (flip)")
-    p.add_argument("--coast", choices=("min", "max"), default="min", help="coast collective β̲ or β̄ (flip)")
-    p.add_argument("--ramp-s", type=finite_float(0.0, 1.0, "s"), default=0.1,
-                   help="thrust ramp-down duration [s] (flip)")
-    p.add_argument("--to", default="5,5", help="target Y,Z [m] (translation)")
-    p.add_argument("--final-angle-rad", type=finite_float(-40.0, 40.0, "rad"), default=0.0,
-                   help="final roll angle [rad] (translation)")
+        p.add_argument("maneuver", choices=families, help="maneuver family (required)")
+    p.add_argument("--flips", type=bounded_int(1, 10), default=None, help="number of flips c_N (flip; default 3)")
+    p.add_argument("--max-rate-deg-s", type=finite_float(30.0, 5700.0, "deg/s"), default=None,
+                   help="coast rate c_pmax [deg/s] (flip; default 1800)")
+    p.add_argument("--dims", type=int, choices=(2, 3), default=None,
+                   help="2D (5 parameters) or 3D (9) (flip; default 3)")
+    p.add_argument("--axis", choices=("roll", "pitch"), default=None, help="flip axis (flip; default roll)")
+    p.add_argument("--coast", choices=("min", "max"), default=None, help="coast collective β̲ or β̄ (flip; default min)")
+    p.add_argument("--ramp-s", type=finite_float(0.0, 1.0, "s"), default=None,
+                   help="thrust ramp-down duration [s] (flip; default 0.1)")
+    p.add_argument("--to", default=None, help="target Y,Z [m] (translation; default 5,5)")
+    p.add_argument("--final-angle-rad", type=finite_float(-40.0, 40.0, "rad"), default=None,
+                   help="final roll angle [rad] (translation; default 0)")
     p.add_argument("--vehicle", default="hummingbird", help="design vehicle: a preset name or a vehicle TOML file")
     p.add_argument("--correction", choices=("tsvd", "inverse", "damped"), default="tsvd",
                    help="right inverse used for C (see docs/results.md)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def _apply_family_defaults(args: argparse.Namespace) -> None:
+    """Refuse the other family's options; fill in this family's defaults."""
+    mine, other = ((_FLIP_DEFAULTS, _TRANSLATION_DEFAULTS) if args.maneuver == "flip"
+                   else (_TRANSLATION_DEFAULTS, _FLIP_DEFAULTS))
+    given = [name for name in other if getattr(args, name, None) is not None]
+    if given:
+        options = ", ".join("--" + name.replace("_", "-") for name in given)
+        raise ConfigError(f"{options}: does not apply to a {args.maneuver} (only to a "
+                          f"{'translation' if args.maneuver == 'flip' else 'flip'})")
+    for name, value in mine.items():
+        if getattr(args, name, None) is None:
+            setattr(args, name, value)
 
 
 def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | None = None,
@@ -162,6 +208,7 @@ def add_db_option(p: argparse.ArgumentParser) -> None:
 
 def maneuver_from_args(args: argparse.Namespace, config: Any) -> Any:
     """The maneuver the options describe, designed for ``config``."""
+    _apply_family_defaults(args)
     if args.maneuver == "flip":
         from aerobat.quadrotor.maneuvers import MultiFlip
 
@@ -216,7 +263,11 @@ def open_store(args: argparse.Namespace, *, create: bool = True, **options: Any)
     from aerobat.store import Store, default_path
 
     db = getattr(args, "db", None)
-    return Store(default_path() if db is None else db, create=create, **options)
+    store = Store(default_path() if db is None else db, create=create,
+                  on_wait=lambda message: print(f"aerobat: {message}", file=sys.stderr, flush=True), **options)
+    for problem in store.problems:
+        print(f"aerobat: warning: {problem}", file=sys.stderr)
+    return store
 
 
 def output_dir(path: str | Path) -> Path:

@@ -113,7 +113,7 @@ def _cmd_learn(args: argparse.Namespace) -> int:
                                 correction=args.correction, start_params=start, warm_start_from=source,
                                 force=args.force, command=args.argv)
         else:
-            run = resume_session(store, args.resume, iterations=args.iterations)
+            run = resume_session(store, args.resume, iterations=args.iterations, take_over=args.take_over)
             if args.maneuver is not None:
                 _check_same_session(args, store, run)
         return _run(store, run, args)
@@ -157,9 +157,16 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
     hint = f"aerobat learn --resume {sid} --db {store.path}"
     out_console = console(args.json)
 
+    closed = {"stdout": False}
+
     def say(text: str) -> None:
-        out_console.print(text, soft_wrap=True)
-        out_console.file.flush()
+        if closed["stdout"]:
+            return
+        try:
+            out_console.print(text, soft_wrap=True)
+            out_console.file.flush()
+        except (BrokenPipeError, ValueError, OSError):  # the reader left (`aerobat learn … | head -3`)
+            closed["stdout"] = True
 
     verb = "resumed" if run.resumed else "started"
     say(f"session {sid} {verb} in {store.path}: {run.maneuver.name} on {run.plant_choice.kind} "
@@ -182,7 +189,8 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
     interrupts = Interrupts()
     interrupts.install()
     try:
-        outcome = run.run(on_iteration=on_iteration, should_stop=interrupts.requested, critical=interrupts.critical)
+        outcome = run.run(on_iteration=on_iteration, critical=interrupts.critical,
+                          should_stop=lambda: interrupts.requested() or closed["stdout"])
     except Exception as exc:
         from aerobat.errors import StoreError
 
@@ -195,8 +203,9 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
         # not kill it by signal while the interpreter shuts down (in-process callers get their handlers back)
         interrupts.restore(ignore=interrupts.requested() and getattr(args, "standalone", False))
     if outcome.status.value == "interrupted":
-        signum = interrupts.signum or signal.SIGINT
-        print(f"aerobat: interrupted: session {sid} stopped after iteration {outcome.last_index} "
+        signum = interrupts.signum or (signal.SIGPIPE if closed["stdout"] else signal.SIGINT)
+        why = "standard output was closed: " if closed["stdout"] and not interrupts.signum else ""
+        print(f"aerobat: interrupted: {why}session {sid} stopped after iteration {outcome.last_index} "
               f"({outcome.measured} of {outcome.target} measured iterations stored); resume with: {hint}",
               file=sys.stderr, flush=True)
         return 128 + int(signum)
@@ -236,6 +245,8 @@ def register(sub: Any) -> None:
     p.add_argument("--from-session", metavar="SESSION", type=session_ref,
                    help="start a new session from another session's learned parameters (same maneuver)")
     p.add_argument("--force", action="store_true", help="learn even if the design did not converge")
+    p.add_argument("--take-over", action="store_true",
+                   help="with --resume: take a session last run on another machine whose process is gone")
     p.add_argument("--fsync", action="store_true",
                    help="make every commit survive power loss too (an fsync per iteration)")
     add_db_option(p)

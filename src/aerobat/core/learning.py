@@ -24,6 +24,7 @@ from aerobat.core.design import Design
 from aerobat.core.maneuver import Maneuver, bounds_arrays, error_scales, position_indices
 from aerobat.core.plant import Plant, Trial, TrialStatus
 from aerobat.core.rules.base import PaperRule, UpdateRule
+from aerobat.core.rules.registry import RuleChoice, make_rule
 from aerobat.errors import ConfigError
 
 __all__ = [
@@ -249,10 +250,17 @@ class Learner:
     warned: set[int] = field(default_factory=set)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.design, Design):
+            raise ConfigError(f"Learner: design must be a Design (from aerobat.design()), got "
+                              f"{type(self.design).__name__}")
+        if isinstance(self.rule, str | RuleChoice):
+            self.rule = make_rule(self.rule, self.design)  # a name: "tsvd", "kalman", …
         if self.rule is None:
             if not np.all(np.isfinite(self.design.correction)):
                 raise ConfigError("the design's correction matrix is not finite (rank-deficient or failed design)")
             self.rule = PaperRule(self.design.correction)
+        if not isinstance(self.rule, UpdateRule):
+            raise ConfigError(f"Learner: rule must be an UpdateRule or a rule name, got {type(self.rule).__name__}")
         self.params = np.array(self.design.p_nominal if self.params is None else self.params, dtype=float)
         if self.params.shape != (len(self.maneuver.parameters),):
             raise ConfigError(f"start parameters: expected {len(self.maneuver.parameters)} values, "

@@ -247,7 +247,8 @@ def start_session(
     return StoredSession(store, session_id, maneuver, result, model, plant, rule, flying, learner, target)
 
 
-def resume_session(store: Store, ref: int | str, *, iterations: int | None = None) -> StoredSession:
+def resume_session(store: Store, ref: int | str, *, iterations: int | None = None,
+                   take_over: bool = False) -> StoredSession:
     """Take over a stored session to continue it exactly where its last commit left it.
 
     Parameters
@@ -255,6 +256,8 @@ def resume_session(store: Store, ref: int | str, *, iterations: int | None = Non
     store : the store that holds it.
     ref : its id, or ``"last"``.
     iterations : a new target of measured iterations (default: the stored one).
+    take_over : resume a session last run on another machine (whose process cannot be checked
+        from here); the caller vouches that it is gone.
 
     Raises
     ------
@@ -300,7 +303,7 @@ def resume_session(store: Store, ref: int | str, *, iterations: int | None = Non
                 raise ConfigError(f"{where}: stored plant state: {exc}") from None
         elif prec.kind != "nominal":
             exact = False  # the plant continues from a fresh random state
-    store.claim_session(session_id)
+    store.claim_session(session_id, take_over=take_over)
     if target != rec.target_iterations:
         store.set_target(session_id, target)
     return StoredSession(store, session_id, maneuver, result, model, plant_choice, rule_choice, plant, learner,

@@ -86,6 +86,14 @@ class VehicleParams:
         # eq 24: 4 f_min < m β̲ <= m β̄ < 4 f_max, and hover must be inside the envelope.
         lo = 4.0 * self.rotor_thrust_min_n / self.mass_kg
         hi = 4.0 * self.rotor_thrust_max_n / self.mass_kg
+        if hi <= self.gravity_m_s2:
+            raise ConfigError(f"rotor_thrust_max_n = {self.rotor_thrust_max_n:g} N is too small for mass_kg = "
+                              f"{self.mass_kg:g} kg: four rotors give at most 4 f_max/m = {hi:.3g} m/s², below "
+                              f"gravity_m_s2 = {self.gravity_m_s2:g}; the vehicle cannot hover")
+        if lo >= self.gravity_m_s2:
+            raise ConfigError(f"rotor_thrust_min_n = {self.rotor_thrust_min_n:g} N is too large for mass_kg = "
+                              f"{self.mass_kg:g} kg: 4 f_min/m = {lo:.3g} m/s² is above gravity_m_s2 = "
+                              f"{self.gravity_m_s2:g}; the vehicle cannot hover")
         check_range("collective_reduced_min_m_s2", self.collective_reduced_min_m_s2, low=lo,
                     high=self.gravity_m_s2, low_inclusive=False, high_inclusive=False,
                     unit="m/s², eq 24: 4 f_min/m < β̲ < g")

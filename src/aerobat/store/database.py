@@ -57,6 +57,15 @@ class Database:
         commits but never corrupts the file. ``"full"``: commits also survive power loss
         (an fsync per commit, a few milliseconds on ordinary disks).
     busy_timeout_s : how long a write waits for another process's transaction.
+    on_wait : called with a message when a write has waited a while for another process's lock.
+
+    Opening is careful: ``path`` is always a filesystem path (never an SQLite URI, even if it
+    starts with ``file:``); a store opened to write (``create=True``) must pass SQLite's
+    ``quick_check`` and carry aerobat's identity (``application_id`` and ``meta.application``),
+    and its file and folder must be writable — checked before anything is written. A store
+    opened to read only is opened read-only (``immutable`` in a read-only folder), and a failed
+    check is reported in :attr:`problems` instead of refusing it. Each write first checks that
+    the file is still the one that was opened (not deleted or replaced).
 
     Raises
     ------
@@ -69,7 +78,8 @@ class Database:
     """
 
     def __init__(self, path: str | os.PathLike[str], *, create: bool = True,
-                 synchronous: Literal["normal", "full"] = "normal", busy_timeout_s: float = 60.0) -> None:
+                 synchronous: Literal["normal", "full"] = "normal", busy_timeout_s: float = 60.0,
+                 on_wait: Any = None) -> None:
         if synchronous not in ("normal", "full"):
             raise ConfigError(f"synchronous = {synchronous!r}: allowed 'normal' or 'full'")
         if not str(path).strip():
@@ -78,10 +88,19 @@ class Database:
         self.busy_timeout_s = float(busy_timeout_s)
         self.owner = owner_token()
         self.migrated_from: list[int] = []
+        self.problems: list[str] = []
+        self.writing = create
+        self.on_wait = on_wait
         self._conn: sqlite3.Connection | None = None
+        self._identity: tuple[int, int] | None = None
         fresh = self._check_file(create)
+        read_only = not create and not os.access(self.path.parent if str(self.path.parent) else ".", os.W_OK)
+        uri = f"file:{quote(str(self.path.resolve()))}" + ("?mode=ro&immutable=1" if read_only else
+                                                           "" if create else "?mode=ro")
+        if read_only:
+            self.problems.append(f"{self.path}: its folder is read-only: opened as an unchanging snapshot")
         try:
-            self._conn = sqlite3.connect(str(self.path), timeout=self.busy_timeout_s, isolation_level=None,
+            self._conn = sqlite3.connect(uri, uri=True, timeout=min(self.busy_timeout_s, 1.0), isolation_level=None,
                                          check_same_thread=False)
         except sqlite3.Error as exc:
             raise self._translate(exc, "opening the database") from None
@@ -91,8 +110,9 @@ class Database:
                 self._conn.execute(f"PRAGMA synchronous = {synchronous.upper()}")
                 if fresh:
                     self._initialize()
-                else:
+                elif create:
                     self._upgrade_if_needed()
+            self._identity = self._file_identity()
         except BaseException:
             self.close()
             raise
@@ -109,9 +129,18 @@ class Database:
             parent = path.parent if str(path.parent) else Path(".")
             if not parent.is_dir():
                 raise StoreAccessError(f"{path}: cannot create the database: directory {parent} does not exist")
+            if not os.access(parent, os.W_OK):
+                raise StoreAccessError(f"{path}: cannot create the database: directory {parent} is read-only")
             return True
         if not path.is_file():
             raise StoreAccessError(f"{path}: not a regular file, expected a database file (--db PATH)")
+        if create and not os.access(path, os.W_OK):
+            raise StoreAccessError(f"{path}: the database is read-only; nothing can be stored in it (commands that "
+                                   f"only read it, like `aerobat sessions`, still work)")
+        folder = path.parent if str(path.parent) else Path(".")
+        if create and not os.access(folder, os.W_OK):
+            raise StoreAccessError(f"{path}: its folder {folder} is read-only: SQLite needs to create its journal "
+                                   f"files there to write (commands that only read the store still work)")
         try:
             with path.open("rb") as handle:
                 header = handle.read(100)
@@ -151,6 +180,7 @@ class Database:
                 with contextlib.suppress(sqlite3.Error):
                     row = probe.execute("SELECT value FROM meta WHERE key = 'application'").fetchone()
                     tagged = bool(row and row[0] == "aerobat")
+            damage = [r[0] for r in probe.execute("PRAGMA quick_check(20)")] if tables else ["ok"]
         except sqlite3.DatabaseError as exc:
             kind = getattr(exc, "sqlite_errorname", "")
             if kind.startswith(("SQLITE_BUSY", "SQLITE_LOCKED")):
@@ -160,6 +190,22 @@ class Database:
         finally:
             probe.close()
         ours = app_id == APPLICATION_ID or tagged
+        if ours and damage != ["ok"]:
+            lines = [line.strip() for entry in damage for line in str(entry).splitlines()
+                     if line.strip() and not line.startswith("***")]
+            detail = "; ".join(lines[:3]) + (" …" if len(lines) > 3 else "")
+            if self.writing:
+                raise StoreFormatError(f"{path}: the database is damaged (SQLite's quick_check: {detail}); nothing "
+                                       f"was written to it — restore it from a backup, or read what is left with "
+                                       f"`aerobat sessions` / `show` / `export`")
+            self.problems.append(f"{path}: the database is damaged (quick_check: {detail}); what it shows may be "
+                                 f"incomplete")
+        if ours and not (app_id == APPLICATION_ID and tagged) and tables:
+            changed = "its application_id" if app_id != APPLICATION_ID else "its meta.application entry"
+            if self.writing:
+                raise StoreFormatError(f"{path}: {changed} was changed: it no longer identifies as an aerobat store, "
+                                       f"so nothing is written to it (reading it still works)")
+            self.problems.append(f"{path}: {changed} was changed: it no longer identifies as an aerobat store")
         if not ours:
             if not tables and app_id == 0:
                 return True  # an empty SQLite database
@@ -282,10 +328,27 @@ class Database:
         except sqlite3.Error as exc:
             raise self._translate(exc, action) from None
 
-    def _write(self, action: str, fn: Any, *, attempts: int = 5) -> Any:
-        """Run ``fn(conn)`` in one ``BEGIN IMMEDIATE`` transaction, retrying if the file stays busy."""
+    def _file_identity(self) -> tuple[int, int] | None:
+        try:
+            stat = os.stat(self.path)
+        except OSError:
+            return None
+        return stat.st_dev, stat.st_ino
+
+    def _check_still_there(self, action: str) -> None:
+        if self._identity is not None and self._file_identity() != self._identity:
+            raise StoreWriteError(f"{self.path}: {action} failed: the database file was deleted or replaced while "
+                                  f"in use; nothing more is written (what was stored is in the file that was removed)")
+
+    def _write(self, action: str, fn: Any) -> Any:
+        """Run ``fn(conn)`` in one ``BEGIN IMMEDIATE`` transaction, waiting up to ``busy_timeout_s`` for a lock."""
         conn = self._db
-        for attempt in range(attempts):
+        if not self.writing:
+            raise StoreAccessError(f"{self.path}: {action}: the store was opened for reading only")
+        self._check_still_there(action)
+        waited = 0.0
+        told = False
+        while True:
             try:
                 with self._guard(action):
                     conn.execute("BEGIN IMMEDIATE")
@@ -297,10 +360,14 @@ class Database:
                         raise
                 return result
             except StoreBusyError:
-                if attempt == attempts - 1:
+                waited += 1.0  # the connection's own busy timeout
+                if waited >= self.busy_timeout_s:
                     raise
-                time.sleep(0.05 * 2**attempt)
-        raise AssertionError("unreachable")
+                if not told and self.on_wait is not None:
+                    self.on_wait(f"{self.path}: waiting for another process's lock to {action} (up to "
+                                 f"{self.busy_timeout_s:g} s)")
+                    told = True
+                time.sleep(0.05)
 
     def integrity_check(self) -> list[str]:
         """``PRAGMA integrity_check`` and ``foreign_key_check``: an empty list if the file is sound."""

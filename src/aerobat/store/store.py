@@ -312,15 +312,19 @@ class Store(StudyTables):
                    info, recorded_at, plant_state, learner_state)
                VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)""", row)
 
-    def claim_session(self, session_id: int) -> SessionRecord:
+    def claim_session(self, session_id: int, *, take_over: bool = False) -> SessionRecord:
         """Take over a session to resume it: it becomes ``running`` under this process.
+
+        A session marked running by a live process on this machine is never taken. One marked
+        running by a process on another machine cannot be checked from here; ``take_over``
+        says its process is gone (the caller's responsibility).
 
         Raises
         ------
         SessionNotFound
             No such session.
-        StoreError
-            Its process is still running (exit code 2).
+        SessionInUse
+            Its process is still running, or ran on another machine and ``take_over`` is not given.
         """
 
         def write(conn: sqlite3.Connection) -> None:
@@ -328,7 +332,12 @@ class Store(StudyTables):
             if row is None:
                 raise SessionNotFound(f"{self.path}: no session {session_id} (see `aerobat sessions --db {self.path}`)")
             state, owner, pid, host = row
-            if state == "running" and owner != self.owner and owner_alive(owner) is not False:
+            alive = owner_alive(owner) if state == "running" and owner != self.owner else False
+            if alive is None and not take_over:
+                raise SessionInUse(f"{self.path}: session {session_id} was last run by process {pid} on another "
+                                   f"machine ({host}), which this one cannot check; if that process is gone, "
+                                   f"resume with --take-over")
+            if alive:
                 raise SessionInUse(f"{self.path}: session {session_id} is still being run by process {pid} on "
                                    f"{host}; stop that process before resuming")
             now = utc_now()

@@ -168,6 +168,9 @@ def translation_maneuver(
     from aerobat.quadrotor.timeoptimal import BenchmarkLimits, solve_translation
 
     v = config.vehicle
+    if math.hypot(float(target_yz[0]), float(target_yz[1])) < 1e-3 and abs(final_angle_rad) < 1e-6:
+        raise ConfigError(f"translation to {tuple(target_yz)}: the target is the start; a translation needs a "
+                          f"target at least 1 mm away (or a final angle)")
     if limits is None:
         margin = 0.05 * (v.collective_reduced_max_m_s2 - v.collective_reduced_min_m_s2)
         limits = BenchmarkLimits(

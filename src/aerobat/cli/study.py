@@ -41,6 +41,8 @@ def run_cli_study(args: argparse.Namespace, kind: str, spec: dict[str, Any], job
     """Run a study with progress lines; returns (outcome, output folder). Failed jobs are the caller's to report."""
     from aerobat.experiments.studies import run_study
 
+    if args.out is not None:
+        output_dir(args.out)  # an unusable --out (the store itself, a file) is refused before anything is written
     out_console = console(getattr(args, "json", False))
     started = time.perf_counter()
     state: dict[str, Any] = {"first": 0}

@@ -1,0 +1,299 @@
+"""Issue 19: nothing lost, nothing silent — the store's last gaps and the messages that were unclear.
+
+Each test reproduces what an adversarial pass found, and failed on the code before the fix.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import io
+import os
+import socket
+import sqlite3
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from aerobat.cli import main
+from aerobat.store import Store
+
+SMALL = ["flip", "--dims", "2", "--flips", "1", "--max-rate-deg-s", "800"]
+
+
+def call(argv: list[str]) -> tuple[int, str, str]:
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(argv)
+    return code, out.getvalue(), err.getvalue()
+
+
+def digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def one_error_line(err: str, *fragments: str) -> None:
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("aerobat: error:") and "Traceback" not in err, err
+    for fragment in fragments:
+        assert fragment in lines[0], err
+
+
+@pytest.fixture()
+def store_with_a_session(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, _, err = call(["learn", *SMALL, "--plant", "nominal", "--iterations", "2", "--db", "s.sqlite"])
+    assert code == 0, err
+    return tmp_path / "s.sqlite"
+
+
+# ------------------------------------------------------------------ 1, 2: outputs never overwrite the store
+
+
+def test_export_refuses_the_store_and_existing_files(store_with_a_session):
+    db = store_with_a_session
+    before = digest(db)
+    code, _, err = call(["export", "1", "--db", str(db), "--format", "csv", "--output", str(db)])
+    assert code == 2
+    one_error_line(err, "that is the experiment store")
+    code, _, err = call(["export", "1", "--db", str(db), "--format", "csv", "--output", str(db), "--force"])
+    assert code == 2  # never the store, not even with --force
+    assert digest(db) == before
+    other = db.parent / "x.csv"
+    other.write_text("keep me")
+    code, _, err = call(["export", "1", "--db", str(db), "--output", str(other)])
+    assert code == 2 and other.read_text() == "keep me"
+    one_error_line(err, "exists", "--force")
+    code, _, err = call(["export", "1", "--db", str(db), "--output", str(other), "--force"])
+    assert code == 0 and other.read_text().startswith("session,")
+
+
+def test_benchmark_map_output_cannot_be_the_store(store_with_a_session):
+    db = store_with_a_session
+    before = digest(db)
+    code, _, err = call(["benchmark", "map", "--y=1:1:1", "--z=1:1:1", "--workers", "1", "--db", str(db),
+                         "--out", str(db)])
+    assert code == 2 and "--out" in err
+    assert digest(db) == before
+    with Store(db, create=False) as store:
+        assert store.integrity_check() == [] and len(store.list_sessions()) == 1
+
+
+# ------------------------------------------------------------------ 3: --db is always a path
+
+
+def test_a_db_that_looks_like_an_sqlite_uri_is_a_plain_file(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    name = "file:m.sqlite?mode=memory"
+    code, _, err = call(["learn", *SMALL, "--plant", "nominal", "--iterations", "1", "--db", name])
+    assert code == 0, err
+    assert (tmp_path / name).is_file()  # on disk, under exactly that name
+    code, out, err = call(["sessions", "--db", name, "--json"])
+    assert code == 0 and '"id": 1' in out, err
+
+
+# ------------------------------------------------------------------ 4: damaged or re-identified stores
+
+
+def _damage(db: Path) -> None:
+    with sqlite3.connect(db) as conn:
+        root = conn.execute("SELECT rootpage FROM sqlite_master WHERE name = 'iterations'").fetchone()[0]
+        size = conn.execute("PRAGMA page_size").fetchone()[0]
+        conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    data = bytearray(db.read_bytes())
+    offset = (root - 1) * size
+    data[offset + 8: offset + 12] = b"\xff\xff\xff\xff"  # cell pointers out of range: quick_check reports it
+    db.write_bytes(bytes(data))
+
+
+def test_a_damaged_store_is_refused_for_writing_and_reported_for_reading(store_with_a_session):
+    db = store_with_a_session
+    _damage(db)
+    before = digest(db)
+    for argv in (["learn", "--resume", "1", "--iterations", "4"], ["learn", *SMALL, "--iterations", "1"]):
+        code, out, err = call([*argv, "--db", str(db)])
+        assert code == 2, err
+        one_error_line(err, "damaged", "quick_check")
+        assert "session" not in out  # nothing was flown
+    assert digest(db) == before
+    code, out, err = call(["sessions", "--db", str(db)])
+    assert code == 0 and "warning:" in err and "damaged" in err
+
+
+def test_a_store_whose_identity_was_changed_is_not_written(store_with_a_session):
+    db = store_with_a_session
+    with sqlite3.connect(db) as conn:
+        conn.execute("PRAGMA application_id = 7")
+    before = digest(db)
+    code, _, err = call(["learn", "--resume", "1", "--iterations", "4", "--db", str(db)])
+    assert code == 2
+    one_error_line(err, "application_id", "changed")
+    assert digest(db) == before
+    code, out, err = call(["show", "1", "--db", str(db)])
+    assert code == 0 and "warning:" in err
+
+
+# ------------------------------------------------------------------ 5: losing the store mid-session
+
+
+def test_deleting_the_store_mid_session_stops_it_with_a_failure(tmp_path):
+    db = tmp_path / "gone.sqlite"
+    proc = subprocess.Popen([sys.executable, "-m", "aerobat.cli", "learn", *SMALL, "--plant", "arena",
+                             "--iterations", "3000", "--db", str(db), "--out", str(tmp_path / "o")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.time() + 120
+        while time.time() < deadline:
+            line = proc.stdout.readline() if proc.stdout else ""
+            if line.strip().startswith("2  ok"):
+                break
+        for suffix in ("", "-wal", "-shm"):
+            with contextlib.suppress(FileNotFoundError):
+                os.remove(f"{db}{suffix}")
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 1, err
+    assert "deleted or replaced" in err and "Traceback" not in err
+
+
+# ------------------------------------------------------------------ 7, 8: no internal errors, clear messages
+
+
+@pytest.mark.parametrize("argv, fragments", [
+    (["design", "translation", "--to", "0,0"], ["target is the start"]),
+    (["learn", *SMALL, "--seed", "9223372036854775808"], ["--seed"]),
+    (["learn", *SMALL, "--seed", "-1"], ["--seed"]),
+    (["sessions", "--limit", "1e23"], ["--limit"]),
+    (["design", "flip", "--max-rate-deg-s", "99999"], ["--max-rate-deg-s", "deg/s"]),
+    (["learn", *SMALL, "--plant", "nominal", "--arena", "a.toml"], ["--arena", "--plant arena"]),
+    (["learn", *SMALL, "--to", "1,2"], ["--to", "does not apply"]),
+    (["design", "translation", "--to=-1e9,3"], ["--to", "1000"]),
+    (["design", "translation", "--flips", "2"], ["--flips", "does not apply"]),
+])
+def test_bad_input_is_one_line_naming_the_option(tmp_path, monkeypatch, argv, fragments):
+    monkeypatch.chdir(tmp_path)
+    started = time.perf_counter()
+    code, _, err = call(argv)
+    assert code == 2, err
+    one_error_line(err, *fragments)
+    assert time.perf_counter() - started < 30  # refused before any long solve
+
+
+def test_an_impossible_vehicle_says_it_cannot_hover(tmp_path):
+    heavy = tmp_path / "heavy.toml"
+    heavy.write_text("[vehicle]\nmass_kg = 100.0\n")
+    code, _, err = call(["design", *SMALL, "--vehicle", str(heavy)])
+    assert code == 2
+    one_error_line(err, "rotor_thrust_max_n", "cannot hover", str(heavy))
+
+
+def test_a_benchmark_map_with_one_point_per_axis_draws(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, _, err = call(["benchmark", "map", "--y=2:2:1", "--z=1:1:1", "--workers", "1"])
+    assert code == 0, err
+    assert (tmp_path / "out" / "study-1" / "benchmark_map.png").stat().st_size > 1000
+
+
+def test_closing_stdout_interrupts_the_session_cleanly(tmp_path):
+    db = tmp_path / "p.sqlite"
+    learn = subprocess.Popen([sys.executable, "-m", "aerobat.cli", "learn", *SMALL, "--iterations", "40", "--db",
+                              str(db), "--out", str(tmp_path / "o")], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert learn.stdout is not None
+    for _ in range(2):
+        learn.stdout.readline()
+    learn.stdout.close()  # as `| head -2` does
+    _, err = learn.communicate(timeout=120)
+    assert learn.returncode == 141, err  # 128 + SIGPIPE
+    assert b"standard output was closed" in err and b"resume with" in err
+    with Store(db, create=False) as store:
+        rec = store.session(1)
+        assert rec.state == "interrupted" and rec.n_measured >= 1
+
+
+def test_a_read_only_store_fails_before_the_design_and_still_reads(store_with_a_session, monkeypatch):
+    db = store_with_a_session
+    real_access = os.access
+
+    def file_read_only(path, mode, *args, **kwargs):  # as chmod 444 is for a normal user (root ignores it)
+        if mode == os.W_OK and Path(path).resolve() == db.resolve():
+            return False
+        return real_access(path, mode, *args, **kwargs)
+
+    monkeypatch.setattr(os, "access", file_read_only)
+    started = time.perf_counter()
+    code, out, err = call(["learn", "flip", "--flips", "3", "--dims", "3", "--iterations", "1", "--db", str(db)])
+    assert code == 2 and time.perf_counter() - started < 5 and "session" not in out
+    one_error_line(err, "read-only")
+    assert call(["sessions", "--db", str(db)])[0] == 0
+
+
+def test_a_store_in_a_read_only_folder_can_be_read(store_with_a_session, monkeypatch):
+    db = store_with_a_session
+    real_access = os.access
+
+    def folder_read_only(path, mode, *args, **kwargs):
+        if mode == os.W_OK and Path(path).resolve() == db.parent.resolve():
+            return False
+        return real_access(path, mode, *args, **kwargs)
+
+    monkeypatch.setattr(os, "access", folder_read_only)
+    code, out, err = call(["sessions", "--db", str(db)])
+    assert code == 0 and "2D 1x roll flip" in out and "read-only" in err
+    code, _, err = call(["learn", *SMALL, "--iterations", "1", "--db", str(db)])
+    assert code == 2 and "read-only" in err
+
+
+def test_a_session_of_another_machine_needs_take_over(store_with_a_session):
+    db = store_with_a_session
+    with sqlite3.connect(db) as conn:
+        conn.execute("UPDATE sessions SET state = 'running', owner = 'elsewhere:4242:1', host = 'elsewhere', "
+                     "pid = 4242")
+    code, _, err = call(["learn", "--resume", "1", "--iterations", "3", "--db", str(db)])
+    assert code == 2
+    one_error_line(err, "another machine", "--take-over")
+    code, _, err = call(["learn", "--resume", "1", "--iterations", "3", "--db", str(db), "--take-over"])
+    assert code == 0, err
+    assert socket.gethostname() in Store(db, create=False).session(1).owner
+
+
+def test_waiting_for_another_writer_is_announced(store_with_a_session):
+    db = store_with_a_session
+    holder = sqlite3.connect(db, isolation_level=None, check_same_thread=False)
+    holder.execute("BEGIN IMMEDIATE")
+    release = threading.Timer(2.5, lambda: holder.execute("COMMIT"))
+    release.start()
+    try:
+        code, _, err = call(["learn", "--resume", "1", "--iterations", "3", "--db", str(db)])
+    finally:
+        release.join()
+        holder.close()
+    assert code == 0, err
+    assert "waiting for another process's lock" in err
+
+
+# ------------------------------------------------------------------ 10: the API meets misuse with clear errors
+
+
+def test_the_api_refuses_misuse_with_config_errors():
+    from aerobat import Arena, MultiFlip, NominalModel, design, hummingbird, learn
+    from aerobat.errors import ConfigError
+
+    config = hummingbird()
+    with pytest.raises(ConfigError, match="VehicleConfig"):
+        MultiFlip(vehicle=config)
+    flip = MultiFlip(vehicle=config.vehicle, flips=1, dims=2, max_rate_rad_s=np.radians(800))
+    nominal = design(flip, NominalModel(config))
+    for bad in ({"rule": "bogus"}, {"iterations": float("nan")}, {"iterations": 2.5}, {"iterations": float("inf")},
+                {"iterations": -1}):
+        kwargs = {"iterations": 2, **bad}
+        with pytest.raises(ConfigError):
+            learn(flip, nominal, Arena(config), **kwargs)
+    with pytest.raises(ConfigError, match="Design"):
+        learn(flip, "not a design", Arena(config), iterations=1)  # type: ignore[arg-type]

@@ -83,7 +83,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split("\n")) or type(exc).__name__
+    """The message on one line: line breaks become spaces, other control characters their escapes."""
+    text = " ".join(str(exc).splitlines()) or type(exc).__name__
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode() for c in text)
 
 
 def _negative_values(argv: list[str]) -> list[str]:

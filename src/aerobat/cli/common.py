@@ -149,11 +149,10 @@ def add_maneuver_options(p: argparse.ArgumentParser, *, optional: bool = False, 
     Options of the other family are refused (not ignored): their defaults are applied by
     :func:`maneuver_from_args`, which knows the family.
     """
-    if optional:
-        p.add_argument("maneuver", nargs="?", choices=families,
-                       help="maneuver family (omit with --resume to use the stored session's)")
-    else:
-        p.add_argument("maneuver", choices=families, help="maneuver family (required)")
+    p.add_argument("maneuver", nargs="?", choices=families,
+                   help="maneuver family (or --maneuver" + (", or --resume" if optional else "") + ")")
+    p.add_argument("--maneuver", dest="maneuver_source", metavar="FILE.toml|package.module:Name", default=None,
+                   help="a maneuver file (docs/maneuvers.md) or a Python maneuver, instead of a family")
     p.add_argument("--flips", type=bounded_int(1, 10), default=None, help="number of flips c_N (flip; default 3)")
     p.add_argument("--max-rate-deg-s", type=finite_float(30.0, 5700.0, "deg/s"), default=None,
                    help="coast rate c_pmax [deg/s] (flip; default 1800)")
@@ -174,6 +173,12 @@ def add_maneuver_options(p: argparse.ArgumentParser, *, optional: bool = False, 
 
 def _apply_family_defaults(args: argparse.Namespace) -> None:
     """Refuse the other family's options; fill in this family's defaults."""
+    if args.maneuver is None:  # --maneuver FILE: no family option applies
+        given = [name for name in (*_FLIP_DEFAULTS, *_TRANSLATION_DEFAULTS) if getattr(args, name, None) is not None]
+        if given:
+            options = ", ".join("--" + name.replace("_", "-") for name in given)
+            raise ConfigError(f"{options}: does not apply to --maneuver (only to the flip and translation families)")
+        return
     mine, other = ((_FLIP_DEFAULTS, _TRANSLATION_DEFAULTS) if args.maneuver == "flip"
                    else (_TRANSLATION_DEFAULTS, _FLIP_DEFAULTS))
     given = [name for name in other if getattr(args, name, None) is not None]
@@ -208,7 +213,20 @@ def add_db_option(p: argparse.ArgumentParser) -> None:
 
 def maneuver_from_args(args: argparse.Namespace, config: Any) -> Any:
     """The maneuver the options describe, designed for ``config``."""
+    source = getattr(args, "maneuver_source", None)
+    if source is not None and args.maneuver is not None:
+        raise ConfigError(f"name either a maneuver family ({args.maneuver}) or --maneuver {source}, not both")
+    if source is None and args.maneuver is None:
+        raise ConfigError("name a maneuver: a family (flip, translation) or --maneuver FILE.toml|package.module:Name")
     _apply_family_defaults(args)
+    if source is not None:
+        if source.endswith(".toml") or Path(source).exists():
+            from aerobat.quadrotor.maneuvers import load_maneuver_file
+
+            return load_maneuver_file(source, config.vehicle)
+        from aerobat.quadrotor.maneuvers.plugins import load_plugin_maneuver
+
+        return load_plugin_maneuver(source, config.vehicle)
     if args.maneuver == "flip":
         from aerobat.quadrotor.maneuvers import MultiFlip
 

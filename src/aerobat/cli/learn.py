@@ -91,9 +91,9 @@ def _cmd_learn(args: argparse.Namespace) -> int:
     if args.resume is not None and args.from_session is not None:
         raise ConfigError("--resume and --from-session exclude each other: --resume continues a session, "
                           "--from-session starts a new one from another session's learned parameters")
-    if args.resume is None and args.maneuver is None:
-        raise ConfigError("learn: name a maneuver (flip or translation), or continue a stored session with "
-                          "--resume SESSION")
+    if args.resume is None and args.maneuver is None and args.maneuver_source is None:
+        raise ConfigError("learn: name a maneuver (flip, translation or --maneuver FILE), or continue a stored "
+                          "session with --resume SESSION")
     if args.resume is None:
         # everything cheap is checked before the store is touched and before the (long) design
         config = vehicle_from_name_or_file(args.vehicle)
@@ -114,7 +114,7 @@ def _cmd_learn(args: argparse.Namespace) -> int:
                                 force=args.force, command=args.argv)
         else:
             run = resume_session(store, args.resume, iterations=args.iterations, take_over=args.take_over)
-            if args.maneuver is not None:
+            if args.maneuver is not None or args.maneuver_source is not None:
                 _check_same_session(args, store, run)
         return _run(store, run, args)
 

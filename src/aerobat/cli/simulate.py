@@ -17,6 +17,7 @@ from aerobat.cli.common import (
     console,
     plant_choice_from_args,
 )
+from aerobat.errors import ConfigError, DesignFailed
 
 __all__ = ["register"]
 
@@ -69,8 +70,23 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     from aerobat.quadrotor.simulate import final_state_summary
     from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
 
-    program = load_program(args.program)
     config = vehicle_from_name_or_file(args.vehicle)
+    if (args.program is None) == (args.maneuver_source is None):
+        raise ConfigError("fly: give a program file, or --maneuver FILE.toml|package.module:Name (its nominal "
+                          "design is flown), not both")
+    if args.program is not None:
+        program = load_program(args.program)
+    else:
+        from aerobat.cli.common import maneuver_from_args
+        from aerobat.core.design import design
+        from aerobat.quadrotor.simulate import NominalModel
+
+        args.maneuver = None
+        maneuver = maneuver_from_args(args, config)
+        nominal = design(maneuver, NominalModel(config))
+        if not nominal.converged:
+            raise DesignFailed(f"design failed, nothing to fly: {nominal.message}", nominal)
+        program = maneuver.program(nominal.p_nominal)
     plant = plant_choice_from_args(args).build(config)
     trials = []
     panels: list[tuple[str, np.ndarray, np.ndarray]] = []
@@ -85,7 +101,7 @@ def _cmd_fly(args: argparse.Namespace) -> int:
         if args.plot and trial.states.shape[0] and len(panels) < 6:
             panels.append((f"trial {k + 1}", trial.times_s, trial.states))
     if args.plot and panels:
-        save_figure(plot_side_views(panels, title=str(args.program)), args.plot, dpi=130)
+        save_figure(plot_side_views(panels, title=program.name or str(args.program)), args.plot, dpi=130)
     ok = [t for t in trials if t["final_state"] is not None]
     stats = _statistics(ok)
     if args.json:
@@ -132,7 +148,9 @@ def register(sub: Any) -> None:
     sim.set_defaults(func=_cmd_simulate)
 
     fly = sub.add_parser("fly", help="fly a program on a plant", formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    fly.add_argument("program", help="program TOML file (required)")
+    fly.add_argument("program", nargs="?", help="program TOML file (or --maneuver)")
+    fly.add_argument("--maneuver", dest="maneuver_source", metavar="FILE.toml|package.module:Name", default=None,
+                     help="fly this maneuver's nominal design instead of a program file")
     fly.add_argument("--vehicle", default="hummingbird", help="design vehicle: preset name or vehicle TOML file")
     add_plant_options(fly)
     fly.add_argument("--trials", type=bounded_int(1, 100000), default=1, help="how many times to fly it")

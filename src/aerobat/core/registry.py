@@ -9,11 +9,14 @@ entry-point group, so a package that declares, for example::
     slalom = "my_package.slalom:from_spec"
 
 adds a maneuver kind that every command, the store and the studies know, without
-any other wiring. aerobat's own built-ins are declared the same way.
+any other wiring. aerobat's own built-ins are declared the same way. A maneuver whose
+``spec()`` carries ``"module": "my_package.slalom"`` is also found without an entry point:
+:func:`from_spec` imports that module (which registers its kind) when the kind is unknown.
 """
 
 from __future__ import annotations
 
+import importlib
 import re
 from collections.abc import Callable, Iterator, Mapping
 from importlib.metadata import entry_points
@@ -149,4 +152,11 @@ def from_spec(spec: Mapping[str, Any], *, source: str = "maneuver spec") -> Mane
     kind = spec.get("kind")
     if not isinstance(kind, str):
         raise ConfigError(f"{source}.kind: expected a string naming the maneuver family, got {kind!r}")
+    module = spec.get("module")
+    if kind not in MANEUVERS and isinstance(module, str) and module.replace(".", "").replace("_", "").isalnum():
+        try:  # a plugin's spec names its module; importing it registers the kind
+            importlib.import_module(module)
+        except ImportError as exc:
+            raise ConfigError(f"{source}.module: the plugin module {module!r} of maneuver kind {kind!r} cannot be "
+                              f"imported: {exc}") from None
     return MANEUVERS.get(kind, source=f"{source}.kind")(spec, source)

@@ -5,6 +5,7 @@ Both are registered as maneuver kinds (``flip``, ``translation``) through the
 """
 
 from aerobat.quadrotor.maneuvers.flip import FlipStages, MultiFlip, flip_from_spec
+from aerobat.quadrotor.maneuvers.staged import StagedManeuver, load_maneuver_file, staged_from_spec
 from aerobat.quadrotor.maneuvers.translation import (
     Translation,
     translation_from_solution,
@@ -15,8 +16,11 @@ from aerobat.quadrotor.maneuvers.translation import (
 __all__ = [
     "FlipStages",
     "MultiFlip",
+    "StagedManeuver",
     "Translation",
     "flip_from_spec",
+    "load_maneuver_file",
+    "staged_from_spec",
     "translation_from_solution",
     "translation_from_spec",
     "translation_maneuver",

@@ -24,7 +24,7 @@ import contextlib
 import sys
 from collections.abc import Sequence
 
-from aerobat.cli.common import CommandFailed, Parser
+from aerobat.cli.common import CommandFailed, HelpFormatter, Parser
 from aerobat.errors import (
     ConfigError,
     DesignFailed,
@@ -73,7 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
     from aerobat import __version__
 
     parser = Parser(prog="aerobat", description="Design and learn fast open-loop quadrocopter maneuvers "
-                    "(Lupashin & D'Andrea 2012).", formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                    "(Lupashin & D'Andrea 2012).", formatter_class=HelpFormatter)
     parser.add_argument("--debug", action="store_true", help="show tracebacks for errors (accepted anywhere)")
     parser.add_argument("--version", action="version", version=f"aerobat {__version__}")
     sub = parser.add_subparsers(dest="command", parser_class=Parser, metavar="COMMAND")

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.cli.common import console, finite_float, parse_pair
+from aerobat.cli.common import HelpFormatter, console, finite_float, parse_pair
 from aerobat.cli.study import add_execution_options, report_failures, run_cli_study
 from aerobat.errors import ConfigError, SolveFailed
 
@@ -108,7 +108,7 @@ def _cmd_map(args: argparse.Namespace) -> int:
 
 
 def register(sub: Any) -> None:
-    fmt = argparse.ArgumentDefaultsHelpFormatter
+    fmt = HelpFormatter
     bench = sub.add_parser("benchmark", help="time-optimal translation benchmarks", formatter_class=fmt)
     bsub = bench.add_subparsers(dest="benchmark", parser_class=type(bench), metavar="BENCHMARK")
 

@@ -18,6 +18,7 @@ from aerobat.errors import AerobatError, ConfigError, OutputError
 
 __all__ = [
     "CommandFailed",
+    "HelpFormatter",
     "Parser",
     "add_db_option",
     "add_maneuver_options",
@@ -37,6 +38,18 @@ EXIT_USAGE = 2
 
 class CommandFailed(AerobatError):
     """A command ran but its result is a failure (a session that did not complete, failed study jobs…)."""
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows each option's default — unless its help already says what it defaults to, or there is none."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if "default" in text or "required" in text or action.default in (None, argparse.SUPPRESS):
+            return text
+        if isinstance(action, argparse._StoreTrueAction):  # noqa: SLF001 - argparse has no public name for it
+            return text + " (default: off)"
+        return super()._get_help_string(action)
 
 
 class Parser(argparse.ArgumentParser):
@@ -150,9 +163,9 @@ def add_maneuver_options(p: argparse.ArgumentParser, *, optional: bool = False, 
     :func:`maneuver_from_args`, which knows the family.
     """
     p.add_argument("maneuver", nargs="?", choices=families,
-                   help="maneuver family (or --maneuver" + (", or --resume" if optional else "") + ")")
+                   help="maneuver family (required unless --maneuver" + (" or --resume" if optional else "") + ")")
     p.add_argument("--maneuver", dest="maneuver_source", metavar="FILE.toml|package.module:Name", default=None,
-                   help="a maneuver file (docs/maneuvers.md) or a Python maneuver, instead of a family")
+                   help="a maneuver file (docs/maneuvers.md) or a Python maneuver, instead of a family (default: none)")
     p.add_argument("--flips", type=bounded_int(1, 10), default=None, help="number of flips c_N (flip; default 3)")
     p.add_argument("--max-rate-deg-s", type=finite_float(30.0, 5700.0, "deg/s"), default=None,
                    help="coast rate c_pmax [deg/s] (flip; default 1800)")
@@ -200,7 +213,8 @@ def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | No
     p.add_argument("--plant", choices=choices, default=default, help="what flies the program")
     for name, spec in PLANTS.items():
         if spec.option is not None and name in choices:
-            p.add_argument(spec.option, metavar="FILE.toml", help=f"{name} settings (only with --plant {name})")
+            p.add_argument(spec.option, metavar="FILE.toml",
+                          help=f"{name} settings (only with --plant {name}; default: the {name}'s defaults)")
     p.add_argument("--seed", type=bounded_int(0, 2**63 - 1), default=0, help="seed of the plant's random generator")
 
 

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.cli.common import add_maneuver_options, console, maneuver_from_args
+from aerobat.cli.common import HelpFormatter, add_maneuver_options, console, maneuver_from_args
 from aerobat.errors import DesignFailed
 
 __all__ = ["register"]
@@ -44,6 +44,6 @@ def _print_design(result: Any) -> None:
 
 def register(sub: Any) -> None:
     p = sub.add_parser("design", help="nominal design: p⁰, J, C",
-                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                       formatter_class=HelpFormatter)
     add_maneuver_options(p)
     p.set_defaults(func=_cmd_design)

@@ -19,6 +19,7 @@ from typing import Any
 
 from aerobat.cli.common import (
     CommandFailed,
+    HelpFormatter,
     add_db_option,
     add_maneuver_options,
     add_plant_options,
@@ -231,7 +232,7 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
 
 def register(sub: Any) -> None:
     p = sub.add_parser("learn", help="design, then learn on a plant (every iteration goes to the store)",
-                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                       formatter_class=HelpFormatter)
     add_maneuver_options(p, optional=True)
     add_plant_options(p)
     p.add_argument("--iterations", type=bounded_int(1, 10000), default=None,
@@ -241,9 +242,10 @@ def register(sub: Any) -> None:
                    help="update rule: paper, tsvd, damped, kalman, broyden, or <rule>+isc (docs/method.md)")
     p.add_argument("--out", default=None, help="folder for figures and session.json (default: out/session-ID)")
     p.add_argument("--resume", metavar="SESSION", type=session_ref,
-                   help="continue a stored session (id or 'last') with its parameters, counters and plant state")
+                   help="continue a stored session (id or 'last') with its parameters, counters and plant state "
+                        "(default: start a new one)")
     p.add_argument("--from-session", metavar="SESSION", type=session_ref,
-                   help="start a new session from another session's learned parameters (same maneuver)")
+                   help="start a new session from another session's learned parameters (same maneuver; default: p⁰)")
     p.add_argument("--force", action="store_true", help="learn even if the design did not converge")
     p.add_argument("--take-over", action="store_true",
                    help="with --resume: take a session last run on another machine whose process is gone")

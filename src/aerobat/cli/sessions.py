@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from aerobat.cli.common import add_db_option, bounded_int, console, open_store, output_dir, session_ref
+from aerobat.cli.common import HelpFormatter, add_db_option, bounded_int, console, open_store, output_dir, session_ref
 from aerobat.cli.show import print_stored_session
 from aerobat.errors import ConfigError, OutputError
 
@@ -179,10 +179,11 @@ def _show_study(store: Any, args: argparse.Namespace) -> int:
 
 
 def register(sub: Any) -> None:
-    fmt = argparse.ArgumentDefaultsHelpFormatter
+    fmt = HelpFormatter
     ses = sub.add_parser("sessions", help="list the stored learning sessions", formatter_class=fmt)
-    ses.add_argument("--limit", type=bounded_int(1, 10**9), default=None, help="only the newest N sessions")
-    ses.add_argument("--study", type=session_ref, default=None, help="only the sessions of this study")
+    ses.add_argument("--limit", type=bounded_int(1, 10**9), default=None, help="only the newest N sessions (default: all)")
+    ses.add_argument("--study", type=session_ref, default=None,
+                     help="only the sessions of this study (default: all)")
     ses.add_argument("--json", action="store_true", help="print one JSON array")
     add_db_option(ses)
     ses.set_defaults(func=_cmd_sessions)

@@ -12,6 +12,7 @@ import numpy as np
 
 from aerobat.cli.common import (
     CommandFailed,
+    HelpFormatter,
     add_plant_options,
     bounded_int,
     console,
@@ -138,7 +139,7 @@ def _print_trial(k: int, entry: dict[str, Any]) -> None:
 
 def register(sub: Any) -> None:
     sim = sub.add_parser("simulate", help="play a program on the nominal model",
-                         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                         formatter_class=HelpFormatter)
     sim.add_argument("program", help="program TOML file (required)")
     sim.add_argument("--vehicle", default="hummingbird", help="preset name or vehicle TOML file")
     sim.add_argument("--mode", choices=("continuous", "sampled"), default="continuous",
@@ -147,10 +148,10 @@ def register(sub: Any) -> None:
     sim.add_argument("--json", action="store_true", help="print one JSON object")
     sim.set_defaults(func=_cmd_simulate)
 
-    fly = sub.add_parser("fly", help="fly a program on a plant", formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    fly.add_argument("program", nargs="?", help="program TOML file (or --maneuver)")
+    fly = sub.add_parser("fly", help="fly a program on a plant", formatter_class=HelpFormatter)
+    fly.add_argument("program", nargs="?", help="program TOML file (required unless --maneuver)")
     fly.add_argument("--maneuver", dest="maneuver_source", metavar="FILE.toml|package.module:Name", default=None,
-                     help="fly this maneuver's nominal design instead of a program file")
+                     help="fly this maneuver's nominal design instead of a program file (default: none)")
     fly.add_argument("--vehicle", default="hummingbird", help="design vehicle: preset name or vehicle TOML file")
     add_plant_options(fly)
     fly.add_argument("--trials", type=bounded_int(1, 100000), default=1, help="how many times to fly it")

@@ -20,6 +20,7 @@ import numpy as np
 
 from aerobat.cli.common import (
     CommandFailed,
+    HelpFormatter,
     add_db_option,
     add_maneuver_options,
     add_plant_options,
@@ -266,13 +267,14 @@ def add_execution_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=bounded_int(1, 1024), default=None,
                    help="local worker processes (default: all cores)")
     p.add_argument("--resume", default=None, metavar="STUDY", type=session_ref,
-                   help="continue a study (id or 'last'): run only the jobs not done, failed ones included")
+                   help="continue a study (id or 'last'): run only the jobs not done, failed ones included "
+                        "(default: a new study)")
     p.add_argument("--out", default=None, help="folder for figures and the report (default: out/study-ID)")
     add_db_option(p)
 
 
 def register(sub: Any) -> None:
-    fmt = argparse.ArgumentDefaultsHelpFormatter
+    fmt = HelpFormatter
     study = sub.add_parser("study", help="robustness, update-rule and envelope studies (local pool or Dask)",
                            formatter_class=fmt)
     ssub = study.add_subparsers(dest="study", parser_class=type(study), metavar="STUDY")
@@ -285,7 +287,8 @@ def register(sub: Any) -> None:
     rob.add_argument("--rule", default="paper", help="update rule (see docs/method.md)")
     rob.add_argument("--tolerance-m", type=finite_float(1e-6, 100.0, "m"), default=0.12,
                      help="position tolerance of success [m]")
-    rob.add_argument("--ranges", metavar="FILE.toml", help="sampling ranges ([ranges] table)")
+    rob.add_argument("--ranges", metavar="FILE.toml",
+                     help="sampling ranges ([ranges] table; default: docs/plants.md's)")
     add_execution_options(rob)
     rob.set_defaults(func=_cmd_robustness)
 

@@ -1,0 +1,61 @@
+"""Every subcommand's --help lists, for each option, its default or that it is required (issue 16)."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+
+import pytest
+
+from aerobat.cli import main
+from aerobat.cli.app import build_parser
+
+
+def _parsers() -> list[tuple[str, argparse.ArgumentParser]]:
+    out = []
+
+    def walk(prefix: str, parser: argparse.ArgumentParser) -> None:
+        out.append((prefix, parser))
+        for action in parser._actions:  # noqa: SLF001 - the only way to list subparsers
+            if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+                for name, sub in action.choices.items():
+                    walk(f"{prefix} {name}".strip(), sub)
+
+    walk("", build_parser())
+    return out
+
+
+PARSERS = _parsers()
+
+
+@pytest.mark.parametrize("name, parser", PARSERS, ids=[name or "aerobat" for name, _ in PARSERS])
+def test_every_option_has_help_with_its_default_or_required(name, parser):
+    text = parser.format_help()
+    for action in parser._actions:  # noqa: SLF001
+        if action.help == argparse.SUPPRESS or isinstance(action, argparse._HelpAction | argparse._VersionAction |
+                                                          argparse._SubParsersAction):  # noqa: SLF001
+            continue
+        label = action.option_strings[0] if action.option_strings else action.dest
+        assert action.help, f"aerobat {name}: {label} has no help text"
+        shown = parser._get_formatter()._get_help_string(action)  # noqa: SLF001
+        assert "default" in shown or "required" in shown, f"aerobat {name}: {label}: {shown!r} names no default"
+    assert text
+
+
+def test_bare_aerobat_lists_the_commands_and_version_works():
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main([]) == 0
+    for command in ("simulate", "design", "learn", "sessions", "show", "studies", "study", "benchmark", "fly"):
+        assert command in out.getvalue()
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(["--version"]) == 0
+    assert out.getvalue().startswith("aerobat ")
+
+
+def test_debug_is_accepted_anywhere_and_negative_values_are_values():
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        assert main(["design", "translation", "--to", "-2,4", "--debug", "--json"]) == 0

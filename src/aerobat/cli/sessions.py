@@ -181,7 +181,8 @@ def _show_study(store: Any, args: argparse.Namespace) -> int:
 def register(sub: Any) -> None:
     fmt = HelpFormatter
     ses = sub.add_parser("sessions", help="list the stored learning sessions", formatter_class=fmt)
-    ses.add_argument("--limit", type=bounded_int(1, 10**9), default=None, help="only the newest N sessions (default: all)")
+    ses.add_argument("--limit", type=bounded_int(1, 10**9), default=None,
+                     help="only the newest N sessions (default: all)")
     ses.add_argument("--study", type=session_ref, default=None,
                      help="only the sessions of this study (default: all)")
     ses.add_argument("--json", action="store_true", help="print one JSON array")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 from pathlib import Path
 from typing import Any, NoReturn
@@ -29,6 +30,7 @@ __all__ = [
     "output_dir",
     "parse_pair",
     "plant_choice_from_args",
+    "refuse_overwrite",
     "rule_choice_from_args",
     "session_ref",
 ]
@@ -49,7 +51,7 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
             return text
         if isinstance(action, argparse._StoreTrueAction):  # noqa: SLF001 - argparse has no public name for it
             return text + " (default: off)"
-        return super()._get_help_string(action)
+        return super()._get_help_string(action) or ""
 
 
 class Parser(argparse.ArgumentParser):
@@ -312,3 +314,15 @@ def output_dir(path: str | Path) -> Path:
     except OSError as exc:
         raise OutputError(f"--out {out}: cannot create the folder: {exc.strerror or exc}") from None
     return out
+
+
+def refuse_overwrite(path: Path, *, store_path: Path | None, force: bool, option: str) -> None:
+    """Refuse to write over the store itself (ever) or over an existing file (unless ``force``)."""
+    if store_path is not None and path.exists() and store_path.exists():
+        for candidate in (store_path, Path(f"{store_path}-wal"), Path(f"{store_path}-shm")):
+            if candidate.exists() and os.path.samefile(path, candidate):
+                raise ConfigError(f"{option} {path}: that is the experiment store; choose another file")
+    if path.exists() and not force:
+        raise ConfigError(f"{option} {path}: the file exists; choose another name or pass --force to replace it")
+    if path.is_dir():
+        raise ConfigError(f"{option} {path}: is a folder, expected a file")

@@ -28,7 +28,32 @@ def _cmd_design(args: argparse.Namespace) -> int:
         _print_design(result)
     if not result.converged:
         raise DesignFailed(result.message, result)
+    if args.program is not None:
+        _write_program(maneuver, result, args)
     return 0
+
+
+def _write_program(maneuver: Any, result: Any, args: argparse.Namespace) -> None:
+    import dataclasses
+    import sys
+    from pathlib import Path
+
+    from aerobat import __version__
+    from aerobat.cli.common import refuse_overwrite
+    from aerobat.errors import OutputError
+    from aerobat.quadrotor.program import save_program
+
+    path = Path(args.program)
+    refuse_overwrite(path, store_path=None, force=args.force, option="--program")
+    program = dataclasses.replace(maneuver.program(result.p_nominal), provenance=(
+        f"aerobat {__version__}: aerobat {' '.join(args.argv)} (the nominal design p⁰ of {maneuver.name} on "
+        f"{args.vehicle})"))
+    try:
+        save_program(program, path)
+    except OSError as exc:
+        raise OutputError(f"--program {path}: cannot write: {exc.strerror or exc}") from None
+    print(f"program p⁰ written to {path}; fly it with `aerobat fly {path}`",
+          file=sys.stderr if args.json else sys.stdout)
 
 
 def _print_design(result: Any) -> None:
@@ -46,4 +71,7 @@ def register(sub: Any) -> None:
     p = sub.add_parser("design", help="nominal design: p⁰, J, C",
                        formatter_class=HelpFormatter)
     add_maneuver_options(p)
+    p.add_argument("--program", metavar="FILE.toml", default=None,
+                   help="write the nominal program p⁰ to FILE, for `aerobat fly` (default: none)")
+    p.add_argument("--force", action="store_true", help="replace --program if it exists")
     p.set_defaults(func=_cmd_design)

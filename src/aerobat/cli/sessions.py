@@ -6,28 +6,24 @@ import argparse
 import csv
 import io
 import json
-import os
 import sys
 from pathlib import Path
 from typing import Any
 
-from aerobat.cli.common import HelpFormatter, add_db_option, bounded_int, console, open_store, output_dir, session_ref
+from aerobat.cli.common import (
+    HelpFormatter,
+    add_db_option,
+    bounded_int,
+    console,
+    open_store,
+    output_dir,
+    refuse_overwrite,
+    session_ref,
+)
 from aerobat.cli.show import print_stored_session
 from aerobat.errors import ConfigError, OutputError
 
-__all__ = ["refuse_overwrite", "register"]
-
-
-def refuse_overwrite(path: Path, *, store_path: Path | None, force: bool, option: str) -> None:
-    """Refuse to write over the store itself (ever) or over an existing file (unless ``force``)."""
-    if store_path is not None and path.exists() and store_path.exists():
-        for candidate in (store_path, Path(f"{store_path}-wal"), Path(f"{store_path}-shm")):
-            if candidate.exists() and os.path.samefile(path, candidate):
-                raise ConfigError(f"{option} {path}: that is the experiment store; choose another file")
-    if path.exists() and not force:
-        raise ConfigError(f"{option} {path}: the file exists; choose another name or pass --force to replace it")
-    if path.is_dir():
-        raise ConfigError(f"{option} {path}: is a folder, expected a file")
+__all__ = ["register"]
 
 
 def _table(rows: list[tuple[str, ...]], right: set[int]) -> str:
@@ -97,8 +93,12 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
     if args.trajectories and args.format != "json":
         raise ConfigError("--trajectories: only with --format json")
+    if args.iteration is not None and args.program is None:
+        raise ConfigError("--iteration: only with --program")
     with open_store(args, create=False) as store:
         session_id = store.resolve_session(args.session)
+        if args.program is not None:
+            return _export_program(store, session_id, args)
         output = Path(args.output) if args.output else None
         if output is not None:
             refuse_overwrite(output, store_path=store.path, force=args.force, option="--output")
@@ -129,6 +129,37 @@ def _cmd_export(args: argparse.Namespace) -> int:
         print(f"session {session_id} written to {output}", file=sys.stderr)
     else:
         sys.stdout.write(text)
+    return 0
+
+
+def _export_program(store: Any, session_id: int, args: argparse.Namespace) -> int:
+    """The program a session flew at an iteration (default: the learned parameters), as a file ``fly`` reads."""
+    import dataclasses
+
+    from aerobat import __version__
+    from aerobat.core.registry import from_spec
+    from aerobat.quadrotor.program import save_program
+
+    path = Path(args.program)
+    refuse_overwrite(path, store_path=store.path, force=args.force, option="--program")
+    rec = store.session(session_id)
+    maneuver = from_spec(store.maneuver(rec.maneuver_id).spec, source=f"{store.path}: session {session_id} maneuver")
+    if args.iteration is None:
+        params, what = rec.current_params, f"the learned parameters after iteration {rec.last_index}"
+    else:
+        found = store.iterations(session_id, indices=[args.iteration])
+        if not found:
+            raise ConfigError(f"--iteration {args.iteration}: session {session_id} has iterations 1 … "
+                              f"{rec.last_index}")
+        params, what = found[0].params, f"the parameters flown at iteration {args.iteration}"
+    program = dataclasses.replace(maneuver.program(params), provenance=(
+        f"aerobat {__version__}: session {session_id} of {store.path} ({rec.maneuver_name} on {rec.plant_kind}), "
+        f"{what}"))
+    try:
+        save_program(program, path)
+    except OSError as exc:
+        raise OutputError(f"--program {path}: cannot write: {exc.strerror or exc}") from None
+    print(f"program of session {session_id} ({what}) written to {path}; fly it with `aerobat fly {path}`")
     return 0
 
 
@@ -178,6 +209,28 @@ def _show_study(store: Any, args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_examples(args: argparse.Namespace) -> int:
+    """Copy the shipped examples (programs, maneuver files, a Python maneuver) into a folder."""
+    import shutil
+    from importlib.resources import files
+
+    source = files("aerobat") / "examples"
+    target = output_dir(args.folder)
+    copied = []
+    for entry in sorted(Path(str(source)).rglob("*")):
+        if entry.is_dir() or entry.suffix not in (".toml", ".py") or "__pycache__" in entry.parts:
+            continue
+        relative = entry.relative_to(Path(str(source)))
+        destination = target / relative
+        if destination.exists() and not args.force:
+            raise ConfigError(f"{destination}: exists; choose another folder or pass --force to replace it")
+        destination.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(entry, destination)
+        copied.append(str(relative))
+    print(f"{len(copied)} examples copied to {target}/: {', '.join(copied)}")
+    return 0
+
+
 def register(sub: Any) -> None:
     fmt = HelpFormatter
     ses = sub.add_parser("sessions", help="list the stored learning sessions", formatter_class=fmt)
@@ -211,8 +264,18 @@ def register(sub: Any) -> None:
     export.add_argument("--output", metavar="FILE", help="write to FILE (default: standard output)")
     export.add_argument("--force", action="store_true", help="replace --output if it exists (never the store)")
     export.add_argument("--trajectories", action="store_true", help="include measured trajectories (json)")
+    export.add_argument("--program", metavar="FILE.toml", default=None,
+                        help="write the session's program instead (the learned one; default: no program)")
+    export.add_argument("--iteration", type=bounded_int(1, 10**9), default=None,
+                        help="with --program: the program flown at this iteration (default: the learned one)")
     add_db_option(export)
     export.set_defaults(func=_cmd_export)
+
+    examples = sub.add_parser("examples", help="copy the shipped example programs and maneuvers into a folder",
+                              formatter_class=fmt)
+    examples.add_argument("folder", help="where to copy them (required)")
+    examples.add_argument("--force", action="store_true", help="replace files that exist")
+    examples.set_defaults(func=_cmd_examples)
 
     studies = sub.add_parser("studies", help="list the stored studies, or show one", formatter_class=fmt)
     studies.add_argument("study", nargs="?", type=session_ref, default=None,

@@ -97,9 +97,20 @@ class ErrorSpec:
 class Maneuver(Protocol):
     """What the design and learning stages need from a maneuver."""
 
-    name: str
-    parameters: tuple[ParameterSpec, ...]
-    errors: tuple[ErrorSpec, ...]
+    @property
+    def name(self) -> str:
+        """What it is called in tables and records."""
+        ...
+
+    @property
+    def parameters(self) -> tuple[ParameterSpec, ...]:
+        """The learned parameters, in order."""
+        ...
+
+    @property
+    def errors(self) -> tuple[ErrorSpec, ...]:
+        """The final-state error components, in order."""
+        ...
 
     def guess(self) -> np.ndarray:
         """The initial parameter guess p^g (Sect. 4)."""

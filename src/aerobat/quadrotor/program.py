@@ -110,6 +110,7 @@ class Program:
     ramp_down : ramp-down envelopes (Sect. 7.2).
     hover_collective_m_s2 : the collective hover value that ramps approach [m/s²].
     name : free text.
+    provenance : where the program came from (the command, session or design that made it).
     """
 
     switches: tuple[Switch, ...]
@@ -117,6 +118,7 @@ class Program:
     ramp_down: RampDown = field(default_factory=RampDown)
     hover_collective_m_s2: float = 9.81
     name: str = ""
+    provenance: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
         if isinstance(self.duration_s, bool) or not isinstance(self.duration_s, int | float):
@@ -253,8 +255,10 @@ def _envelope(t0: float, T: float, ramp: float) -> tuple[float, float]:
 
 
 def program_to_table(program: Program) -> dict[str, Any]:
+    header: dict[str, Any] = {"provenance": program.provenance} if program.provenance else {}
     return {
         "program": {
+            **header,
             "name": program.name,
             "duration_s": program.duration_s,
             "hover_collective_m_s2": program.hover_collective_m_s2,
@@ -265,7 +269,7 @@ def program_to_table(program: Program) -> dict[str, Any]:
 
 
 def save_program(program: Program, path: str | Path) -> None:
-    """Write ``program`` as TOML (``[program]`` header and ``[[switch]]`` entries)."""
+    """Write ``program`` as TOML (``[program]`` header and ``[[switch]]`` entries), exact to the last bit."""
     Path(path).write_text(tomli_w.dumps(program_to_table(program)))
 
 
@@ -276,7 +280,7 @@ def program_from_table(data: dict[str, Any], *, source: str) -> Program:
     header = data.get("program")
     if not isinstance(header, dict):
         raise ConfigError(f"{source}: missing required table [program] (with duration_s)")
-    allowed = {"name", "duration_s", "hover_collective_m_s2", "ramp_down"}
+    allowed = {"name", "duration_s", "hover_collective_m_s2", "ramp_down", "provenance"}
     bad = sorted(set(header) - allowed)
     if bad:
         raise ConfigError(
@@ -319,6 +323,9 @@ def program_from_table(data: dict[str, Any], *, source: str) -> Program:
         name = header.get("name", "")
         if not isinstance(name, str):
             raise ConfigError(f"[program] name must be a string, got {name!r}")
+        provenance = header.get("provenance", "")
+        if not isinstance(provenance, str):
+            raise ConfigError(f"[program] provenance must be a string, got {provenance!r}")
         return Program(
             switches=tuple(switches),
             duration_s=float(header["duration_s"]),
@@ -326,6 +333,7 @@ def program_from_table(data: dict[str, Any], *, source: str) -> Program:
                                   for k, v in ramp_table.items()}),
             hover_collective_m_s2=float(header.get("hover_collective_m_s2", 9.81)),
             name=name,
+            provenance=provenance,
         )
     except (ValueError, TypeError) as exc:
         raise ConfigError(f"{source}: {exc}") from None

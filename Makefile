@@ -8,9 +8,12 @@ OUT ?= out
 .PHONY: demo test test-slow bench lint clean setup
 
 $(STAMP): pyproject.toml
+	@command -v chromium >/dev/null || { [ "$$(id -u)" = 0 ] && apt-get update -qq && \
+		DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; } || \
+		{ echo "make: the replay test needs Debian's chromium: apt-get install chromium (as root)"; exit 1; }
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[test,dev,rotorpy,dask,baselines]"
+	$(PY) -m pip install --quiet -e ".[test,dev,rotorpy,dask,baselines,replay]"
 	touch $(STAMP)
 
 setup: $(STAMP)

@@ -196,7 +196,7 @@ def test_a_plugin_maneuver_runs_through_the_cli_store_and_a_study(tmp_path, monk
     monkeypatch.chdir(tmp_path)
     code, _, err = call(["learn", "--maneuver", plugin_path, "--plant", "arena", "--iterations", "4"])
     assert code == 0, err
-    for argv in (["sessions"], ["show", "1"], ["plot", "1"], ["export", "1", "--format", "json"]):
+    for argv in (["sessions"], ["show", "1"], ["plot", "1"], ["export", "1", "--format", "json"], ["replay", "1"]):
         code, out, err = call(argv)
         assert code == 0, (argv, err)
     code, _, err = call(["learn", "--resume", "1", "--iterations", "5"])

@@ -209,6 +209,26 @@ def _show_study(store: Any, args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from aerobat.experiments.reports import session_replay
+
+    iterations = None
+    if args.iterations is not None:
+        try:
+            iterations = sorted({int(v) for v in args.iterations.split(",") if v.strip()})
+        except ValueError:
+            raise ConfigError(f"--iterations {args.iterations!r}: expected a comma list of iteration numbers") from None
+    with open_store(args, create=False) as store:
+        session_id = store.resolve_session(args.session)
+        out = output_dir(args.out if args.out is not None else f"out/session-{session_id}")
+        path = session_replay(store, session_id, out / "replay.html", iterations=iterations)
+    if args.json:
+        print(json.dumps({"session": session_id, "replay": str(path)}))
+    else:
+        print(f"3D replay of session {session_id} in {path} (open it in a browser; no server needed)")
+    return 0
+
+
 def _cmd_examples(args: argparse.Namespace) -> int:
     """Copy the shipped examples (programs, maneuver files, a Python maneuver) into a folder."""
     import shutil
@@ -270,6 +290,16 @@ def register(sub: Any) -> None:
                         help="with --program: the program flown at this iteration (default: the learned one)")
     add_db_option(export)
     export.set_defaults(func=_cmd_export)
+
+    replay = sub.add_parser("replay", help="a stored session as an animated 3D scene in one HTML file",
+                            formatter_class=fmt)
+    replay.add_argument("session", type=session_ref, help="session id or 'last' (required)")
+    replay.add_argument("--iterations", default=None,
+                        help="comma list of iterations to show (default: the first and last measured)")
+    replay.add_argument("--out", default=None, metavar="DIR", help="folder for replay.html (default: out/session-ID)")
+    replay.add_argument("--json", action="store_true", help="print one JSON object")
+    add_db_option(replay)
+    replay.set_defaults(func=_cmd_replay)
 
     examples = sub.add_parser("examples", help="copy the shipped example programs and maneuvers into a folder",
                               formatter_class=fmt)

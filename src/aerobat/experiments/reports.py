@@ -6,6 +6,8 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from aerobat.core.registry import from_spec
 from aerobat.errors import ConfigError
 from aerobat.plotting.files import save_figure
@@ -15,7 +17,7 @@ from aerobat.quadrotor.simulate import simulate
 from aerobat.quadrotor.vehicle import vehicle_from_table
 from aerobat.store import Store
 
-__all__ = ["finite_or_none", "session_figures", "session_json"]
+__all__ = ["finite_or_none", "session_figures", "session_json", "session_replay"]
 
 
 def finite_or_none(values: Any) -> list[float | None]:
@@ -112,3 +114,37 @@ def session_figures(store: Store, session_id: int, out: Path) -> list[str]:
     else:
         notes.append(f"note: session {session_id} has no iterations: learning.png not drawn")
     return notes
+
+
+def session_replay(store: Store, session_id: int, path: Path, *, iterations: list[int] | None = None) -> Path:
+    """Write the 3D replay of a stored session: the nominal model's flight and measured iterations.
+
+    ``iterations`` are the iterations to show (default: the first and the last measured one).
+    """
+    from aerobat.plotting.replay import replay_figure, write_replay_html
+
+    rec = store.session(session_id)
+    mrec = store.maneuver(rec.maneuver_id)
+    drec = store.design(rec.design_id)
+    maneuver = from_spec(mrec.spec, source=f"session {session_id} maneuver")
+    config = vehicle_from_table(store.vehicle(drec.vehicle_id).config, source=f"session {session_id} vehicle")
+    nominal = simulate(maneuver.program(drec.p_nominal), config)
+    flights = [("nominal (model)", nominal.times_s, nominal.states)]
+    measured = [it.index for it in store.iterations(session_id) if it.status == "ok" and it.trajectory_rows > 0]
+    if iterations is None:
+        iterations = sorted({measured[0], measured[-1]}) if measured else []
+    missing = [i for i in iterations if i not in measured]
+    if missing:
+        raise ConfigError(f"session {session_id}: iteration(s) {', '.join(map(str, missing))} have no measured "
+                          f"trajectory; measured: {', '.join(map(str, measured)) or 'none'}")
+    for it in store.iterations(session_id, trajectories=True, indices=iterations):
+        if it.times_s is not None and it.states is not None:
+            label = "first attempt" if measured and it.index == measured[0] else "learned" if (
+                measured and it.index == measured[-1]) else "iteration"
+            flights.append((f"{label} (iteration {it.index})", it.times_s, it.states))
+    start = np.asarray(maneuver.initial_state())[:3]
+    target = getattr(maneuver, "target_yz", None)
+    target_m = (start[0], float(target[0]), float(target[1])) if target is not None else None
+    fig = replay_figure(flights, title=f"session {session_id}: {mrec.name} on {rec.plant_kind}",
+                        arm_m=config.vehicle.arm_length_m, target_m=target_m)
+    return write_replay_html(fig, path)

@@ -47,7 +47,8 @@ class VerticalHop:
 
     def program(self, params: np.ndarray) -> Program:
         p0, p1 = (float(v) for v in params)
-        return Program(switches=(Switch(time_s=0.0, channel="collective", value=self.vehicle.collective_reduced_max_m_s2),
+        top = self.vehicle.collective_reduced_max_m_s2
+        return Program(switches=(Switch(time_s=0.0, channel="collective", value=top),
                                  Switch(time_s=p0, channel="collective", value=5.0)),
                        duration_s=p0 + p1 + 0.05, ramp_down=RampDown(collective_s=0.05),
                        hover_collective_m_s2=self.vehicle.gravity_m_s2, name=self.name)

@@ -83,12 +83,14 @@ def session_figures(store: Store, session_id: int, out: Path) -> list[str]:
     notes = []
     panels = []
     target = mrec.spec.get("target_yz", (0.0, 0.0))
+    descriptions: list[str] | None = None
     try:
         maneuver = from_spec(mrec.spec, source=f"session {session_id} maneuver")
         config = vehicle_from_table(store.vehicle(drec.vehicle_id).config, source=f"session {session_id} vehicle")
         nominal = simulate(maneuver.program(drec.p_nominal), config)
         panels.append(("nominal (model)", nominal.times_s, nominal.states))
         target = getattr(maneuver, "target_yz", target)
+        descriptions = [p.description for p in maneuver.parameters]
     except ConfigError as exc:
         notes.append(f"note: nominal trajectory not drawn: {exc}")
     records = store.iterations(session_id)
@@ -109,7 +111,8 @@ def session_figures(store: Store, session_id: int, out: Path) -> list[str]:
         iterations = [{"i": it.index, "status": it.status, "params": it.params.tolist(),
                        "error": finite_or_none(it.error)} for it in records]
         save_figure(plot_learning(iterations, mrec.error_names, mrec.error_units, mrec.parameter_names,
-                                  mrec.parameter_units, title=f"{mrec.name} on {rec.plant_kind}"),
+                                  mrec.parameter_units, title=f"{mrec.name} on {rec.plant_kind}",
+                                  error_scales=mrec.error_scales, parameter_descriptions=descriptions),
                     out / "learning.png")
     else:
         notes.append(f"note: session {session_id} has no iterations: learning.png not drawn")

@@ -13,8 +13,14 @@ __all__ = ["plot_learning"]
 
 
 def plot_learning(iterations: Sequence[dict], error_names: Sequence[str], error_units: Sequence[str],
-                  parameter_names: Sequence[str], parameter_units: Sequence[str], *, title: str = "") -> Any:
-    """Fig. 10: final-state errors and parameters over iterations (lost trials marked)."""
+                  parameter_names: Sequence[str], parameter_units: Sequence[str], *, title: str = "",
+                  error_scales: Sequence[float] | None = None,
+                  parameter_descriptions: Sequence[str] | None = None) -> Any:
+    """Fig. 10: final-state errors and parameters over iterations (lost trials marked).
+
+    ``error_scales`` draws each error's band ±scale (the size of an error that matters);
+    ``parameter_descriptions`` labels each parameter by its meaning as well as its name.
+    """
     ok = [it for it in iterations if it["status"] == "ok"]
     lost = [it for it in iterations if it["status"] != "ok"]
     idx = np.array([it["i"] for it in ok])
@@ -30,6 +36,9 @@ def plot_learning(iterations: Sequence[dict], error_names: Sequence[str], error_
             ax = axes[k, 0]
             angle = error_units[k] == "rad"
             values = np.degrees(errors[:, k]) if angle else errors[:, k]
+            if error_scales is not None:
+                band = float(np.degrees(error_scales[k]) if angle else error_scales[k])
+                ax.axhspan(-band, band, color="C2", alpha=0.15, lw=0, label="± error scale" if k == 0 else None)
             ax.plot(idx, values, ".-", lw=0.8, ms=3)
             ax.axhline(0, color="k", lw=0.5)
             ax.set_ylabel(f"{error_names[k]} [{'°' if angle else error_units[k]}]", fontsize=8)
@@ -40,10 +49,12 @@ def plot_learning(iterations: Sequence[dict], error_names: Sequence[str], error_
             ax.plot(all_idx, params[:, k], ".-", lw=0.8, ms=3, color="C1")
             for it in lost:
                 ax.axvline(it["i"], color="r", lw=0.5, alpha=0.4)
-            ax.set_ylabel(f"{parameter_names[k]} [{parameter_units[k]}]", fontsize=8)
+            meaning = f"\n{parameter_descriptions[k]}" if parameter_descriptions else ""
+            ax.set_ylabel(f"{parameter_names[k]} [{parameter_units[k]}]{meaning}", fontsize=7)
         else:
             axes[k, 1].axis("off")
-    axes[0, 0].set_title("final-state errors")
+    axes[0, 0].set_title("final-state errors" + (" (green: ± the error's scale)" if error_scales is not None
+                                                  else ""))
     axes[0, 1].set_title("parameters (red lines: lost/rejected trials)")
     axes[-1, 0].set_xlabel("iteration")
     axes[-1, 1].set_xlabel("iteration")

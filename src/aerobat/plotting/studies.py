@@ -53,21 +53,45 @@ def plot_success_by_property(properties: Sequence[Mapping[str, float]], success:
     return fig
 
 
-_ENVELOPE_TITLES = {"feasible": "design converged (1) or not (0)", "duration_s": "hover-to-hover duration [s]",
+_ENVELOPE_TITLES = {"feasible": "which flips the vehicle can fly (nominal design)",
+                    "duration_s": "hover-to-hover duration [s]",
                     "apex_m": "apex height above the start [m]",
                     "condition_number": "condition number of J (log10)"}
 
 
 def plot_envelope(name: str, flips: Sequence[int], rates_deg_s: Sequence[float], values: np.ndarray, *,
                   ax: Any = None) -> Any:
-    """One quantity of a design envelope over (flip count, max rate); ``name`` picks the title."""
-    fig, ax = new_axes(ax, figsize=(6, 3.5))
-    data = np.log10(values) if name == "condition_number" else np.asarray(values, dtype=float)
-    half = 0.5 * (rates_deg_s[1] - rates_deg_s[0]) if len(rates_deg_s) > 1 else 50.0  # cells centred on samples
-    image = ax.imshow(data, origin="lower", aspect="auto", cmap="viridis",
-                      extent=(rates_deg_s[0] - half, rates_deg_s[-1] + half, flips[0] - 0.5, flips[-1] + 0.5))
-    fig.colorbar(image, ax=ax)
-    ax.set_xlabel("max rate [deg/s]")
+    """One quantity of a design envelope over (flip count, max rate); each cell centred on its sample.
+
+    ``feasible`` is drawn with two colours and a legend (and grey for a job that failed); the
+    other quantities with a colour bar (the condition number on a log scale).
+    """
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    fig, ax = new_axes(ax, figsize=(6.5, 3.6))
+    data = np.asarray(values, dtype=float)
+    rates = np.asarray(rates_deg_s, dtype=float)
+    half = 0.5 * (rates[1] - rates[0]) if rates.size > 1 else 50.0
+    extent = (rates[0] - half, rates[-1] + half, flips[0] - 0.5, flips[-1] + 0.5)
+    if name == "feasible":
+        shown = np.where(np.isnan(data), 2.0, data)
+        cmap = ListedColormap(["#d62728", "#2ca02c", "#bbbbbb"])
+        ax.imshow(shown, origin="lower", aspect="auto", cmap=cmap, vmin=-0.5, vmax=2.5, extent=extent,
+                  interpolation="nearest")
+        handles = [Patch(color="#2ca02c", label="design converged"), Patch(color="#d62728", label="infeasible")]
+        if np.isnan(data).any():
+            handles.append(Patch(color="#bbbbbb", label="job failed (see aerobat studies)"))
+        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    else:
+        shown = np.log10(data) if name == "condition_number" else data
+        image = ax.imshow(shown, origin="lower", aspect="auto", cmap="viridis", extent=extent,
+                          interpolation="nearest")
+        fig.colorbar(image, ax=ax)
+    ax.set_xticks(rates)
+    ax.set_xticklabels([f"{r:g}" for r in rates], rotation=45, fontsize=7)
+    ax.set_yticks(list(flips))
+    ax.set_xlabel("max rate [deg/s] (cells centred on the sampled rates)")
     ax.set_ylabel("flips")
     ax.set_title(_ENVELOPE_TITLES.get(name, name))
     return fig

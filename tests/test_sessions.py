@@ -116,3 +116,25 @@ def test_resume_refuses_a_completed_session_and_accepts_a_higher_target(tmp_path
             resume_session(store, run.id)
         more = resume_session(store, "last", iterations=4)
         assert more.run().measured == 4
+
+
+def test_a_stored_session_loads_back_and_its_json_round_trips(tmp_path):
+    import json
+
+    from aerobat.experiments.reports import load_session, session_from_json, session_json
+
+    with Store(tmp_path / "a.sqlite") as store:
+        run = start_session(store, FLIP, model=CONFIG, plant=PlantChoice("arena", seed=2),
+                            rule=RuleChoice.parse("paper"), iterations=3, design_result=DESIGN)
+        assert run.run().completed
+        loaded = load_session(store, run.id)
+        data = json.loads(json.dumps(session_json(store, run.id, full=True)))
+        assert np.array_equal(loaded.final_params, store.session(run.id).current_params)
+    assert loaded.status.value == "completed" and len(loaded.iterations) == 3
+    again = session_from_json(data)
+    assert again.status == loaded.status
+    for a, b in zip(again.iterations, loaded.iterations, strict=True):
+        assert np.array_equal(a.params, b.params) and np.array_equal(a.next_params, b.next_params)
+        assert np.allclose(a.error, b.error, equal_nan=True)
+    with pytest.raises(ConfigError, match="session JSON"):
+        session_from_json({"maneuver": data["maneuver"]})

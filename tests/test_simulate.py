@@ -377,3 +377,21 @@ def test_bad_simulate_arguments(kwargs, pattern):
 def test_batch_rejects_bad_max_step(single_flip, max_step_s):
     with pytest.raises(ValueError, match="max_step_s"):
         simulate_batch([single_flip], CFG, max_step_s=max_step_s)
+
+
+def test_trajectory_named_accessors_are_views_of_the_state_columns():
+    from aerobat.quadrotor.dynamics import N_STATE, STATE_NAMES
+    from aerobat.quadrotor.maneuvers import MultiFlip
+    from aerobat.quadrotor.simulate import NominalModel
+    from aerobat.quadrotor.vehicle import hummingbird
+
+    config = hummingbird()
+    flip = MultiFlip(vehicle=config.vehicle, flips=1, dims=2)
+    traj = NominalModel(config).trajectory(flip.program(flip.guess()))
+    assert len(STATE_NAMES) == N_STATE == traj.states.shape[1]
+    assert np.array_equal(traj.position_m, traj.states[:, 0:3])
+    assert np.array_equal(traj.velocity_m_s, traj.states[:, 3:6])
+    assert np.allclose(np.linalg.norm(traj.quaternion, axis=1), 1.0, atol=1e-9)
+    assert np.array_equal(traj.body_rates_rad_s, traj.states[:, 10:13])
+    assert traj.rotor_thrusts_n.shape == (len(traj.times_s), 4)
+    assert "samples over" in repr(traj)

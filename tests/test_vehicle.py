@@ -252,3 +252,21 @@ def test_missing_vehicle_file(tmp_path):
 
 def test_config_error_is_value_error():
     assert issubclass(ConfigError, ValueError)
+
+
+def test_with_mass_keeps_rotor_limits_and_rederives_the_controller():
+    from aerobat.quadrotor.vehicle import hummingbird
+
+    config = hummingbird()
+    heavy = config.with_mass(config.vehicle.mass_kg * 1.25)
+    v0, v1 = config.vehicle, heavy.vehicle
+    # per-rotor thrust limits are the motors': m·β is unchanged
+    assert v1.mass_kg * v1.collective_reduced_max_m_s2 == pytest.approx(v0.mass_kg * v0.collective_reduced_max_m_s2)
+    assert v1.mass_kg * v1.collective_reduced_min_m_s2 == pytest.approx(v0.mass_kg * v0.collective_reduced_min_m_s2)
+    assert heavy.controller.mass_kg == v1.mass_kg  # the controller inverts with the new mass
+    assert heavy.controller.rate_gain_p_per_s == config.controller.rate_gain_p_per_s
+    assert v1.inertia_xx_kg_m2 == v0.inertia_xx_kg_m2
+    with pytest.raises(ConfigError, match="mass_kg"):
+        config.with_mass(0.0)
+    with pytest.raises(ConfigError, match="mass_kg"):
+        config.with_mass(True)

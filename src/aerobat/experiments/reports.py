@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -13,11 +13,16 @@ from aerobat.errors import ConfigError
 from aerobat.plotting.files import save_figure
 from aerobat.plotting.learning import plot_learning
 from aerobat.plotting.vehicle import plot_side_views
+from aerobat.quadrotor.dynamics import STATE_NAMES
 from aerobat.quadrotor.simulate import simulate
 from aerobat.quadrotor.vehicle import vehicle_from_table
 from aerobat.store import Store
 
-__all__ = ["finite_or_none", "session_figures", "session_json", "session_replay"]
+if TYPE_CHECKING:
+    from aerobat.core.learning import Session
+
+__all__ = ["finite_or_none", "load_session", "session_figures", "session_from_json", "session_json",
+           "session_replay"]
 
 
 def finite_or_none(values: Any) -> list[float | None]:
@@ -45,6 +50,7 @@ def session_json(store: Store, session_id: int, *, trajectories: bool = False, f
             entry["info"] = it.info
         if trajectories:
             entry["trajectory"] = None if it.times_s is None or it.states is None else {
+                "columns": ["t_s", *STATE_NAMES],
                 "times_s": it.times_s.tolist(), "states": [finite_or_none(row) for row in it.states]}
         iterations.append(entry)
     data: dict[str, Any] = {
@@ -151,3 +157,47 @@ def session_replay(store: Store, session_id: int, path: Path, *, iterations: lis
     fig = replay_figure(flights, title=f"session {session_id}: {mrec.name} on {rec.plant_kind}",
                         arm_m=config.vehicle.arm_length_m, target_m=target_m)
     return write_replay_html(fig, path)
+
+
+def load_session(store: Store, session_id: int) -> Session:
+    """A stored session as a :class:`~aerobat.core.learning.Session` (its iterations without trials)."""
+    from aerobat.core.learning import Iteration, IterationStatus, Session, SessionStatus
+    from aerobat.experiments.setup import design_from_record
+
+    rec = store.session(session_id)
+    maneuver = from_spec(store.maneuver(rec.maneuver_id).spec, source=f"{store.path}: session {session_id}")
+    design = design_from_record(maneuver, store.design(rec.design_id))
+    iterations = tuple(Iteration(it.index, it.correction, IterationStatus(it.status), it.params, it.error, it.gamma,
+                                 it.scale, it.next_params - it.params, it.message)
+                       for it in store.iterations(session_id))
+    status = SessionStatus(rec.state if rec.state != "running" else "interrupted")
+    return Session(maneuver, design, rec.plant_kind, iterations, rec.current_params, status, rec.message, math.nan)
+
+
+def session_from_json(data: dict[str, Any]) -> Session:
+    """A session from ``aerobat export … --format json`` (or ``show --json``) output."""
+    import numpy as np
+
+    from aerobat.core.design import Design
+    from aerobat.core.learning import Iteration, IterationStatus, Session, SessionStatus
+
+    if isinstance(data, dict) and "maneuver" in data and "design" not in data:
+        raise ConfigError("session JSON: no 'design' field; session.json is a summary, use the output of "
+                          "`aerobat export ID --format json` or `aerobat show ID --json`")
+    try:
+        maneuver = from_spec(data["maneuver"], source="session JSON maneuver")
+        table = dict(data["design"])
+        table.update(converged=table["status"] == "converged",
+                     **{k: [[math.nan if v is None else v for v in row] for row in table[k]]
+                        for k in ("jacobian", "correction")})
+        table["residual"] = [math.nan if v is None else v for v in table["residual"]]
+        design = Design.from_json_dict(maneuver, table)
+        iterations = tuple(Iteration(it["i"], it["correction"], IterationStatus(it["status"]), np.asarray(it["params"]),
+                                     np.array([math.nan if v is None else v for v in it["error"]]), it["gamma"],
+                                     it["scale"], np.asarray(it["next_params"]) - np.asarray(it["params"]),
+                                     it["message"]) for it in data["iterations"])
+        status = SessionStatus(data["status"] if data["status"] not in ("running", "killed") else "interrupted")
+        return Session(maneuver, design, data["plant"], iterations, np.asarray(data["final_params"]), status,
+                       data["message"], float(data.get("wall_s", math.nan)))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ConfigError(f"session JSON: missing or malformed field: {exc}") from None

@@ -105,7 +105,7 @@ def replay_figure(flights: Sequence[tuple[str, np.ndarray, np.ndarray]], *, titl
     for t in frame_times:
         data = []
         for _, times, states in flights:
-            x, y, z = _vehicle_lines(_at(times, states, t), arm_m)
+            x, y, z = _vehicle_lines(_at(times, states, float(t)), arm_m)
             data.append(go.Scatter3d(x=x, y=y, z=z))
         frames.append(go.Frame(data=data, name=f"{t:.3f}", traces=list(range(n_static, n_static + len(flights)))))
     every = [np.concatenate([s[:, POS] for _, _, s in flights])]

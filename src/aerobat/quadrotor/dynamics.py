@@ -55,6 +55,10 @@ OMEGA = slice(10, 13)
 THRUST = slice(13, 17)
 RATE_INT = slice(17, 20)
 N_STATE = 20
+STATE_NAMES = ("x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "qw", "qx", "qy", "qz", "p_rad_s", "q_rad_s",
+               "r_rad_s", "f1_n", "f2_n", "f3_n", "f4_n", "rotation_x_rad", "rotation_y_rad", "rotation_z_rad")
+"""Column names of a state vector: position, velocity (world, z up), attitude quaternion (w, x, y, z; body→world),
+body rates, rotor thrusts, and the integrated body rates ∫ω dt (unwrapped rotation)."""
 _IQ = 6
 _IW = 10
 _IF = 13

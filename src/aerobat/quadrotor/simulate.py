@@ -216,6 +216,34 @@ class Trajectory:
     def duration_s(self) -> float:
         return float(self.times_s[-1] - self.times_s[0])
 
+    @property
+    def position_m(self) -> np.ndarray:
+        """(N, 3) position, world frame, z up [m]."""
+        return self.states[:, POS]
+
+    @property
+    def velocity_m_s(self) -> np.ndarray:
+        """(N, 3) velocity, world frame [m/s]."""
+        return self.states[:, VEL]
+
+    @property
+    def quaternion(self) -> np.ndarray:
+        """(N, 4) attitude quaternion (w, x, y, z), body → world."""
+        return self.states[:, 6:10]
+
+    @property
+    def body_rates_rad_s(self) -> np.ndarray:
+        """(N, 3) body rates p, q, r [rad/s]."""
+        return self.states[:, 10:13]
+
+    @property
+    def rotor_thrusts_n(self) -> np.ndarray:
+        """(N, 4) rotor thrusts [N]."""
+        return self.states[:, 13:17]
+
+    def __repr__(self) -> str:
+        return f"Trajectory({len(self.times_s)} samples over {self.duration_s:.3f} s, {self.mode})"
+
     def euler_zyx(self) -> np.ndarray:
         """(N, 3) Euler angles φ, θ, ψ [rad] along the trajectory (eq 13)."""
         return euler_zyx(self.states)

@@ -15,6 +15,7 @@ motors 2 and 4 produce −κ·f.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -128,6 +129,16 @@ class VehicleParams:
             self.collective_reduced_max_m_s2 - self.collective_reduced_min_m_s2
         ) / (4.0 * self.inertia_xx_kg_m2)
 
+    def with_mass(self, mass_kg: float) -> VehicleParams:
+        """The same vehicle with another mass: the per-rotor thrust limits stay (they are the motors'),
+        so the reduced collective envelope β̲, β̄ scales with 1/m, keeping the same thrust margins."""
+        if isinstance(mass_kg, bool) or not isinstance(mass_kg, int | float) or not mass_kg > 0:
+            raise ConfigError(f"mass_kg = {mass_kg!r}: expected a number > 0 (kg)")
+        k = self.mass_kg / float(mass_kg)
+        return dataclasses.replace(self, mass_kg=float(mass_kg),
+                                   collective_reduced_min_m_s2=self.collective_reduced_min_m_s2 * k,
+                                   collective_reduced_max_m_s2=self.collective_reduced_max_m_s2 * k)
+
     @property
     def max_pitch_acceleration_rad_s2(self) -> float:
         """Eq 27 for the pitch axis, l m (β̄ − β̲) / (4 I_yy) [rad/s²]."""
@@ -187,11 +198,28 @@ class ControllerParams:
 
 @dataclass(frozen=True, kw_only=True)
 class VehicleConfig:
-    """A vehicle's physical constants together with its onboard controller."""
+    """A vehicle's physical constants together with its onboard controller.
+
+    To change the vehicle, use :meth:`with_vehicle` (or :meth:`with_mass`): it re-derives the
+    controller's nominal constants, which ``dataclasses.replace(config, vehicle=…)`` would keep
+    from the old vehicle.
+    """
 
     vehicle: VehicleParams
     controller: ControllerParams
     name: str = "custom"
+
+    def with_vehicle(self, vehicle: VehicleParams, *, name: str | None = None) -> VehicleConfig:
+        """This configuration for another vehicle: the controller keeps its gains and motor order and
+        inverts with the new vehicle's constants."""
+        gains = {k: getattr(self.controller, k) for k in ("rate_gain_p_per_s", "rate_gain_q_per_s",
+                                                          "rate_gain_r_per_s", "motor_order")}
+        return VehicleConfig(vehicle=vehicle, controller=ControllerParams.nominal_for(vehicle, **gains),
+                             name=self.name if name is None else name)
+
+    def with_mass(self, mass_kg: float) -> VehicleConfig:
+        """The same vehicle and controller with another mass (see :meth:`VehicleParams.with_mass`)."""
+        return self.with_vehicle(self.vehicle.with_mass(mass_kg))
 
 
 def hummingbird() -> VehicleConfig:

@@ -19,13 +19,13 @@ _ANGLES = ("roll", "pitch", "yaw")
 
 
 def plot_identification(fit: VehicleFit, *, title: str = "") -> Any:
-    """One row per trial: positions (left) and rotation angles (right), measured (dots) and fitted (lines).
+    """One row per trial: positions (left) and body rotations (right), measured (dots) and fitted (lines).
 
     Returns the figure; the caller saves it (:func:`aerobat.plotting.save_figure`).
     """
     rows = max(len(fit.trials), 1)
-    fig = new_figure(figsize=(11.0, 1.9 * rows + 0.8))
-    grid = fig.add_gridspec(rows, 2, hspace=0.55, wspace=0.25)
+    fig = new_figure(figsize=(11.0, 1.6 * rows + 0.9))
+    grid = fig.add_gridspec(rows, 2)
     for k, trial in enumerate(fit.trials):
         ax_p = fig.add_subplot(grid[k, 0])
         ax_a = fig.add_subplot(grid[k, 1], sharex=ax_p)
@@ -39,7 +39,7 @@ def plot_identification(fit: VehicleFit, *, title: str = "") -> Any:
             ax_a.plot(t, measured[:, i], ".", ms=2.0, color=f"C{i}", alpha=0.6)
             ax_a.plot(t, fitted[:, i], "-", lw=1.0, color=f"C{i}", label=name)
         ax_p.set_ylabel("position [cm]", fontsize=8)
-        ax_a.set_ylabel("rotation [°]", fontsize=8)
+        ax_a.set_ylabel("body rotation [°]", fontsize=8)
         ax_p.set_title(f"{trial.trial.name}: {trial.position_rms_m * 1e3:.1f} mm RMS", fontsize=9, loc="left")
         ax_a.set_title(f"{math.degrees(trial.angle_rms_rad):.2f}° RMS", fontsize=9, loc="left")
         for ax in (ax_p, ax_a):

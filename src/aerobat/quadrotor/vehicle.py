@@ -326,9 +326,7 @@ def _source_table(table: Any, where: str, depth: int = 0) -> dict[str, Any]:
 def hummingbird() -> VehicleConfig:
     """The paper's Table 1 Hummingbird, with a controller that inverts with the same constants."""
     vehicle = VehicleParams()
-    return VehicleConfig(vehicle=vehicle, controller=ControllerParams.nominal_for(vehicle), name="hummingbird",
-                         source={"citation": "Lupashin & D'Andrea, Adaptive fast open-loop maneuvers for "
-                                             "quadrocopters, Autonomous Robots 33 (2012), Table 1"})
+    return VehicleConfig(vehicle=vehicle, controller=ControllerParams.nominal_for(vehicle), name="hummingbird")
 
 
 _PRESET_FILES = ("crazyflie21", "fpv5", "x2class")
@@ -340,10 +338,11 @@ def preset_names() -> tuple[str, ...]:
 
 
 def preset(name: str) -> VehicleConfig:
-    """The preset ``name``: ``hummingbird`` (Table 1) or a package file in ``aerobat/quadrotor/vehicles/``."""
-    if name == "hummingbird":
-        return hummingbird()
-    if name not in _PRESET_FILES:
+    """The preset ``name``, from its package file in ``aerobat/quadrotor/vehicles/`` (with its ``[source]``).
+
+    ``preset("hummingbird")`` equals :func:`hummingbird` (Table 1), which builds it in code.
+    """
+    if name not in preset_names():
         raise ConfigError(f"unknown vehicle preset {name!r}: use one of {', '.join(preset_names())}")
     resource = resources.files("aerobat.quadrotor") / "vehicles" / f"{name}.toml"
     with resources.as_file(resource) as path:

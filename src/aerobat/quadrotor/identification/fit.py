@@ -31,12 +31,7 @@ from scipy.sparse import lil_matrix
 
 from aerobat.core.plant import Trial
 from aerobat.errors import ConfigError, IdentificationFailed
-from aerobat.quadrotor.dynamics import (
-    N_STATE,
-    hover_state,
-    quaternion_from_rotation_vector,
-    rotation_angles,
-)
+from aerobat.quadrotor.dynamics import N_STATE, RATE_INT, hover_state, quaternion_from_rotation_vector
 from aerobat.quadrotor.identification.parameters import (
     PARAMETERS,
     config_from_parameters,
@@ -99,7 +94,8 @@ class TrialFit:
     trial : the identification trial.
     times_s : (M,) measurement times from the trigger [s].
     measured_position_m, fitted_position_m : (M, 3) positions relative to the start [m].
-    measured_angles_rad, fitted_angles_rad : (M, 3) unwrapped rotation angles about body x, y, z [rad].
+    measured_angles_rad, fitted_angles_rad : (M, 3) accumulated rotation about body x, y, z since the
+        trigger [rad].
     position_rms_m, angle_rms_rad : RMS residuals of this trial.
     start : (9,) fitted start: position [m], velocity [m/s], attitude (rotation vector) [rad].
     """
@@ -468,8 +464,10 @@ def _trial_fit(problem: _Problem, config: VehicleConfig, j: int, start: np.ndarr
     times, meas = problem.times[j], problem.measured[j]
     model = _model_at(config, trial, start, times, problem.options.max_step_s)
     err = _attitude_error(model[:, 6:10], meas[:, 6:10])
-    measured_angles = rotation_angles(meas)
-    fitted_angles = rotation_angles(model)
+    # accumulated body-axis rotation since the trigger (∫ω dt; measured: summed attitude increments): no
+    # Euler singularity when a slow pitch flip passes 90°
+    measured_angles = meas[:, RATE_INT] - meas[0, RATE_INT]
+    fitted_angles = model[:, RATE_INT] - model[0, RATE_INT]
     return TrialFit(trial=trial, times_s=times, measured_position_m=meas[:, 0:3].copy(),
                     fitted_position_m=model[:, 0:3].copy(), measured_angles_rad=measured_angles,
                     fitted_angles_rad=fitted_angles,

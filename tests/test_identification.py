@@ -245,3 +245,49 @@ def test_cli_identify_writes_a_vehicle_that_design_accepts_and_refuses_a_bad_fit
     assert status == 1 and not refused.exists()
     assert "no vehicle file written" in capsys.readouterr().err
     assert main(["identify", "--plant", "nominal", "--out", str(out), "--db", db]) == 2  # exists, no --force
+
+
+# ------------------------------------------------------------------ long runs (make test-slow)
+
+
+@pytest.mark.slow
+def test_identified_model_halves_rotorpys_first_attempt():
+    pytest.importorskip("rotorpy")
+    from aerobat.core.design import design
+    from aerobat.core.maneuver import position_indices
+    from aerobat.plants.rotorpy import RotorPyPlant
+    from aerobat.quadrotor.maneuvers import MultiFlip
+    from aerobat.quadrotor.simulate import NominalModel
+
+    run = identify(PlantChoice("rotorpy", seed=0), H)
+    assert run.fit is not None and run.fit.acceptable, run.fit.problems if run.fit else None
+    errors = {}
+    for label, config in (("table1", H), ("identified", run.fit.config)):
+        flip = MultiFlip(vehicle=config.vehicle, flips=3, dims=3)
+        p0 = design(flip, NominalModel(config)).p_nominal
+        trial = RotorPyPlant(H, seed=1).fly(flip.program(p0))
+        errors[label] = float(np.linalg.norm(flip.error(trial.final_state)[position_indices(flip.errors)]))
+    assert errors["table1"] > 0.9
+    assert errors["identified"] < errors["table1"] / 2
+
+
+@pytest.mark.slow
+def test_identified_model_learns_the_triple_flip_in_a_median_of_at_most_two_trials_over_20_seeds():
+    from aerobat.core.design import design
+    from aerobat.core.learning import learn
+    from aerobat.core.maneuver import position_indices
+    from aerobat.quadrotor.maneuvers import MultiFlip
+    from aerobat.quadrotor.simulate import NominalModel
+
+    identified = identify(PlantChoice("arena", seed=0), H).fit.config
+    flip = MultiFlip(vehicle=identified.vehicle, flips=3, dims=3)
+    result = design(flip, NominalModel(identified))
+    idx = position_indices(flip.errors)
+    firsts, trials = [], []
+    for seed in range(1, 21):
+        errors = [float(np.linalg.norm(it.error[idx]))
+                  for it in learn(flip, result, Arena(H, seed=seed), iterations=10).measured]
+        firsts.append(errors[0])
+        trials.append(next((k + 1 for k, e in enumerate(errors) if e < 0.12), math.inf))
+    assert np.median(firsts) < 0.70 / 3
+    assert np.median(trials) <= 2

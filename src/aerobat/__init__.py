@@ -35,6 +35,9 @@ _HOME = {
     "ControllerParams": "aerobat.quadrotor.vehicle", "VehicleConfig": "aerobat.quadrotor.vehicle",
     "VehicleParams": "aerobat.quadrotor.vehicle", "hummingbird": "aerobat.quadrotor.vehicle",
     "load_vehicle": "aerobat.quadrotor.vehicle", "save_vehicle": "aerobat.quadrotor.vehicle",
+    "ModelEffects": "aerobat.quadrotor.vehicle", "preset": "aerobat.quadrotor.vehicle",
+    "vehicle_from_name_or_file": "aerobat.quadrotor.vehicle",
+    "fit_vehicle": "aerobat.quadrotor.identification", "identification_sequence": "aerobat.quadrotor.identification",
     "Program": "aerobat.quadrotor.program", "RampDown": "aerobat.quadrotor.program",
     "Switch": "aerobat.quadrotor.program", "load_program": "aerobat.quadrotor.program",
     "save_program": "aerobat.quadrotor.program",
@@ -47,7 +50,8 @@ _HOME = {
     "PlantChoice": "aerobat.plants",
     # the store and the application
     "Store": "aerobat.store", "start_session": "aerobat.experiments", "resume_session": "aerobat.experiments",
-    "run_study": "aerobat.experiments",
+    "run_study": "aerobat.experiments", "identify": "aerobat.experiments.identify",
+    "write_identified_vehicle": "aerobat.experiments.identify",
 }
 
 __all__ = sorted(_HOME)

@@ -10,6 +10,7 @@ Anything else that escapes is a bug and is reported as an internal error.
     ├── ConfigError            bad input: a file, field, option or argument (also a ValueError)
     ├── MissingDependency      an optional package is not installed (also an ImportError)
     ├── DesignFailed           the nominal design did not converge or is unusable
+    ├── IdentificationFailed   too few usable identification trials, or a fit too poor to use
     ├── SolveFailed            a time-optimal benchmark solve failed
     ├── PlantError             a plant could not fly (firmware gone, simulator broken)
     ├── OutputError            an output file or folder could not be written
@@ -33,6 +34,7 @@ __all__ = [
     "ConfigError",
     "DesignFailed",
     "DiskFull",
+    "IdentificationFailed",
     "MissingDependency",
     "OutputError",
     "PlantError",
@@ -96,6 +98,18 @@ class DesignFailed(AerobatError):
     def __init__(self, message: str, design: Any = None) -> None:
         super().__init__(message)
         self.design = design
+
+
+class IdentificationFailed(AerobatError):
+    """No vehicle was identified: too few usable trials, or a fit whose residual is too large.
+
+    ``result`` holds the fit (or None if it was refused before fitting); the message says
+    what is missing or which residual is too large.
+    """
+
+    def __init__(self, message: str, result: Any = None) -> None:
+        super().__init__(message)
+        self.result = result
 
 
 class SolveFailed(AerobatError):

@@ -5,7 +5,8 @@ status   meaning
 =======  ==================================================================
 0        done
 1        it ran and failed: a design or solve did not converge, a trial
-         crashed, a study job failed, an optional package is missing (its
+         crashed, an identification had too few usable trials or too large a
+         residual, a study job failed, an optional package is missing (its
          install hint is printed), the disk is full, the store is locked
 2        bad input: an option, a file, a field or a value out of range; a
          store that is not an aerobat store, a session that does not exist
@@ -29,6 +30,7 @@ from aerobat.errors import (
     ConfigError,
     DesignFailed,
     DiskFull,
+    IdentificationFailed,
     MissingDependency,
     OutputError,
     PlantError,
@@ -49,7 +51,8 @@ EXIT_USAGE = 2
 EXIT_INTERNAL = 70
 
 _USAGE = (ConfigError, StoreAccessError, StoreFormatError, StoreVersionError, SessionNotFound, SessionInUse)
-_FAILED = (DesignFailed, SolveFailed, PlantError, MissingDependency, DiskFull, StoreError, CommandFailed)
+_FAILED = (DesignFailed, IdentificationFailed, SolveFailed, PlantError, MissingDependency, DiskFull, StoreError,
+           CommandFailed)
 
 
 def exit_status(exc: BaseException) -> int:
@@ -64,9 +67,9 @@ def exit_status(exc: BaseException) -> int:
 
 
 def _commands() -> list:
-    from aerobat.cli import benchmark, design, learn, sessions, simulate, study
+    from aerobat.cli import benchmark, design, identify, learn, sessions, simulate, study, vehicles
 
-    return [simulate, design, learn, sessions, benchmark, study]
+    return [simulate, design, learn, sessions, benchmark, study, identify, vehicles]
 
 
 def build_parser() -> argparse.ArgumentParser:

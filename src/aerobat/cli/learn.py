@@ -98,6 +98,7 @@ def _cmd_learn(args: argparse.Namespace) -> int:
     if args.resume is None:
         # everything cheap is checked before the store is touched and before the (long) design
         config = vehicle_from_name_or_file(args.vehicle)
+        plant_config = vehicle_from_name_or_file(args.plant_vehicle) if args.plant_vehicle is not None else None
         maneuver = maneuver_from_args(args, config)
         plant = plant_choice_from_args(args)
         rule = rule_choice_from_args(args)
@@ -112,7 +113,7 @@ def _cmd_learn(args: argparse.Namespace) -> int:
             run = start_session(store, maneuver, model=config, plant=plant, rule=rule,
                                 iterations=args.iterations if args.iterations is not None else 30,
                                 correction=args.correction, start_params=start, warm_start_from=source,
-                                force=args.force, command=args.argv)
+                                force=args.force, command=args.argv, plant_model=plant_config)
         else:
             run = resume_session(store, args.resume, iterations=args.iterations, take_over=args.take_over)
             if args.maneuver is not None or args.maneuver_source is not None:
@@ -246,6 +247,10 @@ def register(sub: Any) -> None:
                         "(default: start a new one)")
     p.add_argument("--from-session", metavar="SESSION", type=session_ref,
                    help="start a new session from another session's learned parameters (same maneuver; default: p⁰)")
+    p.add_argument("--plant-vehicle", default=None, metavar="NAME|FILE",
+                   help="the vehicle the plant is built around, if not --vehicle (a simulated plant makes its true "
+                        "vehicle and its onboard controller from it): with a vehicle identified on the arena as "
+                        "--vehicle, give the one the arena flew, e.g. hummingbird (default: --vehicle)")
     p.add_argument("--force", action="store_true", help="learn even if the design did not converge")
     p.add_argument("--take-over", action="store_true",
                    help="with --resume: take a session last run on another machine whose process is gone")

@@ -203,6 +203,7 @@ def start_session(
     force: bool = False,
     command: Sequence[str] = (),
     study_id: int | None = None,
+    plant_model: VehicleConfig | None = None,
 ) -> StoredSession:
     """Create a stored session: design (unless given), build the rule and the plant, record them.
 
@@ -211,6 +212,9 @@ def start_session(
     store : where every trial goes.
     maneuver : what to learn (designed on ``model``).
     model : the nominal vehicle (the design model; the plant's onboard controller inverts with it).
+    plant_model : the vehicle the plant is built around, if not ``model`` — e.g. a vehicle identified
+        on the arena is designed on, but the arena stays the one built around the Hummingbird
+        (its true vehicle and its onboard controller come from this one).
     plant : which plant flies (default: the arena, seed 0).
     rule : the update rule (default: the paper's).
     iterations : measured iterations to learn.
@@ -236,14 +240,15 @@ def start_session(
         raise DesignFailed(f"design failed, nothing to learn: {result.message}"
                            + ("" if force else " (force=True / --force learns anyway)"), result)
     update_rule = build_rule(rule, result, model)
-    flying = plant.build(model)
+    base = plant_model if plant_model is not None else model
+    flying = plant.build(base)
     start = np.array(result.p_nominal if start_params is None else start_params, dtype=float)
     learner = Learner(maneuver, result, rule=update_rule, params=start)
-    table = vehicle_table(model)
     session_id = store.create_session(
-        vehicle=table, plant_kind=plant.kind, plant_config=plant_record_config(plant), maneuver=maneuver,
-        design=result, seed=plant.seed, rule=rule.to_table(), target_iterations=target, start_params=start,
-        warm_start_from=warm_start_from, command=command, study_id=study_id)
+        vehicle=vehicle_table(base), design_vehicle=vehicle_table(model), plant_kind=plant.kind,
+        plant_config=plant_record_config(plant), maneuver=maneuver, design=result, seed=plant.seed,
+        rule=rule.to_table(), target_iterations=target, start_params=start, warm_start_from=warm_start_from,
+        command=command, study_id=study_id)
     return StoredSession(store, session_id, maneuver, result, model, plant, rule, flying, learner, target)
 
 

@@ -29,7 +29,7 @@ import math
 import numba as nb
 import numpy as np
 
-from aerobat.quadrotor.vehicle import ControllerParams, VehicleParams
+from aerobat.quadrotor.vehicle import ControllerParams, VehicleConfig, VehicleParams
 
 __all__ = [
     "N_STATE",
@@ -42,6 +42,7 @@ __all__ = [
     "controller_vector",
     "euler_zyx",
     "hover_state",
+    "model_plant_vector",
     "plant_vector",
     "rotation_angles",
     "rotation_matrices",
@@ -85,7 +86,8 @@ P_WIND = 30  # 3 constant wind components, world frame [m/s]
 P_GUST_AMP = 33  # 3 sinusoidal gust amplitudes [m/s]
 P_GUST_FREQ = 36  # gust frequency [Hz]
 P_GUST_PHASE = 37  # gust phase [rad]
-N_PLANT = 38
+P_AXIAL_DRAG = 38  # rotor drag along the body z axis: force −k · T · v_air,z [s/m]
+N_PLANT = 39
 
 # ----------------------------------------------------- controller parameters
 C_GAIN = 0  # 3 rate gains P_p, P_q, P_r [1/s]
@@ -111,6 +113,7 @@ def plant_vector(
     thrust_gains: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0),
     body_drag_n_s2_m2: float = 0.0,
     rotor_drag_s_m: float = 0.0,
+    rotor_drag_axial_s_m: float = 0.0,
     rotational_damping_n_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0),
     wind_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0),
     gust_amplitude_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0),
@@ -140,6 +143,25 @@ def plant_vector(
     v[P_GUST_AMP : P_GUST_AMP + 3] = gust_amplitude_m_s
     v[P_GUST_FREQ] = gust_frequency_hz
     v[P_GUST_PHASE] = gust_phase_rad
+    v[P_AXIAL_DRAG] = rotor_drag_axial_s_m
+    return v
+
+
+def model_plant_vector(config: VehicleConfig) -> np.ndarray:
+    """The design model's plant vector: ``config.vehicle`` plus its :class:`~aerobat.quadrotor.vehicle.ModelEffects`.
+
+    Rate damping and drag use the kernel's aerodynamic terms; a thrust-proportional moment
+    arm (a, b, c) shifts every motor's lever so that the moments gain (a·T, b·T, c·T).
+    The latency is not part of the plant: the simulation applies it to the rate feedback.
+    """
+    e = config.effects
+    v = plant_vector(config.vehicle, thrust_gains=e.motor_thrust_gains, body_drag_n_s2_m2=e.body_drag_n_s2_m2,
+                     rotor_drag_s_m=e.rotor_drag_s_m, rotor_drag_axial_s_m=e.rotor_drag_axial_s_m,
+                     rotational_damping_n_m_s=e.rate_damping_n_m_s)
+    arm = e.thrust_moment_arm_m
+    v[P_MY : P_MY + 4] += arm[0]  # τ_x = Σ y_j f_j
+    v[P_MX : P_MX + 4] -= arm[1]  # τ_y = −Σ x_j f_j
+    v[P_KYAW : P_KYAW + 4] += arm[2]  # τ_z = Σ k_j f_j
     return v
 
 
@@ -229,7 +251,7 @@ def plant_derivative(t, x, ftilde, plant, dx):  # pragma: no cover - compiled
     ax = r13 * a_t
     ay = r23 * a_t
     az = r33 * a_t - plant[P_GRAV]
-    if plant[P_BODY_DRAG] != 0.0 or plant[P_ROTOR_DRAG] != 0.0:
+    if plant[P_BODY_DRAG] != 0.0 or plant[P_ROTOR_DRAG] != 0.0 or plant[P_AXIAL_DRAG] != 0.0:
         wx = plant[P_WIND]
         wy = plant[P_WIND + 1]
         wz = plant[P_WIND + 2]
@@ -260,6 +282,12 @@ def plant_derivative(t, x, ftilde, plant, dx):  # pragma: no cover - compiled
             ax -= kr * (r11 * bx + r12 * by)
             ay -= kr * (r21 * bx + r22 * by)
             az -= kr * (r31 * bx + r32 * by)
+        ka = plant[P_AXIAL_DRAG] * total * inv_m
+        if ka != 0.0:
+            bz = r13 * vx + r23 * vy + r33 * vz  # body-z airspeed (third column of R)
+            ax -= ka * r13 * bz
+            ay -= ka * r23 * bz
+            az -= ka * r33 * bz
     tx -= plant[P_ROT_DAMP] * p
     ty -= plant[P_ROT_DAMP + 1] * q
     tz -= plant[P_ROT_DAMP + 2] * r

@@ -10,6 +10,13 @@ Two playback modes of the same compiled program:
   (1/800 s by default) the program is sampled, the controller computes motor
   commands from the gyro, and both are held (zero-order hold) until the next tick.
 
+A vehicle's :class:`~aerobat.quadrotor.vehicle.ModelEffects` are part of the model:
+damping, drag and thrust-proportional moments through the plant vector, and the
+rate-loop latency as a delay of the rate the controller acts on (the body rate
+``L`` seconds ago, interpolated linearly in a history of the integration steps;
+the rate at the start before that). With zero latency the kernels run exactly the
+arithmetic they always did.
+
 The kernels are compiled with numba and allocate nothing inside their loops;
 :func:`simulate_batch` runs many (program, vehicle) pairs in parallel threads.
 """
@@ -34,9 +41,9 @@ from aerobat.quadrotor.dynamics import (
     controller_vector,
     euler_zyx,
     hover_state,
+    model_plant_vector,
     normalize_quaternion,
     plant_derivative,
-    plant_vector,
     rotation_angles,
 )
 from aerobat.quadrotor.program import CompiledProgram, Program
@@ -64,9 +71,51 @@ def _closed_loop_derivative(t, x, cmd, plant, ctrl, ft, dx):  # pragma: no cover
     plant_derivative(t, x, ft, plant, dx)
 
 
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _delayed_rates(hist_t, hist_w, count, t, x, delay, out):  # pragma: no cover - compiled
+    """Body rates ``delay`` seconds before ``t`` (per axis): from the history, or between its end and ``x`` at ``t``."""
+    for a in range(3):
+        lag = delay[a]
+        now = x[10 + a]
+        if lag <= 0.0 or count == 0:
+            out[a] = now
+            continue
+        s = t - lag
+        last = hist_t[count - 1]
+        if s >= last:
+            span = t - last
+            out[a] = now if span <= 0.0 else hist_w[count - 1, a] + (s - last) / span * (now - hist_w[count - 1, a])
+        elif s <= hist_t[0]:
+            out[a] = hist_w[0, a]
+        else:
+            j = count - 2
+            while j > 0 and hist_t[j] > s:
+                j -= 1
+            w = (s - hist_t[j]) / (hist_t[j + 1] - hist_t[j])
+            out[a] = hist_w[j, a] + w * (hist_w[j + 1, a] - hist_w[j, a])
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _loop_derivative(t, x, cmd, plant, ctrl, ft, dx, hist_t, hist_w, count, delay, rates):  # pragma: no cover
+    """The closed loop with the controller acting on delayed rates (latency), or on ``x``'s if there is none."""
+    if count == 0:
+        _closed_loop_derivative(t, x, cmd, plant, ctrl, ft, dx)
+    else:
+        _delayed_rates(hist_t, hist_w, count, t, x, delay, rates)
+        controller_thrusts(cmd, rates[0], rates[1], rates[2], ctrl, ft)
+        plant_derivative(t, x, ft, plant, dx)
+
+
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
 def _run_continuous(x, bp, coeffs, nseg, plant, ctrl, max_step, rec_t, rec_x, rec_u):  # pragma: no cover
-    """Continuous-time playback; ``x`` is advanced in place. Records every step if rec_t is non-empty."""
+    """Continuous-time playback without latency; ``x`` is advanced in place. Records every step if rec_t has room."""
+    return _run_continuous_delayed(x, bp, coeffs, nseg, plant, ctrl, max_step, rec_t, rec_x, rec_u, np.zeros(3))
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def _run_continuous_delayed(x, bp, coeffs, nseg, plant, ctrl, max_step, rec_t, rec_x, rec_u,
+                            delay):  # pragma: no cover - compiled
+    """Continuous-time playback with per-axis rate-loop latency ``delay`` [s] (zeros: none)."""
     n = x.shape[0]
     k1 = np.empty(n)
     k2 = np.empty(n)
@@ -77,6 +126,21 @@ def _run_continuous(x, bp, coeffs, nseg, plant, ctrl, max_step, rec_t, rec_x, re
     cmdm = np.empty(4)
     cmd1 = np.empty(4)
     ft = np.empty(4)
+    rates = np.empty(3)
+    delayed = delay[0] > 0.0 or delay[1] > 0.0 or delay[2] > 0.0
+    steps = 0
+    if delayed:
+        for k in range(nseg):
+            steps += max(1, int(math.ceil((bp[k + 1] - bp[k]) / max_step - 1e-9)))
+    hist_t = np.empty(steps + 1 if delayed else 0)
+    hist_w = np.empty((steps + 1 if delayed else 0, 3))
+    count = 0
+    if delayed:
+        hist_t[0] = bp[0]
+        hist_w[0, 0] = x[10]
+        hist_w[0, 1] = x[11]
+        hist_w[0, 2] = x[12]
+        count = 1
     record = rec_t.shape[0] > 0
     idx = 0
     if record:
@@ -96,21 +160,28 @@ def _run_continuous(x, bp, coeffs, nseg, plant, ctrl, max_step, rec_t, rec_x, re
             _command(coeffs, k, tau, cmd0)
             _command(coeffs, k, tau + 0.5 * h, cmdm)
             _command(coeffs, k, tau + h, cmd1)
-            _closed_loop_derivative(t, x, cmd0, plant, ctrl, ft, k1)
+            _loop_derivative(t, x, cmd0, plant, ctrl, ft, k1, hist_t, hist_w, count, delay, rates)
             for j in range(n):
                 tmp[j] = x[j] + 0.5 * h * k1[j]
-            _closed_loop_derivative(t + 0.5 * h, tmp, cmdm, plant, ctrl, ft, k2)
+            _loop_derivative(t + 0.5 * h, tmp, cmdm, plant, ctrl, ft, k2, hist_t, hist_w, count, delay, rates)
             for j in range(n):
                 tmp[j] = x[j] + 0.5 * h * k2[j]
-            _closed_loop_derivative(t + 0.5 * h, tmp, cmdm, plant, ctrl, ft, k3)
+            _loop_derivative(t + 0.5 * h, tmp, cmdm, plant, ctrl, ft, k3, hist_t, hist_w, count, delay, rates)
             for j in range(n):
                 tmp[j] = x[j] + h * k3[j]
-            _closed_loop_derivative(t + h, tmp, cmd1, plant, ctrl, ft, k4)
+            _loop_derivative(t + h, tmp, cmd1, plant, ctrl, ft, k4, hist_t, hist_w, count, delay, rates)
             for j in range(n):
                 x[j] += h / 6.0 * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
             normalize_quaternion(x)
+            t_end = t0 + (i + 1) * h if i + 1 < m else bp[k + 1]
+            if delayed:
+                hist_t[count] = t_end
+                hist_w[count, 0] = x[10]
+                hist_w[count, 1] = x[11]
+                hist_w[count, 2] = x[12]
+                count += 1
             if record:
-                rec_t[idx] = t0 + (i + 1) * h if i + 1 < m else bp[k + 1]
+                rec_t[idx] = t_end
                 rec_x[idx, :] = x
                 rec_u[idx, :] = cmd1
                 idx += 1
@@ -137,8 +208,17 @@ def rk4_plant_step(t, x, ft, plant, h, k1, k2, k3, k4, tmp):  # pragma: no cover
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
-def _run_sampled(x, bp, coeffs, nseg, plant, ctrl, tick, substeps, rec_t, rec_x, rec_u):  # pragma: no cover
-    """Onboard playback: sample the program and run the controller every ``tick``; ZOH between."""
+def _run_sampled(x, bp, coeffs, nseg, plant, ctrl, tick, substeps, rec_t, rec_x, rec_u, delay):  # pragma: no cover
+    """Onboard playback: sample the program and run the controller every ``tick``; ZOH between.
+
+    With latency the controller acts on the rates ``delay`` ago, interpolated in the tick history.
+    """
+    delayed = delay[0] > 0.0 or delay[1] > 0.0 or delay[2] > 0.0
+    ticks = int(math.ceil(bp[nseg] / tick - 1e-9)) + 2 if delayed else 0
+    hist_t = np.empty(ticks)
+    hist_w = np.empty((ticks, 3))
+    count = 0
+    rates = np.empty(3)
     n = x.shape[0]
     k1 = np.empty(n)
     k2 = np.empty(n)
@@ -162,7 +242,16 @@ def _run_sampled(x, bp, coeffs, nseg, plant, ctrl, tick, substeps, rec_t, rec_x,
             rec_x[idx, :] = x
             rec_u[idx, :] = cmd
             idx += 1
-        controller_thrusts(cmd, x[10], x[11], x[12], ctrl, ft)
+        if delayed:
+            hist_t[count] = t
+            hist_w[count, 0] = x[10]
+            hist_w[count, 1] = x[11]
+            hist_w[count, 2] = x[12]
+            count += 1
+            _delayed_rates(hist_t, hist_w, count, t, x, delay, rates)
+            controller_thrusts(cmd, rates[0], rates[1], rates[2], ctrl, ft)
+        else:
+            controller_thrusts(cmd, x[10], x[11], x[12], ctrl, ft)
         t_next = min((tick_index + 1) * tick, end)
         h = (t_next - t) / substeps
         for s in range(substeps):
@@ -185,6 +274,18 @@ def _batch_continuous(x0, bp, coeffs, nseg, plant, ctrl, max_step, out):  # prag
     for b in nb.prange(x0.shape[0]):
         x = x0[b].copy()
         _run_continuous(x, bp[b], coeffs[b], nseg[b], plant[b], ctrl[b], max_step, empty_t, empty_x, empty_u)
+        out[b, :] = x
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", parallel=True)
+def _batch_continuous_delayed(x0, bp, coeffs, nseg, plant, ctrl, max_step, delays, out):  # pragma: no cover
+    empty_t = np.empty(0)
+    empty_x = np.empty((0, x0.shape[1]))
+    empty_u = np.empty((0, 4))
+    for b in nb.prange(x0.shape[0]):
+        x = x0[b].copy()
+        _run_continuous_delayed(x, bp[b], coeffs[b], nseg[b], plant[b], ctrl[b], max_step, empty_t, empty_x,
+                                empty_u, delays[b])
         out[b, :] = x
 
 
@@ -299,7 +400,8 @@ def simulate(
     tick_s : command-generator period in sampled mode [s].
     substeps : RK4 steps per tick in sampled mode.
     plant : optional flat plant vector (:func:`~aerobat.dynamics.plant_vector`) overriding
-        ``config.vehicle`` — how testbeds with extra effects use this function.
+        ``config.vehicle`` and its effects — how testbeds with extra effects use this function
+        (the rate-loop latency of ``config.effects`` still applies).
     record : keep every step (True) or only the start and final states (False).
     """
     compiled = program.compile() if isinstance(program, Program) else program
@@ -315,8 +417,9 @@ def simulate(
     if not np.all(np.isfinite(x)):
         raise ConfigError("initial_state contains non-finite values")
     start = x.copy()
-    plant_v = plant_vector(config.vehicle) if plant is None else np.asarray(plant, dtype=float)
+    plant_v = model_plant_vector(config) if plant is None else np.asarray(plant, dtype=float)
     ctrl_v = controller_vector(config.controller)
+    delay = np.array(config.effects.rate_latency_s, dtype=float)
     bp = compiled.breakpoints_s
     coeffs = compiled.coefficients
     nseg = len(bp) - 1
@@ -330,9 +433,9 @@ def simulate(
     rec_x = np.empty((size, N_STATE))
     rec_u = np.empty((size, 4))
     if mode == "continuous":
-        count = _run_continuous(x, bp, coeffs, nseg, plant_v, ctrl_v, max_step_s, rec_t, rec_x, rec_u)
+        count = _run_continuous_delayed(x, bp, coeffs, nseg, plant_v, ctrl_v, max_step_s, rec_t, rec_x, rec_u, delay)
     else:
-        count = _run_sampled(x, bp, coeffs, nseg, plant_v, ctrl_v, tick_s, substeps, rec_t, rec_x, rec_u)
+        count = _run_sampled(x, bp, coeffs, nseg, plant_v, ctrl_v, tick_s, substeps, rec_t, rec_x, rec_u, delay)
     if not record:
         cmds = compiled.evaluate(np.array([0.0, compiled.duration_s - 1e-12]))
         return Trajectory(np.array([0.0, compiled.duration_s]), np.stack([start, x]), cmds, mode)
@@ -354,7 +457,8 @@ def simulate_batch(
     programs : B programs.
     configs : one vehicle for all, or B vehicles.
     initial_states : (B, N_STATE) or None for hover at the origin.
-    plants : optional (B, N_PLANT) plant vectors overriding the vehicles' own.
+    plants : optional (B, N_PLANT) plant vectors overriding the vehicles' own (and their effects;
+        each vehicle's rate-loop latency still applies).
 
     Returns
     -------
@@ -379,7 +483,7 @@ def simulate_batch(
         coeffs[b, :k] = c.coefficients
         nseg[b] = k
     if plants is None:
-        plants = np.stack([plant_vector(c.vehicle) for c in cfgs])
+        plants = np.stack([model_plant_vector(c) for c in cfgs])
     ctrl = np.stack([controller_vector(c.controller) for c in cfgs])
     if initial_states is None:
         initial_states = np.stack([hover_state(c.vehicle) for c in cfgs])
@@ -392,7 +496,11 @@ def simulate_batch(
     if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(plants))):
         raise ConfigError("initial_states and plants must be finite")
     out = np.empty_like(x0)
-    _batch_continuous(x0, bp, coeffs, nseg, plants, ctrl, max_step_s, out)
+    delays = np.array([c.effects.rate_latency_s for c in cfgs], dtype=float)
+    if np.any(delays > 0.0):
+        _batch_continuous_delayed(x0, bp, coeffs, nseg, plants, ctrl, max_step_s, delays, out)
+    else:
+        _batch_continuous(x0, bp, coeffs, nseg, plants, ctrl, max_step_s, out)
     return out
 
 
@@ -405,7 +513,7 @@ class NominalModel:
     def __init__(self, config: VehicleConfig, *, max_step_s: float = DEFAULT_MAX_STEP_S) -> None:
         self.config = config
         self.max_step_s = max_step_s
-        self._plant = plant_vector(config.vehicle)
+        self._plant = model_plant_vector(config)
 
     def final_states(self, programs: Sequence[Program], initial_states: np.ndarray | None = None) -> np.ndarray:
         plants = np.tile(self._plant, (len(programs), 1))

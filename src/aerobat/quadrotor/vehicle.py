@@ -11,12 +11,25 @@ Two parameter sets, deliberately separate:
 Motor numbering follows the paper's Fig. 4 and eq 10: motor 1 on +x_b, motor 2 on
 +y_b, motor 3 on −x_b, motor 4 on −y_b; motors 1 and 3 produce +κ·f yaw moment,
 motors 2 and 4 produce −κ·f.
+
+A :class:`VehicleConfig` may add :class:`ModelEffects`, terms the paper's model leaves
+out (rate-loop latency, rate damping, thrust-proportional moments, drag); an
+identified vehicle (``aerobat identify``) carries them, and the design model
+simulates them. All zero is the paper's model, and is what every preset uses.
+
+Vehicle files (:func:`load_vehicle`) are ``name``, ``[vehicle]``, an optional
+``[controller]``, an optional ``[effects]`` and an optional ``[source]`` (where the
+numbers come from: citations, or the identification that produced them). Presets
+are package data, one file each, in ``aerobat/quadrotor/vehicles/``.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -26,11 +39,15 @@ from aerobat.config import check_range, dataclass_from_table, dataclass_to_table
 from aerobat.errors import ConfigError
 
 __all__ = [
+    "PRESETS",
     "ControllerParams",
+    "ModelEffects",
     "VehicleConfig",
     "VehicleParams",
     "hummingbird",
     "load_vehicle",
+    "preset",
+    "preset_names",
     "save_vehicle",
     "vehicle_from_name_or_file",
     "vehicle_from_table",
@@ -197,17 +214,90 @@ class ControllerParams:
 
 
 @dataclass(frozen=True, kw_only=True)
+class ModelEffects:
+    """Terms beyond the paper's model that a design model may include (all zero: the paper's model).
+
+    They are *equivalent* terms, as an identification measures them from outside the
+    vehicle: a rate loop that is a firmware PID, a gyro with a scale error or a rotor
+    wake that damps rotation all show up here as the first-order numbers below.
+
+    Attributes
+    ----------
+    rate_latency_s : per body axis, the delay between the body rate and the rate the
+        onboard loop acts on (gyro, filter and loop latency) [s].
+    rate_damping_n_m_s : per body axis, a moment −c·ω [N m s/rad]: aerodynamic damping,
+        and anything else that makes the steady rate fall short of the command (a gyro
+        that reads high acts the same way; negative if the steady rate overshoots).
+    thrust_moment_arm_m : per body axis, a moment a·T proportional to the collective
+        thrust T [m]: a centre-of-mass offset and uneven motors (x, y), uneven motor
+        yaw moments (z).
+    motor_thrust_gains : per motor (paper numbering), thrust relative to the model's (uneven motors
+        and propellers) [-].
+    rotor_drag_s_m : in-plane rotor drag, force −k·T·v (body x, y) [s/m].
+    rotor_drag_axial_s_m : axial rotor drag (thrust lost climbing, gained descending), force
+        −k·T·v along body z [s/m].
+    body_drag_n_s2_m2 : quadratic body drag, force −c·|v|·v [N s²/m²].
+    """
+
+    rate_latency_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rate_damping_n_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    thrust_moment_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    motor_thrust_gains: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
+    rotor_drag_s_m: float = 0.0
+    rotor_drag_axial_s_m: float = 0.0
+    body_drag_n_s2_m2: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name, low, high, unit in (("rate_latency_s", 0.0, 0.1, "s"),
+                                      ("rate_damping_n_m_s", -10.0, 10.0, "N m s/rad"),
+                                      ("thrust_moment_arm_m", -0.5, 0.5, "m")):
+            values = getattr(self, name)
+            if not isinstance(values, tuple) or len(values) != 3:
+                raise ConfigError(f"{name} = {values!r}: expected three numbers (body x, y, z)")
+            for axis, value in zip("xyz", values, strict=True):
+                check_range(f"{name}[{axis}]", value, low=low, high=high, unit=unit)
+        if not isinstance(self.motor_thrust_gains, tuple) or len(self.motor_thrust_gains) != 4:
+            raise ConfigError(f"motor_thrust_gains = {self.motor_thrust_gains!r}: expected four numbers (motors 1-4)")
+        for motor, value in enumerate(self.motor_thrust_gains, start=1):
+            check_range(f"motor_thrust_gains[{motor}]", value, low=0.5, high=1.5)
+        check_range("rotor_drag_s_m", self.rotor_drag_s_m, low=0.0, high=1.0, unit="s/m")
+        check_range("rotor_drag_axial_s_m", self.rotor_drag_axial_s_m, low=0.0, high=1.0, unit="s/m")
+        check_range("body_drag_n_s2_m2", self.body_drag_n_s2_m2, low=0.0, high=1.0, unit="N s²/m²")
+
+    @property
+    def neutral(self) -> bool:
+        """True if every term is zero (the paper's model)."""
+        return self == ModelEffects()
+
+
+@dataclass(frozen=True, kw_only=True)
 class VehicleConfig:
     """A vehicle's physical constants together with its onboard controller.
 
     To change the vehicle, use :meth:`with_vehicle` (or :meth:`with_mass`): it re-derives the
     controller's nominal constants, which ``dataclasses.replace(config, vehicle=…)`` would keep
     from the old vehicle.
+
+    Attributes
+    ----------
+    vehicle, controller : the physical constants and the onboard rate controller.
+    name : what it is called.
+    effects : terms beyond the paper's model (identified vehicles); zero by default.
+    source : where the numbers come from (citations, or the identification that produced
+        them): a read-only table of strings, numbers and booleans, kept in vehicle files but
+        not in the store, and not part of equality.
     """
 
     vehicle: VehicleParams
     controller: ControllerParams
     name: str = "custom"
+    effects: ModelEffects = field(default_factory=ModelEffects)
+    source: Mapping[str, Any] = field(default_factory=dict, compare=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.effects, ModelEffects):
+            raise ConfigError(f"effects must be a ModelEffects, got {type(self.effects).__name__}")
+        object.__setattr__(self, "source", _ReadOnly(_source_table(self.source, "source")))
 
     def with_vehicle(self, vehicle: VehicleParams, *, name: str | None = None) -> VehicleConfig:
         """This configuration for another vehicle: the controller keeps its gains and motor order and
@@ -215,11 +305,58 @@ class VehicleConfig:
         gains = {k: getattr(self.controller, k) for k in ("rate_gain_p_per_s", "rate_gain_q_per_s",
                                                           "rate_gain_r_per_s", "motor_order")}
         return VehicleConfig(vehicle=vehicle, controller=ControllerParams.nominal_for(vehicle, **gains),
-                             name=self.name if name is None else name)
+                             name=self.name if name is None else name, effects=self.effects, source=self.source)
 
     def with_mass(self, mass_kg: float) -> VehicleConfig:
         """The same vehicle and controller with another mass (see :meth:`VehicleParams.with_mass`)."""
         return self.with_vehicle(self.vehicle.with_mass(mass_kg))
+
+
+class _ReadOnly(Mapping[str, Any]):
+    """A read-only (and picklable) view of a validated ``[source]`` table."""
+
+    def __init__(self, data: dict[str, Any]) -> None:
+        self._data = data
+
+    def __getitem__(self, key: str) -> Any:
+        return self._data[key]
+
+    def __iter__(self) -> Any:
+        return iter(self._data)
+
+    def __len__(self) -> int:
+        return len(self._data)
+
+    def __repr__(self) -> str:
+        return repr(self._data)
+
+
+def _source_value(value: Any, where: str, depth: int) -> Any:
+    if isinstance(value, bool | str):
+        return value
+    if isinstance(value, int | float):
+        if not math.isfinite(value):
+            raise ConfigError(f"{where} = {value}: must be finite")
+        return value
+    if isinstance(value, list | tuple):
+        return [_source_value(v, f"{where}[{i}]", depth) for i, v in enumerate(value)]
+    if isinstance(value, Mapping) and depth < 2:
+        return _source_table(value, where, depth + 1)
+    raise ConfigError(f"{where}: expected a string, number, boolean, array or table, got "
+                      f"{type(value).__name__} {value!r}")
+
+
+def _source_table(table: Any, where: str, depth: int = 0) -> dict[str, Any]:
+    """A plain, validated copy of a ``[source]`` table (strings, numbers, booleans, arrays, two levels of tables)."""
+    if not isinstance(table, Mapping):
+        raise ConfigError(f"{where}: expected a table, got {type(table).__name__}")
+    out = {}
+    for key, value in table.items():
+        if not isinstance(key, str):
+            raise ConfigError(f"{where}: keys must be strings, got {key!r}")
+        out[key] = _source_value(value, f"{where}.{key}", depth)
+    return out
+
 
 
 def hummingbird() -> VehicleConfig:
@@ -228,21 +365,44 @@ def hummingbird() -> VehicleConfig:
     return VehicleConfig(vehicle=vehicle, controller=ControllerParams.nominal_for(vehicle), name="hummingbird")
 
 
-PRESETS = {"hummingbird": hummingbird}
+_PRESET_FILES = ("crazyflie21", "fpv5", "x2class")
+
+
+def preset_names() -> tuple[str, ...]:
+    """Every preset name, the default (``hummingbird``, Table 1) first."""
+    return ("hummingbird", *_PRESET_FILES)
+
+
+def preset(name: str) -> VehicleConfig:
+    """The preset ``name``, from its package file in ``aerobat/quadrotor/vehicles/`` (with its ``[source]``).
+
+    ``preset("hummingbird")`` equals :func:`hummingbird` (Table 1), which builds it in code.
+    """
+    if name not in preset_names():
+        raise ConfigError(f"unknown vehicle preset {name!r}: use one of {', '.join(preset_names())}")
+    resource = resources.files("aerobat.quadrotor") / "vehicles" / f"{name}.toml"
+    with resources.as_file(resource) as path:
+        return load_vehicle(path)
+
+
+PRESETS = {name: (lambda name=name: preset(name)) for name in preset_names()}
 
 
 def load_vehicle(path: str | Path) -> VehicleConfig:
     """Load a vehicle TOML file.
 
     The file has a ``[vehicle]`` table (any :class:`VehicleParams` field; omitted
-    fields take Table 1 values) and an optional ``[controller]`` table. Controller
-    constants that are not given default to the vehicle's own (a nominal controller).
+    fields take Table 1 values), an optional ``[controller]`` table, an optional
+    ``[effects]`` table (any :class:`ModelEffects` field; omitted: zero) and an optional
+    ``[source]`` table (strings, numbers, booleans, arrays, nested tables; kept as read).
+    Controller constants that are not given default to the vehicle's own (a nominal controller).
     """
     path = Path(path)
     data = read_toml(path)
-    unknown = sorted(set(data) - {"vehicle", "controller", "name"})
+    unknown = sorted(set(data) - {"vehicle", "controller", "effects", "source", "name"})
     if unknown:
-        raise ConfigError(f"{path}: unknown table(s) {', '.join(unknown)}; allowed: name, [vehicle], [controller]")
+        raise ConfigError(f"{path}: unknown table(s) {', '.join(unknown)}; allowed: name, [vehicle], [controller], "
+                          f"[effects], [source]")
     if "vehicle" not in data:
         raise ConfigError(f"{path}: missing required table [vehicle]")
     vehicle = dataclass_from_table(VehicleParams, data["vehicle"], source=f"{path}: [vehicle]")
@@ -251,16 +411,24 @@ def load_vehicle(path: str | Path) -> VehicleConfig:
         raise ConfigError(f"{path}: [controller] must be a table")
     nominal = dataclass_to_table(ControllerParams.nominal_for(vehicle))
     controller = dataclass_from_table(ControllerParams, {**nominal, **table}, source=f"{path}: [controller]")
+    effects = dataclass_from_table(ModelEffects, data.get("effects", {}), source=f"{path}: [effects]")
+    source = _source_table(data.get("source", {}), f"{path}: [source]")
     name = data.get("name", path.stem)
     if not isinstance(name, str):
         raise ConfigError(f"{path}: name must be a string")
-    return VehicleConfig(vehicle=vehicle, controller=controller, name=name)
+    return VehicleConfig(vehicle=vehicle, controller=controller, name=name, effects=effects, source=source)
 
 
 def vehicle_table(config: VehicleConfig) -> dict[str, Any]:
-    """``{"name", "vehicle", "controller"}``: the stored and file form of a configuration."""
-    return {"name": config.name, "vehicle": dataclass_to_table(config.vehicle),
-            "controller": dataclass_to_table(config.controller)}
+    """``{"name", "vehicle", "controller"}`` (and ``"effects"`` unless zero): the stored form of a configuration.
+
+    The ``source`` is not part of it: two files that describe the same vehicle store as one.
+    """
+    table = {"name": config.name, "vehicle": dataclass_to_table(config.vehicle),
+             "controller": dataclass_to_table(config.controller)}
+    if not config.effects.neutral:
+        table["effects"] = dataclass_to_table(config.effects)
+    return table
 
 
 def vehicle_from_table(table: Any, *, source: str) -> VehicleConfig:
@@ -271,16 +439,24 @@ def vehicle_from_table(table: Any, *, source: str) -> VehicleConfig:
         vehicle=dataclass_from_table(VehicleParams, table["vehicle"], source=f"{source}.vehicle"),
         controller=dataclass_from_table(ControllerParams, table["controller"], source=f"{source}.controller"),
         name=str(table.get("name", "custom")),
+        effects=dataclass_from_table(ModelEffects, table.get("effects", {}), source=f"{source}.effects"),
     )
 
 
-def save_vehicle(config: VehicleConfig, path: str | Path) -> None:
-    """Write ``config`` as TOML that :func:`load_vehicle` reads back identically."""
-    Path(path).write_text(tomli_w.dumps(vehicle_table(config)))
+def save_vehicle(config: VehicleConfig, path: str | Path, *, header: str = "") -> None:
+    """Write ``config`` as TOML that :func:`load_vehicle` reads back identically (``[source]`` included).
+
+    ``header`` is written first as ``#`` comment lines.
+    """
+    table = vehicle_table(config)
+    if config.source:
+        table["source"] = _source_table(config.source, "source")
+    comments = "".join(f"# {line}".rstrip() + "\n" for line in header.splitlines())
+    Path(path).write_text(comments + tomli_w.dumps(table))
 
 
 def vehicle_from_name_or_file(spec: str) -> VehicleConfig:
-    """``"hummingbird"`` (a preset name) or a path to a vehicle TOML file."""
+    """A preset name (``hummingbird``, ``crazyflie21``, ``fpv5``, ``x2class``) or a path to a vehicle TOML file."""
     if spec in PRESETS:
         return PRESETS[spec]()
     if not spec.endswith(".toml") and not Path(spec).exists():

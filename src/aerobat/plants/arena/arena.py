@@ -216,6 +216,8 @@ class Arena:
                 values = np.array(state[name], dtype=np.float64)
             except (TypeError, ValueError):
                 raise ValueError(f"arena state.{name}: expected a list of numbers") from None
+            if name == "plant" and values.shape == (current.shape[0] - 1,):
+                values = np.append(values, 0.0)  # stored before the axial rotor-drag entry existed (0 = none)
             if values.shape != current.shape:
                 raise ValueError(f"arena state.{name}: expected {current.shape[0]} values, got {values.size}")
             arrays[name] = values

@@ -28,6 +28,7 @@ __all__ = [
     "ControllerParams",
     "VehicleConfig",
     "VehicleParams",
+    "fpv5",
     "hummingbird",
     "load_vehicle",
     "save_vehicle",
@@ -192,7 +193,16 @@ def hummingbird() -> VehicleConfig:
     return VehicleConfig(vehicle=vehicle, controller=ControllerParams.nominal_for(vehicle), name="hummingbird")
 
 
-PRESETS = {"hummingbird": hummingbird}
+VEHICLE_FILES = Path(__file__).with_name("vehicles")
+"""Vehicle files shipped with aerobat (package data), each a preset under its file name."""
+
+
+def fpv5() -> VehicleConfig:
+    """A 5-inch FPV racer (``vehicles/fpv5.toml``, sources in the file): the Betaflight plant's vehicle."""
+    return load_vehicle(VEHICLE_FILES / "fpv5.toml")
+
+
+PRESETS = {"hummingbird": hummingbird, "fpv5": fpv5}
 
 
 def load_vehicle(path: str | Path) -> VehicleConfig:
@@ -244,7 +254,7 @@ def save_vehicle(config: VehicleConfig, path: str | Path) -> None:
 
 
 def vehicle_from_name_or_file(spec: str) -> VehicleConfig:
-    """``"hummingbird"`` (a preset name) or a path to a vehicle TOML file."""
+    """A preset name (``"hummingbird"``, ``"fpv5"``) or a path to a vehicle TOML file."""
     if spec in PRESETS:
         return PRESETS[spec]()
     if not spec.endswith(".toml") and not Path(spec).exists():

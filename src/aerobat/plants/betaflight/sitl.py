@@ -33,6 +33,7 @@ import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from .errors import FirmwareExited, FirmwareNotResponding, FirmwareUnavailable
 from .link import FirmwareLink
@@ -446,6 +447,40 @@ class SitlProcess:
         motors = self._receive_motors()
         self.steps += 1
         return motors
+
+    def send_rc(self, channels_us: Sequence[int]) -> None:
+        """Send one RC frame now (it reaches the firmware with the next state packet).
+
+        For a caller that schedules frames itself (frame rate, loss, latency); do not mix with
+        :meth:`set_rc`, which sends periodically from :meth:`step`.
+        """
+        try:
+            self._rc_socket.send(pack_rc(0.0, tuple(int(value) for value in channels_us)))
+        except OSError as error:
+            self._check_alive()
+            raise FirmwareNotResponding(f"cannot send to the firmware: {error}", _tail(self.log_path)) from error
+
+    def exchange(self, state_packet: Any, motors: Any) -> None:
+        """Send a packed 144-byte state packet and receive the answering motor packet into ``motors``.
+
+        The fast path of :meth:`step_packed` for a caller that keeps its own clock (no time
+        checks): ``motors`` is any writable 16-byte buffer (e.g. a float32 array of 4). Same
+        watchdog and errors as :meth:`step`.
+        """
+        try:
+            self._state_socket.send(state_packet)
+        except OSError as error:
+            self._check_alive()
+            raise FirmwareNotResponding(f"cannot send to the firmware: {error}", _tail(self.log_path)) from error
+        try:
+            if self._motor_socket.recv_into(motors) == MOTOR_STRUCT.size:
+                self.steps += 1
+                return
+        except (BlockingIOError, TimeoutError):
+            pass
+        # slow path: the watchdog (and any stray datagram)
+        MOTOR_STRUCT.pack_into(motors, 0, *self._receive_motors())
+        self.steps += 1
 
     def _receive_motors(self) -> tuple[float, float, float, float]:
         buffer = self._motor_buffer

@@ -1,4 +1,4 @@
-"""Lockstep SITL behaviour (needs the firmware: slow)."""
+"""Lockstep SITL behaviour at the packet level (needs the firmware; seconds)."""
 
 from __future__ import annotations
 
@@ -22,7 +22,6 @@ from aerobat.plants.betaflight.rc import RADIO_LOST_US, RcCommand
 from aerobat.plants.betaflight.settings import load_settings
 from aerobat.plants.betaflight.sitl import SitlProcess
 
-pytestmark = pytest.mark.slow
 SETTINGS = load_settings()
 PERIOD_S = 125e-6
 

@@ -182,6 +182,8 @@ class Pilot:
     hover_s : hover at the start for at least this long before the trigger [s].
     return_time_s : closed-loop recovery and return after the maneuver [s].
     landing_timeout_s : time allowed to land and disarm [s].
+    vehicle_mass_kg : the mass the pilot believes (the published one): collective → throttle uses
+        it with the airframe's published thrust curve, whatever the true airframe weighs.
     """
 
     position_gain_per_s2: float = 4.0
@@ -199,8 +201,10 @@ class Pilot:
     hover_s: float = 0.5
     return_time_s: float = 2.5
     landing_timeout_s: float = 6.0
+    vehicle_mass_kg: float = 0.752
 
     def __post_init__(self) -> None:
+        check_range("vehicle_mass_kg", self.vehicle_mass_kg, low=0.05, high=20.0, unit="kg")
         for name in ("position_gain_per_s2", "velocity_gain_per_s", "yaw_gain_per_s"):
             check_range(name, getattr(self, name), low=0.0, high=100.0, low_inclusive=False)
         check_range("integral_gain_per_s3", self.integral_gain_per_s3, low=0.0, high=100.0)

@@ -71,8 +71,9 @@ class BetaflightPlant:
 
     Parameters
     ----------
-    config : the *nominal* vehicle (the design model): the pilot's collective → throttle model
-        uses its mass; the true vehicle is ``params.airframe``.
+    config : the *nominal* vehicle (the design model), used for g; the true vehicle is
+        ``params.airframe``, whose published mass and thrust curve the pilot's collective →
+        throttle model inverts (``params.pilot.vehicle_mass_kg``).
     params : the plant's settings (:class:`~.params.BetaflightParams`).
     seed : seeds the plant's generator (noise, wind, radio losses, motor spread per trial).
     binary, eeprom : the SITL binary and configured eeprom (default: built and configured on
@@ -100,7 +101,8 @@ class BetaflightPlant:
         self.start_m = np.zeros(3)
         self.gravity = config.vehicle.gravity_m_s2
         pilot = self.params.pilot
-        self.sticks = StickMap.from_settings(self.settings, self.params.airframe, config.vehicle.mass_kg)
+        # the pilot knows the vehicle it flies as published: its mass and thrust curve
+        self.sticks = StickMap.from_settings(self.settings, self.params.airframe, pilot.vehicle_mass_kg)
         self.limits = self.sticks.limits(max_tilt_rad=math.radians(pilot.max_tilt_deg),
                                          max_climb_m_s=pilot.max_climb_m_s, gravity_m_s2=self.gravity)
         self.gains = np.array([pilot.position_gain_per_s2, pilot.velocity_gain_per_s, pilot.integral_gain_per_s3,
@@ -184,7 +186,7 @@ class BetaflightPlant:
                                             f"{self.settings.revision} ({self.settings.sha256[:12]})"}
         flight = None
         try:
-            flight = Flight(self.binary, self.eeprom, self.params, plant, self.start_m, rng, self.gravity)
+            flight = self.open_flight(rng, plant)
             self.flight = flight
             return self._fly(flight, compiled, info, wall)
         except FirmwareNotResponding as error:
@@ -200,6 +202,17 @@ class BetaflightPlant:
                 flight.close()
             if self.params.drift.enabled:
                 self.capacity *= 1.0 - self.params.drift.thrust_loss_per_trial
+
+    def open_flight(self, rng: np.random.Generator | None = None, plant: np.ndarray | None = None) -> Flight:
+        """A fresh firmware and the vehicle on the floor below the start, powered on (not a trial).
+
+        ``rng`` defaults to a child of the plant's generator, ``plant`` to this trial's true vehicle.
+        The caller closes it (a context manager). :meth:`fly` runs the phases below on one.
+        """
+        rng = rng if rng is not None else np.random.default_rng(self.rng.integers(2**63))
+        plant = plant if plant is not None else self._trial_plant(rng)
+        self._integral = np.zeros(3)
+        return Flight(self.binary, self.eeprom, self.params, plant, self.start_m, rng, self.gravity)
 
     def _timing(self, flight: Flight | None, wall: float) -> dict[str, Any]:
         elapsed = time.perf_counter() - wall
@@ -220,12 +233,13 @@ class BetaflightPlant:
         start_time = None
         truth: list[np.ndarray] = []
         try:
-            info["armed_at_s"] = self._power_on_and_arm(flight)
-            info["airborne_at_s"], info["settled_at_s"] = self._settle(flight)
-            info["hover"] = self._hover(flight, pilot.hover_s)
-            start_time = self._maneuver(flight, compiled, truth)
+            info["armed_at_s"] = self.power_on_and_arm(flight)
+            info["airborne_at_s"], info["settled_at_s"] = self.settle(flight)
+            info["hover"] = self.hover(flight, pilot.hover_s)
+            start_time = self.maneuver(flight, compiled, truth)
             info["start_time_s"] = start_time
-            self._closed_loop(flight, self.start_m, pilot.return_time_s, check=True)
+            self.fly_to(flight, self.start_m, pilot.return_time_s, check=True)
+            info["returned_error_m"] = float(np.linalg.norm(flight.x[0:3] - self.start_m))
         except _Stop as stop:
             info.update(self._timing(flight, wall))
             times, states = (measured_states(flight.mocap(), start_time, flight.time_s, self.start_m)
@@ -238,7 +252,7 @@ class BetaflightPlant:
         final = estimate_final_state(rows, start_time, end_time, self.start_m)
         start_state = estimate_final_state(rows, start_time - 0.06, start_time, self.start_m)
         self._keep_truth(truth, start_time)
-        info["landed"], info["disarmed"] = self._land_and_disarm(flight)
+        info["landed"], info["disarmed"] = self.land_and_disarm(flight)
         info["frames_sent"], info["frames_dropped"] = flight.frames_sent, flight.frames_dropped
         info.update(self._timing(flight, wall))
         nan_state = np.full(N_STATE, np.nan)
@@ -266,7 +280,7 @@ class BetaflightPlant:
                 *aux, *([RC_MIN_US] * (12 - len(aux))))
 
     # --------------------------------------------------------------- phases
-    def _power_on_and_arm(self, flight: Flight) -> float:
+    def power_on_and_arm(self, flight: Flight) -> float:
         """Calibrate on the floor, then arm through AUX1; returns the time the firmware armed."""
         idle = np.array([0.0, 0.0, 0.0, float(RC_MIN_US)])
         disarmed = self.channels(idle, arm=False, angle=True)
@@ -284,7 +298,7 @@ class BetaflightPlant:
         flight.estimate(pos, vel, quat)
         return pos, vel, quat
 
-    def _closed_loop(self, flight: Flight, target: np.ndarray, seconds: float, *, check: bool,
+    def fly_to(self, flight: Flight, target: np.ndarray, seconds: float, *, check: bool,
                      until: Any = None, limits: np.ndarray | None = None) -> bool:
         """ANGLE-mode frames toward ``target`` for ``seconds`` (or until ``until(pos, vel, quat)`` is true)."""
         period = 1.0 / self.params.radio.rate_hz
@@ -314,7 +328,7 @@ class BetaflightPlant:
                 raise _Stop(TrialStatus.CRASHED, f"left the flight volume at t = {row[0]:.3f} s: {name} = "
                                                  f"{rel:+.3f} m beyond the {name} limits [{lo:g}, {hi:g}] m")
 
-    def _settle(self, flight: Flight) -> tuple[float | None, float]:
+    def settle(self, flight: Flight) -> tuple[float | None, float]:
         """Take off and fly to the start until within tolerance for the hold time."""
         pilot = self.params.pilot
         self._integral = np.zeros(3)
@@ -330,11 +344,11 @@ class BetaflightPlant:
             calm[0] = calm[0] + 1 if ok else 0
             return calm[0] >= hold
 
-        if not self._closed_loop(flight, self.start_m, pilot.settle_timeout_s, check=False, until=settled):
+        if not self.fly_to(flight, self.start_m, pilot.settle_timeout_s, check=False, until=settled):
             raise _Stop(TrialStatus.ABORTED, f"did not settle at the start within {pilot.settle_timeout_s:g} s")
         return (airborne[0] if airborne else None), flight.time_s
 
-    def _hover(self, flight: Flight, seconds: float) -> dict[str, float]:
+    def hover(self, flight: Flight, seconds: float) -> dict[str, float]:
         """Hover at the start; the largest position error seen (measured and true) [m]."""
         worst = {"seconds": seconds, "max_error_measured_m": 0.0, "max_error_true_m": 0.0}
 
@@ -346,10 +360,10 @@ class BetaflightPlant:
             return False
 
         if seconds > 0:
-            self._closed_loop(flight, self.start_m, seconds, check=True, until=track)
+            self.fly_to(flight, self.start_m, seconds, check=True, until=track)
         return worst
 
-    def _maneuver(self, flight: Flight, compiled: CompiledProgram, truth: list[np.ndarray]) -> float:
+    def maneuver(self, flight: Flight, compiled: CompiledProgram, truth: list[np.ndarray]) -> float:
         """Stream the program in ACRO; returns the maneuver's start (its first frame reaches the receiver)."""
         period = 1.0 / self.params.radio.rate_hz
         start_time = flight.time_s + flight.latency_steps * flight.step_s
@@ -365,13 +379,13 @@ class BetaflightPlant:
         self._integral = np.zeros(3)
         return start_time
 
-    def _land_and_disarm(self, flight: Flight) -> tuple[bool, bool]:
+    def land_and_disarm(self, flight: Flight) -> tuple[bool, bool]:
         """Descend onto the floor, throttle down and disarm; (landed, disarmed)."""
         pilot = self.params.pilot
         below = self.start_m + np.array([0.0, 0.0, self.params.volume.z_m[0] - 0.3])
         gentle = self.limits.copy()
         gentle[L_CLIMB] = min(gentle[L_CLIMB], _LANDING_SPEED_M_S)
-        landed = self._closed_loop(flight, below, pilot.landing_timeout_s, check=False,
+        landed = self.fly_to(flight, below, pilot.landing_timeout_s, check=False,
                                    until=lambda pos, vel, quat: flight.on_floor, limits=gentle)
         low = np.array([0.0, 0.0, 0.0, float(RC_MIN_US)])
         for _ in range(flight.frames_for(0.1)):

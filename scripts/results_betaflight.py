@@ -232,14 +232,17 @@ def cmd_gyro() -> dict[str, Any]:
         params = BetaflightParams().replace(firmware__gyro_rate_hz=rate)
         trials = []
         for seed in (1, 2, 3):
-            trial = BetaflightPlant(CONFIG, params, seed=seed).fly(maneuver.program(nominal.p_nominal))
-            trials.append({"error": maneuver.error(trial.final_state).tolist(), "info": {
-                k: trial.info[k] for k in ("real_time_factor", "wall_s", "simulated_s", "hover")}})
+            plant = BetaflightPlant(CONFIG, params, seed=seed)
+            trial = plant.fly(maneuver.program(nominal.p_nominal))
+            peak = float(np.degrees(np.abs(plant.last_truth[1][:, 10]).max()))
+            trials.append({"error": maneuver.error(trial.final_state).tolist(), "peak_roll_rate_deg_s": peak,
+                           "info": {k: trial.info[k] for k in ("real_time_factor", "wall_s", "simulated_s", "hover")}})
         t, r = measure_step("roll", 1000.0, params=params)
         out[str(rate)] = {"trials": trials, "step": step_metrics(t, r, 1000.0)}
         e = np.array([tr["error"] for tr in trials])
         print(f"{rate} Hz: first-attempt errors {np.round(e[:, [0, 2, 5]], 3).tolist()} m, flip angle "
-              f"{np.round(np.degrees(e[:, 4]), 2).tolist()}°, real time ×"
+              f"{np.round(np.degrees(e[:, 4]), 2).tolist()}°, peak roll rate "
+              f"{max(tr['peak_roll_rate_deg_s'] for tr in trials):.0f}°/s, real time ×"
               f"{np.mean([tr['info']['real_time_factor'] for tr in trials]):.1f}, step {out[str(rate)]['step']}")
     return out
 

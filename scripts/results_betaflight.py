@@ -73,9 +73,12 @@ def measure_step(axis: str, rate_deg_s: float, seed: int = 1, params: Betaflight
     return np.array(times), np.degrees(np.array(rates))
 
 
-def nominal_step(config: VehicleConfig, axis: str, rate_deg_s: float, gain: float) -> tuple[np.ndarray, np.ndarray]:
-    _, state_index, _, field, channel = AXES[axis]
-    controller = dataclasses.replace(config.controller, **{field: gain})
+def nominal_step(config: VehicleConfig, axis: str, rate_deg_s: float,
+                 gains: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """The design model's response to the same step with rate gains (P_p, P_q, P_r)."""
+    _, state_index, _, _, channel = AXES[axis]
+    controller = dataclasses.replace(config.controller, rate_gain_p_per_s=gains[0], rate_gain_q_per_s=gains[1],
+                                     rate_gain_r_per_s=gains[2])
     model = VehicleConfig(vehicle=config.vehicle, controller=controller, name=config.name)
     program = Program(switches=(Switch(time_s=0.0, channel=channel, value=math.radians(rate_deg_s)),),
                       duration_s=0.3, hover_collective_m_s2=config.vehicle.gravity_m_s2)
@@ -92,46 +95,58 @@ def step_metrics(t: np.ndarray, rate: np.ndarray, command: float) -> dict[str, f
             "overshoot_pct": float(100.0 * (rate.max() / command - 1.0)), "final_deg_s": float(rate[t > 0.2].mean())}
 
 
-def fit_gain(axis_steps: list[tuple[str, np.ndarray, np.ndarray, float]]) -> float:
-    """The P gain whose nominal step responses are closest (least squares, 0–0.25 s) to Betaflight's.
+def fit_gains(steps: dict[str, tuple[np.ndarray, np.ndarray, float]]) -> tuple[float, float, float]:
+    """Rate gains (P, P, P_r) whose nominal step responses are closest to Betaflight's.
 
-    Several axes can share one gain (roll and pitch: after the model's moment inversion the P loop
-    is the same on both).
+    Least squares over 0–0.25 s after each step; roll and pitch share one gain (after the model's
+    moment inversion the P loop is the same on both), yaw has its own. The axes couple through the
+    model's thrust limits (a large step saturates its motors), so the two gains are fitted in turn
+    until they stop changing.
     """
-    def cost(gain: float) -> float:
+    def cost(axes: tuple[str, ...], gains: tuple[float, float, float]) -> float:
         total = 0.0
-        for axis, t, rate, command in axis_steps:
+        for axis in axes:
+            t, rate, command = steps[axis]
             window = (t >= 0.0) & (t <= 0.25)
-            nt, nr = nominal_step(CONFIG, axis, command, gain)
+            nt, nr = nominal_step(CONFIG, axis, command, gains)
             total += float(np.sum((np.interp(t[window], nt, nr) - rate[window]) ** 2))
         return total
 
-    grid = np.geomspace(2.0, 300.0, 60)  # the cost has local minima: a grid, then a local refinement
-    best = int(np.argmin([cost(g) for g in grid]))
-    low, high = grid[max(best - 1, 0)], grid[min(best + 1, len(grid) - 1)]
-    return float(minimize_scalar(cost, bounds=(low, high), method="bounded", options={"xatol": 0.05}).x)
+    def best(fn: Any) -> float:
+        grid = np.geomspace(2.0, 300.0, 60)  # the cost has local minima: a grid, then a local refinement
+        k = int(np.argmin([fn(g) for g in grid]))
+        low, high = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+        return float(minimize_scalar(fn, bounds=(low, high), method="bounded", options={"xatol": 0.05}).x)
+
+    rp, yaw = CONFIG.controller.rate_gain_p_per_s, CONFIG.controller.rate_gain_r_per_s
+    for _ in range(6):
+        new_rp = best(lambda g, yaw=yaw: cost(("roll", "pitch"), (g, g, yaw)))
+        new_yaw = best(lambda g, rp=new_rp: cost(("yaw",), (rp, rp, g)))
+        done = abs(new_rp - rp) < 0.1 and abs(new_yaw - yaw) < 0.1
+        rp, yaw = new_rp, new_yaw
+        if done:
+            break
+    return rp, rp, yaw
 
 
 def cmd_rate() -> dict[str, Any]:
-    steps = {axis: (axis, *measure_step(axis, command), command)
+    steps = {axis: (*measure_step(axis, command), command)
              for axis, command in (("roll", 1000.0), ("pitch", 1000.0), ("yaw", 400.0))}
-    gains = {"roll": fit_gain([steps["roll"], steps["pitch"]]), "yaw": fit_gain([steps["yaw"]])}
-    gains["pitch"] = gains["roll"]
-    results: dict[str, Any] = {}
-    for axis, (_, t, rate, command) in steps.items():
-        gain = gains[axis]
-        nt, nr = nominal_step(CONFIG, axis, command, gain)
-        current = getattr(CONFIG.controller, AXES[axis][3])
+    fitted = fit_gains(steps)
+    current = (CONFIG.controller.rate_gain_p_per_s, CONFIG.controller.rate_gain_q_per_s,
+               CONFIG.controller.rate_gain_r_per_s)
+    results: dict[str, Any] = {"fitted_gains_per_s": fitted, "vehicle_file_gains_per_s": current}
+    for axis, (t, rate, command) in steps.items():
+        nt, nr = nominal_step(CONFIG, axis, command, fitted)
         ct, cr = nominal_step(CONFIG, axis, command, current)
         window = (t >= 0.0) & (t <= 0.25)
         rms = float(np.sqrt(np.mean((np.interp(t[window], nt, nr) - rate[window]) ** 2)))
         results[axis] = {"command_deg_s": command, "betaflight": step_metrics(t, rate, command),
-                         "fitted_gain_per_s": gain, "fitted": step_metrics(nt, nr, command), "fitted_rms_deg_s": rms,
-                         "vehicle_file_gain_per_s": current, "vehicle_file": step_metrics(ct, cr, command),
-                         "t_s": t.tolist(), "rate_deg_s": rate.tolist()}
-        print(f"{axis}: Betaflight {results[axis]['betaflight']}; fitted P = {gain:.1f}/s "
-              f"{results[axis]['fitted']} (rms {rms:.0f} deg/s); fpv5.toml P = {current:g}/s "
-              f"{results[axis]['vehicle_file']}")
+                         "fitted": step_metrics(nt, nr, command), "fitted_rms_deg_s": rms,
+                         "vehicle_file": step_metrics(ct, cr, command), "t_s": t.tolist(), "rate_deg_s": rate.tolist()}
+        print(f"{axis}: Betaflight {results[axis]['betaflight']}; fitted {results[axis]['fitted']} "
+              f"(rms {rms:.0f} deg/s); fpv5.toml {results[axis]['vehicle_file']}")
+    print(f"fitted gains {np.round(fitted, 1).tolist()} 1/s; fpv5.toml {current}")
     _plot_steps(results)
     return results
 
@@ -141,16 +156,18 @@ def _plot_steps(results: dict[str, Any]) -> None:
     from aerobat.plotting.files import new_figure
 
     fig = new_figure(figsize=(12, 3.4))
-    for ax, (axis, r) in zip(fig.subplots(1, 3), results.items(), strict=True):
+    for ax, axis in zip(fig.subplots(1, 3), ("roll", "pitch", "yaw"), strict=True):
+        r = results[axis]
         ax.plot(np.array(r["t_s"]) * 1e3, r["rate_deg_s"], "k.-", ms=3, label="Betaflight (true rate)")
-        for gain, style in ((r["fitted_gain_per_s"], "C0-"), (r["vehicle_file_gain_per_s"], "C1--")):
-            nt, nr = nominal_step(CONFIG, axis, r["command_deg_s"], gain)
-            ax.plot(nt * 1e3, nr, style, label=f"nominal P loop, {gain:.1f}/s")
+        for gains, style, what in ((results["fitted_gains_per_s"], "C0-", "fitted"),
+                                   (results["vehicle_file_gains_per_s"], "C1--", "fpv5.toml")):
+            nt, nr = nominal_step(CONFIG, axis, r["command_deg_s"], tuple(gains))
+            ax.plot(nt * 1e3, nr, style, label=f"nominal P loop, {what} {np.round(gains, 1).tolist()} 1/s")
         ax.axhline(r["command_deg_s"], color="0.7", lw=0.8)
         ax.set_xlim(-10, 300)
         ax.set_title(f"{axis} step {r['command_deg_s']:g} °/s", fontsize=9)
         ax.set_xlabel("time since the step reached the receiver [ms]")
-        ax.legend(fontsize=7)
+        ax.legend(fontsize=6)
     fig.axes[0].set_ylabel("body rate [°/s]")
     save_figure(fig, OUT / "rate_steps.png")
 

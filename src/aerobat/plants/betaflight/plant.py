@@ -236,8 +236,10 @@ class BetaflightPlant:
             info["armed_at_s"] = self.power_on_and_arm(flight)
             info["airborne_at_s"], info["settled_at_s"] = self.settle(flight)
             info["hover"] = self.hover(flight, pilot.hover_s)
+            dropped = flight.frames_dropped
             start_time = self.maneuver(flight, compiled, truth)
             info["start_time_s"] = start_time
+            info["maneuver_frames_dropped"] = flight.frames_dropped - dropped
             self.fly_to(flight, self.start_m, pilot.return_time_s, check=True)
             info["returned_error_m"] = float(np.linalg.norm(flight.x[0:3] - self.start_m))
         except _Stop as stop:

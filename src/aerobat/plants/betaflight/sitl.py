@@ -198,6 +198,7 @@ class _Resources:
         if process is not None and os.getpid() == self.owner_pid and process.poll() is None:
             try:
                 os.killpg(process.pid, signal.SIGTERM)
+                os.killpg(process.pid, signal.SIGCONT)  # a stopped (hung) firmware takes the SIGTERM now
                 process.wait(timeout=1.0)
             except ProcessLookupError:
                 pass

@@ -147,6 +147,7 @@ def run() -> tuple[list[tuple[str, str, str]], dict[str, Any]]:
     """(rows for docs/performance.md, raw results)."""
     binary = ensure_sitl()
     eeprom = ensure_eeprom(binary)
+    load_before = os.getloadavg()[0]
     info = json.loads((binary.parent / "build-info.json").read_text())
     lock = bench_lockstep(binary, eeprom)
     alone = bench_firmware_alone(binary, eeprom)
@@ -172,7 +173,11 @@ def run() -> tuple[list[tuple[str, str, str]], dict[str, Any]]:
          f"{dog['detected_after_s']:.2f} s with a 1 s step timeout ({dog['lost_status']}); next trial "
          f"{dog['next_trial']} on a fresh firmware in {dog['next_trial_wall_s']:.2f} s"),
     ]
-    return rows, {"lockstep": lock, "firmware_alone_steps_s": alone, "trials_8khz": t8, "trials_4khz": t4,
+    load_after = os.getloadavg()[0]
+    rows.append(("1-minute load average before / after these rows (2 cores: above 2 means shared)", "—",
+                 f"{load_before:.1f} / {load_after:.1f}"))
+    return rows, {"load_average": (load_before, load_after), "lockstep": lock, "firmware_alone_steps_s": alone,
+                  "trials_8khz": t8, "trials_4khz": t4,
                   "watchdog": dog, "build": info}
 
 

@@ -1,7 +1,7 @@
 """Run one lockstep Betaflight SITL process and exchange packets with it.
 
 :class:`SitlProcess` starts the patched SITL binary (see
-``firmware/betaflight/lockstep.patch``) in a private temporary directory with a
+``lockstep.patch`` in this package) in a private temporary directory with a
 copy of a configured ``eeprom.bin``, on ports of its own, and drives it in
 lockstep: every :meth:`SitlProcess.step` sends one state packet (preceded by an
 RC packet when one is due) and waits for exactly one motor packet.

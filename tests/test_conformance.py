@@ -17,6 +17,7 @@ from aerobat.core.registry import from_spec, registered_kinds
 from aerobat.core.rules import RULES, IscModel, make_rule
 from aerobat.core.testing import ToyManeuver, ToyModel, ToyPlant, check_maneuver, check_plant, check_rule
 from aerobat.plants import PLANTS, PlantChoice
+from aerobat.plants.betaflight.errors import FirmwareUnavailable
 from aerobat.quadrotor.maneuvers import MultiFlip, load_maneuver_file, translation_maneuver
 from aerobat.quadrotor.simulate import NominalModel
 from aerobat.quadrotor.vehicle import hummingbird
@@ -47,18 +48,19 @@ def test_maneuver_conforms(kind):
 
 
 def test_every_plant_has_a_check():
-    assert set(PLANTS.names()) == {"nominal", "arena", "rotorpy"}
+    assert set(PLANTS.names()) == {"nominal", "arena", "rotorpy", "betaflight"}
 
 
-@pytest.mark.parametrize("kind", ["nominal", "arena", "rotorpy"])
+@pytest.mark.parametrize("kind", ["nominal", "arena", "rotorpy", "betaflight"])
 def test_plant_conforms(kind):
     choice = PlantChoice(kind, seed=4)
     try:
         choice.spec.check_available()
-    except ImportError as exc:
+        plant = choice.build(CONFIG)
+    except (ImportError, FirmwareUnavailable) as exc:
         pytest.skip(str(exc))
     p0 = design(FLIP, NominalModel(CONFIG)).p_nominal
-    trial = check_plant(choice.build(CONFIG), FLIP, params=p0)
+    trial = check_plant(plant, FLIP, params=p0)
     assert trial.ok, trial.message
 
 

@@ -99,27 +99,33 @@ def _design(args: argparse.Namespace) -> tuple[Any, Any, Any]:
 def _cmd_robustness(args: argparse.Namespace) -> int:
     from aerobat.core.rules import RuleChoice
     from aerobat.experiments.studies import RobustnessRanges, load_ranges, robustness_jobs, summarize_robustness
-    from aerobat.experiments.studies.robustness import SAMPLED_PROPERTIES
+    from aerobat.experiments.studies.robustness import BETAFLIGHT_PROPERTIES, SAMPLED_PROPERTIES
+    from aerobat.plants import PlantChoice
     from aerobat.plotting import save_figure, write_text
     from aerobat.plotting.studies import plot_success_by_property, plot_trials_to_tolerance
 
     rule = RuleChoice.parse(args.rule, source="--rule")
     ranges = load_ranges(args.ranges) if args.ranges else RobustnessRanges()
+    if args.betaflight is not None and args.plant != "betaflight":
+        raise ConfigError(f"--betaflight applies only with --plant betaflight (got --plant {args.plant})")
+    base = PlantChoice.from_file(args.plant, args.betaflight).settings if args.plant == "betaflight" else None
+    properties = BETAFLIGHT_PROPERTIES if args.plant == "betaflight" else SAMPLED_PROPERTIES
     config, maneuver, nominal = _design(args)
     jobs = robustness_jobs(maneuver, nominal, config, vehicles=args.vehicles, iterations=args.iterations,
-                           seed=args.seed, ranges=ranges, rule=rule, tolerance_m=args.tolerance_m)
+                           seed=args.seed, ranges=ranges, rule=rule, tolerance_m=args.tolerance_m, plant=args.plant,
+                           base=base)
     spec = {"maneuver": maneuver.spec(), "vehicles": args.vehicles, "iterations": args.iterations,
-            "seed": args.seed, "rule": rule.label, "tolerance_m": args.tolerance_m,
+            "seed": args.seed, "rule": rule.label, "tolerance_m": args.tolerance_m, "plant": args.plant,
             "ranges": {k: list(v) if isinstance(v, tuple) else v for k, v in ranges.__dict__.items()}}
     outcome, out = run_cli_study(args, "robustness", spec, jobs)
     results = [r for _, r in sorted(outcome.results.items())]
-    summary = summarize_robustness(results)
+    summary = summarize_robustness(results, properties)
     save_figure(plot_trials_to_tolerance(summary.trials_to_tolerance, args.tolerance_m),
                 out / "trials_to_tolerance.png")
     with_props = [r for r in results if r.get("properties")]
     if with_props:
         save_figure(plot_success_by_property([r["properties"] for r in with_props],
-                                             [bool(r.get("success")) for r in with_props], SAMPLED_PROPERTIES),
+                                             [bool(r.get("success")) for r in with_props], properties),
                     out / "success_vs_property.png")
     report = {
         "study": outcome.study_id, "vehicles": args.vehicles, "learned": summary.completed,
@@ -289,6 +295,10 @@ def register(sub: Any) -> None:
                      help="position tolerance of success [m]")
     rob.add_argument("--ranges", metavar="FILE.toml",
                      help="sampling ranges ([ranges] table; default: docs/plants.md's)")
+    rob.add_argument("--plant", choices=("arena", "betaflight"), default="arena",
+                     help="whose true vehicle is sampled (docs/plants.md says what varies)")
+    rob.add_argument("--betaflight", metavar="FILE.toml",
+                     help="Betaflight plant settings to sample around (default: the shipped ones)")
     add_execution_options(rob)
     rob.set_defaults(func=_cmd_robustness)
 
@@ -300,7 +310,7 @@ def register(sub: Any) -> None:
     rules.add_argument("--trials", type=bounded_int(2, 1000), default=30, help="measured trials per run")
     rules.add_argument("--tolerance-m", type=finite_float(1e-6, 100.0, "m"), default=0.12,
                        help="position tolerance [m]")
-    add_plant_options(rules, kinds=("arena", "rotorpy"))
+    add_plant_options(rules, kinds=("arena", "rotorpy", "betaflight"))
     rules.set_defaults(seed=1)
     add_execution_options(rules)
     rules.set_defaults(func=_cmd_rules)

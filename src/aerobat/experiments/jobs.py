@@ -69,7 +69,7 @@ def learn_job(spec: dict[str, Any]) -> dict[str, Any]:
         "trials_to_tolerance": first_below,
         "success": bool(session.status.value == "completed" and float(np.mean(last)) <= tol),
         "final_params": session.final_params.tolist(),
-        "lost_trials": sum(1 for it in session.iterations if it.status.value == "no_trigger"),
+        "lost_trials": sum(1 for it in session.iterations if it.status.value in ("no_trigger", "lost")),
         "properties": spec.get("properties", {}),
         "iterations": _records(session.iterations),
         "wall_s": time.perf_counter() - start,

@@ -6,6 +6,8 @@
                       (:class:`~aerobat.plants.arena.Arena`, settings ``--arena FILE``)
 ``rotorpy``           RotorPy's Hummingbird, supervised like the arena
                       (:class:`~aerobat.plants.rotorpy.RotorPyPlant`, ``--rotorpy FILE``)
+``betaflight``        a 5-inch racer flown by Betaflight 4.6 (SITL in lockstep) in the arena
+                      (:class:`~aerobat.plants.betaflight.BetaflightPlant`, ``--betaflight FILE``)
 ====================  ===============================================================
 
 Each is a :class:`~aerobat.plants.spec.PlantSpec` in :data:`PLANTS`; a package adds its own
@@ -69,6 +71,30 @@ def _rotorpy_default() -> Any:
     return RotorPySettings()
 
 
+def _betaflight(config: VehicleConfig, settings: Any, seed: int) -> Plant:
+    from aerobat.plants.betaflight.plant import BetaflightPlant
+
+    return BetaflightPlant(config, settings, seed=seed)
+
+
+def _betaflight_load(path: str | Path) -> Any:
+    from aerobat.plants.betaflight.params import load_betaflight
+
+    return load_betaflight(path)
+
+
+def _betaflight_from_table(table: Any, source: str) -> Any:
+    from aerobat.plants.betaflight.params import BetaflightParams
+
+    return dataclass_from_table(BetaflightParams, table, source=source)
+
+
+def _betaflight_default() -> Any:
+    from aerobat.plants.betaflight.params import BetaflightParams
+
+    return BetaflightParams()
+
+
 PLANTS.register("nominal", PlantSpec(
     "nominal", "the design model itself: continuous time, no noise",
     lambda config, settings, seed: NominalPlant(config)))
@@ -83,3 +109,7 @@ PLANTS.register("rotorpy", PlantSpec(
     _rotorpy, load_settings=_rotorpy_load, settings_from_table=_rotorpy_from_table,
     settings_to_table=_rotorpy_to_table, default_settings=_rotorpy_default,
     requires=(("rotorpy", "rotorpy"),), option="--rotorpy"))
+PLANTS.register("betaflight", PlantSpec(
+    "betaflight", "a 5-inch racer flown by Betaflight 4.6's own firmware (SITL in lockstep) in the arena",
+    _betaflight, load_settings=_betaflight_load, settings_from_table=_betaflight_from_table,
+    settings_to_table=dataclass_to_table, default_settings=_betaflight_default, option="--betaflight"))

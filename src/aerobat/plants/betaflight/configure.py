@@ -1,0 +1,211 @@
+"""Configure the firmware once through its CLI and keep the resulting eeprom.
+
+Why a separate process: entering the CLI sets the CLI arming-disable flag for
+the rest of the process (even after ``exit noreboot``), and CLI traffic
+arrives at wall-clock moments, which would make a lockstep run
+non-deterministic. So :func:`ensure_eeprom` starts a SITL from a blank eeprom,
+keeps it stepping (level, at rest) from a background thread so that its serial
+task runs, applies ``settings.toml`` over TCP, sends ``save`` (the SITL writes
+``eeprom.bin`` and exits), checks the saved values in a second process, and
+caches ``eeprom.bin``. Flying processes start from a copy of it and never open
+the CLI.
+"""
+
+from __future__ import annotations
+
+import argparse
+import fcntl
+import re
+import shutil
+import sys
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from .build import ensure_sitl
+from .errors import BetaflightError, ConfigureFailed, FirmwareNotResponding
+from .packets import SitlState
+from .settings import BetaflightSettings, load_settings
+from .sitl import SitlProcess
+
+__all__ = ["AT_REST_LEVEL", "ensure_eeprom", "step_at_rest"]
+
+AT_REST_LEVEL = SitlState(
+    time_s=0.0,
+    gyro_frd_rad_s=(0.0, 0.0, 0.0),
+    specific_force_frd_m_s2=(0.0, 0.0, -9.80665),
+    quat_wxyz_frd_to_ned=(1.0, 0.0, 0.0, 0.0),
+)
+"""Sensors of a level quad standing still (time filled in per step)."""
+
+Progress = Callable[[str], None]
+
+
+class _Stepper:
+    """Keeps a SITL stepping at rest from a background thread until stopped or the firmware exits."""
+
+    def __init__(self, sitl: SitlProcess) -> None:
+        self._sitl = sitl
+        self._stop = threading.Event()
+        self.error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="sitl-at-rest", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            step_at_rest(self._sitl, self._stop.is_set)
+        except FirmwareNotResponding as error:  # expected after `save`
+            self.error = error
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=10.0)
+
+
+def step_at_rest(sitl: SitlProcess, stop: Callable[[], bool], steps: int | None = None) -> int:
+    """Step ``sitl`` with :data:`AT_REST_LEVEL` until ``stop()`` is true (or ``steps`` are done).
+
+    Returns the number of steps taken.
+    """
+    period_s = sitl.gyro_period_us / 1e6
+    taken = 0
+    while not stop() and (steps is None or taken < steps):
+        sitl.step(AT_REST_LEVEL._replace(time_s=(sitl.steps + 1) * period_s))
+        taken += 1
+    return taken
+
+
+def _apply(sitl: SitlProcess, settings: BetaflightSettings, say: Progress) -> str:
+    """Apply the settings over the CLI and save; returns the CLI transcript."""
+    stepper = _Stepper(sitl)
+    transcript = []
+    try:
+        with sitl.open_link() as link:
+            transcript.append(link.cli.enter())
+            for command in settings.cli_commands():
+                output = link.cli.command(command)
+                if command.startswith("feature") and output.startswith("Unavailable"):
+                    raise ConfigureFailed(f"CLI command {command!r}: {output.strip()} in this build")
+                transcript.append(f"# {command}\n{output}")
+            say(f"applied {len(settings.cli_commands())} CLI commands; saving")
+            transcript.append(link.cli.save())
+        deadline = time.monotonic() + 10.0
+        while sitl.alive() and time.monotonic() < deadline:
+            time.sleep(0.02)
+        if sitl.alive():
+            raise ConfigureFailed("the SITL did not exit after `save`")
+    finally:
+        stepper.stop()
+    return "\n".join(transcript)
+
+
+_GET_PATTERN = re.compile(r"^(\w+) = (.*?)\s*$", re.MULTILINE)
+
+
+def _verify(sitl: SitlProcess, settings: BetaflightSettings) -> None:
+    """Read every configured value back through the CLI of a process started from the saved eeprom."""
+    stepper = _Stepper(sitl)
+    try:
+        with sitl.open_link() as link:
+            link.cli.enter()
+            for name, expected in settings.values:
+                output = link.cli.command(f"get {name}")
+                found = {match.group(1): match.group(2) for match in _GET_PATTERN.finditer(output)}
+                if found.get(name, "").upper() != expected.upper():
+                    raise ConfigureFailed(f"saved eeprom has {name} = {found.get(name)!r}, expected {expected!r}")
+            aux_output = link.cli.command("aux")
+            for slot, mode in enumerate(settings.modes.values()):
+                if mode.cli_command(slot) not in aux_output:
+                    raise ConfigureFailed(f"saved eeprom lacks {mode.cli_command(slot)!r}")
+    finally:
+        stepper.stop()
+
+
+def ensure_eeprom(
+    binary: Path | None = None,
+    settings_path: Path | None = None,
+    *,
+    cache_dir: Path | None = None,
+    verify: bool = True,
+    progress: Progress | None = None,
+) -> Path:
+    """Return a configured ``eeprom.bin`` for ``binary``, creating it on first use.
+
+    Parameters
+    ----------
+    binary : Path, optional
+        Lockstep SITL binary (default :func:`.build.ensure_sitl`).
+    settings_path : Path, optional
+        Settings file (default: the packaged ``settings.toml``).
+    cache_dir : Path, optional
+        Cache root passed to :func:`.build.ensure_sitl` when ``binary`` is None.
+    verify : bool
+        Read the values back from the saved eeprom in a second process.
+    progress : callable, optional
+        Called with one line of text per stage.
+
+    Returns
+    -------
+    Path
+        ``eeprom-<settings sha256[:12]>.bin`` next to the binary.
+
+    Raises
+    ------
+    ConfigureFailed
+        The CLI rejected a command, or the saved eeprom does not hold the values.
+    FirmwareUnavailable, FirmwareNotResponding
+        The firmware could not be built or started.
+    """
+    say = progress or (lambda _line: None)
+    binary = Path(binary) if binary is not None else ensure_sitl(cache_dir, progress=progress)
+    settings = load_settings(settings_path)
+    eeprom = binary.parent / f"eeprom-{settings.sha256[:12]}.bin"
+    if eeprom.is_file():
+        return eeprom
+    lock_path = eeprom.with_suffix(".lock")
+    with open(lock_path, "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if eeprom.is_file():
+            return eeprom
+        say(f"configuring from a blank eeprom with {settings.path.name} (revision {settings.revision})")
+        with SitlProcess(binary, None) as sitl:
+            workdir = sitl.workdir
+            assert workdir is not None
+            transcript = _apply(sitl, settings, say)
+            saved = workdir / "eeprom.bin"
+            if not saved.is_file():
+                raise ConfigureFailed(f"no eeprom.bin was saved in {workdir}")
+            staged = eeprom.with_suffix(".tmp")
+            shutil.copyfile(saved, staged)
+        (binary.parent / f"{eeprom.stem}.cli.txt").write_text(transcript)
+        if verify:
+            say("verifying the saved eeprom in a fresh process")
+            try:
+                with SitlProcess(binary, staged) as check:
+                    _verify(check, settings)
+            except BaseException:
+                staged.unlink(missing_ok=True)
+                raise
+        staged.replace(eeprom)
+        say(f"configured eeprom: {eeprom}")
+        return eeprom
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command line: configure (or find) the eeprom and print its path."""
+    parser = argparse.ArgumentParser(description="Configure the Betaflight SITL eeprom (cached).")
+    parser.add_argument("--cache-dir", type=Path, default=None)
+    parser.add_argument("--settings", type=Path, default=None)
+    args = parser.parse_args(argv)
+    try:
+        eeprom = ensure_eeprom(settings_path=args.settings, cache_dir=args.cache_dir, progress=print)
+    except BetaflightError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+    print(eeprom)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

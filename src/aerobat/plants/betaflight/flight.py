@@ -1,0 +1,192 @@
+"""One flight: a firmware process, the physical world around it, the radio and motion capture.
+
+:class:`Flight` owns a fresh :class:`~.sitl.SitlProcess` and steps it in lockstep with
+:func:`.physics.step`: one state packet out, one motor packet back, one gyro period of physics.
+Time advances in radio frames: :meth:`Flight.frame` takes the channels the ground sends for one
+frame period; the radio drops the frame with the configured probability (seeded) or delivers it
+after the link latency, right before the state packet of the step it arrives in. Motion capture
+samples the true state at its rate with seeded noise into a log the supervisor reads with its
+latency. Nothing here decides what to fly: that is the plant's supervisor.
+
+Everything random comes from the generator passed in, so a seed repeats a flight bit for bit;
+the firmware is deterministic in lockstep.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from aerobat.errors import ConfigError
+from aerobat.plants.arena.kernel import MOCAP_COLUMNS, estimate_pose, mocap_sample
+from aerobat.plants.betaflight.params import BetaflightParams
+from aerobat.plants.betaflight.physics import (
+    C_CONTACT,
+    C_DELAY,
+    C_TICK,
+    N_COUNTERS,
+    PACKET_DOUBLES,
+    aux_vector,
+    ground_state,
+    prime,
+    step,
+)
+from aerobat.plants.betaflight.sitl import SitlProcess
+from aerobat.quadrotor.dynamics import N_STATE
+
+__all__ = ["Flight", "NonFinite"]
+
+
+class NonFinite(Exception):
+    """The vehicle's state went non-finite (the trial is aborted)."""
+
+
+class Flight:
+    """A firmware instance and the world it flies in, from power-on on the floor.
+
+    Parameters
+    ----------
+    binary, eeprom : the lockstep SITL and its configured eeprom.
+    params : the plant's settings.
+    plant : the true vehicle's plant vector for this flight (:func:`.physics.airframe_plant`).
+    start_m : the maneuver start [m]; the vehicle stands on the floor below it.
+    rng : the plant's generator (noise, radio drops).
+    gravity_m_s2 : g.
+    """
+
+    def __init__(self, binary: Path, eeprom: Path, params: BetaflightParams, plant: np.ndarray,
+                 start_m: np.ndarray, rng: np.random.Generator, gravity_m_s2: float) -> None:
+        fw = params.firmware
+        self.params = params
+        self.rng = rng
+        self.step_s = 1.0 / fw.gyro_rate_hz
+        frame_steps = fw.gyro_rate_hz / params.radio.rate_hz
+        if abs(frame_steps - round(frame_steps)) > 1e-9:
+            raise ConfigError(f"radio.rate_hz = {params.radio.rate_hz:g}: the frame period must be a whole number "
+                              f"of gyro periods ({fw.gyro_rate_hz} Hz)")
+        self.frame_steps = round(frame_steps)
+        self.mocap_every = max(1, round(fw.gyro_rate_hz / params.motion_capture.rate_hz))
+        self.latency_steps = round(params.radio.latency_s / self.step_s)
+        self.start_m = np.asarray(start_m, dtype=float)
+        ground = float(self.start_m[2] + params.volume.z_m[0])
+        self.x = ground_state((float(self.start_m[0]), float(self.start_m[1]), ground))
+        self.plant = plant
+        self.aux = aux_vector(params, step_s=self.step_s, ground_z_m=ground, gravity_m_s2=gravity_m_s2)
+        delay = round(params.airframe.output_delay_s / self.step_s)
+        self.counters = np.zeros(N_COUNTERS, dtype=np.int64)
+        self.counters[C_DELAY] = delay
+        self.counters[C_CONTACT] = 1
+        self.pending = np.zeros((delay + 1, 4))
+        self.scratch = np.zeros((6, N_STATE))
+        self.packet = np.zeros(PACKET_DOUBLES)
+        self.motors = np.zeros(4, dtype=np.float32)
+        self.tick = 0
+        self.log = np.empty((4096, MOCAP_COLUMNS))
+        self.log_count = 0
+        self._queue: list[tuple[int, tuple[int, ...]]] = []
+        self.frames_sent = 0
+        self.frames_dropped = 0
+        prime(self.x, self.plant, self.aux, self.counters, self._noise(1)[0], self.packet, self.scratch)
+        self.sitl = SitlProcess(binary, eeprom, gyro_rate_hz=fw.gyro_rate_hz, step_timeout_s=fw.step_timeout_s)
+
+    # ------------------------------------------------------------------ lifetime
+    def close(self) -> None:
+        """Kill the firmware and release its ports and files (idempotent)."""
+        self.sitl.close()
+
+    def __enter__(self) -> Flight:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ time
+    @property
+    def time_s(self) -> float:
+        """Simulated time since power-on [s]."""
+        return self.tick * self.step_s
+
+    @property
+    def on_floor(self) -> bool:
+        return bool(self.counters[C_CONTACT])
+
+    def _noise(self, n: int) -> np.ndarray:
+        if self.params.sensors.gyro_noise_rad_s == 0.0 and self.params.sensors.accel_noise_m_s2 == 0.0:
+            return np.zeros((n, 6))
+        return self.rng.standard_normal((n, 6))
+
+    def frame(self, channels_us: Sequence[int], *, lossless: bool = False) -> None:
+        """Send one radio frame and fly one frame period.
+
+        The frame is lost with the radio's drop probability (``lossless``: never, e.g. a radio
+        that stopped altogether is modelled by its channels instead) and otherwise reaches the
+        receiver after the link latency.
+        """
+        dropped = not lossless and self.rng.random() < self.params.radio.drop_probability
+        self.frames_sent += 1
+        if dropped:
+            self.frames_dropped += 1
+        else:
+            self._queue.append((self.tick + self.latency_steps, tuple(int(c) for c in channels_us)))
+        self._advance(self.frame_steps)
+
+    def _advance(self, n: int) -> None:
+        noise = self._noise(n)
+        mc = self.params.motion_capture
+        rows = n // self.mocap_every + 2
+        if self.log_count + rows > self.log.shape[0]:
+            grown = np.empty((2 * self.log.shape[0] + rows, MOCAP_COLUMNS))
+            grown[: self.log_count] = self.log[: self.log_count]
+            self.log = grown
+        mocap_noise = np.zeros((rows, 6))
+        if mc.position_noise_m:
+            mocap_noise[:, :3] = mc.position_noise_m * self.rng.standard_normal((rows, 3))
+        if mc.attitude_noise_rad:
+            mocap_noise[:, 3:] = mc.attitude_noise_rad * self.rng.standard_normal((rows, 3))
+        used = 0
+        exchange = self.sitl.exchange
+        queue = self._queue
+        x, motors, plant, aux, pending = self.x, self.motors, self.plant, self.aux, self.pending
+        counters, packet, scratch = self.counters, self.packet, self.scratch
+        tick = self.tick
+        every = self.mocap_every
+        for i in range(n):
+            if tick % every == 0:
+                mocap_sample(x, tick * self.step_s, mocap_noise[used], self.log[self.log_count])
+                self.log_count += 1
+                used += 1
+            while queue and queue[0][0] <= tick:
+                self.sitl.send_rc(queue.pop(0)[1])
+            exchange(packet, motors)
+            if step(x, motors, plant, aux, pending, counters, noise[i], packet, scratch):
+                self.tick = tick + 1
+                raise NonFinite(f"non-finite vehicle state at t = {self.tick * self.step_s:.4f} s")
+            tick += 1
+        self.tick = tick
+        assert int(counters[C_TICK]) == tick
+
+    # ------------------------------------------------------------------ measurement
+    def estimate(self, pos: np.ndarray, vel: np.ndarray, quat: np.ndarray) -> bool:
+        """The supervisor's estimate now: the arena's fit over mocap samples older than the latency."""
+        available = self.time_s - self.params.motion_capture.latency_s + 1e-12
+        rows = int(np.searchsorted(self.log[: self.log_count, 0], available, side="right"))
+        return bool(estimate_pose(self.log, rows, pos, vel, quat))
+
+    def mocap(self) -> np.ndarray:
+        """The motion-capture log so far: rows (t, x, y, z, qw, qx, qy, qz)."""
+        return self.log[: self.log_count]
+
+    def motor_commands(self) -> tuple[float, float, float, float]:
+        """The firmware's latest motor packet (0 = stopped, ``motor_idle`` = armed idle)."""
+        return (float(self.motors[0]), float(self.motors[1]), float(self.motors[2]), float(self.motors[3]))
+
+    def truth(self) -> np.ndarray:
+        """A copy of the true state (aerobat layout; thrust slots in Betaflight packet order)."""
+        return self.x.copy()
+
+    def frames_for(self, seconds: float) -> int:
+        """Radio frames in ``seconds`` (at least one)."""
+        return max(1, math.ceil(seconds * self.params.radio.rate_hz - 1e-9))

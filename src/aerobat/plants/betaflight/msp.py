@@ -1,0 +1,301 @@
+"""MSP (MultiWii Serial Protocol) v1/v2 client for Betaflight.
+
+Frames (all little-endian)::
+
+    v1 request   $ M <  size:u8 cmd:u8 payload checksum:u8   checksum = XOR(size, cmd, payload)
+    v1 response  $ M >  (or $ M ! for an error), same layout
+    v2 request   $ X <  flag:u8 cmd:u16 size:u16 payload crc:u8   crc = CRC-8/DVB-S2(flag..payload)
+    v2 response  $ X >  (or $ X !), same layout
+
+Decoders are given for the requests the plant needs; the payload layouts are
+those of Betaflight 4.6 ``src/main/msp/msp.c`` (checked there).
+
+MSP traffic reaches the firmware at wall-clock moments, so using it on a
+lockstep SITL makes a run non-deterministic; use it for diagnosis only.
+"""
+
+from __future__ import annotations
+
+import enum
+import struct
+import time
+from dataclasses import dataclass
+
+from .errors import LinkTimeout, MspError
+from .transport import Transport
+
+__all__ = [
+    "ARMING_DISABLE_FLAG_NAMES",
+    "MSP_API_VERSION",
+    "MSP_ATTITUDE",
+    "MSP_MOTOR",
+    "MSP_RC",
+    "MSP_STATUS",
+    "MSP_STATUS_EX",
+    "ApiVersion",
+    "Attitude",
+    "MspClient",
+    "MspVersion",
+    "StatusEx",
+    "crc8_dvb_s2",
+    "decode_arming_disable_flags",
+    "encode_request",
+]
+
+MSP_API_VERSION = 1
+MSP_STATUS = 101
+MSP_MOTOR = 104
+MSP_RC = 105
+MSP_ATTITUDE = 108
+MSP_STATUS_EX = 150
+
+ARMING_DISABLE_FLAG_NAMES: tuple[str, ...] = (
+    "NOGYRO", "FAILSAFE", "RXLOSS", "NOT_DISARMED", "BOXFAILSAFE", "RUNAWAY", "CRASH", "THROTTLE",
+    "ANGLE", "BOOTGRACE", "NOPREARM", "LOAD", "CALIB", "CLI", "CMS", "BST", "MSP", "PARALYZE", "GPS",
+    "RESCUE_SW", "DSHOT_TELEM", "REBOOT_REQD", "DSHOT_BBANG", "NO_ACC_CAL", "MOTOR_PROTO",
+    "FLIP_SWITCH", "ALT_HOLD_SW", "POS_HOLD_SW", "ARM_SWITCH",
+)  # fmt: skip
+"""Bit i of the arming-disable mask is name i (``armingDisableFlagNames`` in fc/runtime_config.c)."""
+
+
+class MspVersion(enum.Enum):
+    """MSP protocol version used for requests."""
+
+    V1 = 1
+    V2 = 2
+
+
+def crc8_dvb_s2(data: bytes, crc: int = 0) -> int:
+    """CRC-8/DVB-S2 (polynomial 0xD5), as MSP v2 uses it."""
+    for byte in data:
+        crc ^= byte
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0xD5) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+    return crc
+
+
+def encode_request(command: int, payload: bytes = b"", version: MspVersion = MspVersion.V2) -> bytes:
+    """Encode one MSP request frame.
+
+    Parameters
+    ----------
+    command : int
+        MSP command id (v1: 0..254, v2: 0..65535).
+    payload : bytes
+        Request payload (v1: at most 254 bytes).
+    version : MspVersion
+        Frame format.
+    """
+    if version is MspVersion.V1:
+        if not 0 <= command < 255 or len(payload) > 254:
+            raise ValueError("MSP v1 carries command ids < 255 and payloads <= 254 bytes")
+        checksum = len(payload) ^ command
+        for byte in payload:
+            checksum ^= byte
+        return b"$M<" + bytes((len(payload), command)) + payload + bytes((checksum,))
+    body = struct.pack("<BHH", 0, command, len(payload)) + payload
+    return b"$X<" + body + bytes((crc8_dvb_s2(body),))
+
+
+@dataclass(frozen=True)
+class _Frame:
+    command: int
+    payload: bytes
+    is_error: bool
+
+
+def _parse_frame(buffer: bytearray) -> tuple[_Frame | None, int]:
+    """Find the first complete response frame in ``buffer``.
+
+    Returns the frame (or None if none is complete yet) and how many bytes of
+    ``buffer`` can be dropped. Bytes before a frame start and frames with a
+    bad checksum are skipped.
+    """
+    start = 0
+    while True:
+        start = buffer.find(b"$", start)
+        if start < 0:
+            return None, len(buffer)
+        if len(buffer) - start < 3:
+            return None, start
+        kind, direction = buffer[start + 1], buffer[start + 2]
+        if kind not in b"MX" or direction not in b">!":
+            start += 1
+            continue
+        if kind == ord("M"):
+            if len(buffer) - start < 5:
+                return None, start
+            size, command = buffer[start + 3], buffer[start + 4]
+            end = start + 5 + size + 1
+            if len(buffer) < end:
+                return None, start
+            payload = bytes(buffer[start + 5 : end - 1])
+            checksum = size ^ command
+            for byte in payload:
+                checksum ^= byte
+            if checksum != buffer[end - 1]:
+                start += 1
+                continue
+        else:
+            if len(buffer) - start < 8:
+                return None, start
+            _flag, command, size = struct.unpack_from("<BHH", buffer, start + 3)
+            end = start + 8 + size + 1
+            if len(buffer) < end:
+                return None, start
+            if crc8_dvb_s2(bytes(buffer[start + 3 : end - 1])) != buffer[end - 1]:
+                start += 1
+                continue
+            payload = bytes(buffer[start + 8 : end - 1])
+        return _Frame(command, payload, direction == ord("!")), end
+
+
+@dataclass(frozen=True)
+class ApiVersion:
+    """MSP_API_VERSION: MSP protocol version and API version major.minor."""
+
+    protocol: int
+    major: int
+    minor: int
+
+
+@dataclass(frozen=True)
+class Attitude:
+    """MSP_ATTITUDE: the firmware's attitude estimate, in degrees (roll right +, pitch as Betaflight reports it)."""
+
+    roll_deg: float
+    pitch_deg: float
+    yaw_deg: float
+
+
+def decode_arming_disable_flags(mask: int) -> tuple[str, ...]:
+    """Names of the set bits of an arming-disable mask, lowest bit first."""
+    return tuple(
+        ARMING_DISABLE_FLAG_NAMES[bit] if bit < len(ARMING_DISABLE_FLAG_NAMES) else f"BIT{bit}"
+        for bit in range(32)
+        if mask >> bit & 1
+    )
+
+
+@dataclass(frozen=True)
+class StatusEx:
+    """MSP_STATUS_EX, the fields the plant uses.
+
+    Attributes
+    ----------
+    pid_cycle_time_us : int
+        Latest PID task interval (simulated microseconds on the lockstep SITL).
+    armed : bool
+        Bit 0 of the flight-mode flags (BOXARM is always the first active box).
+    flight_mode_flags : int
+        First 32 flight-mode bits, indexed by the active boxes (MSP_BOXIDS order).
+    cpu_load_percent : int
+        Average system load (0 on the SITL).
+    arming_disable_mask : int
+        Raw arming-disable bits.
+    arming_disable_flags : tuple of str
+        Their names (e.g. ``("RXLOSS", "CALIB")``); empty when arming is allowed.
+    """
+
+    pid_cycle_time_us: int
+    armed: bool
+    flight_mode_flags: int
+    cpu_load_percent: int
+    arming_disable_mask: int
+    arming_disable_flags: tuple[str, ...]
+
+    @classmethod
+    def decode(cls, payload: bytes) -> StatusEx:
+        """Decode the MSP_STATUS_EX payload (layout from msp.c, ``case MSP_STATUS_EX``)."""
+        cycle_time_us, _i2c_errors, _sensors, mode_flags, _profile, load = struct.unpack_from("<HHHIBH", payload, 0)
+        offset = 13 + 2  # pid profile count, rate profile index
+        extra_mode_bytes = payload[offset]
+        offset += 1 + extra_mode_bytes
+        _flag_count = payload[offset]
+        (mask,) = struct.unpack_from("<I", payload, offset + 1)
+        return cls(
+            pid_cycle_time_us=cycle_time_us,
+            armed=bool(mode_flags & 1),
+            flight_mode_flags=mode_flags,
+            cpu_load_percent=load,
+            arming_disable_mask=mask,
+            arming_disable_flags=decode_arming_disable_flags(mask),
+        )
+
+
+class MspClient:
+    """Request/response MSP over a :class:`~.transport.Transport`.
+
+    Parameters
+    ----------
+    transport : Transport
+        Byte link to the flight controller.
+    version : MspVersion
+        Frame format for requests (Betaflight answers in the same format).
+    timeout_s : float
+        Default time to wait for a complete answer.
+    """
+
+    def __init__(self, transport: Transport, version: MspVersion = MspVersion.V2, timeout_s: float = 1.0) -> None:
+        self._transport = transport
+        self._version = version
+        self._timeout_s = timeout_s
+        self._buffer = bytearray()
+
+    def request(self, command: int, payload: bytes = b"", timeout_s: float | None = None) -> bytes:
+        """Send one request and return the payload of its answer.
+
+        Answers to other commands (late answers to earlier requests) are
+        discarded.
+
+        Raises
+        ------
+        LinkTimeout
+            No answer within the timeout.
+        MspError
+            The firmware answered with an error frame (unknown command, bad payload).
+        """
+        timeout_s = self._timeout_s if timeout_s is None else timeout_s
+        self._transport.write(encode_request(command, payload, self._version))
+        deadline = time.monotonic() + timeout_s
+        while True:
+            frame, consumed = _parse_frame(self._buffer)
+            del self._buffer[:consumed]
+            if frame is not None:
+                if frame.command != command:
+                    continue
+                if frame.is_error:
+                    raise MspError(f"the flight controller rejected MSP command {command}")
+                return frame.payload
+            remaining_s = deadline - time.monotonic()
+            if remaining_s <= 0:
+                raise LinkTimeout(f"no answer to MSP command {command} within {timeout_s} s")
+            self._buffer += self._transport.read(4096, remaining_s)
+
+    def api_version(self) -> ApiVersion:
+        """MSP_API_VERSION (Betaflight 4.6: protocol 0, API 1.47)."""
+        protocol, major, minor = struct.unpack_from("<BBB", self.request(MSP_API_VERSION))
+        return ApiVersion(protocol, major, minor)
+
+    def status_ex(self) -> StatusEx:
+        """MSP_STATUS_EX: arming state and arming-disable flags."""
+        return StatusEx.decode(self.request(MSP_STATUS_EX))
+
+    def rc_us(self) -> tuple[int, ...]:
+        """MSP_RC: the channels as the firmware sees them, in microseconds.
+
+        Order is Betaflight's internal one after ``map``: roll, pitch, YAW,
+        THROTTLE, AUX1.. (not the AETR order of the receiver).
+        """
+        payload = self.request(MSP_RC)
+        return struct.unpack(f"<{len(payload) // 2}H", payload)
+
+    def motor_outputs(self) -> tuple[int, ...]:
+        """MSP_MOTOR: motor outputs in Betaflight order M1..M8, in the protocol's units (PWM: 1000..2000)."""
+        payload = self.request(MSP_MOTOR)
+        return struct.unpack(f"<{len(payload) // 2}H", payload)
+
+    def attitude(self) -> Attitude:
+        """MSP_ATTITUDE: roll and pitch in 0.1 degree, yaw in degrees."""
+        roll_decideg, pitch_decideg, yaw_deg = struct.unpack_from("<hhh", self.request(MSP_ATTITUDE))
+        return Attitude(roll_decideg / 10.0, pitch_decideg / 10.0, float(yaw_deg))

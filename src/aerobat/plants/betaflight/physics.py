@@ -1,0 +1,331 @@
+"""The physical world around the firmware: one compiled, allocation-free step per state packet.
+
+The vehicle is aerobat's rigid body (:func:`aerobat.quadrotor.dynamics.plant_derivative`, the
+state layout of :mod:`aerobat.quadrotor.dynamics`: world frame z up, body FLU) with an X-frame
+rotor layout in Betaflight's motor order, each rotor's steady-state thrust from the airframe's
+thrust curve at the firmware's motor command, first-order thrust dynamics with rising and falling
+time constants, drag, wind, and a floor. :func:`step` advances one gyro period and writes the
+next state packet (what the firmware's sensors read at the new instant).
+
+Frames. aerobat's world is (x, y, z-up); it is read as north-west-up, so NED = (x, −y, −z) and
+body FRD = (x_b, −y_b, −z_b). The same 180° turn about x maps both, hence the FRD→NED quaternion
+is (w, x, −y, −z) of aerobat's FLU→world quaternion, gyro FRD = (p, −q, −r) and the
+accelerometer's specific force FRD = (f_x, −f_y, −f_z). A positive roll (right side down) is
++p in both frames; a nose-down pitch is +q in FLU and −q in FRD; a nose-right yaw is −r in FLU.
+
+Motor slots (Betaflight packet order, QUADX, props in): 0 front-right CCW, 1 rear-left CCW,
+2 front-left CW, 3 rear-right CW. A counter-clockwise propeller (seen from above) pushes the
+body clockwise: its yaw moment about z-up is −κ f.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from aerobat.plants.betaflight.packets import MOTOR_POSITIONS_FRD, MOTOR_SPIN_CCW
+from aerobat.plants.betaflight.params import BetaflightParams
+from aerobat.quadrotor.dynamics import (
+    N_STATE,
+    P_FMAX,
+    P_FMIN,
+    P_IZZ,
+    P_KYAW,
+    P_MX,
+    P_MY,
+    P_RATE_DN,
+    P_RATE_UP,
+    normalize_quaternion,
+    plant_derivative,
+    plant_vector,
+)
+from aerobat.quadrotor.vehicle import VehicleParams
+
+__all__ = [
+    "A_ACCEL_NOISE",
+    "A_ATT_ERR",
+    "A_BIAS",
+    "A_CURVE_K",
+    "A_CURVE_R",
+    "A_FMAX",
+    "A_GRAVITY",
+    "A_GROUND",
+    "A_GYRO_NOISE",
+    "A_SCALE",
+    "A_STEP",
+    "C_CONTACT",
+    "C_DELAY",
+    "C_TICK",
+    "N_AUX",
+    "N_COUNTERS",
+    "PACKET_DOUBLES",
+    "airframe_plant",
+    "aux_vector",
+    "ground_state",
+    "prime",
+    "step",
+    "thrust_curve",
+    "write_packet",
+]
+
+PACKET_DOUBLES = 18
+"""The state packet: t, gyro FRD (3), specific force FRD (3), quaternion FRD→NED (4), velocity (3),
+position (3), pressure."""
+
+# aux vector: the step's constants
+A_STEP = 0  # step length [s]
+A_GRAVITY = 1
+A_GROUND = 2  # floor height, world z [m]
+A_FMAX = 3  # thrust curve: f_max [N], min-speed ratio r, shape k
+A_CURVE_R = 4
+A_CURVE_K = 5
+A_SCALE = 6  # 3 gyro scale errors (FLU)
+A_BIAS = 9  # 3 gyro biases [rad/s] (FLU)
+A_ATT_ERR = 12  # roll, pitch error of the attitude sent to the firmware [rad]
+A_GYRO_NOISE = 14
+A_ACCEL_NOISE = 15
+A_ROTOR_J = 16  # rotor (prop + bell) inertia about its axis [kg m²]
+A_THRUST_COEF = 17  # f = k Ω² [N/(rad/s)²]
+A_SPIN = 18  # 4 spin signs (+1: counter-clockwise seen from above)
+N_AUX = 22
+
+# counters: integers the step keeps
+C_TICK = 0  # steps taken
+C_DELAY = 1  # motor-output delay in steps
+C_CONTACT = 2  # 1 while resting on the floor
+N_COUNTERS = 3
+
+_SEA_LEVEL_PA = 101325.0
+
+
+def airframe_plant(params: BetaflightParams, *, thrust_gains: tuple[float, float, float, float] | None = None,
+                   wind_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                   gust_amplitude_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                   gust_frequency_hz: float = 0.0, gust_phase_rad: float = 0.0) -> np.ndarray:
+    """The plant vector of :mod:`aerobat.quadrotor.dynamics` for the X-frame airframe in packet order."""
+    a = params.airframe
+    aero = params.aerodynamics
+    carrier = VehicleParams(mass_kg=a.mass_kg, arm_length_m=math.hypot(a.motor_x_m, a.motor_y_m),
+                            inertia_xx_kg_m2=a.inertia_kg_m2[0], inertia_yy_kg_m2=a.inertia_kg_m2[1],
+                            inertia_zz_kg_m2=a.inertia_kg_m2[2], motor_rate_up_per_s=1.0 / a.motor_tau_up_s,
+                            motor_rate_down_per_s=1.0 / a.motor_tau_down_s, rotor_thrust_min_n=0.0,
+                            rotor_thrust_max_n=a.thrust_max_n, collective_reduced_min_m_s2=1.0,
+                            collective_reduced_max_m_s2=20.0, drag_constant_m=a.kappa_m)
+    extra: dict = {}
+    if aero.enabled:
+        extra = {"body_drag_n_s2_m2": aero.body_drag_n_s2_m2, "rotor_drag_s_m": aero.rotor_drag_s_m,
+                 "rotational_damping_n_m_s": aero.rotational_damping_n_m_s}
+    plant = plant_vector(carrier, thrust_gains=thrust_gains or a.thrust_gains, wind_m_s=wind_m_s,
+                         gust_amplitude_m_s=gust_amplitude_m_s, gust_frequency_hz=gust_frequency_hz,
+                         gust_phase_rad=gust_phase_rad, **extra)
+    for slot, ((fwd, right), ccw) in enumerate(zip(MOTOR_POSITIONS_FRD, MOTOR_SPIN_CCW, strict=True)):
+        plant[P_MX + slot] = fwd * a.motor_x_m - a.com_offset_m[0]
+        plant[P_MY + slot] = -right * a.motor_y_m - a.com_offset_m[1]  # FRD right = FLU −y
+        plant[P_KYAW + slot] = -a.kappa_m if ccw else a.kappa_m
+    plant[P_FMIN] = 0.0
+    plant[P_FMAX] = a.thrust_max_n
+    plant[P_RATE_UP] = 1.0 / a.motor_tau_up_s
+    plant[P_RATE_DN] = 1.0 / a.motor_tau_down_s
+    return plant
+
+
+def aux_vector(params: BetaflightParams, *, step_s: float, ground_z_m: float, gravity_m_s2: float) -> np.ndarray:
+    """The step's constants (indices ``A_*``)."""
+    a, s = params.airframe, params.sensors
+    aux = np.zeros(N_AUX)
+    aux[A_STEP] = step_s
+    aux[A_GRAVITY] = gravity_m_s2
+    aux[A_GROUND] = ground_z_m
+    aux[A_FMAX] = a.thrust_max_n
+    aux[A_CURVE_R] = a.curve_min_speed_ratio
+    aux[A_CURVE_K] = a.curve_shape
+    aux[A_SCALE : A_SCALE + 3] = s.gyro_scale_error
+    aux[A_BIAS : A_BIAS + 3] = s.gyro_bias_rad_s
+    aux[A_ATT_ERR : A_ATT_ERR + 2] = s.attitude_error_rad
+    aux[A_GYRO_NOISE] = s.gyro_noise_rad_s
+    aux[A_ACCEL_NOISE] = s.accel_noise_m_s2
+    aux[A_ROTOR_J] = a.rotor_inertia_kg_m2
+    aux[A_THRUST_COEF] = a.thrust_coefficient_n_s2
+    aux[A_SPIN : A_SPIN + 4] = [1.0 if ccw else -1.0 for ccw in MOTOR_SPIN_CCW]
+    return aux
+
+
+def ground_state(position_m: tuple[float, float, float]) -> np.ndarray:
+    """The vehicle standing level on the floor at ``position_m``, motors stopped."""
+    x = np.zeros(N_STATE)
+    x[0:3] = position_m
+    x[6] = 1.0
+    return x
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def thrust_curve(u, aux):  # pragma: no cover - compiled
+    """Steady-state rotor thrust [N] at motor command ``u`` (0 or less: stopped)."""
+    if u <= 0.0:
+        return 0.0
+    if u > 1.0:
+        u = 1.0
+    k = aux[A_CURVE_K]
+    r = aux[A_CURVE_R]
+    s = (1.0 - r) * math.sqrt(k * u * u + (1.0 - k) * u) + r
+    return aux[A_FMAX] * s * s
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def derivative(t, x, ft, plant, aux, dx):  # pragma: no cover - compiled
+    """:func:`~aerobat.quadrotor.dynamics.plant_derivative` plus the rotors' reaction torque on yaw.
+
+    Spinning a rotor up takes a torque J_r Ω̇ that the motor's stator puts on the body, the other
+    way round (Ω = √(f/k), so Ω̇ = ḟ / (2 √(k f))). On a racer it acts faster than the drag moment
+    κ f, which only follows once the rotor has sped up.
+    """
+    plant_derivative(t, x, ft, plant, dx)
+    jr = aux[A_ROTOR_J]
+    if jr > 0.0:
+        k = aux[A_THRUST_COEF]
+        torque = 0.0
+        for j in range(4):
+            f = max(x[13 + j], 1e-3)
+            torque -= aux[A_SPIN + j] * jr * dx[13 + j] / (2.0 * math.sqrt(k * f))
+        dx[12] += torque / plant[P_IZZ]
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def write_packet(x, t, deriv, aux, contact, noise, packet):  # pragma: no cover - compiled
+    """The state packet the firmware reads at time ``t`` for true state ``x`` (``deriv`` = dx/dt there)."""
+    g = aux[A_GRAVITY]
+    qw = x[6]
+    qx = x[7]
+    qy = x[8]
+    qz = x[9]
+    # specific force in the world: a − g_vec (on the floor the normal force cancels gravity)
+    if contact != 0:
+        fx = 0.0
+        fy = 0.0
+        fz = g
+    else:
+        fx = deriv[3]
+        fy = deriv[4]
+        fz = deriv[5] + g
+    # to the body: Rᵀ f
+    r11 = 1.0 - 2.0 * (qy * qy + qz * qz)
+    r12 = 2.0 * (qx * qy - qw * qz)
+    r13 = 2.0 * (qx * qz + qw * qy)
+    r21 = 2.0 * (qx * qy + qw * qz)
+    r22 = 1.0 - 2.0 * (qx * qx + qz * qz)
+    r23 = 2.0 * (qy * qz - qw * qx)
+    r31 = 2.0 * (qx * qz - qw * qy)
+    r32 = 2.0 * (qy * qz + qw * qx)
+    r33 = 1.0 - 2.0 * (qx * qx + qy * qy)
+    bx = r11 * fx + r21 * fy + r31 * fz
+    by = r12 * fx + r22 * fy + r32 * fz
+    bz = r13 * fx + r23 * fy + r33 * fz
+    an = aux[A_ACCEL_NOISE]
+    gn = aux[A_GYRO_NOISE]
+    p = (1.0 + aux[A_SCALE]) * x[10] + aux[A_BIAS] + gn * noise[0]
+    q = (1.0 + aux[A_SCALE + 1]) * x[11] + aux[A_BIAS + 1] + gn * noise[1]
+    r = (1.0 + aux[A_SCALE + 2]) * x[12] + aux[A_BIAS + 2] + gn * noise[2]
+    # attitude the firmware flies on: q ⊗ δ, δ = small roll/pitch error in the body
+    dx = 0.5 * aux[A_ATT_ERR]
+    dy = 0.5 * aux[A_ATT_ERR + 1]
+    dw = math.sqrt(max(0.0, 1.0 - dx * dx - dy * dy))
+    mw = qw * dw - qx * dx - qy * dy
+    mx = qw * dx + qx * dw - qz * dy
+    my = qw * dy + qy * dw + qz * dx
+    mz = qz * dw + qx * dy - qy * dx
+    packet[0] = t
+    packet[1] = p  # gyro FRD
+    packet[2] = -q
+    packet[3] = -r
+    packet[4] = bx + an * noise[3]  # specific force FRD
+    packet[5] = -(by + an * noise[4])
+    packet[6] = -(bz + an * noise[5])
+    packet[7] = mw  # FRD→NED quaternion
+    packet[8] = mx
+    packet[9] = -my
+    packet[10] = -mz
+    for i in range(11, 17):
+        packet[i] = 0.0  # GPS velocity and position: no GPS in this build
+    altitude = x[2]
+    packet[17] = _SEA_LEVEL_PA * (1.0 - 2.25577e-5 * altitude) ** 5.25588
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def step(x, motors, plant, aux, pending, counters, noise, packet, scratch):  # pragma: no cover - compiled
+    """Advance the world one gyro period with the firmware's latest ``motors``; write the next packet.
+
+    ``motors`` (4, float32): the motor packet just received (commands in [0, 1], 0 = stopped).
+    ``pending`` (D+1, 4): ring of motor commands for the output delay of D steps (``counters``).
+    ``noise`` (6,): standard normal draws for the next packet's gyro and accelerometer noise.
+    ``scratch`` (6, N_STATE): work space. Returns 1 if the state went non-finite, else 0.
+    """
+    h = aux[A_STEP]
+    tick = counters[C_TICK]
+    delay = counters[C_DELAY]
+    slots = pending.shape[0]
+    for j in range(4):
+        pending[tick % slots, j] = motors[j]
+    applied = (tick - delay) % slots if tick >= delay else -1
+    ft = scratch[5]
+    for j in range(4):
+        ft[j] = thrust_curve(pending[applied, j], aux) if applied >= 0 else 0.0
+    t = tick * h
+    k1 = scratch[0]
+    k2 = scratch[1]
+    k3 = scratch[2]
+    k4 = scratch[3]
+    tmp = scratch[4]
+    n = x.shape[0]
+    resting = counters[C_CONTACT] != 0
+    derivative(t, x, ft, plant, aux, k1)
+    if resting and k1[5] <= 0.0:
+        # standing on the floor: only the rotors change (thrust states, first order)
+        for j in range(4):
+            x[13 + j] += h * k1[13 + j]
+    else:
+        counters[C_CONTACT] = 0
+        for j in range(n):
+            tmp[j] = x[j] + 0.5 * h * k1[j]
+        derivative(t + 0.5 * h, tmp, ft, plant, aux, k2)
+        for j in range(n):
+            tmp[j] = x[j] + 0.5 * h * k2[j]
+        derivative(t + 0.5 * h, tmp, ft, plant, aux, k3)
+        for j in range(n):
+            tmp[j] = x[j] + h * k3[j]
+        derivative(t + h, tmp, ft, plant, aux, k4)
+        for j in range(n):
+            x[j] += h / 6.0 * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
+        normalize_quaternion(x)
+        if x[2] < aux[A_GROUND]:
+            # the floor: stop, stand level on the legs, keep the heading
+            x[2] = aux[A_GROUND]
+            for j in range(3, 6):
+                x[j] = 0.0
+            for j in range(10, 13):
+                x[j] = 0.0
+            yaw = math.atan2(2.0 * (x[6] * x[9] + x[7] * x[8]), 1.0 - 2.0 * (x[8] * x[8] + x[9] * x[9]))
+            x[6] = math.cos(0.5 * yaw)
+            x[7] = 0.0
+            x[8] = 0.0
+            x[9] = math.sin(0.5 * yaw)
+            counters[C_CONTACT] = 1
+    counters[C_TICK] = tick + 1
+    for j in range(n):
+        if not math.isfinite(x[j]):
+            return 1
+    derivative(t + h, x, ft, plant, aux, k1)
+    write_packet(x, t + h, k1, aux, counters[C_CONTACT], noise, packet)
+    return 0
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def prime(x, plant, aux, counters, noise, packet, scratch):  # pragma: no cover - compiled
+    """Write the packet of the current instant (before the first :func:`step`), motors stopped."""
+    ft = scratch[5]
+    for j in range(4):
+        ft[j] = 0.0
+    t = counters[C_TICK] * aux[A_STEP]
+    plant_derivative(t, x, ft, plant, scratch[0])
+    write_packet(x, t, scratch[0], aux, counters[C_CONTACT], noise, packet)

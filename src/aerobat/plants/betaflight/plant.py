@@ -1,0 +1,397 @@
+"""``--plant betaflight``: the arena's physical world with Betaflight 4.6 as the onboard loop.
+
+One :meth:`BetaflightPlant.fly` is one iteration of the paper's Fig. 8, flown the way an FPV
+pilot flies (``docs/plants.md``, Betaflight):
+
+1. **Power on** on the floor below the start: a fresh SITL process (lockstep, its own ports)
+   boots from the configured eeprom; ARM off, ANGLE on, throttle low while Betaflight
+   calibrates its gyro.
+2. **Arm** through AUX1; the firmware answers with idle motor commands.
+3. **Take off, settle, hover** in ANGLE mode: the offboard position loop on motion capture sends
+   angle sticks and throttle over the radio (250 Hz, lossy) until the vehicle has stayed at the
+   start for the hold time and then hovered for ``hover_s``.
+4. **Trigger**: AUX2 switches to ACRO (air mode is on whenever armed) and the program streams
+   as stick positions (body rates through the linear rate curve, collective through the inverted
+   throttle→thrust model), one frame per radio period.
+5. **Measure**: after the program (and 15 ms of its hover command) ANGLE mode and the position
+   loop take over and fly back; the final state at the maneuver's end is estimated from
+   motion-capture samples alone (:mod:`aerobat.plants.mocap`).
+6. **Land and disarm** on the floor; the firmware process ends with the trial.
+
+Every trial starts a fresh firmware: the plant's state between trials is its random generator,
+the trial count and the battery (drift), so a saved state repeats the next trial bit for bit.
+A firmware that dies or stops answering loses the trial (``TrialStatus.LOST``, with the reason);
+the next trial starts a new one, and learning flies the lost parameters again.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aerobat.core.plant import Trial, TrialStatus
+from aerobat.plants.betaflight.errors import FirmwareNotResponding
+from aerobat.plants.betaflight.flight import Flight, NonFinite
+from aerobat.plants.betaflight.params import BetaflightParams
+from aerobat.plants.betaflight.physics import airframe_plant
+from aerobat.plants.betaflight.pilot import L_CLIMB, StickMap, angle_sticks, program_sticks
+from aerobat.plants.betaflight.rc import RC_MIN_US, stick_to_us
+from aerobat.plants.betaflight.settings import BetaflightSettings, load_settings
+from aerobat.plants.mocap import estimate_final_state, measured_states
+from aerobat.quadrotor.dynamics import N_STATE
+from aerobat.quadrotor.program import CompiledProgram, Program
+from aerobat.quadrotor.vehicle import VehicleConfig
+
+__all__ = ["BetaflightPlant"]
+
+_MARGIN_S = 0.015  # program's hover command after its end (the estimate looks 10 ms past it)
+_LANDING_SPEED_M_S = 1.0
+
+
+class _Stop(Exception):
+    """A trial ends early with ``status`` (crash, abort); the message says why."""
+
+    def __init__(self, status: TrialStatus, message: str) -> None:
+        super().__init__(message)
+        self.status = status
+
+
+def _tilt(quat: np.ndarray) -> float:
+    x, y = quat[1], quat[2]
+    return math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y))))
+
+
+class BetaflightPlant:
+    """The 5-inch racer in a motion-capture arena, flown by Betaflight 4.6 (SITL, lockstep).
+
+    Parameters
+    ----------
+    config : the *nominal* vehicle (the design model), used for g; the true vehicle is
+        ``params.airframe``, whose published mass and thrust curve the pilot's collective →
+        throttle model inverts (``params.pilot.vehicle_mass_kg``).
+    params : the plant's settings (:class:`~.params.BetaflightParams`).
+    seed : seeds the plant's generator (noise, wind, radio losses, motor spread per trial).
+    binary, eeprom : the SITL binary and configured eeprom (default: built and configured on
+        first use, cached: :func:`.build.ensure_sitl`, :func:`.configure.ensure_eeprom`).
+    settings : the firmware's settings (default: the packaged ``settings.toml``).
+    """
+
+    name = "betaflight"
+
+    def __init__(self, config: VehicleConfig, params: BetaflightParams | None = None, *, seed: int = 0,
+                 binary: Path | None = None, eeprom: Path | None = None,
+                 settings: BetaflightSettings | None = None) -> None:
+        from aerobat.plants.betaflight.build import ensure_sitl
+        from aerobat.plants.betaflight.configure import ensure_eeprom
+
+        self.config = config
+        self.params = params or BetaflightParams()
+        self.seed = seed
+        self.rng = np.random.default_rng(seed)
+        self.trials_flown = 0
+        self.capacity = 1.0
+        self.settings = settings or load_settings()
+        self.binary = Path(binary) if binary is not None else ensure_sitl()
+        self.eeprom = Path(eeprom) if eeprom is not None else ensure_eeprom(self.binary, self.settings.path)
+        self.start_m = np.zeros(3)
+        self.gravity = config.vehicle.gravity_m_s2
+        pilot = self.params.pilot
+        # the pilot knows the vehicle it flies as published: its mass and thrust curve
+        self.sticks = StickMap.from_settings(self.settings, self.params.airframe, pilot.vehicle_mass_kg)
+        self.limits = self.sticks.limits(max_tilt_rad=math.radians(pilot.max_tilt_deg),
+                                         max_climb_m_s=pilot.max_climb_m_s, gravity_m_s2=self.gravity)
+        self.gains = np.array([pilot.position_gain_per_s2, pilot.velocity_gain_per_s, pilot.integral_gain_per_s3,
+                               pilot.yaw_gain_per_s])
+        self.last_truth: tuple[np.ndarray, np.ndarray] = (np.empty(0), np.empty((0, N_STATE)))
+        self.flight: Flight | None = None  # the flight in progress (for fault injection and diagnosis)
+        self._integral = np.zeros(3)
+
+    # ---------------------------------------------------------------- state
+    def get_state(self) -> dict[str, Any]:
+        """What changes from trial to trial: ``format``, ``rng``, ``trials_flown``, ``capacity`` (JSON-ready)."""
+        rng = self.rng.bit_generator.state
+        return {
+            "format": 1,
+            "rng": {key: (dict(value) if isinstance(value, dict) else value) for key, value in rng.items()},
+            "trials_flown": int(self.trials_flown),
+            "capacity": float(self.capacity),
+        }
+
+    def set_state(self, state: Mapping[str, Any]) -> None:
+        """Restore :meth:`get_state` (of a plant built with the same arguments).
+
+        Raises
+        ------
+        ValueError
+            A field is missing or of the wrong type, or the generator kind differs.
+        """
+        if not isinstance(state, Mapping):
+            raise ValueError(f"betaflight state: expected a table, got {type(state).__name__}")
+        missing = [k for k in ("format", "rng", "trials_flown", "capacity") if k not in state]
+        if missing:
+            raise ValueError(f"betaflight state: missing field(s) {', '.join(missing)}")
+        if state["format"] != 1:
+            raise ValueError(f"betaflight state.format = {state['format']!r}: this aerobat reads format 1")
+        kind = self.rng.bit_generator.state["bit_generator"]
+        rng = state["rng"]
+        if not isinstance(rng, Mapping) or rng.get("bit_generator") != kind:
+            raise ValueError(f"betaflight state.rng: expected a {kind} generator state")
+        count = state["trials_flown"]
+        if isinstance(count, bool) or not isinstance(count, int) or count < 0:
+            raise ValueError(f"betaflight state.trials_flown = {count!r}: expected an integer >= 0")
+        capacity = state["capacity"]
+        if isinstance(capacity, bool) or not isinstance(capacity, int | float) or not 0.0 < capacity <= 1.0:
+            raise ValueError(f"betaflight state.capacity = {capacity!r}: expected a number in (0, 1]")
+        try:
+            self.rng.bit_generator.state = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in rng.items()}
+        except (TypeError, ValueError, KeyError) as exc:
+            raise ValueError(f"betaflight state.rng: {exc}") from None
+        self.trials_flown = count
+        self.capacity = float(capacity)
+
+    def reset_drift(self) -> None:
+        """A fresh battery: thrust capacity back to 100 %."""
+        self.capacity = 1.0
+
+    # ---------------------------------------------------------------- trial
+    def _trial_plant(self, rng: np.random.Generator) -> np.ndarray:
+        """The true vehicle for one trial: motor spread, battery, per-trial jitter, wind and gust."""
+        p = self.params
+        gains = np.array(p.airframe.thrust_gains, dtype=float) * self.capacity
+        extra: dict[str, Any] = {}
+        d = p.disturbances
+        if d.enabled:
+            gains = gains * (1.0 + d.thrust_gain_jitter * rng.standard_normal()
+                             + d.motor_gain_jitter * rng.standard_normal(4))
+            extra = {"wind_m_s": tuple(float(v) for v in d.wind_std_m_s * rng.standard_normal(3)),
+                     "gust_amplitude_m_s": tuple(float(v) for v in d.gust_amplitude_std_m_s * rng.standard_normal(3)),
+                     "gust_frequency_hz": d.gust_frequency_hz,
+                     "gust_phase_rad": float(rng.uniform(0.0, 2.0 * math.pi))}
+        return airframe_plant(p, thrust_gains=(float(gains[0]), float(gains[1]), float(gains[2]), float(gains[3])),
+                              **extra)
+
+    def fly(self, program: Program | CompiledProgram) -> Trial:
+        """One supervised trial (Fig. 8) through the firmware; a failure is a trial status, never an exception."""
+        wall = time.perf_counter()
+        compiled = program.compile() if isinstance(program, Program) else program
+        rng = np.random.default_rng(self.rng.integers(2**63))  # one child stream per trial, whatever happens
+        plant = self._trial_plant(rng)
+        self.trials_flown += 1
+        info: dict[str, Any] = {"firmware": f"Betaflight 4.6.0 SITL lockstep, settings revision "
+                                            f"{self.settings.revision} ({self.settings.sha256[:12]})"}
+        flight = None
+        try:
+            flight = self.open_flight(rng, plant)
+            self.flight = flight
+            return self._fly(flight, compiled, info, wall)
+        except FirmwareNotResponding as error:
+            info.update(self._timing(flight, wall))
+            reason = str(error).splitlines()[0]
+            return self._failed(TrialStatus.LOST, f"firmware lost: {reason}; the next trial starts a new one", info)
+        except NonFinite as error:
+            info.update(self._timing(flight, wall))
+            return self._failed(TrialStatus.ABORTED, str(error), info)
+        finally:
+            self.flight = None
+            if flight is not None:
+                flight.close()
+            if self.params.drift.enabled:
+                self.capacity *= 1.0 - self.params.drift.thrust_loss_per_trial
+
+    def open_flight(self, rng: np.random.Generator | None = None, plant: np.ndarray | None = None) -> Flight:
+        """A fresh firmware and the vehicle on the floor below the start, powered on (not a trial).
+
+        ``rng`` defaults to a child of the plant's generator, ``plant`` to this trial's true vehicle.
+        The caller closes it (a context manager). :meth:`fly` runs the phases below on one.
+        """
+        rng = rng if rng is not None else np.random.default_rng(self.rng.integers(2**63))
+        plant = plant if plant is not None else self._trial_plant(rng)
+        self._integral = np.zeros(3)
+        return Flight(self.binary, self.eeprom, self.params, plant, self.start_m, rng, self.gravity)
+
+    def _timing(self, flight: Flight | None, wall: float) -> dict[str, Any]:
+        elapsed = time.perf_counter() - wall
+        simulated = flight.time_s if flight is not None else 0.0
+        return {"wall_s": elapsed, "simulated_s": simulated,
+                "steps": flight.tick if flight is not None else 0,
+                "real_time_factor": simulated / elapsed if elapsed > 0 else math.nan}
+
+    @staticmethod
+    def _failed(status: TrialStatus, message: str, info: dict[str, Any],
+                times: np.ndarray | None = None, states: np.ndarray | None = None) -> Trial:
+        nan_state = np.full(N_STATE, np.nan)
+        return Trial(status, message, nan_state, np.empty(0) if times is None else times,
+                     np.empty((0, N_STATE)) if states is None else states, nan_state.copy(), info)
+
+    def _fly(self, flight: Flight, compiled: CompiledProgram, info: dict[str, Any], wall: float) -> Trial:
+        pilot = self.params.pilot
+        start_time = None
+        truth: list[np.ndarray] = []
+        try:
+            info["armed_at_s"] = self.power_on_and_arm(flight)
+            info["airborne_at_s"], info["settled_at_s"] = self.settle(flight)
+            info["hover"] = self.hover(flight, pilot.hover_s)
+            dropped = flight.frames_dropped
+            start_time = self.maneuver(flight, compiled, truth)
+            info["start_time_s"] = start_time
+            info["maneuver_frames_dropped"] = flight.frames_dropped - dropped
+            self.fly_to(flight, self.start_m, pilot.return_time_s, check=True)
+            info["returned_error_m"] = float(np.linalg.norm(flight.x[0:3] - self.start_m))
+        except _Stop as stop:
+            info.update(self._timing(flight, wall))
+            times, states = (measured_states(flight.mocap(), start_time, flight.time_s, self.start_m)
+                             if start_time is not None else (None, None))
+            self._keep_truth(truth, start_time)
+            return self._failed(stop.status, str(stop), info, times, states)
+        end_time = start_time + compiled.duration_s
+        rows = flight.mocap()
+        times, states = measured_states(rows, start_time, end_time, self.start_m)
+        final = estimate_final_state(rows, start_time, end_time, self.start_m)
+        start_state = estimate_final_state(rows, start_time - 0.06, start_time, self.start_m)
+        self._keep_truth(truth, start_time)
+        info["landed"], info["disarmed"] = self.land_and_disarm(flight)
+        info["frames_sent"], info["frames_dropped"] = flight.frames_sent, flight.frames_dropped
+        info.update(self._timing(flight, wall))
+        nan_state = np.full(N_STATE, np.nan)
+        start_state = start_state if start_state is not None else nan_state.copy()
+        if final is None or not (np.all(np.isfinite(final[:13])) and np.all(np.isfinite(final[17:]))):
+            return Trial(TrialStatus.ABORTED, "too few motion-capture samples to estimate the final state", nan_state,
+                         times, states, start_state, info)
+        return Trial(TrialStatus.OK, f"maneuver flown through Betaflight ({info['steps']} lockstep steps, "
+                                     f"{info['frames_dropped']}/{info['frames_sent']} radio frames lost)",
+                     final, times, states, start_state, info)
+
+    def _keep_truth(self, truth: list[np.ndarray], start_time: float | None) -> None:
+        if truth and start_time is not None:
+            rows = np.array(truth)
+            self.last_truth = (rows[:, 0] - start_time, rows[:, 1:])
+        else:
+            self.last_truth = (np.empty(0), np.empty((0, N_STATE)))
+
+    # ------------------------------------------------------------- channels
+    def channels(self, sticks: np.ndarray, *, arm: bool, angle: bool) -> tuple[int, ...]:
+        """RC channels (AETR1234, us) for (roll, pitch, yaw) sticks and a throttle pulse, with the mode switches."""
+        aux = self.settings.aux_us(ARM=arm, ANGLE=angle)
+        return (stick_to_us(float(sticks[0])), stick_to_us(float(sticks[1])),
+                int(round(min(max(float(sticks[3]), RC_MIN_US), 2000.0))), stick_to_us(float(sticks[2])),
+                *aux, *([RC_MIN_US] * (12 - len(aux))))
+
+    # --------------------------------------------------------------- phases
+    def power_on_and_arm(self, flight: Flight) -> float:
+        """Calibrate on the floor, then arm through AUX1; returns the time the firmware armed."""
+        idle = np.array([0.0, 0.0, 0.0, float(RC_MIN_US)])
+        disarmed = self.channels(idle, arm=False, angle=True)
+        for _ in range(flight.frames_for(self.params.pilot.calibration_s)):
+            flight.frame(disarmed)
+        armed = self.channels(idle, arm=True, angle=True)
+        for _ in range(flight.frames_for(1.0)):
+            flight.frame(armed)
+            if min(flight.motor_commands()) > 0.0:
+                return flight.time_s
+        raise _Stop(TrialStatus.ABORTED, "the firmware did not arm within 1 s of the ARM switch")
+
+    def _estimate(self, flight: Flight) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        pos, vel, quat = np.zeros(3), np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
+        flight.estimate(pos, vel, quat)
+        return pos, vel, quat
+
+    def fly_to(self, flight: Flight, target: np.ndarray, seconds: float, *, check: bool,
+                     until: Any = None, limits: np.ndarray | None = None) -> bool:
+        """ANGLE-mode frames toward ``target`` for ``seconds`` (or until ``until(pos, vel, quat)`` is true)."""
+        period = 1.0 / self.params.radio.rate_hz
+        sticks = np.zeros(4)
+        for _ in range(flight.frames_for(seconds)):
+            pos, vel, quat = self._estimate(flight)
+            angle_sticks(pos, vel, quat, target, self._integral, self.gains,
+                         self.limits if limits is None else limits, period, sticks)
+            flight.frame(self.channels(sticks, arm=True, angle=True))
+            if check:
+                self._check_volume(flight)
+            if until is not None and until(*self._estimate(flight)):
+                return True
+        return False
+
+    def _check_volume(self, flight: Flight) -> None:
+        if flight.on_floor:
+            raise _Stop(TrialStatus.CRASHED, f"hit the floor at t = {flight.time_s:.3f} s")
+        rows = flight.mocap()
+        if rows.shape[0] == 0:
+            return
+        row = rows[-1]
+        vol = self.params.volume
+        for axis, (lo, hi), name in ((0, vol.x_m, "x"), (1, vol.y_m, "y"), (2, vol.z_m, "z")):
+            rel = row[1 + axis] - self.start_m[axis]
+            if rel < lo or rel > hi:
+                raise _Stop(TrialStatus.CRASHED, f"left the flight volume at t = {row[0]:.3f} s: {name} = "
+                                                 f"{rel:+.3f} m beyond the {name} limits [{lo:g}, {hi:g}] m")
+
+    def settle(self, flight: Flight) -> tuple[float | None, float]:
+        """Take off and fly to the start until within tolerance for the hold time."""
+        pilot = self.params.pilot
+        self._integral = np.zeros(3)
+        hold = max(1, flight.frames_for(pilot.settle_hold_s))
+        calm = [0]
+        airborne: list[float] = []
+
+        def settled(pos: np.ndarray, vel: np.ndarray, quat: np.ndarray) -> bool:
+            if not airborne and not flight.on_floor:
+                airborne.append(flight.time_s)
+            ok = (np.linalg.norm(pos - self.start_m) < pilot.settle_position_m
+                  and np.linalg.norm(vel) < pilot.settle_velocity_m_s and _tilt(quat) < pilot.settle_tilt_rad)
+            calm[0] = calm[0] + 1 if ok else 0
+            return calm[0] >= hold
+
+        if not self.fly_to(flight, self.start_m, pilot.settle_timeout_s, check=False, until=settled):
+            raise _Stop(TrialStatus.ABORTED, f"did not settle at the start within {pilot.settle_timeout_s:g} s")
+        return (airborne[0] if airborne else None), flight.time_s
+
+    def hover(self, flight: Flight, seconds: float) -> dict[str, float]:
+        """Hover at the start; the largest position error seen (measured and true) [m]."""
+        worst = {"seconds": seconds, "max_error_measured_m": 0.0, "max_error_true_m": 0.0}
+
+        def track(pos: np.ndarray, vel: np.ndarray, quat: np.ndarray) -> bool:
+            worst["max_error_measured_m"] = max(worst["max_error_measured_m"],
+                                                float(np.linalg.norm(pos - self.start_m)))
+            worst["max_error_true_m"] = max(worst["max_error_true_m"],
+                                            float(np.linalg.norm(flight.x[0:3] - self.start_m)))
+            return False
+
+        if seconds > 0:
+            self.fly_to(flight, self.start_m, seconds, check=True, until=track)
+        return worst
+
+    def maneuver(self, flight: Flight, compiled: CompiledProgram, truth: list[np.ndarray]) -> float:
+        """Stream the program in ACRO; returns the maneuver's start (its first frame reaches the receiver)."""
+        period = 1.0 / self.params.radio.rate_hz
+        start_time = flight.time_s + flight.latency_steps * flight.step_s
+        n = flight.frames_for(compiled.duration_s + _MARGIN_S)
+        commands = compiled.evaluate(np.arange(n) * period)
+        commands[np.arange(n) * period >= compiled.duration_s - 1e-12] = compiled.hover
+        sticks = np.zeros(4)
+        for k in range(n):
+            program_sticks(commands[k], self.limits, sticks)
+            flight.frame(self.channels(sticks, arm=True, angle=False))
+            truth.append(np.concatenate([[flight.time_s], flight.x]))
+            self._check_volume(flight)
+        self._integral = np.zeros(3)
+        return start_time
+
+    def land_and_disarm(self, flight: Flight) -> tuple[bool, bool]:
+        """Descend onto the floor, throttle down and disarm; (landed, disarmed)."""
+        pilot = self.params.pilot
+        below = self.start_m + np.array([0.0, 0.0, self.params.volume.z_m[0] - 0.3])
+        gentle = self.limits.copy()
+        gentle[L_CLIMB] = min(gentle[L_CLIMB], _LANDING_SPEED_M_S)
+        landed = self.fly_to(flight, below, pilot.landing_timeout_s, check=False,
+                                   until=lambda pos, vel, quat: flight.on_floor, limits=gentle)
+        low = np.array([0.0, 0.0, 0.0, float(RC_MIN_US)])
+        for _ in range(flight.frames_for(0.1)):
+            flight.frame(self.channels(low, arm=True, angle=True))
+        for _ in range(flight.frames_for(0.1)):
+            flight.frame(self.channels(low, arm=False, angle=True))
+        return landed, max(flight.motor_commands()) == 0.0

@@ -86,10 +86,11 @@ DEFAULT_SCHEME = FeedbackScheme.TRACKING
 class FeedbackGains:
     """Gains and limits of the onboard feedback (units in the names)."""
 
-    attitude_gain_per_s: float = 20.0
+    attitude_gain_per_s: float = 10.0
+    attitude_gain_spinning_per_s: float = 20.0
     yaw_gain_per_s: float = 8.0
-    position_gain_per_s2: float = 16.0
-    velocity_gain_per_s: float = 7.0
+    position_gain_per_s2: float = 10.0
+    velocity_gain_per_s: float = 5.0
     max_acceleration_m_s2: float = 5.0
     max_tilt_rad: float = 0.25
     tilt_fade_collective_m_s2: tuple[float, float] = (3.0, 7.0)
@@ -120,7 +121,8 @@ class FeedbackGains:
 
 # flat gains vector for the kernels
 G_SCHEME, G_ATT, G_YAW, G_KP, G_KD, G_AMAX, G_TILT, G_FADE_LO, G_FADE_HI, G_RATE, G_FUSE, G_AGE, G_REF_DT = range(13)
-N_GAINS = 13
+G_ATT_SPIN = 13
+N_GAINS = 14
 
 
 def feedback_vector(scheme: FeedbackScheme, gains: FeedbackGains | None = None) -> np.ndarray:
@@ -139,6 +141,7 @@ def feedback_vector(scheme: FeedbackScheme, gains: FeedbackGains | None = None) 
     v[G_FUSE] = g.attitude_fusion_gain
     v[G_AGE] = g.max_estimate_age_s
     v[G_REF_DT] = 1.0 / g.reference_rate_hz
+    v[G_ATT_SPIN] = g.attitude_gain_spinning_per_s
     return v
 
 
@@ -351,6 +354,10 @@ def apply_feedback(cmd, state, gains, ref, tau, t, scratch):  # pragma: no cover
     # attitude error, body frame: q̂⁻¹ ⊗ q_ref
     ew, ex, ey, ez = _qmul(qw, -qx, -qy, -qz, scratch[6], scratch[7], scratch[8], scratch[9])
     phx, phy, phz = _qlog(ew, ex, ey, ez)
+    # the attitude gain blends to its spinning value while the program commands fast rotation
+    spin = math.sqrt(cmd[1] * cmd[1] + cmd[2] * cmd[2] + cmd[3] * cmd[3])
+    still = min(max(1.0 - (spin - 1.0) / 2.0, 0.0), 1.0)
+    k_att = still * gains[G_ATT] + (1.0 - still) * gains[G_ATT_SPIN]
     dc = 0.0
     if scheme == 2 and state[S_HAVE] > 0.0 and t - state[S_TM] <= gains[G_AGE]:
         age = t - state[S_TM]
@@ -366,8 +373,7 @@ def apply_feedback(cmd, state, gains, ref, tau, t, scratch):  # pragma: no cover
         # translation acts only while the reference is near upright: no tilt steering in a flip
         # and while the program commands no fast rotation (its motors are busy turning)
         upright = 1.0 - 2.0 * (scratch[7] * scratch[7] + scratch[8] * scratch[8])
-        spin = math.sqrt(cmd[1] * cmd[1] + cmd[2] * cmd[2] + cmd[3] * cmd[3])
-        gate = min(max((upright - 0.5) / 0.4, 0.0), 1.0) * min(max(1.0 - (spin - 1.0) / 2.0, 0.0), 1.0)
+        gate = min(max((upright - 0.5) / 0.4, 0.0), 1.0) * still
         ax *= gate
         ay *= gate
         az *= gate
@@ -411,8 +417,8 @@ def apply_feedback(cmd, state, gains, ref, tau, t, scratch):  # pragma: no cover
             phz += r02 * tx + r12 * ty + r22 * tz
     lim = gains[G_RATE]
     cmd[0] += dc
-    cmd[1] += min(max(gains[G_ATT] * phx, -lim), lim)
-    cmd[2] += min(max(gains[G_ATT] * phy, -lim), lim)
+    cmd[1] += min(max(k_att * phx, -lim), lim)
+    cmd[2] += min(max(k_att * phy, -lim), lim)
     cmd[3] += min(max(gains[G_YAW] * phz, -lim), lim)
 
 

@@ -37,7 +37,7 @@ kernel compiles as one unit.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from enum import StrEnum
 from typing import Any
 
@@ -48,10 +48,13 @@ from aerobat.errors import ConfigError
 
 __all__ = [
     "FEEDBACK_COLUMNS",
+    "Feedback",
     "FeedbackGains",
     "FeedbackScheme",
     "HISTORY_TICKS",
+    "OPEN_LOOP",
     "Reference",
+    "as_feedback",
     "feedback_vector",
     "onboard_state",
     "reference_from_trajectory",
@@ -119,17 +122,74 @@ class FeedbackGains:
         return {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v) for f in fields(self)}
 
 
+@dataclass(frozen=True)
+class Feedback:
+    """A feedback scheme with its gains: what a plant's onboard loop mixes into the program."""
+
+    scheme: FeedbackScheme = DEFAULT_SCHEME
+    gains: FeedbackGains = field(default_factory=FeedbackGains)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.scheme, str) and not isinstance(self.scheme, FeedbackScheme):
+            object.__setattr__(self, "scheme", FeedbackScheme.parse(self.scheme, where="feedback.scheme"))
+        if not isinstance(self.scheme, FeedbackScheme):
+            raise ConfigError(f"feedback.scheme = {self.scheme!r}: expected one of "
+                              f"{', '.join(s.value for s in FeedbackScheme)}")
+        if not isinstance(self.gains, FeedbackGains):
+            raise ConfigError(f"feedback.gains: expected FeedbackGains, got {type(self.gains).__name__}")
+
+    @property
+    def enabled(self) -> bool:
+        return self.scheme is not FeedbackScheme.NONE
+
+    def to_table(self) -> dict[str, Any]:
+        """``{"scheme", "gains"}``, JSON- and TOML-ready."""
+        return {"scheme": self.scheme.value, "gains": self.gains.to_table()}
+
+    @classmethod
+    def from_table(cls, table: Any, *, source: str) -> Feedback:
+        """Inverse of :meth:`to_table` (gains not given keep their defaults)."""
+        from collections.abc import Mapping
+
+        from aerobat.config import dataclass_from_table
+
+        if not isinstance(table, Mapping) or "scheme" not in table:
+            raise ConfigError(f"{source}: expected a feedback table with a scheme, got {table!r}")
+        unknown = set(table) - {"scheme", "gains"}
+        if unknown:
+            raise ConfigError(f"{source}: unknown field(s) {', '.join(sorted(unknown))} (scheme, gains)")
+        scheme = FeedbackScheme.parse(table["scheme"], where=f"{source}.scheme")
+        gains = dataclass_from_table(FeedbackGains, table.get("gains") or {}, source=f"{source}.gains")
+        return cls(scheme, gains)
+
+
+OPEN_LOOP = Feedback(FeedbackScheme.NONE)
+"""The paper's pure open loop."""
+
+
+def as_feedback(value: Feedback | FeedbackScheme | str | None) -> Feedback:
+    """A :class:`Feedback` from a feedback, a scheme or its name (default gains); None is the default."""
+    if value is None:
+        return Feedback()
+    if isinstance(value, Feedback):
+        return value
+    if isinstance(value, str):
+        return Feedback(FeedbackScheme.parse(value, where="feedback"))
+    raise ConfigError(f"feedback = {value!r}: expected a Feedback or one of "
+                      f"{', '.join(s.value for s in FeedbackScheme)}")
+
+
 # flat gains vector for the kernels
 G_SCHEME, G_ATT, G_YAW, G_KP, G_KD, G_AMAX, G_TILT, G_FADE_LO, G_FADE_HI, G_RATE, G_FUSE, G_AGE, G_REF_DT = range(13)
 G_ATT_SPIN = 13
 N_GAINS = 14
 
 
-def feedback_vector(scheme: FeedbackScheme, gains: FeedbackGains | None = None) -> np.ndarray:
+def feedback_vector(feedback: Feedback) -> np.ndarray:
     """The scheme and its gains as the flat vector the compiled kernels read."""
-    g = gains or FeedbackGains()
+    g = feedback.gains
     v = np.zeros(N_GAINS)
-    v[G_SCHEME] = scheme.code
+    v[G_SCHEME] = feedback.scheme.code
     v[G_ATT] = g.attitude_gain_per_s
     v[G_YAW] = g.yaw_gain_per_s
     v[G_KP] = g.position_gain_per_s2
@@ -249,7 +309,12 @@ def _qlog(w, x, y, z):  # pragma: no cover - compiled
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def onboard_propagate(state, history, t, p, q, r, dt):  # pragma: no cover - compiled
-    """Integrate the gyro rates (p, q, r) [rad/s] over ``dt`` into q̂ and record (t, q̂)."""
+    """Record (t, q̂), then integrate the gyro rates (p, q, r) [rad/s] over [t, t + dt] into q̂."""
+    head = int(state[S_HEAD])
+    history[head, 0] = t
+    for i in range(4):
+        history[head, 1 + i] = state[i]
+    state[S_HEAD] = (head + 1) % history.shape[0]
     dw, dx, dy, dz = _qexp(p * dt, q * dt, r * dt)
     w, x, y, z = _qmul(state[0], state[1], state[2], state[3], dw, dx, dy, dz)
     n = math.sqrt(w * w + x * x + y * y + z * z)
@@ -257,11 +322,6 @@ def onboard_propagate(state, history, t, p, q, r, dt):  # pragma: no cover - com
     state[1] = x / n
     state[2] = y / n
     state[3] = z / n
-    head = int(state[S_HEAD])
-    history[head, 0] = t
-    for i in range(4):
-        history[head, 1 + i] = state[i]
-    state[S_HEAD] = (head + 1) % history.shape[0]
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")

@@ -21,9 +21,10 @@ from aerobat.plants.arena.kernel import MOCAP_COLUMNS, supervise
 from aerobat.plants.arena.params import ArenaParams
 from aerobat.plants.mocap import estimate_final_state, measured_states
 from aerobat.quadrotor.feedback import (
-    FeedbackGains,
+    Feedback,
     FeedbackScheme,
     Reference,
+    as_feedback,
     feedback_vector,
     onboard_state,
     reference_from_trajectory,
@@ -75,22 +76,20 @@ class Arena:
     config : the *nominal* vehicle (the design model); the onboard controller inverts with it.
     params : the arena's effects (defaults: a realistic Hummingbird in a mocap arena).
     seed : seeds the arena's single random generator.
-    feedback : what the onboard loop mixes into the program (:mod:`aerobat.quadrotor.feedback`);
-        ``none`` (the default here) is the paper's pure open loop.
-    feedback_gains : the onboard feedback's gains (default :class:`FeedbackGains`).
+    feedback : what the onboard loop mixes into the program (:mod:`aerobat.quadrotor.feedback`):
+        a :class:`Feedback`, or a scheme name with default gains; default the best scheme measured
+        (``tracking``); ``"none"`` is the paper's pure open loop.
     """
 
     name = "arena"
 
     def __init__(self, config: VehicleConfig, params: ArenaParams | None = None, *, seed: int = 0,
-                 feedback: FeedbackScheme | str = FeedbackScheme.NONE,
-                 feedback_gains: FeedbackGains | None = None) -> None:
+                 feedback: Feedback | FeedbackScheme | str | None = None) -> None:
         self.config = config
         self.params = params or ArenaParams()
         self.seed = seed
-        self.feedback = FeedbackScheme.parse(feedback, where="feedback") if isinstance(feedback, str) else feedback
-        self.feedback_gains = feedback_gains or FeedbackGains()
-        self._fb_vector = feedback_vector(self.feedback, self.feedback_gains)
+        self.feedback = as_feedback(feedback)
+        self._fb_vector = feedback_vector(self.feedback)
         self.onboard, self.history = onboard_state()
         self._reference = Reference.empty()
         self.rng = np.random.default_rng(seed)
@@ -203,7 +202,7 @@ class Arena:
         }
         for name in ("x", "gyro_prev", "radio_cmd", "integral", "plant", "start_m"):
             state[name] = [float(v) for v in getattr(self, name)]
-        if self.feedback is not FeedbackScheme.NONE:
+        if self.feedback.enabled:
             state["onboard"] = [float(v) for v in self.onboard]
             state["history"] = [float(v) for v in self.history.ravel()]
         return state
@@ -256,7 +255,7 @@ class Arena:
         except (TypeError, ValueError, KeyError) as exc:
             raise ValueError(f"arena state.rng: {exc}") from None
         onboard, history = onboard_state()
-        if self.feedback is not FeedbackScheme.NONE:
+        if self.feedback.enabled:
             for name, default in (("onboard", onboard), ("history", history)):
                 if name not in state:
                     raise ValueError(f"arena state: missing field {name} (the onboard feedback's estimator)")
@@ -355,7 +354,7 @@ class Arena:
         """Send the switch list in packets, each acknowledged; retries cost a timeout each."""
         links = self.params.links
         packets = max(1, math.ceil(len(program.switches) / links.upload_switches_per_packet))
-        if self.feedback is not FeedbackScheme.NONE:  # the reference goes up with the program
+        if self.feedback.enabled:  # the reference goes up with the program
             packets += math.ceil(self._reference.samples.shape[0] / links.upload_reference_samples_per_packet)
         attempts_total = 0
         for packet in range(packets):
@@ -382,9 +381,9 @@ class Arena:
         log = _Log(np.empty((4096, MOCAP_COLUMNS)))
         self.plant = self._plant_vector()
         nominal = simulate(program, self.config, record=True)
-        if self.feedback is not FeedbackScheme.NONE:
+        if self.feedback.enabled:
             self._reference = reference_from_trajectory(nominal.times_s, nominal.states,
-                                                        self.feedback_gains.reference_rate_hz)
+                                                        self.feedback.gains.reference_rate_hz)
         failure = self._settle(log)
         if failure:
             return self._abort(failure, log)

@@ -71,12 +71,12 @@ def advance(x, gyro_prev, tick0, n_ticks, tick_s, plant, ctrl, sensor, latency, 
         gq = (1.0 + sensor[1]) * x[11] + sensor[4]
         gr = (1.0 + sensor[2]) * x[12] + sensor[5]
         if feedback:
+            if running:
+                apply_feedback(cmd, onboard, fb_gains, reference, (tick - man_start_tick) * tick_s, t, scratch)
             if latency > 0:
                 onboard_propagate(onboard, history, t, gyro_prev[0], gyro_prev[1], gyro_prev[2], tick_s)
             else:
                 onboard_propagate(onboard, history, t, gp, gq, gr, tick_s)
-            if running:
-                apply_feedback(cmd, onboard, fb_gains, reference, (tick - man_start_tick) * tick_s, t, scratch)
         if latency > 0:
             controller_thrusts(cmd, gyro_prev[0], gyro_prev[1], gyro_prev[2], ctrl, ft)
         else:

@@ -113,10 +113,13 @@ def _cmd_robustness(args: argparse.Namespace) -> int:
     config, maneuver, nominal = _design(args)
     jobs = robustness_jobs(maneuver, nominal, config, vehicles=args.vehicles, iterations=args.iterations,
                            seed=args.seed, ranges=ranges, rule=rule, tolerance_m=args.tolerance_m, plant=args.plant,
-                           base=base)
+                           base=base, feedback=args.feedback)
     spec = {"maneuver": maneuver.spec(), "vehicles": args.vehicles, "iterations": args.iterations,
             "seed": args.seed, "rule": rule.label, "tolerance_m": args.tolerance_m, "plant": args.plant,
             "ranges": {k: list(v) if isinstance(v, tuple) else v for k, v in ranges.__dict__.items()}}
+    scheme = jobs[0].spec["plant"].get("feedback", {}).get("scheme", "none") if jobs else "none"
+    if scheme != "none":
+        spec["feedback"] = scheme
     outcome, out = run_cli_study(args, "robustness", spec, jobs)
     results = [r for _, r in sorted(outcome.results.items())]
     summary = summarize_robustness(results, properties)
@@ -271,9 +274,9 @@ def _cmd_feedback(args: argparse.Namespace) -> int:
     import csv
 
     from aerobat.experiments.studies import feedback_study_jobs, parse_scenarios, parse_schemes, summarize_feedback
-    from aerobat.quadrotor.feedback import Feedback
     from aerobat.plotting import save_figure
     from aerobat.plotting.studies import plot_feedback
+    from aerobat.quadrotor.feedback import Feedback
 
     if args.feedback is not None:
         raise ConfigError("--feedback: the feedback study compares schemes; name them with --schemes")
@@ -365,6 +368,8 @@ def register(sub: Any) -> None:
                      help="sampling ranges ([ranges] table; default: docs/plants.md's)")
     rob.add_argument("--plant", choices=("arena", "betaflight"), default="arena",
                      help="whose true vehicle is sampled (docs/plants.md says what varies)")
+    rob.add_argument("--feedback", choices=("none", "attitude", "tracking"), default=None,
+                     help="onboard feedback of every vehicle (default: the plant's best measured; docs/feedback.md)")
     rob.add_argument("--betaflight", metavar="FILE.toml",
                      help="Betaflight plant settings to sample around (default: the shipped ones)")
     add_execution_options(rob)

@@ -136,7 +136,7 @@ def rule_run_job(spec: dict[str, Any]) -> dict[str, Any]:
     diverged = bool(pos and np.mean(last) > pos[0])
     angle_idx = [k for k, e in enumerate(maneuver.errors) if e.kind is ErrorKind.ANGLE]
     tail = np.array([np.asarray(e)[angle_idx] for e in errors[-10:]]) if errors and angle_idx else None
-    labels = {key: spec[key] for key in ("scenario", "scheme") if key in spec}
+    labels: dict[str, Any] = {key: spec[key] for key in ("scenario", "scheme") if key in spec}
     return {
         **labels,
         "last10_angle_deg": ([] if tail is None else np.degrees(np.mean(np.abs(tail), axis=0)).tolist()),

@@ -72,10 +72,10 @@ def _rotorpy_default() -> Any:
     return RotorPySettings()
 
 
-def _betaflight(config: VehicleConfig, settings: Any, seed: int) -> Plant:
+def _betaflight(config: VehicleConfig, settings: Any, seed: int, feedback: Any = None) -> Plant:
     from aerobat.plants.betaflight.plant import BetaflightPlant
 
-    return BetaflightPlant(config, settings, seed=seed)
+    return BetaflightPlant(config, settings, seed=seed, feedback=feedback)
 
 
 def _betaflight_load(path: str | Path) -> Any:
@@ -98,12 +98,21 @@ def _betaflight_default() -> Any:
 
 _ALL_SCHEMES = tuple(FeedbackScheme)
 
+
+def _nominal(config: VehicleConfig, settings: Any, seed: int, feedback: Any = None) -> Plant:
+    return NominalPlant(config)  # the reference is its own flight: every correction would be zero
+
+
+def _arena(config: VehicleConfig, settings: Any, seed: int, feedback: Any = None) -> Plant:
+    return Arena(config, settings, seed=seed, feedback=feedback)
+
+
 PLANTS.register("nominal", PlantSpec(
     "nominal", "the design model itself: continuous time, no noise",
-    lambda config, settings, seed, feedback=None: NominalPlant(config), feedback=_ALL_SCHEMES))
+    _nominal, feedback=_ALL_SCHEMES))
 PLANTS.register("arena", PlantSpec(
     "arena", "a simulated arena: a true vehicle unlike the model, sensors, lossy links, the Fig. 8 supervisor",
-    lambda config, settings, seed, feedback=None: Arena(config, settings, seed=seed, feedback=feedback),
+    _arena,
     load_settings=load_arena,
     settings_from_table=lambda table, source: dataclass_from_table(ArenaParams, table, source=source),
     settings_to_table=dataclass_to_table, default_settings=ArenaParams, option="--arena",
@@ -116,4 +125,5 @@ PLANTS.register("rotorpy", PlantSpec(
 PLANTS.register("betaflight", PlantSpec(
     "betaflight", "a 5-inch racer flown by Betaflight 4.6's own firmware (SITL in lockstep) in the arena",
     _betaflight, load_settings=_betaflight_load, settings_from_table=_betaflight_from_table,
-    settings_to_table=dataclass_to_table, default_settings=_betaflight_default, option="--betaflight"))
+    settings_to_table=dataclass_to_table, default_settings=_betaflight_default, option="--betaflight",
+    feedback=_ALL_SCHEMES))

@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-import warnings
-
 import math
+import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
 

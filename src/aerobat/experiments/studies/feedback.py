@@ -29,8 +29,8 @@ __all__ = ["SCENARIOS", "feedback_study_jobs", "parse_scenarios", "parse_schemes
 def _gyro_x5(p: ArenaParams) -> ArenaParams:
     o = p.onboard
     return dataclasses.replace(p, onboard=dataclasses.replace(
-        o, gyro_scale_error=tuple(5.0 * v for v in o.gyro_scale_error),
-        gyro_bias_rad_s=tuple(5.0 * v for v in o.gyro_bias_rad_s)))
+        o, gyro_scale_error=(5.0 * o.gyro_scale_error[0], 5.0 * o.gyro_scale_error[1], 5.0 * o.gyro_scale_error[2]),
+        gyro_bias_rad_s=(5.0 * o.gyro_bias_rad_s[0], 5.0 * o.gyro_bias_rad_s[1], 5.0 * o.gyro_bias_rad_s[2])))
 
 
 def _lossy(p: ArenaParams) -> ArenaParams:

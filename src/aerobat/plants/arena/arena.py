@@ -20,15 +20,6 @@ from aerobat.core.plant import Trial, TrialStatus
 from aerobat.plants.arena.kernel import MOCAP_COLUMNS, supervise
 from aerobat.plants.arena.params import ArenaParams
 from aerobat.plants.mocap import estimate_final_state, measured_states
-from aerobat.quadrotor.feedback import (
-    Feedback,
-    FeedbackScheme,
-    Reference,
-    as_feedback,
-    feedback_vector,
-    onboard_state,
-    reference_from_trajectory,
-)
 from aerobat.quadrotor.dynamics import (
     N_STATE,
     controller_vector,
@@ -37,6 +28,15 @@ from aerobat.quadrotor.dynamics import (
     quaternion_from_rotation_vector,
     quaternion_multiply,
     rotation_vector_from_quaternion,
+)
+from aerobat.quadrotor.feedback import (
+    Feedback,
+    FeedbackScheme,
+    Reference,
+    as_feedback,
+    feedback_vector,
+    onboard_state,
+    reference_from_trajectory,
 )
 from aerobat.quadrotor.program import Program
 from aerobat.quadrotor.simulate import Trajectory, simulate

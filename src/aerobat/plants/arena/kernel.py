@@ -113,12 +113,13 @@ def mocap_sample(x, t, noise, out):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
-def pd_command(pos, vel, quat, target, integral, gains, limits, dt, out):  # pragma: no cover - compiled
+def pd_command(pos, vel, quat, target, integral, gains, limits, dt, out, settling=False):  # pragma: no cover
     """Cascaded PD(+I) hover controller: position → acceleration → attitude → body rates.
 
     gains = (k_p [1/s²], k_d [1/s], k_att [1/s], k_yaw [1/s], k_i [1/s³]);
     limits = (collective min, max [m/s²], max tilt acceleration [m/s²], max rate [rad/s], g).
-    Writes (collective, p̂, q̂, r̂) into ``out``; updates ``integral`` (anti-windup clamp).
+    Writes (collective, p̂, q̂, r̂) into ``out``; updates ``integral`` (anti-windup clamp), within 0.1 m of
+    the target, or within 0.3 m while ``settling`` and nearly still.
     """
     kp = gains[0]
     kd = gains[1]
@@ -127,9 +128,12 @@ def pd_command(pos, vel, quat, target, integral, gains, limits, dt, out):  # pra
     ki = gains[4]
     g = limits[4]
     a = np.empty(3)
+    # settling and nearly still: a steady offset the P term cannot remove (a heavy vehicle sags
+    # 10 cm, beyond the 0.1 m window, and would never settle) is trimmed too
+    still = settling and vel[0] * vel[0] + vel[1] * vel[1] + vel[2] * vel[2] < 0.05 * 0.05
     for i in range(3):
         err = target[i] - pos[i]
-        if abs(err) < 0.1:  # conditional integration: trim only near the target
+        if abs(err) < 0.1 or (still and abs(err) < 0.3):  # conditional integration: trim only near the target
             integral[i] = min(max(integral[i] + err * dt, -1.0), 1.0)
         a[i] = kp * err - kd * vel[i] + ki * integral[i]
     horiz = math.sqrt(a[0] * a[0] + a[1] * a[1])
@@ -279,7 +283,7 @@ def supervise(x, gyro_prev, tick0, end_tick, tick_s, plant, ctrl, sensor, latenc
                 relay_translation = man_start_tick >= 0 and relay_deviation(
                     log, available, man_start_tick * tick_s, target, reference, fb_gains[12], scratch, relay)
         if closed_loop and have:
-            pd_command(est_pos, est_vel, est_quat, target, integral, gains, limits, period_s, cmd)
+            pd_command(est_pos, est_vel, est_quat, target, integral, gains, limits, period_s, cmd, settle[0] > 0)
         else:
             for i in range(4):
                 cmd[i] = hover_cmd[i]

@@ -13,7 +13,7 @@ from aerobat.core.learning import learn
 from aerobat.core.maneuver import ErrorKind, position_indices
 from aerobat.errors import ConfigError
 from aerobat.plants import Arena, ArenaParams, PlantChoice
-from aerobat.quadrotor.dynamics import quaternion_from_rotation_vector, quaternion_multiply
+from aerobat.quadrotor.dynamics import quaternion_from_rotation_vector
 from aerobat.quadrotor.feedback import (
     OPEN_LOOP,
     Feedback,

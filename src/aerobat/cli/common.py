@@ -218,6 +218,10 @@ def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | No
             p.add_argument(spec.option, metavar="FILE.toml",
                           help=f"{name} settings (only with --plant {name}; default: the {name}'s defaults)")
     p.add_argument("--seed", type=bounded_int(0, 2**63 - 1), default=0, help="seed of the plant's random generator")
+    p.add_argument("--feedback", choices=("none", "attitude", "tracking"), default=None,
+                   help="what the vehicle's onboard loop mixes into the program: none (the paper's open "
+                        "loop), attitude, tracking (docs/feedback.md; default: the plant's best measured, "
+                        "tracking on the arena and RotorPy, none on Betaflight)")
 
 
 def add_db_option(p: argparse.ArgumentParser) -> None:
@@ -270,7 +274,7 @@ def plant_choice_from_args(args: argparse.Namespace) -> Any:
         if name != args.plant:
             raise ConfigError(f"{spec.option} applies only with --plant {name} (got --plant {args.plant})")
         path = given
-    return PlantChoice.from_file(args.plant, path, seed=args.seed)
+    return PlantChoice.from_file(args.plant, path, seed=args.seed, feedback=getattr(args, "feedback", None))
 
 
 def rule_choice_from_args(args: argparse.Namespace) -> Any:

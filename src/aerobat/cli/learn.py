@@ -139,6 +139,8 @@ def _check_same_session(args: argparse.Namespace, store: Any, run: Any) -> None:
         differences.append("the plant's settings differ from the stored plant's")
     if plant.seed != run.plant_choice.seed:
         differences.append(f"--seed {plant.seed} (stored: {run.plant_choice.seed})")
+    if args.feedback is not None and plant.feedback != run.plant_choice.feedback:
+        differences.append(f"--feedback {args.feedback} (stored: {run.plant_choice.feedback.scheme.value})")
     if vehicle_table(config) != vehicle_table(run.model):
         differences.append(f"--vehicle {args.vehicle} differs from the stored vehicle")
     if rule_choice_from_args(args).to_table() != run.rule_choice.to_table():
@@ -172,8 +174,8 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
 
     verb = "resumed" if run.resumed else "started"
     say(f"session {sid} {verb} in {store.path}: {run.maneuver.name} on {run.plant_choice.kind} "
-        f"(seed {run.plant_choice.seed}, rule {run.rule_choice.label}), {run.measured} of {run.target} measured "
-        f"iterations done")
+        f"(seed {run.plant_choice.seed}, feedback {run.plant_choice.feedback.scheme.value}, rule "
+        f"{run.rule_choice.label}), {run.measured} of {run.target} measured iterations done")
     if not run.exact:
         say(f"  note: the {run.plant_choice.kind} plant's state was not stored; resumed trials will not repeat an "
             f"uninterrupted run exactly")

@@ -23,7 +23,8 @@ def print_stored_session(store: Any, session_id: int, *, iterations: bool, heade
     if header:
         prec = store.plant(rec.plant_id)
         lines = [
-            f"session {rec.id}: {mrec.name} on {prec.kind} (seed {rec.seed}) — {rec.display_state}",
+            f"session {rec.id}: {mrec.name} on {prec.kind} (seed {rec.seed}, feedback "
+            f"{(prec.config.get('feedback') or {}).get('scheme', 'none')}) — {rec.display_state}",
             f"  message:    {rec.message}",
             f"  started:    {rec.started_at}   updated: {rec.updated_at}   ended: {rec.ended_at or '—'}",
             f"  iterations: {rec.n_measured} measured of {rec.target_iterations} ({rec.n_records} trials, "

@@ -113,10 +113,13 @@ def _cmd_robustness(args: argparse.Namespace) -> int:
     config, maneuver, nominal = _design(args)
     jobs = robustness_jobs(maneuver, nominal, config, vehicles=args.vehicles, iterations=args.iterations,
                            seed=args.seed, ranges=ranges, rule=rule, tolerance_m=args.tolerance_m, plant=args.plant,
-                           base=base)
+                           base=base, feedback=args.feedback)
     spec = {"maneuver": maneuver.spec(), "vehicles": args.vehicles, "iterations": args.iterations,
             "seed": args.seed, "rule": rule.label, "tolerance_m": args.tolerance_m, "plant": args.plant,
             "ranges": {k: list(v) if isinstance(v, tuple) else v for k, v in ranges.__dict__.items()}}
+    scheme = jobs[0].spec["plant"].get("feedback", {}).get("scheme", "none") if jobs else "none"
+    if scheme != "none":
+        spec["feedback"] = scheme
     outcome, out = run_cli_study(args, "robustness", spec, jobs)
     results = [r for _, r in sorted(outcome.results.items())]
     summary = summarize_robustness(results, properties)
@@ -264,6 +267,74 @@ def _cmd_rules(args: argparse.Namespace) -> int:
     return 0
 
 
+# ------------------------------------------------------------------ feedback
+
+
+def _cmd_feedback(args: argparse.Namespace) -> int:
+    import csv
+
+    from aerobat.experiments.studies import feedback_study_jobs, parse_scenarios, parse_schemes, summarize_feedback
+    from aerobat.plotting import save_figure
+    from aerobat.plotting.studies import plot_feedback
+    from aerobat.quadrotor.feedback import Feedback
+
+    if args.feedback is not None:
+        raise ConfigError("--feedback: the feedback study compares schemes; name them with --schemes")
+    schemes = parse_schemes(args.schemes)
+    scenarios = parse_scenarios(args.scenarios, plant=args.plant)
+    plant = plant_choice_from_args(args)
+    plant.spec.check_available()
+    for scheme in schemes:
+        plant.spec.check_feedback(Feedback(scheme))
+    config, maneuver, nominal = _design(args)
+    jobs = feedback_study_jobs(maneuver, nominal, config, schemes=schemes, scenarios=scenarios, seeds=args.seeds,
+                               trials=args.trials, plant=plant, rule=args.rule, tolerance_m=args.tolerance_m)
+    spec = {"maneuver": maneuver.spec(), "schemes": [s.value for s in schemes], "scenarios": scenarios,
+            "seeds": args.seeds, "trials": args.trials, "plant": plant.to_table(), "rule": args.rule,
+            "tolerance_m": args.tolerance_m}
+    outcome, out = run_cli_study(args, "feedback", spec, jobs)
+    results = [r for _, r in sorted(outcome.results.items()) if "scheme" in r]
+    by_key = {job.key: job for job in jobs}
+    failed: dict[tuple[str, str], list[str]] = {}
+    for f in outcome.failed:
+        job = by_key.get(f.key)
+        pair = (job.spec["scenario"], job.spec["scheme"]) if job else ("?", f.label)
+        failed.setdefault(pair, []).append(f.error)
+    rows = summarize_feedback(results, schemes, scenarios, args.trials, failed)
+    with (out / "feedback.csv").open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows({**r, "job_errors": " | ".join(r["job_errors"]),
+                          "last10_angle_deg": " ".join(f"{a:.3f}" for a in r["last10_angle_deg"])} for r in rows)
+    curves = {sc: {s.value: [r["position_errors_m"] for r in results
+                             if r["scenario"] == sc and r["scheme"] == s.value] for s in schemes}
+              for sc in scenarios}
+    save_figure(plot_feedback(curves, args.trials, args.tolerance_m), out / "feedback.png")
+    if args.json:
+        print(json.dumps({"study": outcome.study_id, "rows": rows}))
+    else:
+        from rich.table import Table
+
+        table = Table(title=f"study {outcome.study_id}: {maneuver.name}, {args.seeds} seeds × {args.trials} "
+                            f"trials, rule {args.rule}")
+        for col in ("scenario", "scheme", "last-10 [m]", "worst seed", "angles [°]",
+                    f"median to {args.tolerance_m:g} m", "failed", "ms/trial"):
+            table.add_column(col, justify="left" if col in ("scenario", "scheme") else "right")
+        for r in rows:
+            angles = "/".join(f"{a:.2f}" for a in r["last10_angle_deg"]) or "—"
+            table.add_row(r["scenario"], r["scheme"], f"{r['last10_mean_m']:.3f}", f"{r['last10_worst_seed_m']:.3f}",
+                          angles, f"{r['median_trials_to_tolerance']:g}", f"{r['failures']}/{r['runs']}",
+                          f"{r['wall_ms_per_trial']:.1f}")
+        c = console()
+        c.print(table)
+        for r in rows:
+            for error in r["job_errors"]:
+                c.print(f"{r['scenario']}/{r['scheme']}: a job failed: {error}")
+        c.print(f"({outcome.ran} runs now, {outcome.skipped} already done); feedback.csv and feedback.png in {out}/")
+    report_failures(outcome)
+    return 0
+
+
 # ------------------------------------------------------------------ parser
 
 
@@ -297,6 +368,8 @@ def register(sub: Any) -> None:
                      help="sampling ranges ([ranges] table; default: docs/plants.md's)")
     rob.add_argument("--plant", choices=("arena", "betaflight"), default="arena",
                      help="whose true vehicle is sampled (docs/plants.md says what varies)")
+    rob.add_argument("--feedback", choices=("none", "attitude", "tracking"), default=None,
+                     help="onboard feedback of every vehicle (default: the plant's best measured; docs/feedback.md)")
     rob.add_argument("--betaflight", metavar="FILE.toml",
                      help="Betaflight plant settings to sample around (default: the shipped ones)")
     add_execution_options(rob)
@@ -314,6 +387,22 @@ def register(sub: Any) -> None:
     rules.set_defaults(seed=1)
     add_execution_options(rules)
     rules.set_defaults(func=_cmd_rules)
+
+    fb = ssub.add_parser("feedback", help="open loop and each onboard feedback scheme side by side, across "
+                         "scenarios", formatter_class=fmt)
+    add_maneuver_options(fb)
+    fb.add_argument("--schemes", default="none,attitude,tracking", help="comma list of feedback schemes")
+    fb.add_argument("--scenarios", default="default,gyro-x5,lossy-link,slow-link",
+                    help="comma list of arena scenarios (docs/feedback.md)")
+    fb.add_argument("--seeds", type=bounded_int(1, 1000), default=20, help="plant seeds per scheme and scenario")
+    fb.add_argument("--trials", type=bounded_int(2, 1000), default=30, help="measured trials per run")
+    fb.add_argument("--rule", default="paper", help="update rule (see docs/method.md)")
+    fb.add_argument("--tolerance-m", type=finite_float(1e-6, 100.0, "m"), default=0.12,
+                    help="position tolerance [m]")
+    add_plant_options(fb, kinds=("arena", "rotorpy"))
+    fb.set_defaults(seed=0)
+    add_execution_options(fb)
+    fb.set_defaults(func=_cmd_feedback)
 
     env = ssub.add_parser("envelope", help="design a grid of flips and map feasibility, duration, height, "
                           "conditioning", formatter_class=fmt)

@@ -26,6 +26,7 @@ whose residual is too large is returned with its ``problems`` and
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -40,6 +41,7 @@ from aerobat.core.plant import Plant, StatefulPlant, Trial, TrialStatus
 from aerobat.errors import ConfigError, IdentificationFailed, OutputError
 from aerobat.experiments.setup import plant_choice_from_record, plant_record_config
 from aerobat.plants import PlantChoice
+from aerobat.quadrotor.feedback import OPEN_LOOP
 from aerobat.quadrotor.identification import (
     FitOptions,
     IdentificationSequence,
@@ -162,6 +164,8 @@ def identify(plant: PlantChoice, prior: VehicleConfig, *, store: Store | None = 
     ----------
     plant : which plant flies (built around ``prior``: its onboard controller inverts with
         ``prior``'s constants, as a real vehicle's firmware does with the values it was given).
+        Identification always flies the open loop: onboard feedback would hide the very
+        dynamics being measured, so the plant's feedback is set to ``none``.
     prior : the vehicle one believes one has; the fit starts from it and keeps its controller.
     store : keep the identification as a session (every flight committed as it happens).
     flips : include the two slow flips.
@@ -178,6 +182,7 @@ def identify(plant: PlantChoice, prior: VehicleConfig, *, store: Store | None = 
         Too few usable trials (the session, if stored, is marked failed with the same message).
     """
     started = time.perf_counter()
+    plant = dataclasses.replace(plant, feedback=OPEN_LOOP)
     trials, notes = identification_sequence(prior, flips=flips, max_angle_rad=max_angle_rad)
     sequence = IdentificationSequence(prior, trials)
     flying = plant.build(prior)

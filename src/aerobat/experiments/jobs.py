@@ -16,7 +16,7 @@ import numpy as np
 
 from aerobat.core.design import Design, design
 from aerobat.core.learning import Iteration, learn
-from aerobat.core.maneuver import Maneuver, position_indices
+from aerobat.core.maneuver import ErrorKind, Maneuver, position_indices
 from aerobat.core.registry import from_spec
 from aerobat.core.rules import RuleChoice
 from aerobat.experiments.baselines import BASELINES, run_baseline
@@ -134,7 +134,12 @@ def rule_run_job(spec: dict[str, Any]) -> dict[str, Any]:
     later = pos[first:] if first is not None else []
     last = pos[-10:] if pos else [math.nan]
     diverged = bool(pos and np.mean(last) > pos[0])
+    angle_idx = [k for k, e in enumerate(maneuver.errors) if e.kind is ErrorKind.ANGLE]
+    tail = np.array([np.asarray(e)[angle_idx] for e in errors[-10:]]) if errors and angle_idx else None
+    labels: dict[str, Any] = {key: spec[key] for key in ("scenario", "scheme") if key in spec}
     return {
+        **labels,
+        "last10_angle_deg": ([] if tail is None else np.degrees(np.mean(np.abs(tail), axis=0)).tolist()),
         "method": method,
         "status": status,
         "position_errors_m": pos,

@@ -32,22 +32,30 @@ def build_rule(choice: RuleChoice, design: Design, model: VehicleConfig) -> Upda
 
 
 def plant_record_config(choice: PlantChoice) -> dict[str, Any]:
-    """What the store keeps of a plant besides its kind and vehicle: ``{"settings": {...}}``."""
-    return {"settings": choice.settings_table()}
+    """What the store keeps of a plant besides its kind and vehicle: ``{"settings": {...}}`` and, unless
+    the plant flies the paper's open loop, ``"feedback": {"scheme", "gains"}``."""
+    config: dict[str, Any] = {"settings": choice.settings_table()}
+    if choice.feedback.enabled:
+        config["feedback"] = choice.feedback.to_table()
+    return config
 
 
 def plant_choice_from_record(kind: str, config: Mapping[str, Any], seed: int | None, *, source: str) -> PlantChoice:
     """The plant a stored session flew, from today's form or an earlier store's.
 
-    Today: ``{"settings": {...}}``. Before schema 4: the arena as ``{"arena": {...}}``, RotorPy
-    as ``{"settings": path or null}`` (the file is read again; a missing file is an error).
+    Today: ``{"settings": {...}}`` plus ``"feedback"`` when the plant ran onboard feedback (without
+    it, the paper's open loop: every session stored before feedback existed). Before schema 4: the
+    arena as ``{"arena": {...}}``, RotorPy as ``{"settings": path or null}`` (the file is read again;
+    a missing file is an error).
     """
     settings_table: Any = config.get("settings") if isinstance(config, Mapping) else None
     if kind == "arena" and isinstance(config, Mapping) and "arena" in config:
         settings_table = config["arena"]
-    table = {"kind": kind, "settings": {}, "seed": int(seed or 0)}
+    table: dict[str, Any] = {"kind": kind, "settings": {}, "seed": int(seed or 0)}
+    if isinstance(config, Mapping) and "feedback" in config:
+        table["feedback"] = config["feedback"]
     if isinstance(settings_table, str):  # an old RotorPy session stored its settings file's path
-        return PlantChoice.from_file(kind, settings_table, seed=int(seed or 0))
+        return PlantChoice.from_file(kind, settings_table, seed=int(seed or 0), feedback="none")
     if isinstance(settings_table, Mapping):
         table["settings"] = dict(settings_table)
     return PlantChoice.from_table(table, source=source)

@@ -24,6 +24,7 @@ from aerobat.core.plant import Plant, StatefulPlant, Trial, TrialStatus
 from aerobat.plants.arena import Arena, ArenaParams, load_arena
 from aerobat.plants.nominal import NominalPlant
 from aerobat.plants.spec import PLANTS, PlantChoice, PlantSpec
+from aerobat.quadrotor.feedback import DEFAULT_SCHEME, FeedbackScheme
 from aerobat.quadrotor.vehicle import VehicleConfig
 
 __all__ = [
@@ -41,10 +42,10 @@ __all__ = [
 ]
 
 
-def _rotorpy(config: VehicleConfig, settings: Any, seed: int) -> Plant:
+def _rotorpy(config: VehicleConfig, settings: Any, seed: int, feedback: Any = None) -> Plant:
     from aerobat.plants.rotorpy import RotorPyPlant
 
-    return RotorPyPlant(config, settings=settings, seed=seed)
+    return RotorPyPlant(config, settings=settings, seed=seed, feedback=feedback)
 
 
 def _rotorpy_load(path: str | Path) -> Any:
@@ -71,10 +72,10 @@ def _rotorpy_default() -> Any:
     return RotorPySettings()
 
 
-def _betaflight(config: VehicleConfig, settings: Any, seed: int) -> Plant:
+def _betaflight(config: VehicleConfig, settings: Any, seed: int, feedback: Any = None) -> Plant:
     from aerobat.plants.betaflight.plant import BetaflightPlant
 
-    return BetaflightPlant(config, settings, seed=seed)
+    return BetaflightPlant(config, settings, seed=seed, feedback=feedback)
 
 
 def _betaflight_load(path: str | Path) -> Any:
@@ -95,21 +96,34 @@ def _betaflight_default() -> Any:
     return BetaflightParams()
 
 
+_ALL_SCHEMES = tuple(FeedbackScheme)
+
+
+def _nominal(config: VehicleConfig, settings: Any, seed: int, feedback: Any = None) -> Plant:
+    return NominalPlant(config)  # the reference is its own flight: every correction would be zero
+
+
+def _arena(config: VehicleConfig, settings: Any, seed: int, feedback: Any = None) -> Plant:
+    return Arena(config, settings, seed=seed, feedback=feedback)
+
+
 PLANTS.register("nominal", PlantSpec(
     "nominal", "the design model itself: continuous time, no noise",
-    lambda config, settings, seed: NominalPlant(config)))
+    _nominal, feedback=_ALL_SCHEMES))
 PLANTS.register("arena", PlantSpec(
     "arena", "a simulated arena: a true vehicle unlike the model, sensors, lossy links, the Fig. 8 supervisor",
-    lambda config, settings, seed: Arena(config, settings, seed=seed),
+    _arena,
     load_settings=load_arena,
     settings_from_table=lambda table, source: dataclass_from_table(ArenaParams, table, source=source),
-    settings_to_table=dataclass_to_table, default_settings=ArenaParams, option="--arena"))
+    settings_to_table=dataclass_to_table, default_settings=ArenaParams, option="--arena",
+    feedback=_ALL_SCHEMES, default_feedback=DEFAULT_SCHEME))
 PLANTS.register("rotorpy", PlantSpec(
     "rotorpy", "RotorPy's Hummingbird (an independent simulator), supervised like the arena",
     _rotorpy, load_settings=_rotorpy_load, settings_from_table=_rotorpy_from_table,
     settings_to_table=_rotorpy_to_table, default_settings=_rotorpy_default,
-    requires=(("rotorpy", "rotorpy"),), option="--rotorpy"))
+    requires=(("rotorpy", "rotorpy"),), option="--rotorpy", feedback=_ALL_SCHEMES, default_feedback=DEFAULT_SCHEME))
 PLANTS.register("betaflight", PlantSpec(
     "betaflight", "a 5-inch racer flown by Betaflight 4.6's own firmware (SITL in lockstep) in the arena",
     _betaflight, load_settings=_betaflight_load, settings_from_table=_betaflight_from_table,
-    settings_to_table=dataclass_to_table, default_settings=_betaflight_default, option="--betaflight"))
+    settings_to_table=dataclass_to_table, default_settings=_betaflight_default, option="--betaflight",
+    feedback=_ALL_SCHEMES))

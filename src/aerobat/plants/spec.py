@@ -17,6 +17,7 @@ from typing import Any
 from aerobat.core.plant import Plant
 from aerobat.core.registry import Registry
 from aerobat.errors import ConfigError, MissingDependency
+from aerobat.quadrotor.feedback import OPEN_LOOP, Feedback, FeedbackScheme, as_feedback
 from aerobat.quadrotor.vehicle import VehicleConfig
 
 __all__ = ["PLANTS", "PlantChoice", "PlantSpec"]
@@ -36,6 +37,9 @@ class PlantSpec:
     default_settings : the settings used when no file is given.
     requires : ``(module, extra)`` pairs of optional packages the plant needs.
     option : the command-line option that takes the settings file (``--arena``).
+    feedback : the feedback schemes the plant's onboard loop can run (:mod:`aerobat.quadrotor.feedback`);
+        a plant with more than ``none`` is built as ``build(config, settings, seed, feedback)``.
+    default_feedback : the scheme used when none is chosen.
     """
 
     name: str
@@ -47,6 +51,14 @@ class PlantSpec:
     default_settings: Callable[[], Any] | None = None
     requires: tuple[tuple[str, str], ...] = ()
     option: str | None = None
+    feedback: tuple[FeedbackScheme, ...] = (FeedbackScheme.NONE,)
+    default_feedback: FeedbackScheme = FeedbackScheme.NONE
+
+    def check_feedback(self, feedback: Feedback) -> None:
+        """Raise ConfigError if this plant cannot run ``feedback``'s scheme."""
+        if feedback.scheme not in self.feedback:
+            raise ConfigError(f"--feedback {feedback.scheme.value}: the {self.name} plant runs "
+                              f"{', '.join(s.value for s in self.feedback)}")
 
     def check_available(self) -> None:
         """Raise :class:`MissingDependency` with the install hint if a required package is missing."""
@@ -70,11 +82,14 @@ class PlantChoice:
     kind : a registered plant (:data:`PLANTS`).
     settings : the kind's settings (e.g. :class:`~aerobat.plants.arena.ArenaParams`), or None for defaults.
     seed : seeds the plant's random generator.
+    feedback : what the plant's onboard loop mixes into the program: a :class:`Feedback`, a scheme
+        name, or None for the plant's default (the best scheme measured on the arena and RotorPy).
     """
 
     kind: str = "arena"
     settings: Any = field(default=None, compare=False)
     seed: int = 0
+    feedback: Any = None
 
     def __post_init__(self) -> None:
         spec = PLANTS.get(self.kind, source="plant")
@@ -82,20 +97,23 @@ class PlantChoice:
             raise ConfigError(f"plant seed {self.seed!r}: expected an integer in [0, 2^63)")
         if self.settings is None and spec.default_settings is not None:
             object.__setattr__(self, "settings", spec.default_settings())
+        feedback = Feedback(spec.default_feedback) if self.feedback is None else as_feedback(self.feedback)
+        spec.check_feedback(feedback)
+        object.__setattr__(self, "feedback", feedback)
 
     @property
     def spec(self) -> PlantSpec:
         return PLANTS.get(self.kind, source="plant")
 
     @classmethod
-    def from_file(cls, kind: str, path: str | Path | None, *, seed: int = 0) -> PlantChoice:
+    def from_file(cls, kind: str, path: str | Path | None, *, seed: int = 0, feedback: Any = None) -> PlantChoice:
         """The plant ``kind`` with settings read from ``path`` (None: defaults)."""
         spec = PLANTS.get(kind, source="--plant")
         if path is None:
-            return cls(kind, None, seed)
+            return cls(kind, None, seed, feedback)
         if spec.load_settings is None:
             raise ConfigError(f"--plant {kind} takes no settings file (got {path})")
-        return cls(kind, spec.load_settings(path), seed)
+        return cls(kind, spec.load_settings(path), seed, feedback)
 
     def settings_table(self) -> dict[str, Any]:
         """The settings as a JSON-ready table ({} when the kind has none)."""
@@ -105,8 +123,15 @@ class PlantChoice:
         return spec.settings_to_table(self.settings)
 
     def to_table(self) -> dict[str, Any]:
-        """``{"kind", "settings", "seed"}``, JSON-ready."""
-        return {"kind": self.kind, "settings": self.settings_table(), "seed": self.seed}
+        """``{"kind", "settings", "seed"}`` and, unless it is the open loop, ``"feedback"``; JSON-ready.
+
+        (A table without ``feedback`` is the paper's open loop: what every store written before
+        feedback existed holds.)
+        """
+        table = {"kind": self.kind, "settings": self.settings_table(), "seed": self.seed}
+        if self.feedback.enabled:
+            table["feedback"] = self.feedback.to_table()
+        return table
 
     @classmethod
     def from_table(cls, table: Mapping[str, Any], *, source: str) -> PlantChoice:
@@ -120,13 +145,17 @@ class PlantChoice:
             if spec.settings_from_table is None:
                 raise ConfigError(f"{source}: plant {spec.name} takes no settings")
             settings = spec.settings_from_table(stored, f"{source}.settings")
-        return cls(spec.name, settings, int(table.get("seed", 0)))
+        feedback = (Feedback.from_table(table["feedback"], source=f"{source}.feedback") if "feedback" in table
+                    else OPEN_LOOP)
+        return cls(spec.name, settings, int(table.get("seed", 0)), feedback)
 
     def build(self, config: VehicleConfig) -> Plant:
         """The plant, flying a true vehicle around the nominal ``config``."""
         spec = self.spec
         spec.check_available()
-        return spec.build(config, self.settings, self.seed)
+        if spec.feedback == (FeedbackScheme.NONE,):
+            return spec.build(config, self.settings, self.seed)
+        return spec.build(config, self.settings, self.seed, self.feedback)  # type: ignore[call-arg]
 
     def __repr__(self) -> str:
-        return f"PlantChoice({self.kind!r}, seed={self.seed})"
+        return f"PlantChoice({self.kind!r}, seed={self.seed}, feedback={self.feedback.scheme.value!r})"

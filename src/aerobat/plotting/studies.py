@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -110,7 +111,8 @@ def plot_rules(curves: Mapping[str, Sequence[Sequence[float]]], trials: int, tol
             data[i, : min(trials, len(c))] = c[:trials]
         if np.all(np.isnan(data)):
             continue
-        with np.errstate(all="ignore"):
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # a trial no run reached is a gap in the line
             med = np.nanmedian(data, axis=0)
             q1, q3 = np.nanpercentile(data, 25, axis=0), np.nanpercentile(data, 75, axis=0)
         ax.plot(x, med, color=f"C{k}", label=method)
@@ -120,4 +122,22 @@ def plot_rules(curves: Mapping[str, Sequence[Sequence[float]]], trials: int, tol
     ax.set_xlabel("trial")
     ax.set_ylabel("position error [m] (median, quartiles)")
     ax.legend(fontsize=8)
+    return fig
+
+
+def plot_feedback(curves: Mapping[str, Mapping[str, Sequence[Sequence[float]]]], trials: int,
+                  tolerance_m: float) -> Any:
+    """One panel per scenario: median and quartiles of the position error per trial, one line per scheme."""
+    import matplotlib.pyplot as plt
+
+    n = max(1, len(curves))
+    cols = min(n, 2)
+    rows = int(np.ceil(n / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(6.5 * cols, 4.2 * rows), squeeze=False, sharey=True)
+    for ax in axes.flat[n:]:
+        ax.set_visible(False)
+    for ax, (scenario, by_scheme) in zip(axes.flat, curves.items(), strict=False):
+        plot_rules(by_scheme, trials, tolerance_m, ax=ax)
+        ax.set_title(scenario)
+    fig.tight_layout()
     return fig

@@ -6,6 +6,13 @@ every outcome to the store as it arrives.
 """
 
 from aerobat.experiments.studies.envelope import envelope_grid, envelope_jobs
+from aerobat.experiments.studies.feedback import (
+    SCENARIOS,
+    feedback_study_jobs,
+    parse_scenarios,
+    parse_schemes,
+    summarize_feedback,
+)
 from aerobat.experiments.studies.maps import map_csv, map_grid, map_jobs
 from aerobat.experiments.studies.robustness import (
     BETAFLIGHT_PROPERTIES,
@@ -25,22 +32,27 @@ __all__ = [
     "BETAFLIGHT_PROPERTIES",
     "DEFAULT_METHODS",
     "SAMPLED_PROPERTIES",
+    "SCENARIOS",
     "FailedJob",
     "RobustnessRanges",
     "RobustnessSummary",
     "StudyOutcome",
     "envelope_grid",
     "envelope_jobs",
+    "feedback_study_jobs",
     "load_ranges",
     "map_csv",
     "map_grid",
     "map_jobs",
     "parse_methods",
+    "parse_scenarios",
+    "parse_schemes",
     "robustness_jobs",
     "rules_study_jobs",
     "run_study",
     "sample_arena",
     "sample_betaflight",
+    "summarize_feedback",
     "summarize_robustness",
     "summarize_rules",
 ]

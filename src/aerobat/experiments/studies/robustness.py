@@ -24,6 +24,8 @@ from aerobat.errors import ConfigError
 from aerobat.experiments.job import Job
 from aerobat.plants.arena.params import ArenaParams
 from aerobat.plants.betaflight.params import BetaflightParams
+from aerobat.plants.spec import PLANTS
+from aerobat.quadrotor.feedback import Feedback, as_feedback
 from aerobat.quadrotor.vehicle import VehicleConfig, vehicle_table
 
 __all__ = [
@@ -202,16 +204,21 @@ def sample_arena(ranges: RobustnessRanges, seed: int) -> tuple[dict[str, Any], d
 
 def robustness_jobs(maneuver: Maneuver, design: Design, model: VehicleConfig, *, vehicles: int, iterations: int,
                     seed: int, ranges: RobustnessRanges | None = None, rule: RuleChoice | None = None,
-                    tolerance_m: float = 0.12, plant: str = "arena", base: Any = None) -> list[Job]:
+                    tolerance_m: float = 0.12, plant: str = "arena", base: Any = None,
+                    feedback: Any = None) -> list[Job]:
     """One learning job per sampled vehicle; vehicle k's sample and plant seed derive from ``seed`` and k.
 
     ``plant`` is ``"arena"`` or ``"betaflight"``; ``base`` the settings sampled around (default: the
-    plant's defaults).
+    plant's defaults); ``feedback`` the onboard feedback every vehicle runs (a
+    :class:`~aerobat.quadrotor.feedback.Feedback`, a scheme name, or None for the plant's default).
     """
     if plant not in ("arena", "betaflight"):
         raise ConfigError(f"robustness --plant {plant!r}: sampling is defined for arena and betaflight")
     ranges = ranges or RobustnessRanges()
     rule = rule or RuleChoice()
+    spec = PLANTS.get(plant, source="robustness --plant")
+    fb = Feedback(spec.default_feedback) if feedback is None else as_feedback(feedback)
+    spec.check_feedback(fb)
     design_table = {k: v for k, v in design.to_json_dict().items() if k != "maneuver"}
     jobs = []
     for k in range(vehicles):
@@ -221,6 +228,8 @@ def robustness_jobs(maneuver: Maneuver, design: Design, model: VehicleConfig, *,
         else:
             settings, props = sample_arena(ranges, sample_seed)
         table = {"kind": plant, "settings": settings, "seed": sample_seed}
+        if fb.enabled:
+            table["feedback"] = fb.to_table()
         jobs.append(Job(key=f"vehicle-{k:05d}", kind="learn", spec={
             "maneuver": maneuver.spec(), "design": design_table, "model": vehicle_table(model), "plant": table,
             "properties": props, "iterations": iterations, "rule": rule.label, "tolerance_m": tolerance_m,

@@ -29,8 +29,17 @@ from aerobat.quadrotor.dynamics import (
     quaternion_multiply,
     rotation_vector_from_quaternion,
 )
+from aerobat.quadrotor.feedback import (
+    Feedback,
+    FeedbackScheme,
+    Reference,
+    as_feedback,
+    feedback_vector,
+    onboard_state,
+    reference_from_trajectory,
+)
 from aerobat.quadrotor.program import Program
-from aerobat.quadrotor.simulate import simulate
+from aerobat.quadrotor.simulate import Trajectory, simulate
 from aerobat.quadrotor.vehicle import VehicleConfig, VehicleParams
 
 __all__ = ["Arena"]
@@ -67,14 +76,22 @@ class Arena:
     config : the *nominal* vehicle (the design model); the onboard controller inverts with it.
     params : the arena's effects (defaults: a realistic Hummingbird in a mocap arena).
     seed : seeds the arena's single random generator.
+    feedback : what the onboard loop mixes into the program (:mod:`aerobat.quadrotor.feedback`):
+        a :class:`Feedback`, or a scheme name with default gains; default the best scheme measured
+        (``tracking``); ``"none"`` is the paper's pure open loop.
     """
 
     name = "arena"
 
-    def __init__(self, config: VehicleConfig, params: ArenaParams | None = None, *, seed: int = 0) -> None:
+    def __init__(self, config: VehicleConfig, params: ArenaParams | None = None, *, seed: int = 0,
+                 feedback: Feedback | FeedbackScheme | str | None = None) -> None:
         self.config = config
         self.params = params or ArenaParams()
         self.seed = seed
+        self.feedback = as_feedback(feedback)
+        self._fb_vector = feedback_vector(self.feedback)
+        self.onboard, self.history = onboard_state()
+        self._reference = Reference.empty()
         self.rng = np.random.default_rng(seed)
         self.trials_flown = 0
         self.capacity = 1.0
@@ -185,6 +202,9 @@ class Arena:
         }
         for name in ("x", "gyro_prev", "radio_cmd", "integral", "plant", "start_m"):
             state[name] = [float(v) for v in getattr(self, name)]
+        if self.feedback.enabled:
+            state["onboard"] = [float(v) for v in self.onboard]
+            state["history"] = [float(v) for v in self.history.ravel()]
         return state
 
     def set_state(self, state: dict[str, object]) -> None:
@@ -234,11 +254,24 @@ class Arena:
             self.rng.bit_generator.state = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in rng.items()}
         except (TypeError, ValueError, KeyError) as exc:
             raise ValueError(f"arena state.rng: {exc}") from None
+        onboard, history = onboard_state()
+        if self.feedback.enabled:
+            for name, default in (("onboard", onboard), ("history", history)):
+                if name not in state:
+                    raise ValueError(f"arena state: missing field {name} (the onboard feedback's estimator)")
+                try:
+                    values = np.array(state[name], dtype=np.float64)
+                except (TypeError, ValueError):
+                    raise ValueError(f"arena state.{name}: expected a list of numbers") from None
+                if values.size != default.size:
+                    raise ValueError(f"arena state.{name}: expected {default.size} values, got {values.size}")
+                default[...] = values.reshape(default.shape)
         self.trials_flown = counters["trials_flown"]
         self.capacity = float(capacity)
         self.tick = counters["tick"]
         for name, values in arrays.items():
             setattr(self, name, values)
+        self.onboard, self.history = onboard, history
 
     # ------------------------------------------------------------ simulation
     def _mocap_noise(self, rows: int) -> np.ndarray:
@@ -285,7 +318,8 @@ class Arena:
                   self.mocap_every, self.mocap_delay_ticks, noise, log.rows, log.count, period,
                   self.link_delay_ticks, drops, p.links.command_drop_probability, closed_loop,
                   np.asarray(target, dtype=float), self.integral, gains, limits, hover_cmd, volume,
-                  np.zeros(4) if settle is None else settle, out)
+                  np.zeros(4) if settle is None else settle, self._fb_vector, self._reference.samples,
+                  self.onboard, self.history, out)
         self.tick = int(out[0])
         log.count = int(out[1])
         status = int(out[4])
@@ -320,6 +354,8 @@ class Arena:
         """Send the switch list in packets, each acknowledged; retries cost a timeout each."""
         links = self.params.links
         packets = max(1, math.ceil(len(program.switches) / links.upload_switches_per_packet))
+        if self.feedback.enabled:  # the reference goes up with the program
+            packets += math.ceil(self._reference.samples.shape[0] / links.upload_reference_samples_per_packet)
         attempts_total = 0
         for packet in range(packets):
             for _attempt in range(links.upload_max_attempts):
@@ -344,6 +380,10 @@ class Arena:
         nan_state = np.full(N_STATE, np.nan)
         log = _Log(np.empty((4096, MOCAP_COLUMNS)))
         self.plant = self._plant_vector()
+        nominal = simulate(program, self.config, record=True)
+        if self.feedback.enabled:
+            self._reference = reference_from_trajectory(nominal.times_s, nominal.states,
+                                                        self.feedback.gains.reference_rate_hz)
         failure = self._settle(log)
         if failure:
             return self._abort(failure, log)
@@ -373,7 +413,7 @@ class Arena:
                                   program=compiled, man_start_tick=man_start)
         if failure:
             return self._abort(failure, log, start_time)
-        if not self._maneuver_started(log, program, start_time, check_tick):
+        if not self._maneuver_started(log, nominal, start_time, check_tick):
             failure = self._supervise(round(p.supervisor.return_time_s / self.tick_s), log, self.start_m)
             return Trial(TrialStatus.NO_TRIGGER, "trigger lost: no maneuver motion within the timeout; no correction",
                          nan_state, np.empty(0), np.empty((0, N_STATE)), nan_state.copy(),
@@ -413,10 +453,11 @@ class Arena:
                                                  float(self.start_m[2])))
         self.gyro_prev[:] = 0.0
         self.integral[:] = 0.0
+        self.onboard, self.history = onboard_state()  # restarted: the estimator starts level
         self.radio_cmd = np.array([self.config.vehicle.gravity_m_s2, 0.0, 0.0, 0.0])
         return Trial(failure.status, failure.message, nan_state, times, states, nan_state.copy())
 
-    def _maneuver_started(self, log: _Log, program: Program, start_time: float, check_tick: int) -> bool:
+    def _maneuver_started(self, log: _Log, nominal: Trajectory, start_time: float, check_tick: int) -> bool:
         """Did the vehicle start the maneuver? Nearest of two hypotheses at the check time.
 
         The measured pose change since the trigger is compared with the nominal model's
@@ -429,7 +470,6 @@ class Arena:
         if available.shape[0] == 0 or before.shape[0] == 0:
             return True
         ref, now = before[-1], available[-1]
-        nominal = simulate(program, self.config, record=True)
         k = min(int(np.searchsorted(nominal.times_s, now[0] - start_time)), len(nominal.times_s) - 1)
         predicted_disp = nominal.states[k, 0:3]
         predicted_rot = rotation_vector_from_quaternion(nominal.states[k, 6:10])

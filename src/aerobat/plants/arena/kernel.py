@@ -16,6 +16,7 @@ import numba as nb
 import numpy as np
 
 from aerobat.quadrotor.dynamics import controller_thrusts
+from aerobat.quadrotor.feedback import apply_feedback, onboard_propagate, onboard_receive, relay_deviation
 from aerobat.quadrotor.simulate import rk4_plant_step
 
 __all__ = ["MOCAP_COLUMNS", "advance", "estimate_pose", "mocap_sample", "pd_command", "supervise"]
@@ -26,11 +27,17 @@ MOCAP_COLUMNS = 8
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
 def advance(x, gyro_prev, tick0, n_ticks, tick_s, plant, ctrl, sensor, latency, radio_cmd,
-            bp, coeffs, nseg, man_start_tick, duration_s, mocap_every, mocap_noise, mocap_out):  # pragma: no cover
+            bp, coeffs, nseg, man_start_tick, duration_s, mocap_every, mocap_noise, mocap_out,
+            fb_gains, reference, onboard, history, scratch):  # pragma: no cover
     """Advance the true vehicle ``n_ticks`` onboard ticks from global tick ``tick0``.
+
+    With a feedback scheme (``fb_gains[0] > 0``) the onboard attitude estimate integrates
+    the gyro every tick and, while the program runs, :func:`~aerobat.quadrotor.feedback.apply_feedback`
+    corrects its commands towards ``reference``.
 
     Returns (number of mocap rows written, 0 if finite else 1).
     """
+    feedback = fb_gains[0] > 0.0
     n = x.shape[0]
     k1 = np.empty(n)
     k2 = np.empty(n)
@@ -63,6 +70,13 @@ def advance(x, gyro_prev, tick0, n_ticks, tick_s, plant, ctrl, sensor, latency, 
         gp = (1.0 + sensor[0]) * x[10] + sensor[3]
         gq = (1.0 + sensor[1]) * x[11] + sensor[4]
         gr = (1.0 + sensor[2]) * x[12] + sensor[5]
+        if feedback:
+            if running:
+                apply_feedback(cmd, onboard, fb_gains, reference, (tick - man_start_tick) * tick_s, t, scratch)
+            if latency > 0:
+                onboard_propagate(onboard, history, t, gyro_prev[0], gyro_prev[1], gyro_prev[2], tick_s)
+            else:
+                onboard_propagate(onboard, history, t, gp, gq, gr, tick_s)
         if latency > 0:
             controller_thrusts(cmd, gyro_prev[0], gyro_prev[1], gyro_prev[2], ctrl, ft)
         else:
@@ -99,12 +113,13 @@ def mocap_sample(x, t, noise, out):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
-def pd_command(pos, vel, quat, target, integral, gains, limits, dt, out):  # pragma: no cover - compiled
+def pd_command(pos, vel, quat, target, integral, gains, limits, dt, out, settling=False):  # pragma: no cover
     """Cascaded PD(+I) hover controller: position → acceleration → attitude → body rates.
 
     gains = (k_p [1/s²], k_d [1/s], k_att [1/s], k_yaw [1/s], k_i [1/s³]);
     limits = (collective min, max [m/s²], max tilt acceleration [m/s²], max rate [rad/s], g).
-    Writes (collective, p̂, q̂, r̂) into ``out``; updates ``integral`` (anti-windup clamp).
+    Writes (collective, p̂, q̂, r̂) into ``out``; updates ``integral`` (anti-windup clamp), within 0.1 m of
+    the target, or within 0.3 m while ``settling`` and nearly still.
     """
     kp = gains[0]
     kd = gains[1]
@@ -113,9 +128,12 @@ def pd_command(pos, vel, quat, target, integral, gains, limits, dt, out):  # pra
     ki = gains[4]
     g = limits[4]
     a = np.empty(3)
+    # settling and nearly still: a steady offset the P term cannot remove (a heavy vehicle sags
+    # 10 cm, beyond the 0.1 m window, and would never settle) is trimmed too
+    still = settling and vel[0] * vel[0] + vel[1] * vel[1] + vel[2] * vel[2] < 0.05 * 0.05
     for i in range(3):
         err = target[i] - pos[i]
-        if abs(err) < 0.1:  # conditional integration: trim only near the target
+        if abs(err) < 0.1 or (still and abs(err) < 0.3):  # conditional integration: trim only near the target
             integral[i] = min(max(integral[i] + err * dt, -1.0), 1.0)
         a[i] = kp * err - kd * vel[i] + ki * integral[i]
     horiz = math.sqrt(a[0] * a[0] + a[1] * a[1])
@@ -211,7 +229,8 @@ def estimate_pose(log, available, est_pos, est_vel, est_quat):  # pragma: no cov
 def supervise(x, gyro_prev, tick0, end_tick, tick_s, plant, ctrl, sensor, latency, radio_cmd,
               bp, coeffs, nseg, man_start_tick, duration_s, mocap_every, mocap_delay_ticks, mocap_noise,
               log, log_count, period_s, link_delay_ticks, drops, drop_probability, closed_loop, target,
-              integral, gains, limits, hover_cmd, volume, settle, out):  # pragma: no cover - compiled
+              integral, gains, limits, hover_cmd, volume, settle, fb_gains, reference, onboard, history,
+              out):  # pragma: no cover - compiled
     """The supervisor's radio loop (70 Hz) around the vehicle's onboard loop, in one compiled call.
 
     Every radio period: estimate the state from the motion-capture samples available
@@ -223,7 +242,18 @@ def supervise(x, gyro_prev, tick0, end_tick, tick_s, plant, ctrl, sensor, latenc
 
     ``out`` receives (tick, log_count, noise_used, drops_used, status, bad_row) with status
     0 = ran to end_tick, 1 = non-finite state, 2 = left the volume (row bad_row), 3 = settled.
+
+    With a feedback scheme every command packet also carries the latest motion-capture attitude
+    and, once a maneuver was triggered, the deviation from ``reference``; the vehicle takes them
+    in when the packet arrives.
     """
+    feedback = fb_gains[0] > 0.0
+    scratch = np.empty(10)
+    relay = np.empty(6)
+    relay_q = np.empty(4)
+    relay_t = 0.0
+    relay_ok = False
+    relay_translation = False
     tick = tick0
     noise_used = 0
     drops_used = 0
@@ -244,8 +274,16 @@ def supervise(x, gyro_prev, tick0, end_tick, tick_s, plant, ctrl, sensor, latenc
         while available < log_count and log[available, 0] <= avail_time:
             available += 1
         have = estimate_pose(log, available, est_pos, est_vel, est_quat)
+        if feedback:
+            relay_ok = have
+            if have:
+                relay_t = log[available - 1, 0]
+                for i in range(4):
+                    relay_q[i] = log[available - 1, 4 + i]
+                relay_translation = man_start_tick >= 0 and relay_deviation(
+                    log, available, man_start_tick * tick_s, target, reference, fb_gains[12], scratch, relay)
         if closed_loop and have:
-            pd_command(est_pos, est_vel, est_quat, target, integral, gains, limits, period_s, cmd)
+            pd_command(est_pos, est_vel, est_quat, target, integral, gains, limits, period_s, cmd, settle[0] > 0)
         else:
             for i in range(4):
                 cmd[i] = hover_cmd[i]
@@ -258,7 +296,8 @@ def supervise(x, gyro_prev, tick0, end_tick, tick_s, plant, ctrl, sensor, latenc
             if stop > tick:
                 rows, bad = advance(x, gyro_prev, tick, stop - tick, tick_s, plant, ctrl, sensor, latency,
                                     radio_cmd, bp, coeffs, nseg, man_start_tick, duration_s, mocap_every,
-                                    mocap_noise[noise_used:], log[log_count:])
+                                    mocap_noise[noise_used:], log[log_count:], fb_gains, reference, onboard,
+                                    history, scratch)
                 noise_used += rows
                 log_count += rows
                 tick = stop
@@ -268,6 +307,9 @@ def supervise(x, gyro_prev, tick0, end_tick, tick_s, plant, ctrl, sensor, latenc
             if leg == 0 and delivered and arrival <= send_tick:
                 for i in range(4):
                     radio_cmd[i] = cmd[i]
+                if feedback and relay_ok:
+                    onboard_receive(onboard, history, fb_gains, relay_t, relay_q, relay[0:3], relay[3:6],
+                                    relay_translation)
         if status != 0:
             break
         for k in range(first_written, log_count):

@@ -166,6 +166,7 @@ class Links:
     upload_timeout_s: float = 0.02
     upload_max_attempts: int = 10
     upload_switches_per_packet: int = 8
+    upload_reference_samples_per_packet: int = 2
 
     def __post_init__(self) -> None:
         check_range("command_rate_hz", self.command_rate_hz, low=5.0, high=1000.0, unit="Hz")
@@ -175,6 +176,8 @@ class Links:
         check_range("upload_timeout_s", self.upload_timeout_s, low=0.001, high=1.0, unit="s")
         check_range("upload_max_attempts", self.upload_max_attempts, low=1, high=1000)
         check_range("upload_switches_per_packet", self.upload_switches_per_packet, low=1, high=1000)
+        check_range("upload_reference_samples_per_packet", self.upload_reference_samples_per_packet, low=1,
+                    high=1000)
 
 
 @dataclass(frozen=True, kw_only=True)

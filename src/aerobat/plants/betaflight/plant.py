@@ -43,8 +43,19 @@ from aerobat.plants.betaflight.pilot import L_CLIMB, StickMap, angle_sticks, pro
 from aerobat.plants.betaflight.rc import RC_MIN_US, stick_to_us
 from aerobat.plants.betaflight.settings import BetaflightSettings, load_settings
 from aerobat.plants.mocap import estimate_final_state, measured_states
-from aerobat.quadrotor.dynamics import N_STATE
+from aerobat.quadrotor.dynamics import N_STATE, quaternion_from_rotation_vector, quaternion_multiply
+from aerobat.quadrotor.feedback import (
+    Feedback,
+    FeedbackScheme,
+    apply_feedback,
+    as_feedback,
+    feedback_vector,
+    onboard_state,
+    reference_from_trajectory,
+    relay_deviation,
+)
 from aerobat.quadrotor.program import CompiledProgram, Program
+from aerobat.quadrotor.simulate import simulate
 from aerobat.quadrotor.vehicle import VehicleConfig
 
 __all__ = ["BetaflightPlant"]
@@ -79,13 +90,18 @@ class BetaflightPlant:
     binary, eeprom : the SITL binary and configured eeprom (default: built and configured on
         first use, cached: :func:`.build.ensure_sitl`, :func:`.configure.ensure_eeprom`).
     settings : the firmware's settings (default: the packaged ``settings.toml``).
+    feedback : what the offboard pilot mixes into the program's sticks (:mod:`aerobat.quadrotor.feedback`;
+        default ``none``). Betaflight runs no program, so the law runs in the pilot, at the radio's
+        rate, on motion capture: the attitude is the latest motion-capture sample carried forward by
+        the commanded rates over its age and the radio's latency (the pilot sees no gyro).
     """
 
     name = "betaflight"
 
     def __init__(self, config: VehicleConfig, params: BetaflightParams | None = None, *, seed: int = 0,
                  binary: Path | None = None, eeprom: Path | None = None,
-                 settings: BetaflightSettings | None = None) -> None:
+                 settings: BetaflightSettings | None = None,
+                 feedback: Feedback | FeedbackScheme | str | None = None) -> None:
         from aerobat.plants.betaflight.build import ensure_sitl
         from aerobat.plants.betaflight.configure import ensure_eeprom
 
@@ -110,6 +126,8 @@ class BetaflightPlant:
         self.last_truth: tuple[np.ndarray, np.ndarray] = (np.empty(0), np.empty((0, N_STATE)))
         self.flight: Flight | None = None  # the flight in progress (for fault injection and diagnosis)
         self._integral = np.zeros(3)
+        self.feedback = as_feedback("none" if feedback is None else feedback)
+        self._fb_vector = feedback_vector(self.feedback)
 
     # ---------------------------------------------------------------- state
     def get_state(self) -> dict[str, Any]:
@@ -373,13 +391,47 @@ class BetaflightPlant:
         commands = compiled.evaluate(np.arange(n) * period)
         commands[np.arange(n) * period >= compiled.duration_s - 1e-12] = compiled.hover
         sticks = np.zeros(4)
+        law = self._pilot_feedback(compiled, start_time) if self.feedback.enabled else None
         for k in range(n):
-            program_sticks(commands[k], self.limits, sticks)
+            cmd = commands[k]
+            if law is not None and k * period < compiled.duration_s:
+                cmd = law(flight, k * period, cmd)
+            program_sticks(cmd, self.limits, sticks)
             flight.frame(self.channels(sticks, arm=True, angle=False))
             truth.append(np.concatenate([[flight.time_s], flight.x]))
             self._check_volume(flight)
         self._integral = np.zeros(3)
         return start_time
+
+    def _pilot_feedback(self, compiled: CompiledProgram, start_time: float) -> Any:
+        """The feedback law as the offboard pilot runs it: ``law(flight, τ, cmd) -> corrected cmd``."""
+        nominal = simulate(compiled, self.config, record=True)
+        reference = reference_from_trajectory(nominal.times_s, nominal.states, self.feedback.gains.reference_rate_hz)
+        state, _ = onboard_state()
+        scratch, relay = np.empty(10), np.empty(6)
+        ahead = self.params.radio.latency_s
+
+        def law(flight: Flight, tau: float, command: np.ndarray) -> np.ndarray:
+            cmd = command.copy()
+            rows = flight.mocap()
+            available = int(np.searchsorted(rows[:, 0], flight.time_s - self.params.motion_capture.latency_s
+                                            + 1e-12, side="right"))
+            if available == 0:
+                return cmd
+            row = rows[available - 1]
+            # the latest attitude, carried forward by the commanded rates to when this frame acts
+            step = quaternion_from_rotation_vector(cmd[1:4] * (flight.time_s - row[0] + ahead))
+            q = quaternion_multiply(row[4:8], step)
+            state[0:4] = q / np.linalg.norm(q)
+            if relay_deviation(rows, available, start_time, self.start_m, reference.samples, reference.dt_s,
+                               scratch, relay):
+                state[4:10] = relay
+                state[10] = row[0]
+                state[11] = 1.0
+            apply_feedback(cmd, state, self._fb_vector, reference.samples, tau, flight.time_s, scratch)
+            return cmd
+
+        return law
 
     def land_and_disarm(self, flight: Flight) -> tuple[bool, bool]:
         """Descend onto the floor, throttle down and disarm; (landed, disarmed)."""

@@ -51,7 +51,20 @@ from aerobat.plants.rotorpy.settings import (
     load_rotorpy_settings,
 )
 from aerobat.quadrotor.dynamics import N_STATE
+from aerobat.quadrotor.feedback import (
+    Feedback,
+    FeedbackScheme,
+    apply_feedback,
+    as_feedback,
+    feedback_vector,
+    onboard_propagate,
+    onboard_receive,
+    onboard_state,
+    reference_from_trajectory,
+    relay_deviation,
+)
 from aerobat.quadrotor.program import CompiledProgram, Program
+from aerobat.quadrotor.simulate import simulate
 from aerobat.quadrotor.vehicle import VehicleConfig
 
 __all__ = ["RotorPyPlant"]
@@ -167,12 +180,17 @@ class RotorPyPlant:
     settings : settings given directly (mutually exclusive with ``settings_path``).
     wind_profile : any object with RotorPy's wind interface ``update(t, position) -> (3,)`` [m/s];
         replaces ``settings.wind``.
+    feedback : what the onboard loop mixes into the program (:mod:`aerobat.quadrotor.feedback`);
+        default the best scheme measured (``tracking``). The onboard estimator integrates RotorPy's
+        body rates (its model has no gyro errors) and takes the supervisor's motion-capture estimate
+        every supervisor period (``supervisor_rate_hz``; no radio here, so no drops).
     """
 
     name = "rotorpy"
 
     def __init__(self, config: VehicleConfig, settings_path: str | Path | None = None, seed: int = 0, *,
-                 settings: RotorPySettings | None = None, wind_profile: Any | None = None) -> None:
+                 settings: RotorPySettings | None = None, wind_profile: Any | None = None,
+                 feedback: Feedback | FeedbackScheme | str | None = None) -> None:
         multirotor_cls, _ = import_rotorpy()
         if settings_path is not None and settings is not None:
             raise ValueError("give either settings_path or settings, not both")
@@ -217,6 +235,8 @@ class RotorPyPlant:
         self._est_pos = np.zeros(3)
         self._est_vel = np.zeros(3)
         self._est_quat = np.array([1.0, 0.0, 0.0, 0.0])
+        self.feedback = as_feedback(feedback)
+        self._fb_vector = feedback_vector(self.feedback)
 
     # ---------------------------------------------------------------- state
     def hover_state(self, position_m: np.ndarray | None = None) -> dict[str, np.ndarray]:
@@ -445,8 +465,11 @@ class RotorPyPlant:
             n_man = math.ceil(duration / self.tick_s - 1e-9)
             commands = compiled.evaluate(np.arange(n_man) * self.tick_s)
             self.trials_flown += 1
-            for k in range(n_man):
-                self._step(commands[k])
+            if self.feedback.enabled:
+                self._fly_with_feedback(compiled, commands, start_time)
+            else:
+                for k in range(n_man):
+                    self._step(commands[k])
             # hover commands until the supervisor's estimation window is filled, then recover
             for _ in range(math.ceil(0.015 / self.tick_s)):
                 self._step(compiled.hover)
@@ -471,6 +494,36 @@ class RotorPyPlant:
                          times, states, start_state, info)
         return Trial(TrialStatus.OK, f"maneuver flown on RotorPy ({info['steps']} steps of {self.tick_s * 1e3:.3g} ms)",
                      final, times, states, start_state, info)
+
+    def _fly_with_feedback(self, compiled: CompiledProgram, commands: np.ndarray, start_time: float) -> None:
+        """The program's ticks with the onboard feedback: the estimator starts from the supervisor's
+        attitude estimate at the trigger, integrates the body rates every tick and takes in the
+        supervisor's estimate (attitude, deviation from the reference) every supervisor period."""
+        nominal = simulate(compiled, self.config, record=True)
+        reference = reference_from_trajectory(nominal.times_s, nominal.states, self.feedback.gains.reference_rate_hz)
+        onboard, history = onboard_state()
+        est = self._feedback()
+        if est is not None:
+            onboard[0:4] = est[2]
+        scratch = np.empty(10)
+        relay = np.empty(6)
+        cmd = np.empty(4)
+        for k in range(commands.shape[0]):
+            t = self.tick * self.tick_s
+            if k % self.control_every == 0 and self._count:
+                available = int(np.searchsorted(self._rows[: self._count, 0], t - self.mocap_delay_s + 1e-12,
+                                                side="right"))
+                if available:
+                    row = self._rows[available - 1]
+                    moved = relay_deviation(self._rows, available, start_time, self.start_m, reference.samples,
+                                            reference.dt_s, scratch, relay)
+                    onboard_receive(onboard, history, self._fb_vector, float(row[0]), row[4:8].copy(),
+                                    relay[0:3], relay[3:6], moved)
+            cmd[:] = commands[k]
+            apply_feedback(cmd, onboard, self._fb_vector, reference.samples, k * self.tick_s, t, scratch)
+            w = self.state["w"]
+            onboard_propagate(onboard, history, t, float(w[0]), float(w[1]), float(w[2]), self.tick_s)
+            self._step(cmd)
 
     def _abort(self, status: TrialStatus, message: str, start_time: float | None, wall: float, steps0: int) -> Trial:
         """Report a failed trial and put the vehicle back in hover at the start (picked up, restarted)."""

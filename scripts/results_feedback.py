@@ -1,7 +1,7 @@
 """Every number of docs/results.md's "Feedback" section (issue 15), from aerobat's own commands.
 
-    .venv/bin/python scripts/results_feedback.py            # all of it (about 15 min on 2 cores)
-    .venv/bin/python scripts/results_feedback.py flip        # one part: flip, translation, rotorpy, robustness
+    .venv/bin/python scripts/results_feedback.py            # all of it (about an hour on 2 cores)
+    .venv/bin/python scripts/results_feedback.py flip        # one part (names below, PARTS)
 
 Each part runs an ``aerobat study`` with ``--json`` into a scratch store, prints the markdown
 table quoted in docs/results.md and copies the study's figure to docs/figures/feedback/.
@@ -70,7 +70,17 @@ PARTS = {
         "(5, 5) translation, arena, seeds 0–6 × 30 trials (rule paper):"),
     "rotorpy": lambda s: study_feedback(
         "rotorpy", [*FLIP, "--plant", "rotorpy", "--seed", "1", "--seeds", "3", "--trials", "30",
-                    "--scenarios", "default"], s, "3D triple flip at 1800 °/s, RotorPy, seeds 1–3 × 30 trials:"),
+                    "--scenarios", "default"], s,
+        "3D triple flip at 1800 °/s, RotorPy, seeds 1–3 × 30 trials, rule paper:"),
+    "rotorpy-broyden": lambda s: study_feedback(
+        "rotorpy-broyden", [*FLIP, "--plant", "rotorpy", "--seed", "1", "--seeds", "3", "--trials", "30",
+                            "--scenarios", "default", "--rule", "broyden"], s,
+        "3D triple flip at 1800 °/s, RotorPy, seeds 1–3 × 30 trials, rule broyden:"),
+    "betaflight": lambda s: study_feedback(
+        "betaflight", ["flip", "--flips", "3", "--max-rate-deg-s", "1800", "--dims", "3", "--vehicle", "fpv5",
+                       "--plant", "betaflight", "--seed", "1", "--seeds", "3", "--trials", "30",
+                       "--scenarios", "default", "--schemes", "none,tracking"], s,
+        "3D triple flip at 1800 °/s, Betaflight 4.6 (fpv5), seeds 1–3 × 30 trials, rule paper:"),
     "robustness": robustness,
 }
 

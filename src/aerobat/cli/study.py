@@ -399,7 +399,7 @@ def register(sub: Any) -> None:
     fb.add_argument("--rule", default="paper", help="update rule (see docs/method.md)")
     fb.add_argument("--tolerance-m", type=finite_float(1e-6, 100.0, "m"), default=0.12,
                     help="position tolerance [m]")
-    add_plant_options(fb, kinds=("arena", "rotorpy"))
+    add_plant_options(fb, kinds=("arena", "rotorpy", "betaflight"))
     fb.set_defaults(seed=0)
     add_execution_options(fb)
     fb.set_defaults(func=_cmd_feedback)

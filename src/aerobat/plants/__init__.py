@@ -126,4 +126,4 @@ PLANTS.register("betaflight", PlantSpec(
     "betaflight", "a 5-inch racer flown by Betaflight 4.6's own firmware (SITL in lockstep) in the arena",
     _betaflight, load_settings=_betaflight_load, settings_from_table=_betaflight_from_table,
     settings_to_table=dataclass_to_table, default_settings=_betaflight_default, option="--betaflight",
-    feedback=_ALL_SCHEMES))
+    feedback=_ALL_SCHEMES, default_feedback=DEFAULT_SCHEME))

@@ -91,7 +91,7 @@ class BetaflightPlant:
         first use, cached: :func:`.build.ensure_sitl`, :func:`.configure.ensure_eeprom`).
     settings : the firmware's settings (default: the packaged ``settings.toml``).
     feedback : what the offboard pilot mixes into the program's sticks (:mod:`aerobat.quadrotor.feedback`;
-        default ``none``). Betaflight runs no program, so the law runs in the pilot, at the radio's
+        default the best scheme measured, ``tracking``; ``"none"`` streams the program as it is). Betaflight runs no program, so the law runs in the pilot, at the radio's
         rate, on motion capture: the attitude is the latest motion-capture sample carried forward by
         the commanded rates over its age and the radio's latency (the pilot sees no gyro).
     """
@@ -126,7 +126,7 @@ class BetaflightPlant:
         self.last_truth: tuple[np.ndarray, np.ndarray] = (np.empty(0), np.empty((0, N_STATE)))
         self.flight: Flight | None = None  # the flight in progress (for fault injection and diagnosis)
         self._integral = np.zeros(3)
-        self.feedback = as_feedback("none" if feedback is None else feedback)
+        self.feedback = as_feedback(feedback)
         self._fb_vector = feedback_vector(self.feedback)
 
     # ---------------------------------------------------------------- state

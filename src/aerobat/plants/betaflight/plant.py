@@ -92,8 +92,9 @@ class BetaflightPlant:
     settings : the firmware's settings (default: the packaged ``settings.toml``).
     feedback : what the offboard pilot mixes into the program's sticks (:mod:`aerobat.quadrotor.feedback`;
         default the best scheme measured, ``tracking``; ``"none"`` streams the program as it is).
-        Betaflight runs no program, so the law runs in the pilot, at the radio's rate, on motion capture: the attitude is the latest motion-capture sample carried forward by
-        the commanded rates over its age and the radio's latency (the pilot sees no gyro).
+        Betaflight runs no program, so the law runs in the pilot, at the radio's rate, on motion capture: the
+        attitude is the latest motion-capture sample carried forward by the commanded rates over its age and the
+        radio's latency (the pilot sees no gyro).
     """
 
     name = "betaflight"

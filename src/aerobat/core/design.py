@@ -195,7 +195,9 @@ def finite_difference_jacobian(
         batch[1 + n + i] = p
         batch[1 + n + i, i] = minus[i]
     errs = _errors(maneuver, model, batch)
-    J = (errs[1 : n + 1] - errs[n + 1 :]).T / (plus - minus)[None, :]
+    # C order, as a design read back from the store has it: products with J (BLAS) round the same
+    # way in a running session and in a resumed one
+    J = np.ascontiguousarray((errs[1 : n + 1] - errs[n + 1 :]).T / (plus - minus)[None, :])
     return J, errs[0]
 
 

@@ -91,7 +91,7 @@ def _arena_truth(params: ArenaParams) -> dict[str, float]:
 
 @pytest.fixture(scope="module")
 def arena_fit():
-    return fit_vehicle(H, _fly(Arena(H, seed=2)))
+    return fit_vehicle(H, _fly(Arena(H, seed=2, feedback="none")))
 
 
 def test_the_fit_recovers_the_arenas_true_vehicle_to_ten_percent(arena_fit):
@@ -117,7 +117,7 @@ def test_identified_arena_vehicle_designs_and_flies_the_triple_flip_closer_than_
     for label, config in (("table1", H), ("identified", arena_fit.config)):
         flip = MultiFlip(vehicle=config.vehicle, flips=3, dims=3)
         p0 = design(flip, NominalModel(config)).p_nominal
-        trial = Arena(H, seed=7).fly(flip.program(p0))
+        trial = Arena(H, seed=7, feedback="none").fly(flip.program(p0))
         errors[label] = float(np.linalg.norm(flip.error(trial.final_state)[position_indices(flip.errors)]))
     assert errors["table1"] > 0.5
     assert errors["identified"] < errors["table1"] / 3
@@ -286,7 +286,7 @@ def test_identified_model_learns_the_triple_flip_in_a_median_of_at_most_two_tria
     firsts, trials = [], []
     for seed in range(1, 21):
         errors = [float(np.linalg.norm(it.error[idx]))
-                  for it in learn(flip, result, Arena(H, seed=seed), iterations=10).measured]
+                  for it in learn(flip, result, Arena(H, seed=seed, feedback="none"), iterations=10).measured]
         firsts.append(errors[0])
         trials.append(next((k + 1 for k, e in enumerate(errors) if e < 0.12), math.inf))
     assert np.median(firsts) < 0.70 / 3

@@ -12,7 +12,8 @@ from aerobat.core.design import design
 from aerobat.core.learning import constraint_scale, learn
 from aerobat.core.maneuver import bounds_arrays
 from aerobat.core.rules import ConstantSchedule, PaperRule, PaperSchedule
-from aerobat.plants import Arena, ArenaParams, NominalPlant
+from aerobat.plants import Arena as _Arena
+from aerobat.plants import ArenaParams, NominalPlant
 from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel
 
@@ -21,6 +22,11 @@ FLIP3 = MultiFlip(vehicle=CONFIG.vehicle, flips=3, dims=3)
 DESIGN3 = design(FLIP3, NominalModel(CONFIG))
 POSITION = [0, 2, 5]  # y, z, x in the 3D flip's error vector
 ANGLES = [4, 7, 8]
+
+
+def Arena(*args, **kwargs):  # noqa: N802 - the paper's learning loop: pure open loop
+    kwargs.setdefault("feedback", "none")
+    return _Arena(*args, **kwargs)
 
 
 def position_errors(session):

@@ -46,7 +46,7 @@ def test_full_model_design_and_duration(diagonal):
 
 def test_learning_on_the_arena(diagonal):
     maneuver, d = diagonal
-    s = learn(maneuver, d, Arena(CONFIG, seed=1), iterations=30)
+    s = learn(maneuver, d, Arena(CONFIG, seed=1, feedback="none"), iterations=30)  # the paper's open loop
     pos = np.array([np.linalg.norm(it.error[[0, 2]]) for it in s.measured])
     print(f"translation: first {pos[0]:.2f} m, mean of the last 10 {pos[-10:].mean():.3f} m, "
           f"learned duration {maneuver.switch_times(s.final_params)[-1]:.3f} s")

@@ -82,7 +82,7 @@ def test_the_vocabulary_of_docs_cli_md_holds(name, parser):
     for option, action in options.items():
         units = [u for u in ("[m]", "[s]", "[deg]", "[deg/s]", "[m/s²]", "[mm]") if u in (action.help or "")]
         if units and action.nargs != 0:
-            assert option.endswith(UNIT_SUFFIXES), f"aerobat {name}: {option} takes {units[0]} but its name says no unit"
+            assert option.endswith(UNIT_SUFFIXES), f"aerobat {name}: {option} takes {units[0]}, its name no unit"
         assert option not in ("--iterations", "--plot") or name == "replay", f"aerobat {name}: {option} is an old word"
 
 

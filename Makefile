@@ -27,7 +27,7 @@ setup: $(STAMP)
 
 demo: $(STAMP)
 	$(VENV)/bin/aerobat learn flip --flips 3 --max-rate-deg-s 1800 --dims 3 --plant arena --seed 1 \
-		--iterations 30 --out $(OUT)/demo
+		--trials 30 --out $(OUT)/demo
 
 test: $(STAMP)
 	$(PY) -m pytest -q -m "not slow"; rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; exit 0; fi; exit $$rc

@@ -56,7 +56,7 @@ def robustness(scratch: Path) -> None:
     print("| feedback | success (last-10 mean ≤ 0.12 m) | median trials to 0.12 m | failed jobs |")
     print("|---|---:|---:|---:|")
     for scheme in ("none", "tracking"):
-        r = run(["study", "robustness", *FLIP, "--vehicles", "1000", "--iterations", "30", "--seed", "1",
+        r = run(["study", "robustness", *FLIP, "--vehicles", "1000", "--trials", "30", "--seed", "1",
                  "--feedback", scheme, "--out", str(scratch / f"robustness-{scheme}")], scratch)
         print(f"| {scheme} | {100 * r['success_rate']:.1f} % | {r['median_trials_to_tolerance']:g} | "
               f"{len(r['failed_jobs'])} |")

@@ -2,7 +2,7 @@
 
 Each example is designed on the nominal model and learned on the default arena (seed 1, 30
 measured iterations), exactly as `aerobat learn --maneuver FILE --plant arena --seed 1
---iterations 30` does. Prints a markdown table: first and last-10-mean position errors [m].
+--trials 30` does. Prints a markdown table: first and last-10-mean position errors [m].
 
     .venv/bin/python scripts/results_maneuvers.py
 """

@@ -59,3 +59,42 @@ def test_debug_is_accepted_anywhere_and_negative_values_are_values():
     err = io.StringIO()
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
         assert main(["design", "translation", "--to", "-2,4", "--debug", "--json"]) == 0
+
+
+LEAVES = [(name, parser) for name, parser in PARSERS
+          if name and not any(isinstance(a, argparse._SubParsersAction) for a in parser._actions)]  # noqa: SLF001
+UNIT_SUFFIXES = ("-m", "-s", "-deg", "-deg-s", "-m-s2", "-mm")
+
+
+def _visible(parser: argparse.ArgumentParser) -> list[argparse.Action]:
+    return [a for a in parser._actions if a.option_strings and a.help != argparse.SUPPRESS]  # noqa: SLF001
+
+
+@pytest.mark.parametrize("name, parser", LEAVES, ids=[name for name, _ in LEAVES])
+def test_the_vocabulary_of_docs_cli_md_holds(name, parser):
+    """--json everywhere; --out only ever a folder; a unit in the help means a unit in the name;
+    a count of flights is --trials (docs/cli.md)."""
+    options = {s: a for a in _visible(parser) for s in a.option_strings}
+    assert "--json" in options, f"aerobat {name}: no --json"
+    if "--out" in options:
+        out = options["--out"]
+        assert out.metavar == "DIR" or "folder" in (out.help or ""), f"aerobat {name}: --out is not a folder"
+    for option, action in options.items():
+        units = [u for u in ("[m]", "[s]", "[deg]", "[deg/s]", "[m/s²]", "[mm]") if u in (action.help or "")]
+        if units and action.nargs != 0:
+            assert option.endswith(UNIT_SUFFIXES), f"aerobat {name}: {option} takes {units[0]}, its name no unit"
+        assert option not in ("--iterations", "--plot") or name == "replay", f"aerobat {name}: {option} is an old word"
+
+
+def test_earlier_spellings_still_work(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        assert main(["learn", "flip", "--flips", "1", "--dims", "2", "--max-rate-deg-s", "800", "--plant", "nominal",
+                     "--iterations", "2", "--db", "a.sqlite"]) == 0
+        assert main(["learn", "--resume", "1", "--trials", "3", "--db", "a.sqlite"]) == 0
+    from aerobat.store import Store
+
+    with Store(tmp_path / "a.sqlite") as store:
+        assert store.session(1).n_measured == 3
+    assert (tmp_path / "out" / "session-1" / "session.json").exists()

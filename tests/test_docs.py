@@ -66,11 +66,10 @@ def _shrink_iterations(match: re.Match[str]) -> str:
 
 def smaller(command: str) -> str:
     """The same command with sizes a test can afford (documented in this module's docstring)."""
-    command = re.sub(r"(--iterations[ =])(\d+)", _shrink_iterations, command)
-    command = re.sub(r"(--trials[ =])(\d+)", lambda m: f"{m.group(1)}{min(int(m.group(2)), 3)}", command)
+    command = re.sub(r"(--(?:trials|iterations)[ =])(\d+)", _shrink_iterations, command)
     command = re.sub(r"(--seeds[ =])(\d+)", r"\g<1>1", command)
     command = re.sub(r"(--vehicles[ =])(\d+)", r"\g<1>2", command)
-    command = re.sub(r"(--[yz]=-?[\d.]+:-?[\d.]+:)(\d+)", r"\g<1>2", command)
+    command = re.sub(r"(--[yz](?:-m)?[ =]-?[\d.]+:-?[\d.]+:)(\d+)", r"\g<1>2", command)
     command = re.sub(r"(--rates-deg-s[ =][\d.]+:[\d.]+:)(\d+)", r"\g<1>2", command)
     if " study rules" in command and "--trials" not in command:
         command += " --trials 3"

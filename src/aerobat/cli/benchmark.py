@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.cli.common import HelpFormatter, console, finite_float, parse_pair
+from aerobat.cli.common import HelpFormatter, console, finite_float, old_spelling, output_dir, parse_pair
 from aerobat.cli.study import add_execution_options, report_failures, run_cli_study
 from aerobat.errors import ConfigError, SolveFailed
 
@@ -24,9 +24,15 @@ def _limits(args: argparse.Namespace) -> Any:
     return BenchmarkLimits(
         f_min_m_s2=defaults.f_min_m_s2 if args.f_min is None else args.f_min,
         f_max_m_s2=defaults.f_max_m_s2 if args.f_max is None else args.f_max,
-        max_rate_rad_s=args.max_rate_rad_s,
+        max_rate_rad_s=defaults.max_rate_rad_s if args.max_rate_deg_s is None else math.radians(args.max_rate_deg_s),
         gravity_m_s2=defaults.gravity_m_s2,
     )
+
+
+def _require(args: argparse.Namespace, *options: tuple[str, str]) -> None:
+    missing = [option for dest, option in options if getattr(args, dest, None) is None]
+    if missing:
+        raise ConfigError(f"the following arguments are required: {', '.join(missing)}")
 
 
 def _cmd_translation(args: argparse.Namespace) -> int:
@@ -36,17 +42,23 @@ def _cmd_translation(args: argparse.Namespace) -> int:
     from aerobat.plotting.benchmarks import plot_solution
     from aerobat.quadrotor.timeoptimal import solve_translation
 
-    y, z = parse_pair(args.to, "--to")
-    if abs(y) < 1e-9 and abs(z) < 1e-9 and abs(args.final_angle_rad) < 1e-9:
-        raise ConfigError(f"--to {args.to!r}: the target is the start (hover to the same hover takes no time)")
-    solution = solve_translation(y, z, final_angle_rad=args.final_angle_rad, limits=_limits(args))
-    if args.plot and solution.ok:
-        save_figure(plot_solution(solution), args.plot)
+    _require(args, ("to", "--to-m"))
+    y, z = parse_pair(args.to, "--to-m")
+    final_angle_rad = math.radians(args.final_angle_deg)
+    if abs(y) < 1e-9 and abs(z) < 1e-9 and abs(final_angle_rad) < 1e-9:
+        raise ConfigError(f"--to-m {args.to!r}: the target is the start (hover to the same hover takes no time)")
+    folder = output_dir(args.out) if args.out is not None else None  # an unusable --out fails before the solve
+    solution = solve_translation(y, z, final_angle_rad=final_angle_rad, limits=_limits(args))
+    figure = None
+    if solution.ok and (folder is not None or args.plot):
+        figure = save_figure(plot_solution(solution), folder / "translation.png" if folder is not None else args.plot)
+    if folder is not None:
+        (folder / "translation.json").write_text(json.dumps(solution.to_json_dict(), indent=1))
     if args.json:
         print(json.dumps(solution.to_json_dict()))
     else:
         out = console()
-        out.print(f"time-optimal hover-to-hover (0, 0) → ({y:g}, {z:g}) m, final angle {args.final_angle_rad:g} rad")
+        out.print(f"time-optimal hover-to-hover (0, 0) → ({y:g}, {z:g}) m, final angle {args.final_angle_deg:g}°")
         out.print(f"status: {solution.status.value} — {solution.message}")
         if solution.ok:
             out.print(f"T* = {solution.duration_s:.4f} s (transcription {solution.transcription_duration_s:.4f} s), "
@@ -58,8 +70,9 @@ def _cmd_translation(args: argparse.Namespace) -> int:
                 for arc in arcs:
                     table.add_row(arc.kind, f"{arc.start_s:.4f}", f"{arc.end_s:.4f}", f"{arc.value:+.4f}")
                 out.print(table)
-        if args.plot and solution.ok:
-            out.print(f"plot written to {args.plot}")
+        if figure is not None:
+            where = f", solution to {folder / 'translation.json'}" if folder is not None else ""
+            out.print(f"figure written to {figure}{where}")
     if not solution.ok:
         raise SolveFailed(solution.message, solution)
     return 0
@@ -84,8 +97,9 @@ def _cmd_map(args: argparse.Namespace) -> int:
     from aerobat.plotting import save_figure, write_text
     from aerobat.plotting.benchmarks import plot_map
 
-    ya, yb, yn = _parse_range(args.y, "--y")
-    za, zb, zn = _parse_range(args.z, "--z")
+    _require(args, ("y", "--y-m"), ("z", "--z-m"))
+    ya, yb, yn = _parse_range(args.y, "--y-m")
+    za, zb, zn = _parse_range(args.z, "--z-m")
     ys, zs = np.linspace(ya, yb, yn), np.linspace(za, zb, zn)
     limits = dataclasses.asdict(_limits(args))
     jobs = map_jobs(ys, zs, limits)
@@ -113,25 +127,36 @@ def register(sub: Any) -> None:
     bsub = bench.add_subparsers(dest="benchmark", parser_class=type(bench), metavar="BENCHMARK")
 
     def limits(p: argparse.ArgumentParser) -> None:
-        p.add_argument("--f-min", type=finite_float(0.0, 1000.0, "m/s²"), default=None,
+        p.add_argument("--collective-min-m-s2", dest="f_min", type=finite_float(0.0, 1000.0, "m/s²"), default=None,
                        help="minimum collective [m/s²] (default eq 47: 4.80)")
-        p.add_argument("--f-max", type=finite_float(0.0, 1000.0, "m/s²"), default=None,
+        old_spelling(p, "--f-min", "f_min", type=finite_float(0.0, 1000.0, "m/s²"))
+        p.add_argument("--collective-max-m-s2", dest="f_max", type=finite_float(0.0, 1000.0, "m/s²"), default=None,
                        help="maximum collective [m/s²] (default eq 47: 20.70)")
-        p.add_argument("--max-rate-rad-s", type=finite_float(0.01, 100.0, "rad/s"), default=10.0,
-                       help="rate limit [rad/s]")
+        old_spelling(p, "--f-max", "f_max", type=finite_float(0.0, 1000.0, "m/s²"))
+        p.add_argument("--max-rate-deg-s", type=finite_float(0.5, 5700.0, "deg/s"), default=None,
+                       help="body-rate limit [deg/s] (default 573, the paper's 10 rad/s)")
+        old_spelling(p, "--max-rate-rad-s", "max_rate_deg_s", type=finite_float(0.01, 100.0, "rad/s"),
+                     convert=math.degrees)
 
     tr = bsub.add_parser("translation", help="minimum-time hover-to-hover motion to one target", formatter_class=fmt)
-    tr.add_argument("--to", required=True, help="target Y,Z [m] (required)")
-    tr.add_argument("--final-angle-rad", type=finite_float(-40.0, 40.0, "rad"), default=0.0,
-                    help="final attitude (2π: translate with a flip)")
+    tr.add_argument("--to-m", dest="to", metavar="Y,Z", default=None, help="target Y,Z [m] (required)")
+    old_spelling(tr, "--to", "to")
+    tr.add_argument("--final-angle-deg", type=finite_float(-2300.0, 2300.0, "deg"), default=0.0,
+                    help="final roll angle [deg] (360: translate with a flip)")
+    old_spelling(tr, "--final-angle-rad", "final_angle_deg", type=finite_float(-40.0, 40.0, "rad"),
+                 convert=math.degrees)
     limits(tr)
     tr.add_argument("--json", action="store_true", help="print one JSON object")
-    tr.add_argument("--plot", metavar="FILE.png", help="write a figure (default: none)")
+    tr.add_argument("--out", metavar="DIR", default=None,
+                    help="folder for translation.png and translation.json (default: none written)")
+    tr.add_argument("--plot", metavar="FILE.png", default=None, help=argparse.SUPPRESS)  # the earlier spelling
     tr.set_defaults(func=_cmd_translation)
 
     mp = bsub.add_parser("map", help="minimum time over a grid of targets", formatter_class=fmt)
-    mp.add_argument("--y", required=True, help="A:B:N grid of Y targets [m] (required)")
-    mp.add_argument("--z", required=True, help="A:B:N grid of Z targets [m] (required)")
+    mp.add_argument("--y-m", dest="y", metavar="A:B:N", default=None, help="grid of Y targets [m] (required)")
+    old_spelling(mp, "--y", "y")
+    mp.add_argument("--z-m", dest="z", metavar="A:B:N", default=None, help="grid of Z targets [m] (required)")
+    old_spelling(mp, "--z", "z")
     limits(mp)
     mp.add_argument("--json", action="store_true", help="print one JSON object")
     add_execution_options(mp)

@@ -24,6 +24,7 @@ __all__ = [
     "add_db_option",
     "add_maneuver_options",
     "add_plant_options",
+    "old_spelling",
     "console",
     "maneuver_from_args",
     "open_store",
@@ -52,6 +53,23 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
         if isinstance(action, argparse._StoreTrueAction):  # noqa: SLF001 - argparse has no public name for it
             return text + " (default: off)"
         return super()._get_help_string(action) or ""
+
+
+class _OldSpelling(argparse.Action):
+    """An option's earlier name, still accepted (hidden from --help): converts and stores under the new dest."""
+
+    def __init__(self, option_strings: list[str], dest: str, convert: Any = None, **kwargs: Any) -> None:
+        super().__init__(option_strings, dest, help=argparse.SUPPRESS, default=argparse.SUPPRESS, **kwargs)
+        self.convert = convert
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any,
+                 option_string: str | None = None) -> None:
+        setattr(namespace, self.dest, self.convert(values) if self.convert is not None else values)
+
+
+def old_spelling(p: argparse.ArgumentParser, old: str, dest: str, *, type: Any = None, convert: Any = None) -> None:
+    """Accept ``old`` (an option's name before docs/cli.md's vocabulary) as the option stored in ``dest``."""
+    p.add_argument(old, dest=dest, action=_OldSpelling, type=type, convert=convert)
 
 
 class Parser(argparse.ArgumentParser):
@@ -154,7 +172,8 @@ def finite_float(low: float, high: float, unit: str = "") -> Any:
 
 
 _FLIP_DEFAULTS = {"flips": 3, "max_rate_deg_s": 1800.0, "dims": 3, "axis": "roll", "coast": "min", "ramp_s": 0.1}
-_TRANSLATION_DEFAULTS = {"to": "5,5", "final_angle_rad": 0.0}
+_TRANSLATION_DEFAULTS = {"to": "5,5", "final_angle_deg": 0.0}
+_OPTION_OF = {"to": "--to-m"}  # options whose name is not their dest's
 
 
 def add_maneuver_options(p: argparse.ArgumentParser, *, optional: bool = False, families: tuple[str, ...] = (
@@ -177,9 +196,12 @@ def add_maneuver_options(p: argparse.ArgumentParser, *, optional: bool = False, 
     p.add_argument("--coast", choices=("min", "max"), default=None, help="coast collective β̲ or β̄ (flip; default min)")
     p.add_argument("--ramp-s", type=finite_float(0.0, 1.0, "s"), default=None,
                    help="thrust ramp-down duration [s] (flip; default 0.1)")
-    p.add_argument("--to", default=None, help="target Y,Z [m] (translation; default 5,5)")
-    p.add_argument("--final-angle-rad", type=finite_float(-40.0, 40.0, "rad"), default=None,
-                   help="final roll angle [rad] (translation; default 0)")
+    p.add_argument("--to-m", dest="to", metavar="Y,Z", default=None, help="target Y,Z [m] (translation; default 5,5)")
+    old_spelling(p, "--to", "to")
+    p.add_argument("--final-angle-deg", type=finite_float(-2300.0, 2300.0, "deg"), default=None,
+                   help="final roll angle [deg] (translation; default 0)")
+    old_spelling(p, "--final-angle-rad", "final_angle_deg", type=finite_float(-40.0, 40.0, "rad"),
+                 convert=math.degrees)
     p.add_argument("--vehicle", default="hummingbird", help="design vehicle: a preset name or a vehicle TOML file")
     p.add_argument("--correction", choices=("tsvd", "inverse", "damped"), default="tsvd",
                    help="right inverse used for C (see docs/results.md)")
@@ -191,14 +213,14 @@ def _apply_family_defaults(args: argparse.Namespace) -> None:
     if args.maneuver is None:  # --maneuver FILE: no family option applies
         given = [name for name in (*_FLIP_DEFAULTS, *_TRANSLATION_DEFAULTS) if getattr(args, name, None) is not None]
         if given:
-            options = ", ".join("--" + name.replace("_", "-") for name in given)
+            options = ", ".join(_OPTION_OF.get(name, "--" + name.replace("_", "-")) for name in given)
             raise ConfigError(f"{options}: does not apply to --maneuver (only to the flip and translation families)")
         return
     mine, other = ((_FLIP_DEFAULTS, _TRANSLATION_DEFAULTS) if args.maneuver == "flip"
                    else (_TRANSLATION_DEFAULTS, _FLIP_DEFAULTS))
     given = [name for name in other if getattr(args, name, None) is not None]
     if given:
-        options = ", ".join("--" + name.replace("_", "-") for name in given)
+        options = ", ".join(_OPTION_OF.get(name, "--" + name.replace("_", "-")) for name in given)
         raise ConfigError(f"{options}: does not apply to a {args.maneuver} (only to a "
                           f"{'translation' if args.maneuver == 'flip' else 'flip'})")
     for name, value in mine.items():
@@ -253,7 +275,8 @@ def maneuver_from_args(args: argparse.Namespace, config: Any) -> Any:
                          axis=args.axis, dims=args.dims, coast_collective=args.coast, ramp_collective_s=args.ramp_s)
     from aerobat.quadrotor.maneuvers import translation_maneuver
 
-    return translation_maneuver(config, parse_pair(args.to, "--to"), final_angle_rad=args.final_angle_rad)
+    return translation_maneuver(config, parse_pair(args.to, "--to-m"),
+                                final_angle_rad=math.radians(args.final_angle_deg))
 
 
 def plant_choice_from_args(args: argparse.Namespace) -> Any:

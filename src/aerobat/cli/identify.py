@@ -18,6 +18,7 @@ from aerobat.cli.common import (
     bounded_int,
     console,
     finite_float,
+    old_spelling,
     open_store,
     plant_choice_from_args,
     session_ref,
@@ -41,14 +42,16 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     from aerobat.plotting.identification import plot_identification
     from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
 
+    if args.out is None:
+        raise ConfigError("the following arguments are required: --output")
     out = Path(args.out)
     figure = Path(args.figure) if args.figure else out.with_suffix(".png")
     if figure == out:
-        raise ConfigError(f"--figure {figure}: the same file as --out")
+        raise ConfigError(f"--figure {figure}: the same file as --output")
     options = _options(args)
     say = console(args.json).print
     with open_store(args) as store:
-        refuse_overwrite(out, store_path=Path(store.path), force=args.force, option="--out")
+        refuse_overwrite(out, store_path=Path(store.path), force=args.force, option="--output")
         if args.from_session is not None:
             run = refit_session(store, args.from_session, options=options, name=args.name or out.stem)
             say(f"fitting session {run.session_id} of {store.path} again ({len(run.flights)} stored flights)")
@@ -129,13 +132,15 @@ def register(sub: Any) -> None:
     p = sub.add_parser("identify", help="identify the nominal model of the vehicle a plant flies, write a vehicle "
                                         "file", formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     add_plant_options(p)
-    p.add_argument("--out", required=True, metavar="FILE.toml", help="the identified vehicle file to write")
+    p.add_argument("--output", dest="out", default=None, metavar="FILE.toml",
+                   help="the identified vehicle file to write (required)")
+    old_spelling(p, "--out", "out")
     p.add_argument("--vehicle", default="hummingbird",
                    help="prior: the vehicle you believe you have (preset name or vehicle TOML file); the trials are "
                         "built on it and the plant is built around it")
     p.add_argument("--figure", default=None, metavar="FILE.png",
-                   help="measured against fitted responses (default: --out with .png)")
-    p.add_argument("--name", default=None, help="the identified vehicle's name (default: --out's stem)")
+                   help="measured against fitted responses (default: --output with .png)")
+    p.add_argument("--name", default=None, help="the identified vehicle's name (default: --output's stem)")
     p.add_argument("--no-flips", action="store_true", help="leave out the two slow flips (720°/s)")
     p.add_argument("--max-angle-deg", type=finite_float(3.0, 68.0, "deg"), default=28.6,
                    help="largest attitude a rate doublet may reach")
@@ -148,7 +153,7 @@ def register(sub: Any) -> None:
                    help="refuse a fit whose attitude residual is larger (RMS)")
     p.add_argument("--from-session", metavar="SESSION", type=session_ref,
                    help="fit a stored identification session again instead of flying (id or 'last')")
-    p.add_argument("--force", action="store_true", help="replace --out if it exists")
+    p.add_argument("--force", action="store_true", help="replace --output if it exists")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     add_db_option(p)
     p.set_defaults(func=_cmd_identify)

@@ -26,6 +26,7 @@ from aerobat.cli.common import (
     bounded_int,
     console,
     maneuver_from_args,
+    old_spelling,
     open_store,
     output_dir,
     plant_choice_from_args,
@@ -213,7 +214,7 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
               f"({outcome.measured} of {outcome.target} measured iterations stored); resume with: {hint}",
               file=sys.stderr, flush=True)
         return 128 + int(signum)
-    out = output_dir(args.out if args.out is not None else f"out/session-{sid}")
+    out = output_dir(args.out if args.out is not None else (_stored_out(store, sid) or f"out/session-{sid}"))
     data = session_json(store, sid)
     data["wall_s"] = outcome.wall_s
     write_text(out / "session.json", json.dumps(data, indent=1))
@@ -233,13 +234,25 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
     return 0
 
 
+def _stored_out(store: Any, sid: int) -> str | None:
+    """The ``--out`` the session was started (or last resumed) with, from its stored command line."""
+    command = list(store.session(sid).command or [])
+    for k, word in enumerate(command):
+        if word == "--out" and k + 1 < len(command):
+            return str(command[k + 1])
+        if word.startswith("--out="):
+            return word.split("=", 1)[1]
+    return None
+
+
 def register(sub: Any) -> None:
     p = sub.add_parser("learn", help="design, then learn on a plant (every iteration goes to the store)",
                        formatter_class=HelpFormatter)
     add_maneuver_options(p, optional=True)
     add_plant_options(p)
-    p.add_argument("--iterations", type=bounded_int(1, 10000), default=None,
-                   help="measured iterations (default 30; with --resume the stored target)")
+    p.add_argument("--trials", dest="iterations", type=bounded_int(1, 10000), default=None,
+                   help="measured trials, one learning iteration each (default 30; with --resume the stored target)")
+    old_spelling(p, "--iterations", "iterations", type=bounded_int(1, 10000))
     p.add_argument("--gamma", default="paper", help="'paper' (max(1/i, 0.1)) or a constant in (0, 1]")
     p.add_argument("--rule", default="paper",
                    help="update rule: paper, tsvd, damped, kalman, broyden, or <rule>+isc (docs/method.md)")

@@ -81,7 +81,12 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     with open_store(args, create=False) as store:
         session_id = store.resolve_session(args.session)
         out = output_dir(args.out if args.out is not None else f"out/session-{session_id}")
+        before = {p: p.stat().st_mtime_ns for p in out.glob("*.png")}
         notes = session_figures(store, session_id, out)
+    written = sorted(str(p) for p in out.glob("*.png") if before.get(p) != p.stat().st_mtime_ns)
+    if args.json:
+        print(json.dumps({"session": session_id, "folder": str(out), "figures": written, "notes": notes}))
+        return 0
     for note in notes:
         print(note)
     print(f"figures of session {session_id} in {out}/")
@@ -91,10 +96,15 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 def _cmd_export(args: argparse.Namespace) -> int:
     from aerobat.experiments.reports import finite_or_none, session_json
 
-    if args.trajectories and args.format != "json":
+    if args.trajectories and (args.format or ("json" if args.json else "csv")) != "json":
         raise ConfigError("--trajectories: only with --format json")
     if args.iteration is not None and args.program is None:
         raise ConfigError("--iteration: only with --program")
+    if args.json and args.output is None and args.program is None:
+        if args.format == "csv":
+            raise ConfigError("--json with --format csv: --json prints JSON; give --output FILE for the CSV")
+        args.format = "json"  # the export itself is the JSON
+    args.format = args.format or "csv"
     with open_store(args, create=False) as store:
         session_id = store.resolve_session(args.session)
         if args.program is not None:
@@ -126,7 +136,10 @@ def _cmd_export(args: argparse.Namespace) -> int:
             output.write_text(text)
         except OSError as exc:
             raise OutputError(f"--output {output}: cannot write: {exc.strerror or exc}") from None
-        print(f"session {session_id} written to {output}", file=sys.stderr)
+        if args.json:
+            print(json.dumps({"session": session_id, "written": str(output), "format": args.format}))
+        else:
+            print(f"session {session_id} written to {output}", file=sys.stderr)
     else:
         sys.stdout.write(text)
     return 0
@@ -159,7 +172,10 @@ def _export_program(store: Any, session_id: int, args: argparse.Namespace) -> in
         save_program(program, path)
     except OSError as exc:
         raise OutputError(f"--program {path}: cannot write: {exc.strerror or exc}") from None
-    print(f"program of session {session_id} ({what}) written to {path}; fly it with `aerobat fly {path}`")
+    if args.json:
+        print(json.dumps({"session": session_id, "written": str(path), "program": what}))
+    else:
+        print(f"program of session {session_id} ({what}) written to {path}; fly it with `aerobat fly {path}`")
     return 0
 
 
@@ -247,7 +263,10 @@ def _cmd_examples(args: argparse.Namespace) -> int:
         destination.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(entry, destination)
         copied.append(str(relative))
-    print(f"{len(copied)} examples copied to {target}/: {', '.join(copied)}")
+    if args.json:
+        print(json.dumps({"folder": str(target), "files": copied}))
+    else:
+        print(f"{len(copied)} examples copied to {target}/: {', '.join(copied)}")
     return 0
 
 
@@ -274,13 +293,15 @@ def register(sub: Any) -> None:
     plot.add_argument("session", type=session_ref, help="session id or 'last' (required)")
     plot.add_argument("--out", default=None, metavar="DIR",
                       help="folder for learning.png, side_views.png (default: out/session-ID)")
+    plot.add_argument("--json", action="store_true", help="print one JSON object: the figures written")
     add_db_option(plot)
     plot.set_defaults(func=_cmd_plot)
 
     export = sub.add_parser("export", help="a stored session as CSV (one row per iteration) or JSON",
                             formatter_class=fmt)
     export.add_argument("session", type=session_ref, help="session id or 'last' (required)")
-    export.add_argument("--format", choices=("csv", "json"), default="csv", help="output format")
+    export.add_argument("--format", choices=("csv", "json"), default=None,
+                        help="output format (default: csv; json with --json)")
     export.add_argument("--output", metavar="FILE", help="write to FILE (default: standard output)")
     export.add_argument("--force", action="store_true", help="replace --output if it exists (never the store)")
     export.add_argument("--trajectories", action="store_true", help="include measured trajectories (json)")
@@ -288,6 +309,8 @@ def register(sub: Any) -> None:
                         help="write the session's program instead (the learned one; default: no program)")
     export.add_argument("--iteration", type=bounded_int(1, 10**9), default=None,
                         help="with --program: the program flown at this iteration (default: the learned one)")
+    export.add_argument("--json", action="store_true",
+                        help="print JSON: the export itself, or with --output/--program what was written")
     add_db_option(export)
     export.set_defaults(func=_cmd_export)
 
@@ -305,6 +328,7 @@ def register(sub: Any) -> None:
                               formatter_class=fmt)
     examples.add_argument("folder", help="where to copy them (required)")
     examples.add_argument("--force", action="store_true", help="replace files that exist")
+    examples.add_argument("--json", action="store_true", help="print one JSON object: the files copied")
     examples.set_defaults(func=_cmd_examples)
 
     studies = sub.add_parser("studies", help="list the stored studies, or show one", formatter_class=fmt)

@@ -16,6 +16,7 @@ from aerobat.cli.common import (
     add_plant_options,
     bounded_int,
     console,
+    output_dir,
     plant_choice_from_args,
 )
 from aerobat.errors import ConfigError, DesignFailed
@@ -32,19 +33,24 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
     program = load_program(args.program)
     config = vehicle_from_name_or_file(args.vehicle)
+    folder = output_dir(args.out) if args.out is not None else None
     traj = simulate(program, config, mode=args.mode)
     if not np.all(np.isfinite(traj.final_state)):
         raise CommandFailed("simulation produced non-finite states")
     summary = final_state_summary(traj.final_state, traj.duration_s)
-    if args.plot:
-        save_figure(plot_trajectory(traj.times_s, traj.states, traj.commands,
-                                    title=f"{program.name or Path(args.program).stem} on {config.name}"), args.plot)
+    figure = None
+    if folder is not None or args.plot:
+        figure = save_figure(plot_trajectory(traj.times_s, traj.states, traj.commands,
+                                             title=f"{program.name or Path(args.program).stem} on {config.name}"),
+                             folder / "trajectory.png" if folder is not None else args.plot)
+    if folder is not None:
+        (folder / "simulation.json").write_text(json.dumps(summary, indent=1))
     if args.json:
         print(json.dumps(summary))
     else:
         _print_state_table(summary, title=f"{args.program} on {config.name} ({args.mode})")
-        if args.plot:
-            print(f"plot written to {args.plot}")
+        if figure is not None:
+            print(f"figure written to {figure}")
     return 0
 
 
@@ -88,6 +94,7 @@ def _cmd_fly(args: argparse.Namespace) -> int:
         if not nominal.converged:
             raise DesignFailed(f"design failed, nothing to fly: {nominal.message}", nominal)
         program = maneuver.program(nominal.p_nominal)
+    folder = output_dir(args.out) if args.out is not None else None
     plant = plant_choice_from_args(args).build(config)
     trials = []
     panels: list[tuple[str, np.ndarray, np.ndarray]] = []
@@ -99,18 +106,24 @@ def _cmd_fly(args: argparse.Namespace) -> int:
         trials.append(entry)
         if not args.json:
             _print_trial(k + 1, entry)
-        if args.plot and trial.states.shape[0] and len(panels) < 6:
+        if (folder is not None or args.plot) and trial.states.shape[0] and len(panels) < 6:
             panels.append((f"trial {k + 1}", trial.times_s, trial.states))
-    if args.plot and panels:
-        save_figure(plot_side_views(panels, title=program.name or str(args.program)), args.plot, dpi=130)
+    figure = None
+    if panels:
+        figure = save_figure(plot_side_views(panels, title=program.name or str(args.program)),
+                             folder / "trials.png" if folder is not None else args.plot, dpi=130)
     ok = [t for t in trials if t["final_state"] is not None]
     stats = _statistics(ok)
+    if folder is not None:
+        (folder / "trials.json").write_text(json.dumps({"trials": trials, "statistics": stats}, indent=1))
     if args.json:
         print(json.dumps({"trials": trials, "statistics": stats}))
     elif stats:
         mean, std = stats["position_m"]["mean"], stats["position_m"]["std"]
         print(f"{len(ok)} of {len(trials)} trials measured; final position mean "
               f"[{', '.join(f'{v:+.3f}' for v in mean)}] m, spread (std) [{', '.join(f'{v:.3f}' for v in std)}] m")
+    if figure is not None and not args.json:
+        print(f"figure written to {figure}")
     if not ok:
         raise CommandFailed(f"no trial of {len(trials)} was measured")
     return 0
@@ -144,7 +157,9 @@ def register(sub: Any) -> None:
     sim.add_argument("--vehicle", default="hummingbird", help="preset name or vehicle TOML file")
     sim.add_argument("--mode", choices=("continuous", "sampled"), default="continuous",
                      help="continuous-time model or 800 Hz onboard zero-order hold")
-    sim.add_argument("--plot", metavar="FILE.png", help="write a figure (default: none)")
+    sim.add_argument("--out", metavar="DIR", default=None,
+                     help="folder for trajectory.png and simulation.json (default: none written)")
+    sim.add_argument("--plot", metavar="FILE.png", default=None, help=argparse.SUPPRESS)  # the earlier spelling
     sim.add_argument("--json", action="store_true", help="print one JSON object")
     sim.set_defaults(func=_cmd_simulate)
 
@@ -156,5 +171,8 @@ def register(sub: Any) -> None:
     add_plant_options(fly)
     fly.add_argument("--trials", type=bounded_int(1, 100000), default=1, help="how many times to fly it")
     fly.add_argument("--json", action="store_true", help="print one JSON object")
-    fly.add_argument("--plot", metavar="FILE.png", help="side views of the trials (up to 6) (default: none)")
+    fly.add_argument("--out", metavar="DIR", default=None,
+                     help="folder for trials.png (side views of up to 6 trials) and trials.json "
+                          "(default: none written)")
+    fly.add_argument("--plot", metavar="FILE.png", default=None, help=argparse.SUPPRESS)  # the earlier spelling
     fly.set_defaults(func=_cmd_fly)

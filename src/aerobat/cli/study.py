@@ -28,6 +28,7 @@ from aerobat.cli.common import (
     console,
     finite_float,
     maneuver_from_args,
+    old_spelling,
     open_store,
     output_dir,
     plant_choice_from_args,
@@ -359,7 +360,9 @@ def register(sub: Any) -> None:
     rob = ssub.add_parser("robustness", help="learn one maneuver on K sampled vehicles", formatter_class=fmt)
     add_maneuver_options(rob)
     rob.add_argument("--vehicles", type=bounded_int(1, 100000), default=100, help="number of sampled vehicles K")
-    rob.add_argument("--iterations", type=bounded_int(1, 1000), default=30, help="measured iterations per vehicle")
+    rob.add_argument("--trials", dest="iterations", type=bounded_int(1, 1000), default=30,
+                     help="measured trials per vehicle")
+    old_spelling(rob, "--iterations", "iterations", type=bounded_int(1, 1000))
     rob.add_argument("--seed", type=bounded_int(0, 2**40), default=0, help="seed of the vehicle sampling")
     rob.add_argument("--rule", default="paper", help="update rule (see docs/method.md)")
     rob.add_argument("--tolerance-m", type=finite_float(1e-6, 100.0, "m"), default=0.12,

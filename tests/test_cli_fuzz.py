@@ -411,3 +411,22 @@ def test_the_installed_command_answers_bad_input_in_one_line(env, case):
     assert result.stdout == ""
     assert result.stderr.count("\n") == 1 and result.stderr.startswith("aerobat: error: ")
     assert "Traceback" not in result.stderr
+
+
+# ------------------------------------------------- found by scripts/fuzz_campaign.py (issue 19)
+
+
+def one_line(code: int, err: str, status: int, *fragments: str) -> None:
+    lines = err.splitlines()
+    prefix = "aerobat: error: " if status == 2 else "aerobat: failed: "
+    assert code == status and len(lines) == 1 and lines[0].startswith(prefix) and "Traceback" not in err, (code, err)
+    for fragment in fragments:
+        assert fragment in lines[0], err
+
+
+@pytest.mark.parametrize("argv, names", [(["benchmark"], ("benchmark", "translation", "map")),
+                                         (["study"], ("study", "robustness", "rules", "envelope"))])
+def test_a_command_group_without_its_command_says_so_in_one_line(argv, names):
+    code, out, err = call(argv)
+    one_line(code, err, 2, *names)
+    assert "usage:" in out  # and the group's commands, on standard output

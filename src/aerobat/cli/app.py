@@ -82,6 +82,20 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _missing_command(parser: argparse.ArgumentParser, args: argparse.Namespace) -> str:
+    """``benchmark: name a command: translation, map`` for a command group given without its command."""
+    path: list[str] = []
+    while True:
+        group = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)  # noqa: SLF001
+        if group is None:
+            return "name a command"
+        name = getattr(args, group.dest, None)
+        if name is None or name not in group.choices:
+            return f"{' '.join(path) or 'aerobat'}: name a command: {', '.join(group.choices)}"
+        path.append(name)
+        parser = group.choices[name]
+
+
 def _one_line(exc: BaseException) -> str:
     """The message on one line: line breaks become spaces, other control characters their escapes."""
     text = " ".join(str(exc).splitlines()) or type(exc).__name__
@@ -128,6 +142,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if getattr(args, "func", None) is None:  # a command group without its subcommand: show its commands
         with contextlib.suppress(SystemExit):
             parser.parse_args([*argv, "--help"])
+        print(f"aerobat: error: {_missing_command(parser, args)}", file=sys.stderr)
         return EXIT_USAGE
     try:
         return int(args.func(args))

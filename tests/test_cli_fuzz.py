@@ -430,3 +430,14 @@ def test_a_command_group_without_its_command_says_so_in_one_line(argv, names):
     code, out, err = call(argv)
     one_line(code, err, 2, *names)
     assert "usage:" in out  # and the group's commands, on standard output
+
+
+@pytest.mark.parametrize("command", ["simulate", "fly", "benchmark"])
+def test_a_figure_file_of_an_unknown_format_is_refused_in_one_line(tmp_path, command):
+    figure = tmp_path / "figure.sqlite"
+    argv = {"simulate": ["simulate", str(EXAMPLES / "hover.toml")],
+            "fly": ["fly", str(EXAMPLES / "hover.toml"), "--plant", "nominal"],
+            "benchmark": ["benchmark", "translation", "--to", "1,1"]}[command]
+    code, _, err = call([*argv, "--plot", str(figure)])
+    one_line(code, err, 2, str(figure), ".png")
+    assert not figure.exists()

@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import io
 import math
+import os
 import sqlite3
 import string
 import subprocess
@@ -441,3 +442,16 @@ def test_a_figure_file_of_an_unknown_format_is_refused_in_one_line(tmp_path, com
     code, _, err = call([*argv, "--plot", str(figure)])
     one_line(code, err, 2, str(figure), ".png")
     assert not figure.exists()
+
+
+def test_an_undecodable_file_name_is_printed_as_given(tmp_path):
+    """``aerobat examples $'\\xff'``: argv carries the byte as \\udcff; strict UTF-8 stdout must not crash."""
+    folder = tmp_path / "ex\udcff"
+    raw = io.BytesIO()
+    strict = io.TextIOWrapper(raw, encoding="utf-8", errors="strict", write_through=True)
+    err = io.StringIO()
+    with contextlib.redirect_stdout(strict), contextlib.redirect_stderr(err):
+        code = main(["examples", str(folder)])
+    assert code == 0, err.getvalue()
+    assert os.fsencode(str(folder)) in raw.getvalue()
+    assert strict.errors == "strict"  # the caller's stream is left as it was

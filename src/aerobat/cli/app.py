@@ -22,7 +22,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 from aerobat.cli.common import CommandFailed, HelpFormatter, Parser
 from aerobat.errors import (
@@ -119,8 +119,35 @@ def _negative_values(argv: list[str]) -> list[str]:
     return out
 
 
+@contextlib.contextmanager
+def _undecodable_names_printable() -> Iterator[None]:
+    """Print file names as given, even undecodable ones (``\\xff`` in argv is ``\\udcff`` in Python).
+
+    Standard output is strict UTF-8 by default, so printing such a name (``written to …``) would
+    raise UnicodeEncodeError; ``surrogateescape`` writes back the bytes the user gave.
+    """
+    stream = sys.stdout
+    previous = getattr(stream, "errors", None)
+    changed = False
+    if previous == "strict" and hasattr(stream, "reconfigure"):
+        with contextlib.suppress(AttributeError, ValueError, OSError):
+            stream.reconfigure(errors="surrogateescape")
+            changed = True
+    try:
+        yield
+    finally:
+        if changed:
+            with contextlib.suppress(AttributeError, ValueError, OSError):
+                stream.reconfigure(errors=previous)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status (see the module's table)."""
+    with _undecodable_names_printable():
+        return _main(argv)
+
+
+def _main(argv: Sequence[str] | None) -> int:
     import matplotlib
 
     matplotlib.use("Agg")  # the command line draws into files; only here is a backend chosen

@@ -455,3 +455,10 @@ def test_an_undecodable_file_name_is_printed_as_given(tmp_path):
     assert code == 0, err.getvalue()
     assert os.fsencode(str(folder)) in raw.getvalue()
     assert strict.errors == "strict"  # the caller's stream is left as it was
+
+
+@pytest.mark.parametrize("address", ["nan", "1:2:3", ":", "inproc://x", "abc://h:1", "tls://127.0.0.1:1"])
+def test_an_unusable_scheduler_address_is_bad_input(tmp_path, address):
+    code, _, err = call(["benchmark", "map", "--y", "1:1:1", "--z", "1:1:1", "--scheduler", address,
+                         "--db", str(tmp_path / "s.sqlite"), "--out", str(tmp_path / "out")])
+    one_line(code, err, 2, "scheduler", repr(address))

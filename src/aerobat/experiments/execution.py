@@ -101,7 +101,15 @@ class DaskExecutor:
 
         Client = require("distributed", extra="dask", purpose="running studies on a Dask cluster").Client
         self._own = client is None
-        self.client = client if client is not None else Client(address, timeout="10s")
+        if client is None:
+            where = f"Dask scheduler {address!r} (--scheduler or $DASK_SCHEDULER_ADDRESS)"
+            try:
+                client = Client(address, timeout="10s")
+            except (ValueError, TypeError) as exc:  # not an address distributed can use
+                raise ConfigError(f"{where}: expected tcp://HOST:PORT: {exc}") from None
+            except (OSError, TimeoutError) as exc:
+                raise ConfigError(f"{where}: cannot connect: {exc}") from None
+        self.client = client
         self.workers = max(1, sum(w.get("nthreads", 1) for w in self.client.scheduler_info()["workers"].values()))
 
     def run(self, jobs: Iterable[Job]) -> Iterator[tuple[Job, JobResult]]:

@@ -462,3 +462,11 @@ def test_an_unusable_scheduler_address_is_bad_input(tmp_path, address):
     code, _, err = call(["benchmark", "map", "--y", "1:1:1", "--z", "1:1:1", "--scheduler", address,
                          "--db", str(tmp_path / "s.sqlite"), "--out", str(tmp_path / "out")])
     one_line(code, err, 2, "scheduler", repr(address))
+
+
+def test_a_negative_number_after_a_flag_is_not_its_value(env):
+    """``studies --json -1``: the -1 is the study, refused as such (not ``--json: ignored explicit argument``)."""
+    code, _, err = call(["studies", "--json", "-1", "--db", str(env["db"])])
+    one_line(code, err, 2, "study", "'-1'")
+    code, out, err = call(["sessions", "--json", "--limit", "-1", "--db", str(env["db"])])
+    one_line(code, err, 2, "--limit")

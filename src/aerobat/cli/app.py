@@ -102,14 +102,30 @@ def _one_line(exc: BaseException) -> str:
     return "".join(c if c.isprintable() else c.encode("unicode_escape").decode() for c in text)
 
 
-def _negative_values(argv: list[str]) -> list[str]:
-    """``--to -2,4`` → ``--to=-2,4``: a value that starts with a minus sign is a value, not an option."""
+def _valued_options(parser: argparse.ArgumentParser) -> set[str]:
+    """Every option string that takes a value, in any command."""
+    out: set[str] = set()
+    for action in parser._actions:  # noqa: SLF001 - argparse has no public list of its actions
+        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+            for sub in action.choices.values():
+                out |= _valued_options(sub)
+        elif action.option_strings and action.nargs != 0:
+            out.update(action.option_strings)
+    return out
+
+
+def _negative_values(argv: list[str], valued: set[str] | None = None) -> list[str]:
+    """``--to -2,4`` → ``--to=-2,4``: a value that starts with a minus sign is a value, not an option.
+
+    Only options that take a value (``valued``, default: any) are joined: ``--json -1`` stays two words.
+    """
     out: list[str] = []
     k = 0
     while k < len(argv):
         token = argv[k]
         following = argv[k + 1] if k + 1 < len(argv) else ""
-        if (token.startswith("--") and "=" not in token and len(following) > 1 and following[0] == "-"
+        if (token.startswith("--") and "=" not in token and (valued is None or token in valued)
+                and len(following) > 1 and following[0] == "-"
                 and (following[1].isdigit() or following[1] == ".")):
             out.append(f"{token}={following}")
             k += 2
@@ -154,8 +170,8 @@ def _main(argv: Sequence[str] | None) -> int:
     standalone = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv
-    argv = _negative_values([a for a in argv if a != "--debug"])
     parser = build_parser()
+    argv = _negative_values([a for a in argv if a != "--debug"], _valued_options(parser))
     if not argv:  # bare `aerobat`: what it can do
         parser.print_help()
         return EXIT_OK

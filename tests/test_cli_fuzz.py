@@ -470,3 +470,32 @@ def test_a_negative_number_after_a_flag_is_not_its_value(env):
     one_line(code, err, 2, "study", "'-1'")
     code, out, err = call(["sessions", "--json", "--limit", "-1", "--db", str(env["db"])])
     one_line(code, err, 2, "--limit")
+
+
+def test_ctrl_c_during_an_ipopt_solve_stops_the_benchmark(monkeypatch):
+    """CasADi turns a Ctrl-C inside IPOPT into a failed solve; the command must stop (130), not report a failure."""
+    import signal
+
+    from aerobat.quadrotor.timeoptimal import transcription
+
+    real = transcription.transcription_solver
+
+    def interrupted_solver(*args, **kwargs):
+        solver = real(*args, **kwargs)
+
+        class Interrupted:
+            def __call__(self, **inputs):
+                try:  # what CasADi does: its signal check raises KeyboardInterrupt, which it catches
+                    signal.raise_signal(signal.SIGINT)
+                except KeyboardInterrupt:
+                    pass
+                return solver(**inputs)
+
+            def stats(self):
+                return solver.stats()
+
+        return Interrupted()
+
+    monkeypatch.setattr(transcription, "transcription_solver", interrupted_solver)
+    code, _, err = call(["benchmark", "translation", "--to", "1,1"])
+    assert code == 130 and err.startswith("aerobat: interrupted"), (code, err)

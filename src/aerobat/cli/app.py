@@ -142,19 +142,19 @@ def _undecodable_names_printable() -> Iterator[None]:
     Standard output is strict UTF-8 by default, so printing such a name (``written to …``) would
     raise UnicodeEncodeError; ``surrogateescape`` writes back the bytes the user gave.
     """
-    stream = sys.stdout
-    previous = getattr(stream, "errors", None)
+    reconfigure = getattr(sys.stdout, "reconfigure", None)
+    previous = getattr(sys.stdout, "errors", None)
     changed = False
-    if previous == "strict" and hasattr(stream, "reconfigure"):
+    if previous == "strict" and reconfigure is not None:
         with contextlib.suppress(AttributeError, ValueError, OSError):
-            stream.reconfigure(errors="surrogateescape")
+            reconfigure(errors="surrogateescape")
             changed = True
     try:
         yield
     finally:
-        if changed:
+        if changed and reconfigure is not None:
             with contextlib.suppress(AttributeError, ValueError, OSError):
-                stream.reconfigure(errors=previous)
+                reconfigure(errors=previous)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -499,3 +499,23 @@ def test_ctrl_c_during_an_ipopt_solve_stops_the_benchmark(monkeypatch):
     monkeypatch.setattr(transcription, "transcription_solver", interrupted_solver)
     code, _, err = call(["benchmark", "translation", "--to", "1,1"])
     assert code == 130 and err.startswith("aerobat: interrupted"), (code, err)
+
+
+LONG = "飞" * 100 + ".toml"  # 300 bytes: longer than any file name the file system allows
+
+
+@pytest.mark.parametrize("case", ["db", "ranges", "vehicle", "maneuver", "program", "output", "design-program"])
+def test_a_file_name_too_long_for_the_file_system_is_bad_input(env, case):
+    long = str(env["root"] / LONG)
+    argv = {
+        "db": ["sessions", "--db", long],
+        "ranges": ["study", "robustness", *SMALL, "--vehicles", "1", "--iterations", "1", "--workers", "1",
+                   "--ranges", long, "--db", str(env["root"] / "r.sqlite")],
+        "vehicle": ["design", *SMALL, "--vehicle", long.removesuffix(".toml") + "x"],
+        "maneuver": ["design", "--maneuver", long.removesuffix(".toml")],
+        "program": ["simulate", long],
+        "output": ["export", "1", "--db", str(env["db"]), "--output", long],
+        "design-program": ["design", *SMALL, "--program", long],
+    }[case]
+    code, _, err = call(argv)
+    assert code == 2 and err.count("\n") == 1 and err.startswith("aerobat: error: ") and "Traceback" not in err, err

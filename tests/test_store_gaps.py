@@ -301,3 +301,55 @@ def test_the_api_refuses_misuse_with_config_errors():
             learn(flip, nominal, Arena(config), **kwargs)
     with pytest.raises(ConfigError, match="Design"):
         learn(flip, "not a design", Arena(config), iterations=1)  # type: ignore[arg-type]
+
+
+# ------------------------------------------------- the library's entry points, found by scripts/fuzz_campaign.py
+
+
+def _refused(fn, *args, fragment: str = "", **kwargs) -> str:
+    """``fn(...)`` raises an AerobatError (never a TypeError or AttributeError from inside); its message."""
+    from aerobat.errors import AerobatError
+
+    with pytest.raises(AerobatError) as info:
+        fn(*args, **kwargs)
+    assert fragment in str(info.value), str(info.value)
+    return str(info.value)
+
+
+@pytest.mark.parametrize("bad", [None, 5, 1.5, [], ("a",), np.zeros(2), {"a": 1}, b"bytes", "nul\x00.toml",
+                                 "飞" * 100 + ".toml"])
+def test_file_functions_refuse_what_cannot_be_a_file(tmp_path, bad):
+    from aerobat import Store, hummingbird, load_program, load_vehicle, save_program, save_vehicle
+    from aerobat.experiments.studies import load_ranges
+    from aerobat.plants.arena.params import ArenaParams, load_arena, save_arena
+    from aerobat.quadrotor.maneuvers import load_maneuver_file
+
+    if isinstance(bad, str) and "飞" in bad:
+        bad = str(tmp_path / bad)
+    config = hummingbird()
+    for loader in (load_vehicle, load_program, load_arena, load_ranges):
+        _refused(loader, bad)
+    _refused(load_maneuver_file, bad, config.vehicle)
+    _refused(save_vehicle, config, bad)
+    _refused(save_arena, ArenaParams(), bad)
+    _refused(Store, bad)
+    program = load_program(Path(__file__).resolve().parents[1] / "examples" / "hover.toml")
+    _refused(save_program, program, bad)
+
+
+def test_savers_refuse_objects_of_the_wrong_kind(tmp_path):
+    from aerobat import hummingbird, save_program, save_vehicle
+    from aerobat.plants.arena.params import save_arena
+
+    _refused(save_vehicle, "hummingbird", tmp_path / "v.toml", fragment="config")
+    _refused(save_program, hummingbird(), tmp_path / "p.toml", fragment="program")
+    _refused(save_arena, None, tmp_path / "a.toml", fragment="params")
+    _refused(save_vehicle, hummingbird(), "/proc/version", fragment="/proc/version")  # cannot write: OutputError
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("timeout", [{}, "1", float("nan"), -1.0, None])
+def test_store_busy_timeout_must_be_a_number(tmp_path, timeout):
+    from aerobat import Store
+
+    _refused(Store, tmp_path / "s.sqlite", busy_timeout_s=timeout, fragment="busy_timeout_s")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import tomllib
 import types
 import typing
@@ -21,11 +22,15 @@ from aerobat.errors import ConfigError
 
 __all__ = [
     "ConfigError",
+    "as_path",
     "check_finite",
     "check_range",
+    "check_type",
     "dataclass_from_table",
     "dataclass_to_table",
     "read_toml",
+    "short_repr",
+    "write_file",
     "table_field",
 ]
 
@@ -76,9 +81,32 @@ def _unit(unit: str) -> str:
     return f" ({unit})" if unit else ""
 
 
+def short_repr(value: Any, limit: int = 60) -> str:
+    """``repr(value)``, cut to ``limit`` characters (for messages about values of the wrong type)."""
+    try:
+        text = repr(value)
+    except Exception:  # noqa: BLE001 - a value whose repr fails is still described
+        text = f"<{type(value).__name__}>"
+    return text if len(text) <= limit else text[: limit - 1] + "…"
+
+
+def as_path(value: Any, name: str = "path") -> Path:
+    """``value`` as a :class:`~pathlib.Path` (from a str or an ``os.PathLike``); :class:`ConfigError` otherwise."""
+    if not isinstance(value, str | os.PathLike):
+        raise ConfigError(f"{name}: expected a file path (str or pathlib.Path), got {type(value).__name__} "
+                          f"{short_repr(value)}")
+    try:
+        path = Path(value)
+    except TypeError as exc:  # an os.PathLike whose __fspath__ returns bytes or nonsense
+        raise ConfigError(f"{name}: expected a file path, got {short_repr(value)} ({exc})") from None
+    if "\x00" in str(path):
+        raise ConfigError(f"{name} {str(path)!r}: a file path cannot contain a NUL character")
+    return path
+
+
 def read_toml(path: str | Path) -> dict[str, Any]:
     """Read a TOML file, turning I/O and syntax problems into :class:`ConfigError`."""
-    path = Path(path)
+    path = as_path(path)
     try:
         with path.open("rb") as handle:
             return tomllib.load(handle)
@@ -94,6 +122,33 @@ def read_toml(path: str | Path) -> dict[str, Any]:
         raise ConfigError(f"{path}: invalid TOML: {exc}") from None
     except RecursionError:
         raise ConfigError(f"{path}: invalid TOML: nested too deeply") from None
+    except OSError as exc:  # a name too long for the file system, a path through a file, an I/O error…
+        raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
+
+
+def write_file(path: Any, text: str, name: str = "path") -> Path:
+    """Write ``text`` to ``path``: :class:`ConfigError` for a path that is not one, :class:`OutputError` if it fails."""
+    import errno
+
+    from aerobat.errors import DiskFull, OutputError
+
+    path = as_path(path, name)
+    try:
+        path.write_text(text)
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+            raise DiskFull(f"{path}: cannot write: the disk is full or a file size limit was reached ({reason})") \
+                from None
+        raise OutputError(f"{path}: cannot write: {reason}") from None
+    return path
+
+
+def check_type(name: str, value: Any, expected: type | tuple[type, ...], what: str) -> Any:
+    """``value`` if it is an instance of ``expected``; :class:`ConfigError` naming ``name`` and what came otherwise."""
+    if not isinstance(value, expected):
+        raise ConfigError(f"{name}: expected {what}, got {type(value).__name__} {short_repr(value)}")
+    return value
 
 
 def _coerce(value: Any, annotation: Any, where: str) -> Any:

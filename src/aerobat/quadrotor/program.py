@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 import tomli_w
 
-from aerobat.config import read_toml
+from aerobat.config import check_type, read_toml, write_file
 from aerobat.errors import ConfigError
 
 __all__ = [
@@ -270,7 +270,8 @@ def program_to_table(program: Program) -> dict[str, Any]:
 
 def save_program(program: Program, path: str | Path) -> None:
     """Write ``program`` as TOML (``[program]`` header and ``[[switch]]`` entries), exact to the last bit."""
-    Path(path).write_text(tomli_w.dumps(program_to_table(program)))
+    check_type("program", program, Program, "a Program")
+    write_file(path, tomli_w.dumps(program_to_table(program)))
 
 
 def program_from_table(data: dict[str, Any], *, source: str) -> Program:

@@ -22,7 +22,15 @@ from typing import Any
 
 import tomli_w
 
-from aerobat.config import check_range, dataclass_from_table, dataclass_to_table, read_toml
+from aerobat.config import (
+    as_path,
+    check_range,
+    check_type,
+    dataclass_from_table,
+    dataclass_to_table,
+    read_toml,
+    write_file,
+)
 from aerobat.errors import ConfigError
 
 __all__ = [
@@ -238,7 +246,7 @@ def load_vehicle(path: str | Path) -> VehicleConfig:
     fields take Table 1 values) and an optional ``[controller]`` table. Controller
     constants that are not given default to the vehicle's own (a nominal controller).
     """
-    path = Path(path)
+    path = as_path(path)
     data = read_toml(path)
     unknown = sorted(set(data) - {"vehicle", "controller", "name"})
     if unknown:
@@ -276,13 +284,23 @@ def vehicle_from_table(table: Any, *, source: str) -> VehicleConfig:
 
 def save_vehicle(config: VehicleConfig, path: str | Path) -> None:
     """Write ``config`` as TOML that :func:`load_vehicle` reads back identically."""
-    Path(path).write_text(tomli_w.dumps(vehicle_table(config)))
+    check_type("config", config, VehicleConfig, "a VehicleConfig")
+    write_file(path, tomli_w.dumps(vehicle_table(config)))
+
+
+def _exists(path: str) -> bool:
+    """Whether ``path`` names something; False for names the file system refuses (too long, NUL…)."""
+    try:
+        return Path(path).exists()
+    except (OSError, ValueError):
+        return False
 
 
 def vehicle_from_name_or_file(spec: str) -> VehicleConfig:
     """``"hummingbird"`` (a preset name) or a path to a vehicle TOML file."""
+    check_type("vehicle", spec, str, "a preset name or a vehicle TOML file")
     if spec in PRESETS:
         return PRESETS[spec]()
-    if not spec.endswith(".toml") and not Path(spec).exists():
+    if not spec.endswith(".toml") and not _exists(spec):
         raise ConfigError(f"unknown vehicle {spec!r}: use one of {', '.join(PRESETS)} or a .toml file")
     return load_vehicle(spec)

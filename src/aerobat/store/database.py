@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any, Literal, Self
 from urllib.parse import quote
 
+from aerobat.config import as_path, check_range, short_repr
 from aerobat.errors import (
     ConfigError,
     StoreAccessError,
@@ -82,9 +83,13 @@ class Database:
                  on_wait: Any = None) -> None:
         if synchronous not in ("normal", "full"):
             raise ConfigError(f"synchronous = {synchronous!r}: allowed 'normal' or 'full'")
+        if not isinstance(path, str | os.PathLike):
+            raise StoreAccessError(f"--db: expected a database file path, got {type(path).__name__} "
+                                   f"{short_repr(path)}")
         if not str(path).strip():
             raise StoreAccessError("--db: empty database path")
-        self.path = Path(path)
+        check_range("busy_timeout_s", busy_timeout_s, low=0.0, unit="s")
+        self.path = as_path(path, "--db")
         self.busy_timeout_s = float(busy_timeout_s)
         self.owner = owner_token()
         self.migrated_from: list[int] = []
@@ -93,10 +98,13 @@ class Database:
         self.on_wait = on_wait
         self._conn: sqlite3.Connection | None = None
         self._identity: tuple[int, int] | None = None
-        fresh = self._check_file(create)
-        read_only = not create and not os.access(self.path.parent if str(self.path.parent) else ".", os.W_OK)
-        uri = f"file:{quote(str(self.path.resolve()))}" + ("?mode=ro&immutable=1" if read_only else
-                                                           "" if create else "?mode=ro")
+        try:
+            fresh = self._check_file(create)
+            read_only = not create and not os.access(self.path.parent if str(self.path.parent) else ".", os.W_OK)
+            uri = f"file:{quote(str(self.path.resolve()))}" + ("?mode=ro&immutable=1" if read_only else
+                                                               "" if create else "?mode=ro")
+        except OSError as exc:  # a name too long for the file system, a loop of links, an I/O error…
+            raise StoreAccessError(f"{self.path}: cannot open the database: {exc.strerror or exc}") from None
         if read_only:
             self.problems.append(f"{self.path}: its folder is read-only: opened as an unchanging snapshot")
         try:

@@ -353,3 +353,34 @@ def test_store_busy_timeout_must_be_a_number(tmp_path, timeout):
     from aerobat import Store
 
     _refused(Store, tmp_path / "s.sqlite", busy_timeout_s=timeout, fragment="busy_timeout_s")
+
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+@pytest.mark.parametrize("changes, fragment", [
+    ({"program": "hover.toml"}, "program"), ({"config": None}, "config"), ({"max_step_s": None}, "max_step_s"),
+    ({"max_step_s": 5e-324}, "max_step_s"), ({"max_step_s": 5e-324, "record": False}, "max_step_s"),
+    ({"mode": "sampled", "substeps": 10**9}, "substeps"), ({"mode": "sampled", "tick_s": 1e-300}, "tick_s"),
+    ({"substeps": 2.5}, "substeps"), ({"plant": 0}, "plant"), ({"record": np.zeros(3)}, "record"),
+    ({"mode": np.zeros(2)}, "mode"), ({"initial_state": 10**400}, "initial_state"),
+    ({"initial_state": np.zeros(3)}, "initial_state")])
+def test_simulate_refuses_bad_arguments(changes, fragment):
+    from aerobat import hummingbird, load_program, simulate
+
+    kwargs = {"program": load_program(EXAMPLES / "single_flip.toml"), "config": hummingbird(), **changes}
+    _refused(simulate, kwargs.pop("program"), kwargs.pop("config"), fragment=fragment, **kwargs)
+
+
+@pytest.mark.parametrize("changes, fragment", [
+    ({"configs": 0}, "configs"), ({"configs": [None]}, "configs[0]"), ({"programs": np.int64(3)}, "programs"),
+    ({"programs": [None]}, "programs[0]"), ({"initial_states": 1 + 2j}, "initial_states"),
+    ({"plants": {}}, "plants"), ({"max_step_s": 1e-300}, "max_step_s")])
+def test_simulate_batch_refuses_bad_arguments(changes, fragment):
+    from aerobat import NominalModel, hummingbird, load_program, simulate_batch
+
+    kwargs = {"programs": [load_program(EXAMPLES / "single_flip.toml")], "configs": hummingbird(), **changes}
+    _refused(simulate_batch, kwargs.pop("programs"), kwargs.pop("configs"), fragment=fragment, **kwargs)
+    _refused(NominalModel, [], fragment="config")
+    _refused(NominalModel, hummingbird(), max_step_s=0.0, fragment="max_step_s")
+    _refused(NominalModel(hummingbird()).final_states, -1e308, fragment="programs")

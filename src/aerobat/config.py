@@ -18,12 +18,17 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
+import numpy as np
+
 from aerobat.errors import ConfigError
 
 __all__ = [
     "ConfigError",
+    "as_float_array",
     "as_path",
     "check_finite",
+    "check_int",
+    "check_number",
     "check_range",
     "check_type",
     "dataclass_from_table",
@@ -40,9 +45,50 @@ T = TypeVar("T")
 def check_finite(name: str, value: float, unit: str = "") -> None:
     """Raise :class:`ConfigError` unless ``value`` is a finite real number."""
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ConfigError(f"{name} must be a number, got {type(value).__name__} {value!r}")
-    if not math.isfinite(value):
+        raise ConfigError(f"{name} must be a number, got {type(value).__name__} {short_repr(value)}")
+    try:
+        finite = math.isfinite(value)
+    except OverflowError:  # an integer beyond any float
+        raise ConfigError(f"{name} = {short_repr(value)} is too large{_unit(unit)}") from None
+    if not finite:
         raise ConfigError(f"{name} = {value} must be finite{_unit(unit)}")
+
+
+def check_number(name: str, value: Any, *, low: float | None = None, high: float | None = None,
+                 low_inclusive: bool = True, high_inclusive: bool = True, unit: str = "") -> float:
+    """``value`` as a float: a finite real number (NumPy scalars too, never a bool) within the range."""
+    if isinstance(value, np.integer | np.floating) and not isinstance(value, np.bool_):
+        value = value.item()
+    check_range(name, value, low=low, high=high, low_inclusive=low_inclusive, high_inclusive=high_inclusive,
+                unit=unit)
+    return float(value)
+
+
+def check_int(name: str, value: Any, *, low: int | None = None, high: int | None = None) -> int:
+    """``value`` as an int: an integer (a NumPy integer too, never a bool or a float) within [low, high]."""
+    if isinstance(value, np.integer):
+        value = int(value)
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ConfigError(f"{name} must be an integer, got {type(value).__name__} {short_repr(value)}")
+    if (low is not None and value < low) or (high is not None and value > high):
+        allowed = f"{low if low is not None else '…'} … {high if high is not None else '…'}"
+        raise ConfigError(f"{name} = {short_repr(value)} is out of range: allowed {allowed}")
+    return value
+
+
+def as_float_array(name: str, value: Any, shape: tuple[int, ...] | None = None, *, finite: bool = True) -> Any:
+    """``value`` as a float array of ``shape``, finite; :class:`ConfigError` naming ``name`` otherwise."""
+    if isinstance(value, str | bytes | Mapping) or value is None:
+        raise ConfigError(f"{name}: expected an array of numbers, got {type(value).__name__} {short_repr(value)}")
+    try:
+        array = np.array(value, dtype=float)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise ConfigError(f"{name}: expected an array of numbers, got {short_repr(value)} ({exc})") from None
+    if shape is not None and array.shape != shape:
+        raise ConfigError(f"{name} must have shape {shape}, got {array.shape}")
+    if finite and not np.all(np.isfinite(array)):
+        raise ConfigError(f"{name} contains non-finite values")
+    return array
 
 
 def check_range(

@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import io
+import math
 import os
 import socket
 import sqlite3
@@ -384,3 +385,22 @@ def test_simulate_batch_refuses_bad_arguments(changes, fragment):
     _refused(NominalModel, [], fragment="config")
     _refused(NominalModel, hummingbird(), max_step_s=0.0, fragment="max_step_s")
     _refused(NominalModel(hummingbird()).final_states, -1e308, fragment="programs")
+
+
+def test_plants_refuse_bad_arguments():
+    from aerobat import Arena, ArenaParams, NominalPlant, PlantChoice, hummingbird
+
+    config = hummingbird()
+    _refused(Arena, "hummingbird", fragment="config")
+    _refused(Arena, config, {"a": 1}, fragment="params")
+    for seed in (-1, "1", math.inf, np.full(3, np.nan), 2**64):
+        _refused(Arena, config, ArenaParams(), seed=seed, fragment="seed")
+    _refused(NominalPlant, b"x", fragment="config")
+    for rate in ("abc", np.full(3, np.nan), 0.0, 1e308):
+        _refused(NominalPlant, config, sample_rate_hz=rate, fragment="sample_rate_hz")
+    for plant in (Arena(config, seed=1), NominalPlant(config)):
+        for program in (None, {}, "hover.toml", np.zeros((2, 2)), config):
+            _refused(plant.fly, program, fragment="program")
+    for kind in ([], {"a": 1}, np.zeros((2, 2)), None):
+        _refused(PlantChoice, kind, fragment="plant")
+        _refused(PlantChoice.from_file, kind, None, fragment="plant")

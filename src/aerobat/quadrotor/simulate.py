@@ -24,7 +24,7 @@ from typing import Literal
 import numba as nb
 import numpy as np
 
-from aerobat.config import as_float_array, check_int, check_number, check_type
+from aerobat.config import as_float_array, check_int, check_type, short_repr
 from aerobat.errors import ConfigError
 from aerobat.quadrotor.dynamics import (
     N_PLANT,
@@ -286,7 +286,13 @@ MAX_STEPS = 10_000_000  # RK4 steps of one simulation: 600 s at the default step
 
 def check_max_step(max_step_s: object, name: str = "max_step_s") -> float:
     """A step size: a finite number > 0 [s] (how many steps it makes is checked against each program)."""
-    return check_number(name, max_step_s, low=0.0, low_inclusive=False, unit="s")
+    if isinstance(max_step_s, np.integer | np.floating) and not isinstance(max_step_s, np.bool_):
+        max_step_s = max_step_s.item()
+    if isinstance(max_step_s, bool) or not isinstance(max_step_s, int | float):
+        raise ConfigError(f"{name} must be a number, got {type(max_step_s).__name__} {short_repr(max_step_s)}")
+    if not (max_step_s > 0 and math.isfinite(max_step_s)):
+        raise ConfigError(f"{name} = {max_step_s} must be finite and > 0 (s)")
+    return float(max_step_s)
 
 
 def _check_steps(steps: float, what: str) -> None:
@@ -329,8 +335,10 @@ def simulate(
     compiled = _compiled(program)
     check_type("config", config, VehicleConfig, "a VehicleConfig")
     max_step_s = check_max_step(max_step_s)
-    tick_s = check_number("tick_s", tick_s, low=0.0, low_inclusive=False, unit="s")
-    substeps = check_int("substeps", substeps, low=1, high=MAX_STEPS)
+    tick_s = check_max_step(tick_s, "tick_s")
+    substeps = check_int("substeps", substeps)
+    if not 1 <= substeps <= MAX_STEPS:
+        raise ConfigError(f"substeps = {substeps} must be >= 1 (and at most {MAX_STEPS:.0e})")
     check_type("record", record, (bool, np.bool_), "True or False")
     if not isinstance(mode, str) or mode not in ("continuous", "sampled"):
         raise ConfigError(f"mode = {mode!r}: allowed 'continuous' or 'sampled'")

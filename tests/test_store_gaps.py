@@ -404,3 +404,34 @@ def test_plants_refuse_bad_arguments():
     for kind in ([], {"a": 1}, np.zeros((2, 2)), None):
         _refused(PlantChoice, kind, fragment="plant")
         _refused(PlantChoice.from_file, kind, None, fragment="plant")
+
+
+@pytest.fixture(scope="module")
+def small_design():
+    from aerobat import MultiFlip, NominalModel, design, hummingbird
+
+    config = hummingbird()
+    flip = MultiFlip(vehicle=config.vehicle, flips=1, max_rate_rad_s=math.radians(800), dims=2)
+    return config, flip, design(flip, NominalModel(config))
+
+
+def test_design_and_learn_refuse_bad_arguments(small_design):
+    from aerobat import NominalModel, NominalPlant, RuleChoice, design, learn, make_rule
+
+    config, flip, nominal = small_design
+    model = NominalModel(config)
+    for bad in (1e308, {"a": 1}, np.full(5, np.nan), (1, 2), None):
+        _refused(design, bad, model, fragment="maneuver")
+        _refused(design, flip, bad, fragment="model")
+        _refused(learn, bad, nominal, NominalPlant(config), iterations=1, fragment="maneuver")
+        _refused(learn, flip, nominal, bad, iterations=1, fragment="plant")
+        _refused(make_rule, bad, nominal, fragment="choice")
+        _refused(make_rule, "paper", bad, fragment="design")
+    for name, value in (("tolerance", np.zeros((2, 2))), ("tolerance", 10**400), ("tsvd_rtol", config),
+                        ("damping", None), ("max_iterations", -30), ("raise_on_failure", math.inf),
+                        ("correction", "qr"), ("p_guess", np.zeros(2)), ("p_guess", "abc")):
+        _refused(design, flip, model, fragment=name, **{name: value})
+    _refused(learn, flip, nominal, NominalPlant(config), iterations=1, max_attempts=config, fragment="max_attempts")
+    _refused(learn, flip, nominal, NominalPlant(config), iterations=1, start_params={}, fragment="start parameters")
+    _refused(RuleChoice, "paper", schedule=[1.0], fragment="schedule")
+    _refused(RuleChoice, "paper", isc="yes", fragment="isc")

@@ -23,6 +23,7 @@ __all__ = [
     "Maneuver",
     "ParameterSpec",
     "bounds_arrays",
+    "check_maneuver",
     "check_parameters",
     "error_scales",
     "parameter_scales",
@@ -139,6 +140,19 @@ class Maneuver(Protocol):
     def spec(self) -> dict[str, Any]:
         """A JSON-ready description that rebuilds the maneuver (for the store)."""
         ...
+
+
+_MEMBERS = ("parameters", "errors", "guess", "program", "error")  # what design and learning use
+
+
+def check_maneuver(value: Any, name: str = "maneuver") -> Maneuver:
+    """``value`` if it has the :class:`Maneuver` members; :class:`ConfigError` naming ``name`` otherwise."""
+    missing = [m for m in _MEMBERS if not hasattr(type(value), m) and not hasattr(value, m)]
+    if missing:
+        text = repr(value) if isinstance(value, int | float | str | bool) or value is None else ""
+        raise ConfigError(f"{name}: expected a maneuver (MultiFlip, a translation, a maneuver file…), got "
+                          f"{type(value).__name__} {text[:60]}".rstrip() + f" (no {', '.join(missing[:3])})")
+    return value  # type: ignore[no-any-return]
 
 
 def bounds_arrays(parameters: tuple[ParameterSpec, ...]) -> tuple[np.ndarray, np.ndarray]:

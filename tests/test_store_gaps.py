@@ -435,3 +435,31 @@ def test_design_and_learn_refuse_bad_arguments(small_design):
     _refused(learn, flip, nominal, NominalPlant(config), iterations=1, start_params={}, fragment="start parameters")
     _refused(RuleChoice, "paper", schedule=[1.0], fragment="schedule")
     _refused(RuleChoice, "paper", isc="yes", fragment="isc")
+
+
+def test_sessions_and_store_queries_refuse_bad_arguments(store_with_a_session, small_design):
+    from aerobat import PlantChoice, RuleChoice, resume_session, start_session
+    from aerobat.experiments.reports import load_session
+
+    config, flip, nominal = small_design
+    with Store(store_with_a_session) as store:
+        for ref in (math.inf, -math.inf, math.nan, 1.5, True, 2**64, {}, None):
+            _refused(store.resolve_session, ref, fragment="session")
+            _refused(store.resolve_study, ref, fragment="study")
+        for session_id in (2**64, -(2**70)):
+            _refused(store.session, session_id)
+            _refused(load_session, store, session_id)
+        _refused(store.list_sessions, limit=2**63, fragment="limit")
+        _refused(store.list_sessions, limit="", fragment="limit")
+        _refused(store.list_sessions, newest_first=np.zeros(0), fragment="newest_first")
+        base = {"model": config, "plant": PlantChoice("nominal"), "rule": RuleChoice(), "iterations": 1,
+                "design_result": nominal}
+        for name, value in (("model", np.int64(3)), ("plant", "nominal"), ("rule", np.zeros((2, 2))),
+                            ("design_result", "converged"), ("command", config), ("warm_start_from", 1.5),
+                            ("study_id", "x")):
+            _refused(start_session, store, flip, fragment=name, **{**base, name: value})
+        _refused(start_session, store, b"x", fragment="maneuver", **base)
+        for bad in ({"a": 1}, np.zeros(0), "abc"):
+            _refused(start_session, bad, flip, fragment="store", **base)
+            _refused(resume_session, bad, "last", fragment="store")
+            _refused(load_session, bad, 1, fragment="store")

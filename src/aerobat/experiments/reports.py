@@ -161,9 +161,11 @@ def session_replay(store: Store, session_id: int, path: Path, *, iterations: lis
 
 def load_session(store: Store, session_id: int) -> Session:
     """A stored session as a :class:`~aerobat.core.learning.Session` (its iterations without trials)."""
+    from aerobat.config import check_type
     from aerobat.core.learning import Iteration, IterationStatus, Session, SessionStatus
     from aerobat.experiments.setup import design_from_record
 
+    check_type("store", store, Store, "a Store")
     rec = store.session(session_id)
     maneuver = from_spec(store.maneuver(rec.maneuver_id).spec, source=f"{store.path}: session {session_id}")
     design = design_from_record(maneuver, store.design(rec.design_id))

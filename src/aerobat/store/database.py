@@ -22,6 +22,7 @@ from urllib.parse import quote
 from aerobat.config import as_path, check_range, short_repr
 from aerobat.errors import (
     ConfigError,
+    SessionNotFound,
     StoreAccessError,
     StoreBusyError,
     StoreError,
@@ -335,6 +336,8 @@ class Database:
             yield
         except sqlite3.Error as exc:
             raise self._translate(exc, action) from None
+        except OverflowError as exc:  # an id beyond SQLite's 64-bit integers: no such row can exist
+            raise SessionNotFound(f"{self.path}: {action}: {exc}") from None
 
     def _file_identity(self) -> tuple[int, int] | None:
         try:

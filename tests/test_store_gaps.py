@@ -463,3 +463,34 @@ def test_sessions_and_store_queries_refuse_bad_arguments(store_with_a_session, s
             _refused(start_session, bad, flip, fragment="store", **base)
             _refused(resume_session, bad, "last", fragment="store")
             _refused(load_session, bad, 1, fragment="store")
+
+
+def test_maneuvers_and_programs_refuse_bad_arguments(small_design):
+    from aerobat import MultiFlip, Program, RampDown, Translation, from_spec, solve_translation, translation_maneuver
+
+    config, flip, nominal = small_design
+    for name, value in (("max_rate_rad_s", {"a": 1}), ("max_rate_rad_s", np.full(5, np.nan)),
+                        ("max_rate_rad_s", 10**400), ("coast_collective", np.zeros(0)), ("axis", ["roll"]),
+                        ("dims", np.zeros(2)), ("ramp_collective_s", "0.1"), ("name", 5)):
+        _refused(MultiFlip, vehicle=config.vehicle, fragment=name, **{name: value})
+    for params in ("", {}, 10**400, config, np.zeros((2, 2))):
+        _refused(flip.program, params, fragment="parameters")
+    for name, value in (("config", b"x"), ("target_yz", 1 + 2j), ("target_yz", 1), ("target_yz", [1.0]),
+                        ("final_angle_rad", 10**400), ("ramp_s", [])):
+        kwargs = {"config": config, "target_yz": (1.0, 1.0), name: value}
+        _refused(translation_maneuver, kwargs.pop("config"), kwargs.pop("target_yz"), fragment=name, **kwargs)
+    translation = Translation(vehicle=config.vehicle, target_yz=(1.0, 1.0), final_angle_rad=0.0,
+                              interval_inputs=((10.0, 0.0),), guess_times_s=(1.0,))
+    for name, value in (("interval_inputs", 1e308), ("interval_inputs", ((1.0, "x"),)), ("guess_times_s", None),
+                        ("vehicle", config), ("target_yz", "ab")):
+        fields = {"vehicle": translation.vehicle, "target_yz": translation.target_yz, "final_angle_rad": 0.0,
+                  "interval_inputs": translation.interval_inputs, "guess_times_s": translation.guess_times_s}
+        _refused(Translation, fragment=name, **{**fields, name: value})
+    _refused(RampDown, collective_s=10**400, fragment="collective_s")
+    for switches in (10**400, Path("/nonexistent"), "abc"):
+        _refused(Program, switches=switches, duration_s=1.0, fragment="switches")
+    _refused(Program, switches=(), duration_s=10**400, fragment="duration_s")
+    _refused(config.with_mass, 10**400, fragment="mass_kg")
+    _refused(solve_translation, 1.0, 1.0, intervals=2**64, fragment="intervals")
+    _refused(solve_translation, 10**400, 1.0, fragment="target_y_m")
+    _refused(from_spec, flip.spec(), source={"a": 1}, fragment="source")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 import os
 import tomllib
 import types
@@ -30,6 +31,7 @@ __all__ = [
     "check_int",
     "check_number",
     "check_range",
+    "check_real",
     "check_type",
     "dataclass_from_table",
     "dataclass_to_table",
@@ -52,6 +54,14 @@ def check_finite(name: str, value: float, unit: str = "") -> None:
         raise ConfigError(f"{name} = {short_repr(value)} is too large{_unit(unit)}") from None
     if not finite:
         raise ConfigError(f"{name} = {value} must be finite{_unit(unit)}")
+
+
+def check_real(name: str, value: Any) -> None:
+    """Raise :class:`ConfigError` unless ``value`` is a real number a float can hold (nan and inf pass)."""
+    if isinstance(value, bool | np.bool_) or not isinstance(value, numbers.Real):
+        raise ConfigError(f"{name} must be a number, got {type(value).__name__} {short_repr(value)}")
+    if isinstance(value, numbers.Integral) and abs(int(value)) > 2**1023:
+        raise ConfigError(f"{name} = {short_repr(value)} is too large")
 
 
 def check_number(name: str, value: Any, *, low: float | None = None, high: float | None = None,

@@ -162,7 +162,10 @@ def bounds_arrays(parameters: tuple[ParameterSpec, ...]) -> tuple[np.ndarray, np
 
 def check_parameters(parameters: tuple[ParameterSpec, ...], params: np.ndarray) -> str | None:
     """None if ``params`` is finite and inside the box bounds, else a message naming the offender."""
-    params = np.asarray(params, dtype=float)
+    try:
+        params = np.asarray(params, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        return f"expected {len(parameters)} numbers, got {type(params).__name__}"
     if params.shape != (len(parameters),):
         return f"expected {len(parameters)} parameters, got shape {params.shape}"
     for spec, value in zip(parameters, params, strict=True):

@@ -152,6 +152,9 @@ def from_spec(spec: Mapping[str, Any], *, source: str = "maneuver spec") -> Mane
     ConfigError
         Not a table, unknown kind, or a field missing, of the wrong type or out of range.
     """
+    if not isinstance(source, str):
+        raise ConfigError(f"source: expected a string (where the spec came from), got {type(source).__name__} "
+                          f"{short_repr(source)}")
     if not isinstance(spec, Mapping):
         raise ConfigError(f"{source}: expected a table, got {type(spec).__name__}")
     kind = spec.get("kind")

@@ -24,6 +24,7 @@ import tomli_w
 
 from aerobat.config import (
     as_path,
+    check_finite,
     check_range,
     check_type,
     dataclass_from_table,
@@ -142,6 +143,7 @@ class VehicleParams:
         so the reduced collective envelope β̲, β̄ scales with 1/m, keeping the same thrust margins."""
         if isinstance(mass_kg, bool) or not isinstance(mass_kg, int | float) or not mass_kg > 0:
             raise ConfigError(f"mass_kg = {mass_kg!r}: expected a number > 0 (kg)")
+        check_finite("mass_kg", mass_kg, "kg")
         k = self.mass_kg / float(mass_kg)
         return dataclasses.replace(self, mass_kg=float(mass_kg),
                                    collective_reduced_min_m_s2=self.collective_reduced_min_m_s2 * k,

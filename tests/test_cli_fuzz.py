@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import math
 import os
 import sqlite3
@@ -519,3 +520,13 @@ def test_a_file_name_too_long_for_the_file_system_is_bad_input(env, case):
     }[case]
     code, _, err = call(argv)
     assert code == 2 and err.count("\n") == 1 and err.startswith("aerobat: error: ") and "Traceback" not in err, err
+
+
+def test_an_unusable_scheduler_is_refused_before_a_study_is_created(tmp_path):
+    """With --json the study's announcement goes to stderr; a bad --scheduler must not leave it (or the study)."""
+    db = tmp_path / "s.sqlite"
+    code, _, err = call(["study", "envelope", "--flips", "1", "--rates-deg-s", "800", "--dims", "2", "--json",
+                         "--scheduler", "nan", "--db", str(db), "--out", str(tmp_path / "out")])
+    one_line(code, err, 2, "scheduler")
+    code, out, _ = call(["studies", "--json", "--db", str(db)])
+    assert code == 0 and json.loads(out) == []

@@ -530,3 +530,14 @@ def test_an_unusable_scheduler_is_refused_before_a_study_is_created(tmp_path):
     one_line(code, err, 2, "scheduler")
     code, out, _ = call(["studies", "--json", "--db", str(db)])
     assert code == 0 and json.loads(out) == []
+
+
+def test_a_store_whose_name_has_undecodable_bytes_works(tmp_path):
+    """``--db $'\\xff.sqlite'``: the SQLite URI is built from the file name's bytes (it failed to encode)."""
+    db = tmp_path / "s\udcff.sqlite"
+    code, _, err = call(["learn", *SMALL, "--plant", "nominal", "--iterations", "1", "--db", str(db),
+                         "--out", str(tmp_path / "out")])
+    assert code == 0, err
+    assert os.path.exists(os.fsencode(str(db)))
+    code, out, err = call(["sessions", "--json", "--db", str(db)])
+    assert code == 0 and len(json.loads(out)) == 1, err

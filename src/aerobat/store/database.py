@@ -102,7 +102,7 @@ class Database:
         try:
             fresh = self._check_file(create)
             read_only = not create and not os.access(self.path.parent if str(self.path.parent) else ".", os.W_OK)
-            uri = f"file:{quote(str(self.path.resolve()))}" + ("?mode=ro&immutable=1" if read_only else
+            uri = f"file:{quote(os.fsencode(self.path.resolve()))}" + ("?mode=ro&immutable=1" if read_only else
                                                                "" if create else "?mode=ro")
         except OSError as exc:  # a name too long for the file system, a loop of links, an I/O error…
             raise StoreAccessError(f"{self.path}: cannot open the database: {exc.strerror or exc}") from None
@@ -167,7 +167,7 @@ class Database:
     def _probe(self) -> bool:
         """Read-only look inside an SQLite file: is it ours, and which version?"""
         path = self.path
-        uri = f"file:{quote(str(path.resolve()))}?mode=ro"
+        uri = f"file:{quote(os.fsencode(path.resolve()))}?mode=ro"
         with path.open("rb") as handle:
             wal_format = handle.read(20)[18:20] == b"\x02\x02"
         side_files = any(Path(f"{path}{suffix}").exists() for suffix in ("-wal", "-shm"))

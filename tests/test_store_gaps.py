@@ -494,3 +494,20 @@ def test_maneuvers_and_programs_refuse_bad_arguments(small_design):
     _refused(solve_translation, 1.0, 1.0, intervals=2**64, fragment="intervals")
     _refused(solve_translation, 10**400, 1.0, fragment="target_y_m")
     _refused(from_spec, flip.spec(), source={"a": 1}, fragment="source")
+
+
+def test_more_entry_points_refuse_bad_arguments(tmp_path, small_design):
+    from aerobat import ControllerParams, PlantChoice, hummingbird, simulate_batch, start_session
+    from aerobat.experiments.reports import session_from_json
+
+    config, flip, nominal = small_design
+    for order in (10**400, config, (1, 2, 3, "4"), (1.0, 2.0, 3.0, 4.0), None):
+        _refused(ControllerParams, motor_order=order, fragment="motor_order")
+    _refused(simulate_batch, [], hummingbird(), max_step_s=10**400, fragment="max_step_s")
+    with Store(tmp_path / "s.sqlite") as store:
+        for params in ("abc", np.zeros(2), {}):
+            _refused(start_session, store, flip, model=config, plant=PlantChoice("nominal"), iterations=1,
+                     design_result=nominal, start_params=params, fragment="start_params")
+    for data in (np.full(5, np.nan), [], "x", {"maneuver": flip.spec(), "design": [1]}, {"iterations": 5}):
+        _refused(session_from_json, data, fragment="session JSON")
+

@@ -183,7 +183,9 @@ def session_from_json(data: dict[str, Any]) -> Session:
     from aerobat.core.design import Design
     from aerobat.core.learning import Iteration, IterationStatus, Session, SessionStatus
 
-    if isinstance(data, dict) and "maneuver" in data and "design" not in data:
+    if not isinstance(data, dict):
+        raise ConfigError(f"session JSON: expected an object (a dict), got {type(data).__name__}")
+    if "maneuver" in data and "design" not in data:
         raise ConfigError("session JSON: no 'design' field; session.json is a summary, use the output of "
                           "`aerobat export ID --format json` or `aerobat show ID --json`")
     try:
@@ -201,5 +203,5 @@ def session_from_json(data: dict[str, Any]) -> Session:
         status = SessionStatus(data["status"] if data["status"] not in ("running", "killed") else "interrupted")
         return Session(maneuver, design, data["plant"], iterations, np.asarray(data["final_params"]), status,
                        data["message"], float(data.get("wall_s", math.nan)))
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ConfigError(f"session JSON: missing or malformed field: {exc}") from None
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:
+        raise ConfigError(f"session JSON: missing or malformed field: {type(exc).__name__}: {exc}") from None

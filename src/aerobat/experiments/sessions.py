@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.config import check_int, check_type, short_repr
+from aerobat.config import as_float_array, check_int, check_type, short_repr
 from aerobat.core.design import Design, design
 from aerobat.core.learning import Iteration, Learner, SessionStatus, learn
 from aerobat.core.maneuver import Maneuver, check_maneuver, position_indices
@@ -249,7 +249,8 @@ def start_session(
                            + ("" if force else " (force=True / --force learns anyway)"), result)
     update_rule = build_rule(rule, result, model)
     flying = plant.build(model)
-    start = np.array(result.p_nominal if start_params is None else start_params, dtype=float)
+    start = (np.array(result.p_nominal, dtype=float) if start_params is None
+             else as_float_array("start_params", start_params, (len(maneuver.parameters),)))
     learner = Learner(maneuver, result, rule=update_rule, params=start)
     table = vehicle_table(model)
     session_id = store.create_session(

@@ -19,12 +19,12 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numba as nb
 import numpy as np
 
-from aerobat.config import as_float_array, check_int, check_type, short_repr
+from aerobat.config import as_float_array, check_int, check_real, check_type
 from aerobat.errors import ConfigError
 from aerobat.quadrotor.dynamics import (
     N_PLANT,
@@ -284,15 +284,13 @@ def _step_count(bp: np.ndarray, max_step: float) -> float:
 MAX_STEPS = 10_000_000  # RK4 steps of one simulation: 600 s at the default step is 1.2 million
 
 
-def check_max_step(max_step_s: object, name: str = "max_step_s") -> float:
+def check_max_step(max_step_s: Any, name: str = "max_step_s") -> float:
     """A step size: a finite number > 0 [s] (how many steps it makes is checked against each program)."""
-    if isinstance(max_step_s, np.integer | np.floating) and not isinstance(max_step_s, np.bool_):
-        max_step_s = max_step_s.item()
-    if isinstance(max_step_s, bool) or not isinstance(max_step_s, int | float):
-        raise ConfigError(f"{name} must be a number, got {type(max_step_s).__name__} {short_repr(max_step_s)}")
-    if not (max_step_s > 0 and math.isfinite(max_step_s)):
+    check_real(name, max_step_s)
+    value = float(max_step_s)
+    if not (value > 0 and math.isfinite(value)):
         raise ConfigError(f"{name} = {max_step_s} must be finite and > 0 (s)")
-    return float(max_step_s)
+    return value
 
 
 def _check_steps(steps: float, what: str) -> None:

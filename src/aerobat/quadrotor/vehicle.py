@@ -30,6 +30,7 @@ from aerobat.config import (
     dataclass_from_table,
     dataclass_to_table,
     read_toml,
+    short_repr,
     write_file,
 )
 from aerobat.errors import ConfigError
@@ -189,8 +190,10 @@ class ControllerParams:
         for name in ("inertia_xx_kg_m2", "inertia_yy_kg_m2", "inertia_zz_kg_m2"):
             check_range(name, getattr(self, name), low=1e-7, high=100.0, unit="kg m²")
         check_range("drag_constant_m", self.drag_constant_m, low=1e-5, high=1.0, unit="m")
-        if sorted(self.motor_order) != [1, 2, 3, 4]:
-            raise ConfigError(f"motor_order = {self.motor_order} must be a permutation of (1, 2, 3, 4)")
+        order = self.motor_order
+        whole = isinstance(order, tuple | list) and all(isinstance(m, int) and not isinstance(m, bool) for m in order)
+        if not whole or sorted(order) != [1, 2, 3, 4]:
+            raise ConfigError(f"motor_order = {short_repr(order)} must be a permutation of (1, 2, 3, 4)")
 
     @classmethod
     def nominal_for(cls, vehicle: VehicleParams, **gains: Any) -> ControllerParams:

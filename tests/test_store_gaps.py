@@ -511,3 +511,23 @@ def test_more_entry_points_refuse_bad_arguments(tmp_path, small_design):
     for data in (np.full(5, np.nan), [], "x", {"maneuver": flip.spec(), "design": [1]}, {"iterations": 5}):
         _refused(session_from_json, data, fragment="session JSON")
 
+
+def test_ctrl_c_while_a_local_pool_runs_is_raised_between_waits():
+    """A KeyboardInterrupt inside the pool's locks can leave one released twice (RuntimeError: release
+    unlocked lock, an internal error found by the fuzz campaign's budget); the executor defers it."""
+    import signal
+
+    from aerobat.experiments.execution import LocalExecutor
+    from aerobat.experiments.job import Job
+
+    pool = LocalExecutor(2)
+    seen = []
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            for _job, _result in pool.run([Job(f"k{i}", "no-such-kind", {}) for i in range(4)]):
+                seen.append(signal.getsignal(signal.SIGINT))
+                signal.raise_signal(signal.SIGINT)  # Ctrl-C while jobs are still running or queued
+    finally:
+        pool.close()
+    assert len(seen) == 1 and seen[0] is not signal.default_int_handler
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

@@ -540,20 +540,24 @@ def draw_invocation(rng: random.Random, cmd: Command, fx: Fixtures, all_cmds: li
             bad.extend(opt.mentions())
             why.append(f"{name} {value!r}")
 
-    for opt in options:  # required positionals and options: valid most of the time
-        if not opt.required or opt in chosen:
+    mostly_valid = rng.random() < 0.35  # one odd value among valid ones reaches deeper than many
+    for opt in options:  # required (and most optional) positionals and required options: valid most of the time
+        wanted = opt.required or (opt.positional and rng.random() < 0.8)
+        if not wanted or opt in chosen:
             continue
         if rng.random() < 0.85:
             value = valid_value(rng, opt, fx)
             if value is not None:
                 add_value(opt, value)
                 continue
-        if rng.random() < 0.3:  # left out: argparse says it is required
-            bad.extend(opt.mentions())
-            why.append(f"{opt.label} missing")
+        if rng.random() < 0.3:  # left out (argparse says so if it is required)
+            if opt.required:
+                bad.extend(opt.mentions())
+                why.append(f"{opt.label} missing")
             continue
         chosen.append(opt)
-    for opt in chosen:
+    odd = rng.randrange(len(chosen)) if chosen else -1
+    for index, opt in enumerate(chosen):
         if opt.positional:
             value = valid_value(rng, opt, fx) if rng.random() < 0.6 else draw_value(rng, opt, fx)
             if value is None or read_as_option(value):
@@ -561,7 +565,7 @@ def draw_invocation(rng: random.Random, cmd: Command, fx: Fixtures, all_cmds: li
             add_value(opt, value)
             continue
         value = "" if opt.flag else None
-        if value is None and rng.random() < 0.4:  # half-valid command lines reach further than refused ones
+        if value is None and rng.random() < (0.9 if mostly_valid and index != odd else 0.4):
             value = valid_value(rng, opt, fx)
         if value is None:
             value = draw_value(rng, opt, fx)

@@ -541,3 +541,29 @@ def test_a_store_whose_name_has_undecodable_bytes_works(tmp_path):
     assert os.path.exists(os.fsencode(str(db)))
     code, out, err = call(["sessions", "--json", "--db", str(db)])
     assert code == 0 and len(json.loads(out)) == 1, err
+
+
+def test_a_scheduler_address_where_something_else_answers_is_bad_input(tmp_path):
+    """A server that is not a Dask scheduler can answer anything: an HTTP reply read as a frame length is 3 EiB."""
+    import socket
+    import threading
+
+    server = socket.create_server(("127.0.0.1", 0))
+    port = server.getsockname()[1]
+
+    def answer() -> None:
+        with contextlib.suppress(OSError):
+            while True:
+                conn, _ = server.accept()
+                conn.recv(1024)
+                conn.sendall(b"HTTP/1.1 400 Bad Request\r\nconnection: close\r\ncontent-length: 0\r\n\r\n")
+                conn.close()
+
+    threading.Thread(target=answer, daemon=True).start()
+    try:
+        code, _, err = call(["benchmark", "map", "--y", "1:1:1", "--z", "1:1:1", "--scheduler",
+                             f"tcp://127.0.0.1:{port}", "--db", str(tmp_path / "s.sqlite"),
+                             "--out", str(tmp_path / "out")])
+    finally:
+        server.close()
+    one_line(code, err, 2, "scheduler")

@@ -138,8 +138,8 @@ class DaskExecutor:
                 client = Client(address, timeout="10s")
             except (ValueError, TypeError) as exc:  # not an address distributed can use
                 raise ConfigError(f"{where}: expected tcp://HOST:PORT: {exc}") from None
-            except (OSError, TimeoutError) as exc:
-                raise ConfigError(f"{where}: cannot connect: {exc}") from None
+            except Exception as exc:  # unreachable, or something else answers there (its replies can be anything)
+                raise ConfigError(f"{where}: cannot connect: {type(exc).__name__}: {exc}") from None
         self.client = client
         self.workers = max(1, sum(w.get("nthreads", 1) for w in self.client.scheduler_info()["workers"].values()))
 

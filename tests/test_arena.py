@@ -12,13 +12,14 @@ from aerobat.config import ConfigError
 from aerobat.plants import Arena as _Arena
 from aerobat.plants import ArenaParams, NominalPlant, Plant, load_arena
 from aerobat.plants.arena import save_arena
+from aerobat.quadrotor.dynamics import euler_zyx
+from aerobat.quadrotor.maneuvers import MultiFlip
 
 
 def Arena(*args, **kwargs):  # noqa: N802 - these tests are about the testbed itself: the paper's open loop
     kwargs.setdefault("feedback", "none")
     return _Arena(*args, **kwargs)
-from aerobat.quadrotor.dynamics import euler_zyx
-from aerobat.quadrotor.maneuvers import MultiFlip
+
 
 CONFIG = hummingbird()
 TRIPLE = load_program("examples/triple_flip_1800.toml")

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import math
+import os
 import sqlite3
 import string
 import subprocess
@@ -411,3 +413,157 @@ def test_the_installed_command_answers_bad_input_in_one_line(env, case):
     assert result.stdout == ""
     assert result.stderr.count("\n") == 1 and result.stderr.startswith("aerobat: error: ")
     assert "Traceback" not in result.stderr
+
+
+# ------------------------------------------------- found by scripts/fuzz_campaign.py (issue 19)
+
+
+def one_line(code: int, err: str, status: int, *fragments: str) -> None:
+    lines = err.splitlines()
+    prefix = "aerobat: error: " if status == 2 else "aerobat: failed: "
+    assert code == status and len(lines) == 1 and lines[0].startswith(prefix) and "Traceback" not in err, (code, err)
+    for fragment in fragments:
+        assert fragment in lines[0], err
+
+
+@pytest.mark.parametrize("argv, names", [(["benchmark"], ("benchmark", "translation", "map")),
+                                         (["study"], ("study", "robustness", "rules", "envelope"))])
+def test_a_command_group_without_its_command_says_so_in_one_line(argv, names):
+    code, out, err = call(argv)
+    one_line(code, err, 2, *names)
+    assert "usage:" in out  # and the group's commands, on standard output
+
+
+@pytest.mark.parametrize("command", ["simulate", "fly", "benchmark"])
+def test_a_figure_file_of_an_unknown_format_is_refused_in_one_line(tmp_path, command):
+    figure = tmp_path / "figure.sqlite"
+    argv = {"simulate": ["simulate", str(EXAMPLES / "hover.toml")],
+            "fly": ["fly", str(EXAMPLES / "hover.toml"), "--plant", "nominal"],
+            "benchmark": ["benchmark", "translation", "--to", "1,1"]}[command]
+    code, _, err = call([*argv, "--plot", str(figure)])
+    one_line(code, err, 2, str(figure), ".png")
+    assert not figure.exists()
+
+
+def test_an_undecodable_file_name_is_printed_as_given(tmp_path):
+    """``aerobat examples $'\\xff'``: argv carries the byte as \\udcff; strict UTF-8 stdout must not crash."""
+    folder = tmp_path / "ex\udcff"
+    raw = io.BytesIO()
+    strict = io.TextIOWrapper(raw, encoding="utf-8", errors="strict", write_through=True)
+    err = io.StringIO()
+    with contextlib.redirect_stdout(strict), contextlib.redirect_stderr(err):
+        code = main(["examples", str(folder)])
+    assert code == 0, err.getvalue()
+    assert os.fsencode(str(folder)) in raw.getvalue()
+    assert strict.errors == "strict"  # the caller's stream is left as it was
+
+
+@pytest.mark.parametrize("address", ["nan", "1:2:3", ":", "inproc://x", "abc://h:1", "tls://127.0.0.1:1"])
+def test_an_unusable_scheduler_address_is_bad_input(tmp_path, address):
+    code, _, err = call(["benchmark", "map", "--y", "1:1:1", "--z", "1:1:1", "--scheduler", address,
+                         "--db", str(tmp_path / "s.sqlite"), "--out", str(tmp_path / "out")])
+    one_line(code, err, 2, "scheduler", repr(address))
+
+
+def test_a_negative_number_after_a_flag_is_not_its_value(env):
+    """``studies --json -1``: the -1 is the study, refused as such (not ``--json: ignored explicit argument``)."""
+    code, _, err = call(["studies", "--json", "-1", "--db", str(env["db"])])
+    one_line(code, err, 2, "study", "'-1'")
+    code, out, err = call(["sessions", "--json", "--limit", "-1", "--db", str(env["db"])])
+    one_line(code, err, 2, "--limit")
+
+
+def test_ctrl_c_during_an_ipopt_solve_stops_the_benchmark(monkeypatch):
+    """CasADi turns a Ctrl-C inside IPOPT into a failed solve; the command must stop (130), not report a failure."""
+    import signal
+
+    from aerobat.quadrotor.timeoptimal import transcription
+
+    real = transcription.transcription_solver
+
+    def interrupted_solver(*args, **kwargs):
+        solver = real(*args, **kwargs)
+
+        class Interrupted:
+            def __call__(self, **inputs):
+                try:  # what CasADi does: its signal check raises KeyboardInterrupt, which it catches
+                    signal.raise_signal(signal.SIGINT)
+                except KeyboardInterrupt:
+                    pass
+                return solver(**inputs)
+
+            def stats(self):
+                return solver.stats()
+
+        return Interrupted()
+
+    monkeypatch.setattr(transcription, "transcription_solver", interrupted_solver)
+    code, _, err = call(["benchmark", "translation", "--to", "1,1"])
+    assert code == 130 and err.startswith("aerobat: interrupted"), (code, err)
+
+
+LONG = "飞" * 100 + ".toml"  # 300 bytes: longer than any file name the file system allows
+
+
+@pytest.mark.parametrize("case", ["db", "ranges", "vehicle", "maneuver", "program", "output", "design-program"])
+def test_a_file_name_too_long_for_the_file_system_is_bad_input(env, case):
+    long = str(env["root"] / LONG)
+    argv = {
+        "db": ["sessions", "--db", long],
+        "ranges": ["study", "robustness", *SMALL, "--vehicles", "1", "--iterations", "1", "--workers", "1",
+                   "--ranges", long, "--db", str(env["root"] / "r.sqlite")],
+        "vehicle": ["design", *SMALL, "--vehicle", long.removesuffix(".toml") + "x"],
+        "maneuver": ["design", "--maneuver", long.removesuffix(".toml")],
+        "program": ["simulate", long],
+        "output": ["export", "1", "--db", str(env["db"]), "--output", long],
+        "design-program": ["design", *SMALL, "--program", long],
+    }[case]
+    code, _, err = call(argv)
+    assert code == 2 and err.count("\n") == 1 and err.startswith("aerobat: error: ") and "Traceback" not in err, err
+
+
+def test_an_unusable_scheduler_is_refused_before_a_study_is_created(tmp_path):
+    """With --json the study's announcement goes to stderr; a bad --scheduler must not leave it (or the study)."""
+    db = tmp_path / "s.sqlite"
+    code, _, err = call(["study", "envelope", "--flips", "1", "--rates-deg-s", "800", "--dims", "2", "--json",
+                         "--scheduler", "nan", "--db", str(db), "--out", str(tmp_path / "out")])
+    one_line(code, err, 2, "scheduler")
+    code, out, _ = call(["studies", "--json", "--db", str(db)])
+    assert code == 0 and json.loads(out) == []
+
+
+def test_a_store_whose_name_has_undecodable_bytes_works(tmp_path):
+    """``--db $'\\xff.sqlite'``: the SQLite URI is built from the file name's bytes (it failed to encode)."""
+    db = tmp_path / "s\udcff.sqlite"
+    code, _, err = call(["learn", *SMALL, "--plant", "nominal", "--iterations", "1", "--db", str(db),
+                         "--out", str(tmp_path / "out")])
+    assert code == 0, err
+    assert os.path.exists(os.fsencode(str(db)))
+    code, out, err = call(["sessions", "--json", "--db", str(db)])
+    assert code == 0 and len(json.loads(out)) == 1, err
+
+
+def test_a_scheduler_address_where_something_else_answers_is_bad_input(tmp_path):
+    """A server that is not a Dask scheduler can answer anything: an HTTP reply read as a frame length is 3 EiB."""
+    import socket
+    import threading
+
+    server = socket.create_server(("127.0.0.1", 0))
+    port = server.getsockname()[1]
+
+    def answer() -> None:
+        with contextlib.suppress(OSError):
+            while True:
+                conn, _ = server.accept()
+                conn.recv(1024)
+                conn.sendall(b"HTTP/1.1 400 Bad Request\r\nconnection: close\r\ncontent-length: 0\r\n\r\n")
+                conn.close()
+
+    threading.Thread(target=answer, daemon=True).start()
+    try:
+        code, _, err = call(["benchmark", "map", "--y", "1:1:1", "--z", "1:1:1", "--scheduler",
+                             f"tcp://127.0.0.1:{port}", "--db", str(tmp_path / "s.sqlite"),
+                             "--out", str(tmp_path / "out")])
+    finally:
+        server.close()
+    one_line(code, err, 2, "scheduler")

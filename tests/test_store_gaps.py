@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import io
+import math
 import os
 import socket
 import sqlite3
@@ -301,3 +302,232 @@ def test_the_api_refuses_misuse_with_config_errors():
             learn(flip, nominal, Arena(config), **kwargs)
     with pytest.raises(ConfigError, match="Design"):
         learn(flip, "not a design", Arena(config), iterations=1)  # type: ignore[arg-type]
+
+
+# ------------------------------------------------- the library's entry points, found by scripts/fuzz_campaign.py
+
+
+def _refused(fn, *args, fragment: str = "", **kwargs) -> str:
+    """``fn(...)`` raises an AerobatError (never a TypeError or AttributeError from inside); its message."""
+    from aerobat.errors import AerobatError
+
+    with pytest.raises(AerobatError) as info:
+        fn(*args, **kwargs)
+    assert fragment in str(info.value), str(info.value)
+    return str(info.value)
+
+
+@pytest.mark.parametrize("bad", [None, 5, 1.5, [], ("a",), np.zeros(2), {"a": 1}, b"bytes", "nul\x00.toml",
+                                 "飞" * 100 + ".toml"])
+def test_file_functions_refuse_what_cannot_be_a_file(tmp_path, bad):
+    from aerobat import Store, hummingbird, load_program, load_vehicle, save_program, save_vehicle
+    from aerobat.experiments.studies import load_ranges
+    from aerobat.plants.arena.params import ArenaParams, load_arena, save_arena
+    from aerobat.quadrotor.maneuvers import load_maneuver_file
+
+    if isinstance(bad, str) and "飞" in bad:
+        bad = str(tmp_path / bad)
+    config = hummingbird()
+    for loader in (load_vehicle, load_program, load_arena, load_ranges):
+        _refused(loader, bad)
+    _refused(load_maneuver_file, bad, config.vehicle)
+    _refused(save_vehicle, config, bad)
+    _refused(save_arena, ArenaParams(), bad)
+    _refused(Store, bad)
+    program = load_program(Path(__file__).resolve().parents[1] / "examples" / "hover.toml")
+    _refused(save_program, program, bad)
+
+
+def test_savers_refuse_objects_of_the_wrong_kind(tmp_path):
+    from aerobat import hummingbird, save_program, save_vehicle
+    from aerobat.plants.arena.params import save_arena
+
+    _refused(save_vehicle, "hummingbird", tmp_path / "v.toml", fragment="config")
+    _refused(save_program, hummingbird(), tmp_path / "p.toml", fragment="program")
+    _refused(save_arena, None, tmp_path / "a.toml", fragment="params")
+    _refused(save_vehicle, hummingbird(), "/proc/version", fragment="/proc/version")  # cannot write: OutputError
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("timeout", [{}, "1", float("nan"), -1.0, None])
+def test_store_busy_timeout_must_be_a_number(tmp_path, timeout):
+    from aerobat import Store
+
+    _refused(Store, tmp_path / "s.sqlite", busy_timeout_s=timeout, fragment="busy_timeout_s")
+
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+@pytest.mark.parametrize("changes, fragment", [
+    ({"program": "hover.toml"}, "program"), ({"config": None}, "config"), ({"max_step_s": None}, "max_step_s"),
+    ({"max_step_s": 5e-324}, "max_step_s"), ({"max_step_s": 5e-324, "record": False}, "max_step_s"),
+    ({"mode": "sampled", "substeps": 10**9}, "substeps"), ({"mode": "sampled", "tick_s": 1e-300}, "tick_s"),
+    ({"substeps": 2.5}, "substeps"), ({"plant": 0}, "plant"), ({"record": np.zeros(3)}, "record"),
+    ({"mode": np.zeros(2)}, "mode"), ({"initial_state": 10**400}, "initial_state"),
+    ({"initial_state": np.zeros(3)}, "initial_state")])
+def test_simulate_refuses_bad_arguments(changes, fragment):
+    from aerobat import hummingbird, load_program, simulate
+
+    kwargs = {"program": load_program(EXAMPLES / "single_flip.toml"), "config": hummingbird(), **changes}
+    _refused(simulate, kwargs.pop("program"), kwargs.pop("config"), fragment=fragment, **kwargs)
+
+
+@pytest.mark.parametrize("changes, fragment", [
+    ({"configs": 0}, "configs"), ({"configs": [None]}, "configs[0]"), ({"programs": np.int64(3)}, "programs"),
+    ({"programs": [None]}, "programs[0]"), ({"initial_states": 1 + 2j}, "initial_states"),
+    ({"plants": {}}, "plants"), ({"max_step_s": 1e-300}, "max_step_s")])
+def test_simulate_batch_refuses_bad_arguments(changes, fragment):
+    from aerobat import NominalModel, hummingbird, load_program, simulate_batch
+
+    kwargs = {"programs": [load_program(EXAMPLES / "single_flip.toml")], "configs": hummingbird(), **changes}
+    _refused(simulate_batch, kwargs.pop("programs"), kwargs.pop("configs"), fragment=fragment, **kwargs)
+    _refused(NominalModel, [], fragment="config")
+    _refused(NominalModel, hummingbird(), max_step_s=0.0, fragment="max_step_s")
+    _refused(NominalModel(hummingbird()).final_states, -1e308, fragment="programs")
+
+
+def test_plants_refuse_bad_arguments():
+    from aerobat import Arena, ArenaParams, NominalPlant, PlantChoice, hummingbird
+
+    config = hummingbird()
+    _refused(Arena, "hummingbird", fragment="config")
+    _refused(Arena, config, {"a": 1}, fragment="params")
+    for seed in (-1, "1", math.inf, np.full(3, np.nan), 2**64):
+        _refused(Arena, config, ArenaParams(), seed=seed, fragment="seed")
+    _refused(NominalPlant, b"x", fragment="config")
+    for rate in ("abc", np.full(3, np.nan), 0.0, 1e308):
+        _refused(NominalPlant, config, sample_rate_hz=rate, fragment="sample_rate_hz")
+    for plant in (Arena(config, seed=1), NominalPlant(config)):
+        for program in (None, {}, "hover.toml", np.zeros((2, 2)), config):
+            _refused(plant.fly, program, fragment="program")
+    for kind in ([], {"a": 1}, np.zeros((2, 2)), None):
+        _refused(PlantChoice, kind, fragment="plant")
+        _refused(PlantChoice.from_file, kind, None, fragment="plant")
+
+
+@pytest.fixture(scope="module")
+def small_design():
+    from aerobat import MultiFlip, NominalModel, design, hummingbird
+
+    config = hummingbird()
+    flip = MultiFlip(vehicle=config.vehicle, flips=1, max_rate_rad_s=math.radians(800), dims=2)
+    return config, flip, design(flip, NominalModel(config))
+
+
+def test_design_and_learn_refuse_bad_arguments(small_design):
+    from aerobat import NominalModel, NominalPlant, RuleChoice, design, learn, make_rule
+
+    config, flip, nominal = small_design
+    model = NominalModel(config)
+    for bad in (1e308, {"a": 1}, np.full(5, np.nan), (1, 2), None):
+        _refused(design, bad, model, fragment="maneuver")
+        _refused(design, flip, bad, fragment="model")
+        _refused(learn, bad, nominal, NominalPlant(config), iterations=1, fragment="maneuver")
+        _refused(learn, flip, nominal, bad, iterations=1, fragment="plant")
+        _refused(make_rule, bad, nominal, fragment="choice")
+        _refused(make_rule, "paper", bad, fragment="design")
+    for name, value in (("tolerance", np.zeros((2, 2))), ("tolerance", 10**400), ("tsvd_rtol", config),
+                        ("damping", None), ("max_iterations", -30), ("raise_on_failure", math.inf),
+                        ("correction", "qr"), ("p_guess", np.zeros(2)), ("p_guess", "abc")):
+        _refused(design, flip, model, fragment=name, **{name: value})
+    _refused(learn, flip, nominal, NominalPlant(config), iterations=1, max_attempts=config, fragment="max_attempts")
+    _refused(learn, flip, nominal, NominalPlant(config), iterations=1, start_params={}, fragment="start parameters")
+    _refused(RuleChoice, "paper", schedule=[1.0], fragment="schedule")
+    _refused(RuleChoice, "paper", isc="yes", fragment="isc")
+
+
+def test_sessions_and_store_queries_refuse_bad_arguments(store_with_a_session, small_design):
+    from aerobat import PlantChoice, RuleChoice, resume_session, start_session
+    from aerobat.experiments.reports import load_session
+
+    config, flip, nominal = small_design
+    with Store(store_with_a_session) as store:
+        for ref in (math.inf, -math.inf, math.nan, 1.5, True, 2**64, {}, None):
+            _refused(store.resolve_session, ref, fragment="session")
+            _refused(store.resolve_study, ref, fragment="study")
+        for session_id in (2**64, -(2**70)):
+            _refused(store.session, session_id)
+            _refused(load_session, store, session_id)
+        _refused(store.list_sessions, limit=2**63, fragment="limit")
+        _refused(store.list_sessions, limit="", fragment="limit")
+        _refused(store.list_sessions, newest_first=np.zeros(0), fragment="newest_first")
+        base = {"model": config, "plant": PlantChoice("nominal"), "rule": RuleChoice(), "iterations": 1,
+                "design_result": nominal}
+        for name, value in (("model", np.int64(3)), ("plant", "nominal"), ("rule", np.zeros((2, 2))),
+                            ("design_result", "converged"), ("command", config), ("warm_start_from", 1.5),
+                            ("study_id", "x")):
+            _refused(start_session, store, flip, fragment=name, **{**base, name: value})
+        _refused(start_session, store, b"x", fragment="maneuver", **base)
+        for bad in ({"a": 1}, np.zeros(0), "abc"):
+            _refused(start_session, bad, flip, fragment="store", **base)
+            _refused(resume_session, bad, "last", fragment="store")
+            _refused(load_session, bad, 1, fragment="store")
+
+
+def test_maneuvers_and_programs_refuse_bad_arguments(small_design):
+    from aerobat import MultiFlip, Program, RampDown, Translation, from_spec, solve_translation, translation_maneuver
+
+    config, flip, nominal = small_design
+    for name, value in (("max_rate_rad_s", {"a": 1}), ("max_rate_rad_s", np.full(5, np.nan)),
+                        ("max_rate_rad_s", 10**400), ("coast_collective", np.zeros(0)), ("axis", ["roll"]),
+                        ("dims", np.zeros(2)), ("ramp_collective_s", "0.1"), ("name", 5)):
+        _refused(MultiFlip, vehicle=config.vehicle, fragment=name, **{name: value})
+    for params in ("", {}, 10**400, config, np.zeros((2, 2))):
+        _refused(flip.program, params, fragment="parameters")
+    for name, value in (("config", b"x"), ("target_yz", 1 + 2j), ("target_yz", 1), ("target_yz", [1.0]),
+                        ("final_angle_rad", 10**400), ("ramp_s", [])):
+        kwargs = {"config": config, "target_yz": (1.0, 1.0), name: value}
+        _refused(translation_maneuver, kwargs.pop("config"), kwargs.pop("target_yz"), fragment=name, **kwargs)
+    translation = Translation(vehicle=config.vehicle, target_yz=(1.0, 1.0), final_angle_rad=0.0,
+                              interval_inputs=((10.0, 0.0),), guess_times_s=(1.0,))
+    for name, value in (("interval_inputs", 1e308), ("interval_inputs", ((1.0, "x"),)), ("guess_times_s", None),
+                        ("vehicle", config), ("target_yz", "ab")):
+        fields = {"vehicle": translation.vehicle, "target_yz": translation.target_yz, "final_angle_rad": 0.0,
+                  "interval_inputs": translation.interval_inputs, "guess_times_s": translation.guess_times_s}
+        _refused(Translation, fragment=name, **{**fields, name: value})
+    _refused(RampDown, collective_s=10**400, fragment="collective_s")
+    for switches in (10**400, Path("/nonexistent"), "abc"):
+        _refused(Program, switches=switches, duration_s=1.0, fragment="switches")
+    _refused(Program, switches=(), duration_s=10**400, fragment="duration_s")
+    _refused(config.with_mass, 10**400, fragment="mass_kg")
+    _refused(solve_translation, 1.0, 1.0, intervals=2**64, fragment="intervals")
+    _refused(solve_translation, 10**400, 1.0, fragment="target_y_m")
+    _refused(from_spec, flip.spec(), source={"a": 1}, fragment="source")
+
+
+def test_more_entry_points_refuse_bad_arguments(tmp_path, small_design):
+    from aerobat import ControllerParams, PlantChoice, hummingbird, simulate_batch, start_session
+    from aerobat.experiments.reports import session_from_json
+
+    config, flip, nominal = small_design
+    for order in (10**400, config, (1, 2, 3, "4"), (1.0, 2.0, 3.0, 4.0), None):
+        _refused(ControllerParams, motor_order=order, fragment="motor_order")
+    _refused(simulate_batch, [], hummingbird(), max_step_s=10**400, fragment="max_step_s")
+    with Store(tmp_path / "s.sqlite") as store:
+        for params in ("abc", np.zeros(2), {}):
+            _refused(start_session, store, flip, model=config, plant=PlantChoice("nominal"), iterations=1,
+                     design_result=nominal, start_params=params, fragment="start_params")
+    for data in (np.full(5, np.nan), [], "x", {"maneuver": flip.spec(), "design": [1]}, {"iterations": 5}):
+        _refused(session_from_json, data, fragment="session JSON")
+
+
+def test_ctrl_c_while_a_local_pool_runs_is_raised_between_waits():
+    """A KeyboardInterrupt inside the pool's locks can leave one released twice (RuntimeError: release
+    unlocked lock, an internal error found by the fuzz campaign's budget); the executor defers it."""
+    import signal
+
+    from aerobat.experiments.execution import LocalExecutor
+    from aerobat.experiments.job import Job
+
+    pool = LocalExecutor(2)
+    seen = []
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            for _job, _result in pool.run([Job(f"k{i}", "no-such-kind", {}) for i in range(4)]):
+                seen.append(signal.getsignal(signal.SIGINT))
+                signal.raise_signal(signal.SIGINT)  # Ctrl-C while jobs are still running or queued
+    finally:
+        pool.close()
+    assert len(seen) == 1 and seen[0] is not signal.default_int_handler
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

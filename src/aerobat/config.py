@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
+import os
 import tomllib
 import types
 import typing
@@ -17,15 +19,25 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
+import numpy as np
+
 from aerobat.errors import ConfigError
 
 __all__ = [
     "ConfigError",
+    "as_float_array",
+    "as_path",
     "check_finite",
+    "check_int",
+    "check_number",
     "check_range",
+    "check_real",
+    "check_type",
     "dataclass_from_table",
     "dataclass_to_table",
     "read_toml",
+    "short_repr",
+    "write_file",
     "table_field",
 ]
 
@@ -35,9 +47,58 @@ T = TypeVar("T")
 def check_finite(name: str, value: float, unit: str = "") -> None:
     """Raise :class:`ConfigError` unless ``value`` is a finite real number."""
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ConfigError(f"{name} must be a number, got {type(value).__name__} {value!r}")
-    if not math.isfinite(value):
+        raise ConfigError(f"{name} must be a number, got {type(value).__name__} {short_repr(value)}")
+    try:
+        finite = math.isfinite(value)
+    except OverflowError:  # an integer beyond any float
+        raise ConfigError(f"{name} = {short_repr(value)} is too large{_unit(unit)}") from None
+    if not finite:
         raise ConfigError(f"{name} = {value} must be finite{_unit(unit)}")
+
+
+def check_real(name: str, value: Any) -> None:
+    """Raise :class:`ConfigError` unless ``value`` is a real number a float can hold (nan and inf pass)."""
+    if isinstance(value, bool | np.bool_) or not isinstance(value, numbers.Real):
+        raise ConfigError(f"{name} must be a number, got {type(value).__name__} {short_repr(value)}")
+    if isinstance(value, numbers.Integral) and abs(int(value)) > 2**1023:
+        raise ConfigError(f"{name} = {short_repr(value)} is too large")
+
+
+def check_number(name: str, value: Any, *, low: float | None = None, high: float | None = None,
+                 low_inclusive: bool = True, high_inclusive: bool = True, unit: str = "") -> float:
+    """``value`` as a float: a finite real number (NumPy scalars too, never a bool) within the range."""
+    if isinstance(value, np.integer | np.floating) and not isinstance(value, np.bool_):
+        value = value.item()
+    check_range(name, value, low=low, high=high, low_inclusive=low_inclusive, high_inclusive=high_inclusive,
+                unit=unit)
+    return float(value)
+
+
+def check_int(name: str, value: Any, *, low: int | None = None, high: int | None = None) -> int:
+    """``value`` as an int: an integer (a NumPy integer too, never a bool or a float) within [low, high]."""
+    if isinstance(value, np.integer):
+        value = int(value)
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ConfigError(f"{name} must be an integer, got {type(value).__name__} {short_repr(value)}")
+    if (low is not None and value < low) or (high is not None and value > high):
+        allowed = f"{low if low is not None else '…'} … {high if high is not None else '…'}"
+        raise ConfigError(f"{name} = {short_repr(value)} is out of range: allowed {allowed}")
+    return value
+
+
+def as_float_array(name: str, value: Any, shape: tuple[int, ...] | None = None, *, finite: bool = True) -> Any:
+    """``value`` as a float array of ``shape``, finite; :class:`ConfigError` naming ``name`` otherwise."""
+    if isinstance(value, str | bytes | Mapping) or value is None:
+        raise ConfigError(f"{name}: expected an array of numbers, got {type(value).__name__} {short_repr(value)}")
+    try:
+        array = np.array(value, dtype=float)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise ConfigError(f"{name}: expected an array of numbers, got {short_repr(value)} ({exc})") from None
+    if shape is not None and array.shape != shape:
+        raise ConfigError(f"{name} must have shape {shape}, got {array.shape}")
+    if finite and not np.all(np.isfinite(array)):
+        raise ConfigError(f"{name} contains non-finite values")
+    return array
 
 
 def check_range(
@@ -76,9 +137,32 @@ def _unit(unit: str) -> str:
     return f" ({unit})" if unit else ""
 
 
+def short_repr(value: Any, limit: int = 60) -> str:
+    """``repr(value)``, cut to ``limit`` characters (for messages about values of the wrong type)."""
+    try:
+        text = repr(value)
+    except Exception:  # noqa: BLE001 - a value whose repr fails is still described
+        text = f"<{type(value).__name__}>"
+    return text if len(text) <= limit else text[: limit - 1] + "…"
+
+
+def as_path(value: Any, name: str = "path") -> Path:
+    """``value`` as a :class:`~pathlib.Path` (from a str or an ``os.PathLike``); :class:`ConfigError` otherwise."""
+    if not isinstance(value, str | os.PathLike):
+        raise ConfigError(f"{name}: expected a file path (str or pathlib.Path), got {type(value).__name__} "
+                          f"{short_repr(value)}")
+    try:
+        path = Path(value)
+    except TypeError as exc:  # an os.PathLike whose __fspath__ returns bytes or nonsense
+        raise ConfigError(f"{name}: expected a file path, got {short_repr(value)} ({exc})") from None
+    if "\x00" in str(path):
+        raise ConfigError(f"{name} {str(path)!r}: a file path cannot contain a NUL character")
+    return path
+
+
 def read_toml(path: str | Path) -> dict[str, Any]:
     """Read a TOML file, turning I/O and syntax problems into :class:`ConfigError`."""
-    path = Path(path)
+    path = as_path(path)
     try:
         with path.open("rb") as handle:
             return tomllib.load(handle)
@@ -94,6 +178,33 @@ def read_toml(path: str | Path) -> dict[str, Any]:
         raise ConfigError(f"{path}: invalid TOML: {exc}") from None
     except RecursionError:
         raise ConfigError(f"{path}: invalid TOML: nested too deeply") from None
+    except OSError as exc:  # a name too long for the file system, a path through a file, an I/O error…
+        raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
+
+
+def write_file(path: Any, text: str, name: str = "path") -> Path:
+    """Write ``text`` to ``path``: :class:`ConfigError` for a path that is not one, :class:`OutputError` if it fails."""
+    import errno
+
+    from aerobat.errors import DiskFull, OutputError
+
+    path = as_path(path, name)
+    try:
+        path.write_text(text)
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+            raise DiskFull(f"{path}: cannot write: the disk is full or a file size limit was reached ({reason})") \
+                from None
+        raise OutputError(f"{path}: cannot write: {reason}") from None
+    return path
+
+
+def check_type(name: str, value: Any, expected: type | tuple[type, ...], what: str) -> Any:
+    """``value`` if it is an instance of ``expected``; :class:`ConfigError` naming ``name`` and what came otherwise."""
+    if not isinstance(value, expected):
+        raise ConfigError(f"{name}: expected {what}, got {type(value).__name__} {short_repr(value)}")
+    return value
 
 
 def _coerce(value: Any, annotation: Any, where: str) -> Any:

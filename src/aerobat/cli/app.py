@@ -23,7 +23,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 from aerobat.cli.common import CommandFailed, HelpFormatter, Parser
 from aerobat.errors import (
@@ -85,20 +85,50 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _missing_command(parser: argparse.ArgumentParser, args: argparse.Namespace) -> str:
+    """``benchmark: name a command: translation, map`` for a command group given without its command."""
+    path: list[str] = []
+    while True:
+        group = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)  # noqa: SLF001
+        if group is None:
+            return "name a command"
+        name = getattr(args, group.dest, None)
+        if name is None or name not in group.choices:
+            return f"{' '.join(path) or 'aerobat'}: name a command: {', '.join(group.choices)}"
+        path.append(name)
+        parser = group.choices[name]
+
+
 def _one_line(exc: BaseException) -> str:
     """The message on one line: line breaks become spaces, other control characters their escapes."""
     text = " ".join(str(exc).splitlines()) or type(exc).__name__
     return "".join(c if c.isprintable() else c.encode("unicode_escape").decode() for c in text)
 
 
-def _negative_values(argv: list[str]) -> list[str]:
-    """``--to -2,4`` → ``--to=-2,4``: a value that starts with a minus sign is a value, not an option."""
+def _valued_options(parser: argparse.ArgumentParser) -> set[str]:
+    """Every option string that takes a value, in any command."""
+    out: set[str] = set()
+    for action in parser._actions:  # noqa: SLF001 - argparse has no public list of its actions
+        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+            for sub in action.choices.values():
+                out |= _valued_options(sub)
+        elif action.option_strings and action.nargs != 0:
+            out.update(action.option_strings)
+    return out
+
+
+def _negative_values(argv: list[str], valued: set[str] | None = None) -> list[str]:
+    """``--to -2,4`` → ``--to=-2,4``: a value that starts with a minus sign is a value, not an option.
+
+    Only options that take a value (``valued``, default: any) are joined: ``--json -1`` stays two words.
+    """
     out: list[str] = []
     k = 0
     while k < len(argv):
         token = argv[k]
         following = argv[k + 1] if k + 1 < len(argv) else ""
-        if (token.startswith("--") and "=" not in token and len(following) > 1 and following[0] == "-"
+        if (token.startswith("--") and "=" not in token and (valued is None or token in valued)
+                and len(following) > 1 and following[0] == "-"
                 and (following[1].isdigit() or following[1] == ".")):
             out.append(f"{token}={following}")
             k += 2
@@ -108,16 +138,43 @@ def _negative_values(argv: list[str]) -> list[str]:
     return out
 
 
+@contextlib.contextmanager
+def _undecodable_names_printable() -> Iterator[None]:
+    """Print file names as given, even undecodable ones (``\\xff`` in argv is ``\\udcff`` in Python).
+
+    Standard output is strict UTF-8 by default, so printing such a name (``written to …``) would
+    raise UnicodeEncodeError; ``surrogateescape`` writes back the bytes the user gave.
+    """
+    reconfigure = getattr(sys.stdout, "reconfigure", None)
+    previous = getattr(sys.stdout, "errors", None)
+    changed = False
+    if previous == "strict" and reconfigure is not None:
+        with contextlib.suppress(AttributeError, ValueError, OSError):
+            reconfigure(errors="surrogateescape")
+            changed = True
+    try:
+        yield
+    finally:
+        if changed and reconfigure is not None:
+            with contextlib.suppress(AttributeError, ValueError, OSError):
+                reconfigure(errors=previous)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status (see the module's table)."""
+    with _undecodable_names_printable():
+        return _main(argv)
+
+
+def _main(argv: Sequence[str] | None) -> int:
     import matplotlib
 
     matplotlib.use("Agg")  # the command line draws into files; only here is a backend chosen
     standalone = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv
-    argv = _negative_values([a for a in argv if a != "--debug"])
     parser = build_parser()
+    argv = _negative_values([a for a in argv if a != "--debug"], _valued_options(parser))
     if not argv:  # bare `aerobat`: what it can do
         parser.print_help()
         return EXIT_OK
@@ -131,6 +188,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if getattr(args, "func", None) is None:  # a command group without its subcommand: show its commands
         with contextlib.suppress(SystemExit):
             parser.parse_args([*argv, "--help"])
+        print(f"aerobat: error: {_missing_command(parser, args)}", file=sys.stderr)
         return EXIT_USAGE
     try:
         return int(args.func(args))

@@ -252,6 +252,14 @@ def add_db_option(p: argparse.ArgumentParser) -> None:
 # ------------------------------------------------------------------ objects from options
 
 
+def _exists(path: str) -> bool:
+    """Whether ``path`` names something; False for names the file system refuses (too long…)."""
+    try:
+        return Path(path).exists()
+    except (OSError, ValueError):
+        return False
+
+
 def maneuver_from_args(args: argparse.Namespace, config: Any) -> Any:
     """The maneuver the options describe, designed for ``config``."""
     source = getattr(args, "maneuver_source", None)
@@ -261,7 +269,7 @@ def maneuver_from_args(args: argparse.Namespace, config: Any) -> Any:
         raise ConfigError("name a maneuver: a family (flip, translation) or --maneuver FILE.toml|package.module:Name")
     _apply_family_defaults(args)
     if source is not None:
-        if source.endswith(".toml") or Path(source).exists():
+        if source.endswith(".toml") or _exists(source):
             from aerobat.quadrotor.maneuvers import load_maneuver_file
 
             return load_maneuver_file(source, config.vehicle)
@@ -344,6 +352,13 @@ def output_dir(path: str | Path) -> Path:
 
 def refuse_overwrite(path: Path, *, store_path: Path | None, force: bool, option: str) -> None:
     """Refuse to write over the store itself (ever) or over an existing file (unless ``force``)."""
+    try:
+        _refuse_overwrite(path, store_path=store_path, force=force, option=option)
+    except OSError as exc:  # a name too long for the file system, a path through a file…
+        raise ConfigError(f"{option} {path}: {exc.strerror or exc}") from None
+
+
+def _refuse_overwrite(path: Path, *, store_path: Path | None, force: bool, option: str) -> None:
     if store_path is not None and path.exists() and store_path.exists():
         for candidate in (store_path, Path(f"{store_path}-wal"), Path(f"{store_path}-shm")):
             if candidate.exists() and os.path.samefile(path, candidate):

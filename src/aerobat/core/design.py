@@ -16,8 +16,9 @@ from typing import Any, Protocol
 import numpy as np
 from scipy.optimize import least_squares
 
+from aerobat.config import as_float_array, check_int, check_number, check_type, short_repr
 from aerobat.core.correction import CorrectionKind, correction_matrix, svd_info
-from aerobat.core.maneuver import Maneuver, bounds_arrays, error_scales, parameter_scales
+from aerobat.core.maneuver import Maneuver, bounds_arrays, check_maneuver, error_scales, parameter_scales
 from aerobat.errors import ConfigError, DesignFailed
 
 __all__ = ["Design", "DesignFailed", "DesignStatus", "FinalStateModel", "design", "finite_difference_jacobian"]
@@ -220,8 +221,20 @@ def design(
     not; with ``raise_on_failure`` a failure raises :class:`DesignFailed`.
     """
     start = time.perf_counter()
+    check_maneuver(maneuver)
+    if not callable(getattr(model, "final_states", None)):
+        raise ConfigError(f"model: expected a final-state model (e.g. NominalModel(config)), got "
+                          f"{type(model).__name__} {short_repr(model)}")
+    if not isinstance(correction, str) or correction not in ("inverse", "tsvd", "damped"):
+        raise ConfigError(f"correction = {short_repr(correction)}: allowed 'inverse', 'tsvd', 'damped'")
+    tolerance = check_number("tolerance", tolerance, low=0.0, low_inclusive=False)
+    tsvd_rtol = check_number("tsvd_rtol", tsvd_rtol, low=0.0)
+    damping = check_number("damping", damping, low=0.0)
+    max_iterations = check_int("max_iterations", max_iterations, low=1, high=1_000_000)
+    check_type("raise_on_failure", raise_on_failure, (bool, np.bool_), "True or False")
     model = _CountingModel(model)
-    guess = np.array(maneuver.guess() if p_guess is None else p_guess, dtype=float)
+    guess = (np.array(maneuver.guess(), dtype=float) if p_guess is None
+             else as_float_array("p_guess", p_guess, (len(maneuver.parameters),)))
     lower, upper = bounds_arrays(maneuver.parameters)
     p_scales = parameter_scales(maneuver.parameters)
     e_scales = error_scales(maneuver.errors)

@@ -20,8 +20,9 @@ from typing import Any
 
 import numpy as np
 
+from aerobat.config import check_int, short_repr
 from aerobat.core.design import Design
-from aerobat.core.maneuver import Maneuver, bounds_arrays, error_scales, position_indices
+from aerobat.core.maneuver import Maneuver, bounds_arrays, check_maneuver, error_scales, position_indices
 from aerobat.core.plant import Plant, Trial, TrialStatus
 from aerobat.core.rules.base import PaperRule, UpdateRule
 from aerobat.core.rules.registry import RuleChoice, make_rule
@@ -250,6 +251,7 @@ class Learner:
     warned: set[int] = field(default_factory=set)
 
     def __post_init__(self) -> None:
+        check_maneuver(self.maneuver)
         if not isinstance(self.design, Design):
             raise ConfigError(f"Learner: design must be a Design (from aerobat.design()), got "
                               f"{type(self.design).__name__}")
@@ -261,7 +263,11 @@ class Learner:
             self.rule = PaperRule(self.design.correction)
         if not isinstance(self.rule, UpdateRule):
             raise ConfigError(f"Learner: rule must be an UpdateRule or a rule name, got {type(self.rule).__name__}")
-        self.params = np.array(self.design.p_nominal if self.params is None else self.params, dtype=float)
+        try:
+            self.params = np.array(self.design.p_nominal if self.params is None else self.params, dtype=float)
+        except (TypeError, ValueError, OverflowError):
+            raise ConfigError(f"start parameters: expected {len(self.maneuver.parameters)} numbers, got "
+                              f"{short_repr(self.params)}") from None
         if self.params.shape != (len(self.maneuver.parameters),):
             raise ConfigError(f"start parameters: expected {len(self.maneuver.parameters)} values, "
                               f"got shape {self.params.shape}")
@@ -404,7 +410,12 @@ def learn(
     contact are flown again; absurd measurements are rejected and flown again.
     """
     if isinstance(iterations, bool) or not isinstance(iterations, int | np.integer) or iterations < 0:
-        raise ConfigError(f"iterations = {iterations!r}: expected an integer >= 0")
+        raise ConfigError(f"iterations = {short_repr(iterations)}: expected an integer >= 0")
+    if not callable(getattr(plant, "fly", None)):
+        raise ConfigError(f"plant: expected a plant (with fly(program), e.g. Arena(config)), got "
+                          f"{type(plant).__name__} {short_repr(plant)}")
+    if max_attempts is not None:
+        check_int("max_attempts", max_attempts, low=1)
     if learner is None:
         learner = Learner(maneuver, design, rule=rule, params=start_params, **options)
     elif rule is not None or start_params is not None or options:

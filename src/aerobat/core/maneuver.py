@@ -23,6 +23,7 @@ __all__ = [
     "Maneuver",
     "ParameterSpec",
     "bounds_arrays",
+    "check_maneuver",
     "check_parameters",
     "error_scales",
     "parameter_scales",
@@ -141,6 +142,19 @@ class Maneuver(Protocol):
         ...
 
 
+_MEMBERS = ("parameters", "errors", "guess", "program", "error")  # what design and learning use
+
+
+def check_maneuver(value: Any, name: str = "maneuver") -> Maneuver:
+    """``value`` if it has the :class:`Maneuver` members; :class:`ConfigError` naming ``name`` otherwise."""
+    missing = [m for m in _MEMBERS if not hasattr(type(value), m) and not hasattr(value, m)]
+    if missing:
+        text = repr(value) if isinstance(value, int | float | str | bool) or value is None else ""
+        raise ConfigError(f"{name}: expected a maneuver (MultiFlip, a translation, a maneuver file…), got "
+                          f"{type(value).__name__} {text[:60]}".rstrip() + f" (no {', '.join(missing[:3])})")
+    return value  # type: ignore[no-any-return]
+
+
 def bounds_arrays(parameters: tuple[ParameterSpec, ...]) -> tuple[np.ndarray, np.ndarray]:
     """(lower, upper) arrays of the parameter bounds."""
     return np.array([p.lower for p in parameters]), np.array([p.upper for p in parameters])
@@ -148,7 +162,10 @@ def bounds_arrays(parameters: tuple[ParameterSpec, ...]) -> tuple[np.ndarray, np
 
 def check_parameters(parameters: tuple[ParameterSpec, ...], params: np.ndarray) -> str | None:
     """None if ``params`` is finite and inside the box bounds, else a message naming the offender."""
-    params = np.asarray(params, dtype=float)
+    try:
+        params = np.asarray(params, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        return f"expected {len(parameters)} numbers, got {type(params).__name__}"
     if params.shape != (len(parameters),):
         return f"expected {len(parameters)} parameters, got shape {params.shape}"
     for spec, value in zip(parameters, params, strict=True):

@@ -22,6 +22,7 @@ from collections.abc import Callable, Iterator, Mapping
 from importlib.metadata import entry_points
 from typing import Any, Generic, TypeVar
 
+from aerobat.config import short_repr
 from aerobat.core.maneuver import Maneuver
 from aerobat.errors import ConfigError
 
@@ -86,6 +87,10 @@ class Registry(Generic[T]):
 
     def get(self, name: str, *, source: str = "") -> T:
         """The item called ``name``; :class:`ConfigError` naming ``source`` and the known names if none."""
+        if not isinstance(name, str):
+            where = f"{source}: " if source else ""
+            raise ConfigError(f"{where}{self.what} must be a name (a string), got {type(name).__name__} "
+                              f"{short_repr(name)}; known: {', '.join(self.names())}")
         if name not in self._items:
             self._scan()
             self._load(name)
@@ -147,6 +152,9 @@ def from_spec(spec: Mapping[str, Any], *, source: str = "maneuver spec") -> Mane
     ConfigError
         Not a table, unknown kind, or a field missing, of the wrong type or out of range.
     """
+    if not isinstance(source, str):
+        raise ConfigError(f"source: expected a string (where the spec came from), got {type(source).__name__} "
+                          f"{short_repr(source)}")
     if not isinstance(spec, Mapping):
         raise ConfigError(f"{source}: expected a table, got {type(spec).__name__}")
     kind = spec.get("kind")

@@ -14,9 +14,11 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 import sys
+import threading
 from collections.abc import Iterable, Iterator
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from typing import Any, Protocol
 
 from aerobat.errors import ConfigError
@@ -32,6 +34,35 @@ def _collect(future: Any) -> JobResult:
     except Exception as exc:  # the worker process died, or the result could not be sent back
         return JobResult(JobStatus.FAILED, {}, f"the worker running it failed: {type(exc).__name__}: {exc}")
     return result if isinstance(result, JobResult) else JobResult(JobStatus.FAILED, {}, f"bad job result {result!r}")
+
+
+def _completed(futures: Iterable[Future]) -> Iterator[Future]:
+    """Futures as they complete, like ``as_completed``, with Ctrl-C raised only between waits.
+
+    A KeyboardInterrupt raised asynchronously inside the pool's locks (``as_completed`` holds
+    them while it waits) can leave a lock released twice: the interrupted command then dies of
+    ``RuntimeError: release unlocked lock`` instead of stopping. Here a Ctrl-C only sets a flag
+    (when the default handler is in place, on the main thread), checked every 0.2 s and between
+    results, and is raised from there.
+    """
+    pending = set(futures)
+    interrupted: list[int] = []
+    previous = None
+    if threading.current_thread() is threading.main_thread() and \
+            signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: interrupted.append(signum))
+    try:
+        while pending:
+            if interrupted:
+                raise KeyboardInterrupt
+            done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
+            for future in done:
+                yield future
+                if interrupted:
+                    raise KeyboardInterrupt
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
 
 
 class Executor(Protocol):
@@ -81,7 +112,7 @@ class LocalExecutor:
                                              initializer=_worker_init)
         futures = {self._pool.submit(run_job, job): job for job in jobs}
         try:
-            for future in as_completed(futures):
+            for future in _completed(futures):
                 yield futures[future], _collect(future)
         finally:
             for future in futures:
@@ -101,7 +132,15 @@ class DaskExecutor:
 
         Client = require("distributed", extra="dask", purpose="running studies on a Dask cluster").Client
         self._own = client is None
-        self.client = client if client is not None else Client(address, timeout="10s")
+        if client is None:
+            where = f"Dask scheduler {address!r} (--scheduler or $DASK_SCHEDULER_ADDRESS)"
+            try:
+                client = Client(address, timeout="10s")
+            except (ValueError, TypeError) as exc:  # not an address distributed can use
+                raise ConfigError(f"{where}: expected tcp://HOST:PORT: {exc}") from None
+            except Exception as exc:  # unreachable, or something else answers there (its replies can be anything)
+                raise ConfigError(f"{where}: cannot connect: {type(exc).__name__}: {exc}") from None
+        self.client = client
         self.workers = max(1, sum(w.get("nthreads", 1) for w in self.client.scheduler_info()["workers"].values()))
 
     def run(self, jobs: Iterable[Job]) -> Iterator[tuple[Job, JobResult]]:

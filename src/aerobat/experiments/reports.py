@@ -161,9 +161,11 @@ def session_replay(store: Store, session_id: int, path: Path, *, iterations: lis
 
 def load_session(store: Store, session_id: int) -> Session:
     """A stored session as a :class:`~aerobat.core.learning.Session` (its iterations without trials)."""
+    from aerobat.config import check_type
     from aerobat.core.learning import Iteration, IterationStatus, Session, SessionStatus
     from aerobat.experiments.setup import design_from_record
 
+    check_type("store", store, Store, "a Store")
     rec = store.session(session_id)
     maneuver = from_spec(store.maneuver(rec.maneuver_id).spec, source=f"{store.path}: session {session_id}")
     design = design_from_record(maneuver, store.design(rec.design_id))
@@ -181,7 +183,9 @@ def session_from_json(data: dict[str, Any]) -> Session:
     from aerobat.core.design import Design
     from aerobat.core.learning import Iteration, IterationStatus, Session, SessionStatus
 
-    if isinstance(data, dict) and "maneuver" in data and "design" not in data:
+    if not isinstance(data, dict):
+        raise ConfigError(f"session JSON: expected an object (a dict), got {type(data).__name__}")
+    if "maneuver" in data and "design" not in data:
         raise ConfigError("session JSON: no 'design' field; session.json is a summary, use the output of "
                           "`aerobat export ID --format json` or `aerobat show ID --json`")
     try:
@@ -199,5 +203,5 @@ def session_from_json(data: dict[str, Any]) -> Session:
         status = SessionStatus(data["status"] if data["status"] not in ("running", "killed") else "interrupted")
         return Session(maneuver, design, data["plant"], iterations, np.asarray(data["final_params"]), status,
                        data["message"], float(data.get("wall_s", math.nan)))
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ConfigError(f"session JSON: missing or malformed field: {exc}") from None
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:
+        raise ConfigError(f"session JSON: missing or malformed field: {type(exc).__name__}: {exc}") from None

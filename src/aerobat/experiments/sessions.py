@@ -29,9 +29,10 @@ from typing import Any
 
 import numpy as np
 
+from aerobat.config import as_float_array, check_int, check_type, short_repr
 from aerobat.core.design import Design, design
 from aerobat.core.learning import Iteration, Learner, SessionStatus, learn
-from aerobat.core.maneuver import Maneuver, position_indices
+from aerobat.core.maneuver import Maneuver, check_maneuver, position_indices
 from aerobat.core.plant import Plant, StatefulPlant
 from aerobat.core.registry import from_spec
 from aerobat.core.rules import RuleChoice
@@ -232,8 +233,19 @@ def start_session(
         The design did not converge (unless ``force``) or its correction matrix is unusable.
     """
     target = _check_target(iterations)
-    plant = plant or PlantChoice("arena")
-    rule = rule or RuleChoice()
+    check_type("store", store, Store, "a Store")
+    check_maneuver(maneuver)
+    check_type("model", model, VehicleConfig, "a VehicleConfig (e.g. aerobat.hummingbird())")
+    plant = PlantChoice("arena") if plant is None else check_type("plant", plant, PlantChoice, "a PlantChoice")
+    rule = RuleChoice() if rule is None else check_type("rule", rule, RuleChoice, "a RuleChoice")
+    if design_result is not None:
+        check_type("design_result", design_result, Design, "a Design (from aerobat.design()) or None")
+    if isinstance(command, str) or not isinstance(command, Sequence) or not all(isinstance(a, str) for a in command):
+        raise ConfigError(f"command: expected a list of strings, got {short_repr(command)}")
+    if warm_start_from is not None:
+        check_int("warm_start_from", warm_start_from, low=1)
+    if study_id is not None:
+        check_int("study_id", study_id, low=1)
     result = design_result if design_result is not None else design(maneuver, NominalModel(model),
                                                                      correction=correction)  # type: ignore[arg-type]
     if not result.converged and not (force and np.all(np.isfinite(result.correction))):
@@ -242,7 +254,8 @@ def start_session(
     update_rule = build_rule(rule, result, model)
     base = plant_model if plant_model is not None else model
     flying = plant.build(base)
-    start = np.array(result.p_nominal if start_params is None else start_params, dtype=float)
+    start = (np.array(result.p_nominal, dtype=float) if start_params is None
+             else as_float_array("start_params", start_params, (len(maneuver.parameters),)))
     learner = Learner(maneuver, result, rule=update_rule, params=start)
     session_id = store.create_session(
         vehicle=vehicle_table(base), design_vehicle=vehicle_table(model), plant_kind=plant.kind,
@@ -272,6 +285,7 @@ def resume_session(store: Store, ref: int | str, *, iterations: int | None = Non
     SessionInUse
         Another live process runs it.
     """
+    check_type("store", store, Store, "a Store")
     session_id = store.resolve_session(ref)
     rec = store.session(session_id)
     where = f"{store.path}: session {session_id}"

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from aerobat.config import check_number, check_type
 from aerobat.core.plant import Trial, TrialStatus
-from aerobat.errors import ConfigError
 from aerobat.quadrotor.program import Program
-from aerobat.quadrotor.simulate import DEFAULT_MAX_STEP_S, simulate
+from aerobat.quadrotor.simulate import DEFAULT_MAX_STEP_S, check_max_step, simulate
 from aerobat.quadrotor.vehicle import VehicleConfig
 
 __all__ = ["NominalPlant"]
@@ -25,13 +25,13 @@ class NominalPlant:
 
     def __init__(self, config: VehicleConfig, *, max_step_s: float = DEFAULT_MAX_STEP_S,
                  sample_rate_hz: float = 200.0) -> None:
-        if not sample_rate_hz > 0:
-            raise ConfigError(f"sample_rate_hz = {sample_rate_hz} must be > 0 (Hz)")
-        self.config = config
-        self.max_step_s = max_step_s
-        self.sample_rate_hz = sample_rate_hz
+        self.sample_rate_hz = check_number("sample_rate_hz", sample_rate_hz, low=0.0, high=1e6, low_inclusive=False,
+                                           unit="Hz")
+        self.config = check_type("config", config, VehicleConfig, "a VehicleConfig (e.g. aerobat.hummingbird())")
+        self.max_step_s = check_max_step(max_step_s)
 
     def fly(self, program: Program) -> Trial:
+        check_type("program", program, Program, "a Program")
         traj = simulate(program, self.config, max_step_s=self.max_step_s)
         final = traj.final_state
         picks = np.unique(np.concatenate([

@@ -34,7 +34,14 @@ def _output_error(path: Path, exc: OSError) -> Exception:
 
 def save_figure(fig: Any, path: str | Path, *, dpi: int = 120) -> Path:
     """Write ``fig`` to ``path``; :class:`~aerobat.errors.OutputError` (or ``DiskFull``) if that fails."""
+    from aerobat.errors import OutputError
+
     path = Path(path)
+    kind = path.suffix.lower().lstrip(".")
+    supported = fig.canvas.get_supported_filetypes()
+    if kind and kind not in supported:  # matplotlib would raise a ValueError after the work is done
+        raise OutputError(f"{path}: cannot write a figure as .{kind}; use one of "
+                          f"{', '.join('.' + k for k in sorted(supported))}")
     try:
         fig.savefig(path, dpi=dpi)
     except OSError as exc:

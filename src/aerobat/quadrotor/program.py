@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 import tomli_w
 
-from aerobat.config import read_toml
+from aerobat.config import check_type, read_toml, short_repr, write_file
 from aerobat.errors import ConfigError
 
 __all__ = [
@@ -68,6 +68,14 @@ def _channel_limits(channel: str) -> tuple[float, float]:
     return CHANNEL_LIMITS[channel.split("_")[0]]
 
 
+def _finite(value: float) -> bool:
+    """math.isfinite, False for an integer beyond any float (instead of OverflowError)."""
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
 @dataclass(frozen=True, kw_only=True)
 class Switch:
     """At ``time_s`` [s], set ``channel`` to ``value`` (units per channel, see module doc)."""
@@ -95,7 +103,7 @@ class RampDown:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float):
                 raise ConfigError(f"ramp_down.{name} must be a number, got {value!r}")
-            if not math.isfinite(value) or value < 0:
+            if not _finite(value) or value < 0:
                 raise ConfigError(f"ramp_down.{name} = {value!r} is out of range: allowed >= 0 (s)")
 
 
@@ -121,13 +129,18 @@ class Program:
     provenance: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
+        if isinstance(self.switches, str) or not isinstance(self.switches, tuple | list):
+            raise ConfigError(f"switches: expected a tuple of Switch, got {type(self.switches).__name__} "
+                              f"{short_repr(self.switches)}")
+        check_type("ramp_down", self.ramp_down, RampDown, "a RampDown")
+        check_type("name", self.name, str, "a string")
         if isinstance(self.duration_s, bool) or not isinstance(self.duration_s, int | float):
             raise ConfigError(f"duration_s must be a number, got {self.duration_s!r}")
-        if not math.isfinite(self.duration_s) or not 0.0 < self.duration_s <= MAX_DURATION_S:
+        if not _finite(self.duration_s) or not 0.0 < self.duration_s <= MAX_DURATION_S:
             raise ConfigError(f"duration_s = {self.duration_s} is out of range: allowed (0, {MAX_DURATION_S:g}] (s)")
         if isinstance(self.hover_collective_m_s2, bool) or not isinstance(self.hover_collective_m_s2, int | float):
             raise ConfigError(f"hover_collective_m_s2 must be a number, got {self.hover_collective_m_s2!r}")
-        if not math.isfinite(self.hover_collective_m_s2) or self.hover_collective_m_s2 <= 0:
+        if not _finite(self.hover_collective_m_s2) or self.hover_collective_m_s2 <= 0:
             raise ConfigError(f"hover_collective_m_s2 = {self.hover_collective_m_s2} must be finite and > 0 (m/s²)")
         seen: dict[tuple[str, float], int] = {}
         for index, sw in enumerate(self.switches):
@@ -140,7 +153,7 @@ class Program:
                 v = getattr(sw, attr)
                 if isinstance(v, bool) or not isinstance(v, int | float):
                     raise ConfigError(f"{where}: {attr} must be a number, got {v!r}")
-                if not math.isfinite(v):
+                if not _finite(v):
                     raise ConfigError(f"{where} ({sw.channel}): {attr} = {v} is not finite")
             if sw.time_s < 0:
                 raise ConfigError(f"{where} ({sw.channel}): time_s = {sw.time_s:g} is negative; "
@@ -270,7 +283,8 @@ def program_to_table(program: Program) -> dict[str, Any]:
 
 def save_program(program: Program, path: str | Path) -> None:
     """Write ``program`` as TOML (``[program]`` header and ``[[switch]]`` entries), exact to the last bit."""
-    Path(path).write_text(tomli_w.dumps(program_to_table(program)))
+    check_type("program", program, Program, "a Program")
+    write_file(path, tomli_w.dumps(program_to_table(program)))
 
 
 def program_from_table(data: dict[str, Any], *, source: str) -> Program:

@@ -26,11 +26,12 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numba as nb
 import numpy as np
 
+from aerobat.config import as_float_array, check_int, check_real, check_type
 from aerobat.errors import ConfigError
 from aerobat.quadrotor.dynamics import (
     N_PLANT,
@@ -372,8 +373,35 @@ def final_state_summary(state: np.ndarray, duration_s: float) -> dict:
 
 
 def _steps(bp: np.ndarray, max_step: float) -> int:
-    lengths = np.diff(bp)
-    return int(np.maximum(1, np.ceil(lengths / max_step - 1e-9)).sum())
+    return int(_step_count(bp, max_step))
+
+
+def _step_count(bp: np.ndarray, max_step: float) -> float:
+    """How many RK4 steps (as a float: inf for a step too small to count them)."""
+    with np.errstate(over="ignore"):
+        return float(np.maximum(1, np.ceil(np.diff(bp) / max_step - 1e-9)).sum())
+
+
+MAX_STEPS = 10_000_000  # RK4 steps of one simulation: 600 s at the default step is 1.2 million
+
+
+def check_max_step(max_step_s: Any, name: str = "max_step_s") -> float:
+    """A step size: a finite number > 0 [s] (how many steps it makes is checked against each program)."""
+    check_real(name, max_step_s)
+    value = float(max_step_s)
+    if not (value > 0 and math.isfinite(value)):
+        raise ConfigError(f"{name} = {max_step_s} must be finite and > 0 (s)")
+    return value
+
+
+def _check_steps(steps: float, what: str) -> None:
+    if not steps <= MAX_STEPS:
+        raise ConfigError(f"{what}: {steps:.3g} integration steps for this program; allowed up to {MAX_STEPS:.0e}")
+
+
+def _compiled(program: object, name: str = "program") -> CompiledProgram:
+    check_type(name, program, (Program, CompiledProgram), "a Program")
+    return program.compile() if isinstance(program, Program) else program  # type: ignore[return-value]
 
 
 def simulate(
@@ -404,31 +432,32 @@ def simulate(
         (the rate-loop latency of ``config.effects`` still applies).
     record : keep every step (True) or only the start and final states (False).
     """
-    compiled = program.compile() if isinstance(program, Program) else program
-    if not max_step_s > 0 or not math.isfinite(max_step_s):
-        raise ConfigError(f"max_step_s = {max_step_s} must be finite and > 0 (s)")
-    if not tick_s > 0 or not math.isfinite(tick_s):
-        raise ConfigError(f"tick_s = {tick_s} must be finite and > 0 (s)")
-    if substeps < 1:
-        raise ConfigError(f"substeps = {substeps} must be >= 1")
-    x = hover_state(config.vehicle) if initial_state is None else np.array(initial_state, dtype=float)
-    if x.shape != (N_STATE,):
-        raise ConfigError(f"initial_state must have shape ({N_STATE},), got {x.shape}")
-    if not np.all(np.isfinite(x)):
-        raise ConfigError("initial_state contains non-finite values")
+    compiled = _compiled(program)
+    check_type("config", config, VehicleConfig, "a VehicleConfig")
+    max_step_s = check_max_step(max_step_s)
+    tick_s = check_max_step(tick_s, "tick_s")
+    substeps = check_int("substeps", substeps)
+    if not 1 <= substeps <= MAX_STEPS:
+        raise ConfigError(f"substeps = {substeps} must be >= 1 (and at most {MAX_STEPS:.0e})")
+    check_type("record", record, (bool, np.bool_), "True or False")
+    if not isinstance(mode, str) or mode not in ("continuous", "sampled"):
+        raise ConfigError(f"mode = {mode!r}: allowed 'continuous' or 'sampled'")
+    x = hover_state(config.vehicle) if initial_state is None else as_float_array("initial_state", initial_state,
+                                                                                   (N_STATE,))
     start = x.copy()
-    plant_v = model_plant_vector(config) if plant is None else np.asarray(plant, dtype=float)
+    plant_v = model_plant_vector(config) if plant is None else as_float_array("plant", plant, (N_PLANT,))
     ctrl_v = controller_vector(config.controller)
     delay = np.array(config.effects.rate_latency_s, dtype=float)
     bp = compiled.breakpoints_s
     coeffs = compiled.coefficients
     nseg = len(bp) - 1
     if mode == "continuous":
+        _check_steps(_step_count(bp, max_step_s), f"max_step_s = {max_step_s:g}")
         size = _steps(bp, max_step_s) + 1 if record else 0
-    elif mode == "sampled":
-        size = int(math.ceil(compiled.duration_s / tick_s - 1e-9)) + 2 if record else 0
     else:
-        raise ConfigError(f"mode = {mode!r}: allowed 'continuous' or 'sampled'")
+        ticks = compiled.duration_s / tick_s
+        _check_steps(ticks * substeps, f"tick_s = {tick_s:g} with substeps = {substeps}")
+        size = math.ceil(ticks - 1e-9) + 2 if record else 0
     rec_t = np.empty(size)
     rec_x = np.empty((size, N_STATE))
     rec_u = np.empty((size, 4))
@@ -464,15 +493,20 @@ def simulate_batch(
     -------
     (B, N_STATE) final states.
     """
-    if not max_step_s > 0 or not math.isfinite(max_step_s):
-        raise ConfigError(f"max_step_s = {max_step_s} must be finite and > 0 (s)")
-    compiled = [p.compile() if isinstance(p, Program) else p for p in programs]
+    max_step_s = check_max_step(max_step_s)
+    check_type("programs", programs, Sequence, "a sequence of Programs")
+    compiled = [_compiled(p, f"programs[{k}]") for k, p in enumerate(programs)]
     B = len(compiled)
     if B == 0:
         return np.empty((0, N_STATE))
-    cfgs = [configs] * B if isinstance(configs, VehicleConfig) else list(configs)
+    check_type("configs", configs, (VehicleConfig, Sequence), "a VehicleConfig or a sequence of them")
+    cfgs = [configs] * B if isinstance(configs, VehicleConfig) else list(configs)  # type: ignore[list-item]
     if len(cfgs) != B:
         raise ConfigError(f"got {B} programs but {len(cfgs)} vehicles")
+    for k, cfg in enumerate(cfgs):
+        check_type(f"configs[{k}]", cfg, VehicleConfig, "a VehicleConfig")
+    for one in compiled:
+        _check_steps(_step_count(one.breakpoints_s, max_step_s), f"max_step_s = {max_step_s:g}")
     kmax = max(len(c.breakpoints_s) - 1 for c in compiled)
     bp = np.zeros((B, kmax + 1))
     coeffs = np.zeros((B, kmax, 4, 3))
@@ -487,14 +521,8 @@ def simulate_batch(
     ctrl = np.stack([controller_vector(c.controller) for c in cfgs])
     if initial_states is None:
         initial_states = np.stack([hover_state(c.vehicle) for c in cfgs])
-    x0 = np.ascontiguousarray(initial_states, dtype=float)
-    plants = np.ascontiguousarray(plants, dtype=float)
-    if x0.shape != (B, N_STATE):
-        raise ConfigError(f"initial_states must have shape ({B}, {N_STATE}), got {x0.shape}")
-    if plants.shape != (B, N_PLANT):
-        raise ConfigError(f"plants must have shape ({B}, {N_PLANT}), got {plants.shape}")
-    if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(plants))):
-        raise ConfigError("initial_states and plants must be finite")
+    x0 = np.ascontiguousarray(as_float_array("initial_states", initial_states, (B, N_STATE)))
+    plants = np.ascontiguousarray(as_float_array("plants", plants, (B, N_PLANT)))
     out = np.empty_like(x0)
     delays = np.array([c.effects.rate_latency_s for c in cfgs], dtype=float)
     if np.any(delays > 0.0):
@@ -511,11 +539,12 @@ class NominalModel:
     """
 
     def __init__(self, config: VehicleConfig, *, max_step_s: float = DEFAULT_MAX_STEP_S) -> None:
-        self.config = config
-        self.max_step_s = max_step_s
+        self.config = check_type("config", config, VehicleConfig, "a VehicleConfig (e.g. aerobat.hummingbird())")
+        self.max_step_s = check_max_step(max_step_s)
         self._plant = model_plant_vector(config)
 
     def final_states(self, programs: Sequence[Program], initial_states: np.ndarray | None = None) -> np.ndarray:
+        check_type("programs", programs, Sequence, "a sequence of Programs")
         plants = np.tile(self._plant, (len(programs), 1))
         return simulate_batch(programs, self.config, initial_states=initial_states, plants=plants,
                               max_step_s=self.max_step_s)

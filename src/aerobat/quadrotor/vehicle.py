@@ -35,7 +35,17 @@ from typing import Any
 
 import tomli_w
 
-from aerobat.config import check_range, dataclass_from_table, dataclass_to_table, read_toml
+from aerobat.config import (
+    as_path,
+    check_finite,
+    check_range,
+    check_type,
+    dataclass_from_table,
+    dataclass_to_table,
+    read_toml,
+    short_repr,
+    write_file,
+)
 from aerobat.errors import ConfigError
 
 __all__ = [
@@ -152,6 +162,7 @@ class VehicleParams:
         so the reduced collective envelope β̲, β̄ scales with 1/m, keeping the same thrust margins."""
         if isinstance(mass_kg, bool) or not isinstance(mass_kg, int | float) or not mass_kg > 0:
             raise ConfigError(f"mass_kg = {mass_kg!r}: expected a number > 0 (kg)")
+        check_finite("mass_kg", mass_kg, "kg")
         k = self.mass_kg / float(mass_kg)
         return dataclasses.replace(self, mass_kg=float(mass_kg),
                                    collective_reduced_min_m_s2=self.collective_reduced_min_m_s2 * k,
@@ -197,8 +208,10 @@ class ControllerParams:
         for name in ("inertia_xx_kg_m2", "inertia_yy_kg_m2", "inertia_zz_kg_m2"):
             check_range(name, getattr(self, name), low=1e-7, high=100.0, unit="kg m²")
         check_range("drag_constant_m", self.drag_constant_m, low=1e-5, high=1.0, unit="m")
-        if sorted(self.motor_order) != [1, 2, 3, 4]:
-            raise ConfigError(f"motor_order = {self.motor_order} must be a permutation of (1, 2, 3, 4)")
+        order = self.motor_order
+        whole = isinstance(order, tuple | list) and all(isinstance(m, int) and not isinstance(m, bool) for m in order)
+        if not whole or sorted(order) != [1, 2, 3, 4]:
+            raise ConfigError(f"motor_order = {short_repr(order)} must be a permutation of (1, 2, 3, 4)")
 
     @classmethod
     def nominal_for(cls, vehicle: VehicleParams, **gains: Any) -> ControllerParams:
@@ -403,7 +416,7 @@ def load_vehicle(path: str | Path) -> VehicleConfig:
     ``[source]`` table (strings, numbers, booleans, arrays, nested tables; kept as read).
     Controller constants that are not given default to the vehicle's own (a nominal controller).
     """
-    path = Path(path)
+    path = as_path(path)
     data = read_toml(path)
     unknown = sorted(set(data) - {"vehicle", "controller", "effects", "source", "name"})
     if unknown:
@@ -454,17 +467,27 @@ def save_vehicle(config: VehicleConfig, path: str | Path, *, header: str = "") -
 
     ``header`` is written first as ``#`` comment lines.
     """
+    check_type("config", config, VehicleConfig, "a VehicleConfig")
     table = vehicle_table(config)
     if config.source:
         table["source"] = _source_table(config.source, "source")
     comments = "".join(f"# {line}".rstrip() + "\n" for line in header.splitlines())
-    Path(path).write_text(comments + tomli_w.dumps(table))
+    write_file(path, comments + tomli_w.dumps(table))
+
+
+def _exists(path: str) -> bool:
+    """Whether ``path`` names something; False for names the file system refuses (too long, NUL…)."""
+    try:
+        return Path(path).exists()
+    except (OSError, ValueError):
+        return False
 
 
 def vehicle_from_name_or_file(spec: str) -> VehicleConfig:
     """A preset name (``hummingbird``, ``crazyflie21``, ``fpv5``, ``x2class``) or a path to a vehicle TOML file."""
+    check_type("vehicle", spec, str, "a preset name or a vehicle TOML file")
     if spec in PRESETS:
         return PRESETS[spec]()
-    if not spec.endswith(".toml") and not Path(spec).exists():
+    if not spec.endswith(".toml") and not _exists(spec):
         raise ConfigError(f"unknown vehicle {spec!r}: use one of {', '.join(PRESETS)} or a .toml file")
     return load_vehicle(spec)

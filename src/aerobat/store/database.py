@@ -19,8 +19,10 @@ from pathlib import Path
 from typing import Any, Literal, Self
 from urllib.parse import quote
 
+from aerobat.config import as_path, check_range, short_repr
 from aerobat.errors import (
     ConfigError,
+    SessionNotFound,
     StoreAccessError,
     StoreBusyError,
     StoreError,
@@ -82,9 +84,13 @@ class Database:
                  on_wait: Any = None) -> None:
         if synchronous not in ("normal", "full"):
             raise ConfigError(f"synchronous = {synchronous!r}: allowed 'normal' or 'full'")
+        if not isinstance(path, str | os.PathLike):
+            raise StoreAccessError(f"--db: expected a database file path, got {type(path).__name__} "
+                                   f"{short_repr(path)}")
         if not str(path).strip():
             raise StoreAccessError("--db: empty database path")
-        self.path = Path(path)
+        check_range("busy_timeout_s", busy_timeout_s, low=0.0, unit="s")
+        self.path = as_path(path, "--db")
         self.busy_timeout_s = float(busy_timeout_s)
         self.owner = owner_token()
         self.migrated_from: list[int] = []
@@ -93,10 +99,13 @@ class Database:
         self.on_wait = on_wait
         self._conn: sqlite3.Connection | None = None
         self._identity: tuple[int, int] | None = None
-        fresh = self._check_file(create)
-        read_only = not create and not os.access(self.path.parent if str(self.path.parent) else ".", os.W_OK)
-        uri = f"file:{quote(str(self.path.resolve()))}" + ("?mode=ro&immutable=1" if read_only else
-                                                           "" if create else "?mode=ro")
+        try:
+            fresh = self._check_file(create)
+            read_only = not create and not os.access(self.path.parent if str(self.path.parent) else ".", os.W_OK)
+            uri = f"file:{quote(os.fsencode(self.path.resolve()))}" + ("?mode=ro&immutable=1" if read_only else
+                                                               "" if create else "?mode=ro")
+        except OSError as exc:  # a name too long for the file system, a loop of links, an I/O error…
+            raise StoreAccessError(f"{self.path}: cannot open the database: {exc.strerror or exc}") from None
         if read_only:
             self.problems.append(f"{self.path}: its folder is read-only: opened as an unchanging snapshot")
         try:
@@ -158,7 +167,7 @@ class Database:
     def _probe(self) -> bool:
         """Read-only look inside an SQLite file: is it ours, and which version?"""
         path = self.path
-        uri = f"file:{quote(str(path.resolve()))}?mode=ro"
+        uri = f"file:{quote(os.fsencode(path.resolve()))}?mode=ro"
         with path.open("rb") as handle:
             wal_format = handle.read(20)[18:20] == b"\x02\x02"
         side_files = any(Path(f"{path}{suffix}").exists() for suffix in ("-wal", "-shm"))
@@ -327,6 +336,8 @@ class Database:
             yield
         except sqlite3.Error as exc:
             raise self._translate(exc, action) from None
+        except OverflowError as exc:  # an id beyond SQLite's 64-bit integers: no such row can exist
+            raise SessionNotFound(f"{self.path}: {action}: {exc}") from None
 
     def _file_identity(self) -> tuple[int, int] | None:
         try:

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from aerobat.config import check_int, check_type, short_repr
 from aerobat.errors import ConfigError, SessionInUse, SessionNotFound, StoreError, StoreFormatError
 from aerobat.store.codec import (
     TRAJECTORY_CODEC,
@@ -383,9 +384,11 @@ class Store(StudyTables):
                 raise SessionNotFound(f"{self.path}: holds no sessions yet")
             return int(row[0])
         try:
+            if isinstance(ref, bool) or (isinstance(ref, float) and int(ref) != ref):
+                raise TypeError
             session_id = int(ref)
-        except (TypeError, ValueError):
-            raise SessionNotFound(f"{self.path}: session {ref!r}: expected a session id or 'last'") from None
+        except (TypeError, ValueError, OverflowError):
+            raise SessionNotFound(f"{self.path}: session {short_repr(ref)}: expected a session id or 'last'") from None
         if not 1 <= session_id < 2**63:
             raise SessionNotFound(f"{self.path}: no session {session_id} (see `aerobat sessions --db {self.path}`)")
         with self._guard("reading sessions"):
@@ -399,13 +402,14 @@ class Store(StudyTables):
 
     def list_sessions(self, *, limit: int | None = None, newest_first: bool = False) -> list[SessionSummary]:
         """Every session's summary row (no iteration is read)."""
+        check_type("newest_first", newest_first, (bool, np.bool_), "True or False")
         order = "DESC" if newest_first else "ASC"
         sql = (f"SELECT {self._SUMMARY_COLUMNS} FROM sessions s JOIN maneuvers m ON m.id = s.maneuver_id "
                f"JOIN plants p ON p.id = s.plant_id ORDER BY s.id {order}")
         args: tuple[Any, ...] = ()
         if limit is not None:
             sql += " LIMIT ?"
-            args = (int(limit),)
+            args = (check_int("limit", limit, low=0, high=2**63 - 1),)
         with self._guard("listing sessions"):
             rows = self._db.execute(sql, args).fetchall()
         alive: dict[str | None, bool | None] = {}

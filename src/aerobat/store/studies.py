@@ -7,6 +7,7 @@ import sqlite3
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from aerobat.config import short_repr
 from aerobat.errors import ConfigError, SessionNotFound
 from aerobat.store.codec import canonical_json, json_ready, utc_now
 from aerobat.store.database import Database
@@ -45,9 +46,11 @@ class StudyTables(Database):
                     raise SessionNotFound(f"{self.path}: holds no studies yet")
                 return int(row[0])
             try:
+                if isinstance(ref, bool) or (isinstance(ref, float) and int(ref) != ref):
+                    raise TypeError
                 study_id = int(ref)
-            except (TypeError, ValueError):
-                raise SessionNotFound(f"{self.path}: study {ref!r}: expected a study id or 'last'") from None
+            except (TypeError, ValueError, OverflowError):
+                raise SessionNotFound(f"{self.path}: study {short_repr(ref)}: expected a study id or 'last'") from None
             if not 1 <= study_id < 2**63 or self._db.execute(
                     "SELECT 1 FROM studies WHERE id = ?", (study_id,)).fetchone() is None:
                 raise SessionNotFound(f"{self.path}: no study {study_id} (see `aerobat studies`)")

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from aerobat.config import check_finite, check_type, short_repr
 from aerobat.core.design import Design
 from aerobat.core.registry import Registry
 from aerobat.core.rules.base import ConstantSchedule, PaperRule, PaperSchedule, Schedule, UpdateRule
@@ -91,8 +92,10 @@ class ScheduleChoice:
     value: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.kind not in ("paper", "constant"):
-            raise ConfigError(f"schedule kind {self.kind!r}: allowed 'paper' or 'constant'")
+        if not isinstance(self.kind, str) or self.kind not in ("paper", "constant"):
+            raise ConfigError(f"schedule kind {short_repr(self.kind)}: allowed 'paper' or 'constant'")
+        check_finite("constant step size", self.value)
+        check_finite("schedule minimum", self.minimum)
         if not 0.0 < self.value <= 1.0:
             raise ConfigError(f"constant step size {self.value}: allowed (0, 1]")
         if not 0.0 < self.minimum <= 1.0:
@@ -133,6 +136,8 @@ class RuleChoice:
 
     def __post_init__(self) -> None:
         spec = RULES.get(self.name, source="rule")
+        check_type("isc", self.isc, (bool, np.bool_), "True or False")
+        check_type("schedule", self.schedule, (ScheduleChoice, type(None)), "a ScheduleChoice or None")
         if self.schedule is not None and not spec.takes_schedule:
             raise ConfigError(f"rule {self.name!r} takes no schedule: its step is its own")
 
@@ -201,6 +206,8 @@ def make_rule(choice: RuleChoice | str, design: Design, *, isc: IscModel | None 
     """
     if isinstance(choice, str):
         choice = RuleChoice.parse(choice, source="rule")
+    check_type("choice", choice, RuleChoice, "a RuleChoice or a rule name ('paper', 'tsvd+isc', …)")
+    check_type("design", design, Design, "a Design (from aerobat.design())")
     spec = RULES.get(choice.name, source="rule")
     schedule = choice.schedule.schedule() if choice.schedule is not None else None
     try:

@@ -132,24 +132,25 @@ def run_study(
     keys = [job.key for job in jobs]
     if len(set(keys)) != len(keys):
         raise ConfigError(f"study {kind}: job keys repeat")
-    if resume is not None:
-        study_id = store.resolve_study(resume)
-        record = store.study(study_id)
-        if record.kind != kind:
-            raise ConfigError(f"--resume {study_id}: study {study_id} is a {record.kind} study, not {kind}")
-        if _canonical(record.spec) != _canonical(spec):
-            raise ConfigError(f"--resume {study_id}: the command line describes another {kind} study than "
-                              f"study {study_id}; give the same options (see `aerobat studies show {study_id}`)")
-    else:
-        study_id = store.create_study(kind, spec, command=command)
-    done = store.finished_study_jobs(study_id)
-    todo = [job for job in jobs if job.key not in done]
-    if on_start is not None:
-        on_start(study_id, len(todo), len(jobs) - len(todo))
     own = executor is None
+    # the executor first: an unusable scheduler address is refused before a study is created or announced
     runner = make_executor(scheduler=scheduler, workers=workers) if executor is None else executor
-    count = len(jobs) - len(todo)
     try:
+        if resume is not None:
+            study_id = store.resolve_study(resume)
+            record = store.study(study_id)
+            if record.kind != kind:
+                raise ConfigError(f"--resume {study_id}: study {study_id} is a {record.kind} study, not {kind}")
+            if _canonical(record.spec) != _canonical(spec):
+                raise ConfigError(f"--resume {study_id}: the command line describes another {kind} study than "
+                                  f"study {study_id}; give the same options (see `aerobat studies show {study_id}`)")
+        else:
+            study_id = store.create_study(kind, spec, command=command)
+        done = store.finished_study_jobs(study_id)
+        todo = [job for job in jobs if job.key not in done]
+        if on_start is not None:
+            on_start(study_id, len(todo), len(jobs) - len(todo))
+        count = len(jobs) - len(todo)
         for job, outcome in runner.run(todo):
             _record(store, study_id, job, outcome)
             count += 1

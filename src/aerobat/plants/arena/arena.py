@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from aerobat.config import check_int, check_type
 from aerobat.core.plant import Trial, TrialStatus
 from aerobat.plants.arena.kernel import MOCAP_COLUMNS, supervise
 from aerobat.plants.arena.params import ArenaParams
@@ -85,9 +86,10 @@ class Arena:
 
     def __init__(self, config: VehicleConfig, params: ArenaParams | None = None, *, seed: int = 0,
                  feedback: Feedback | FeedbackScheme | str | None = None) -> None:
-        self.config = config
-        self.params = params or ArenaParams()
-        self.seed = seed
+        self.config = check_type("config", config, VehicleConfig, "a VehicleConfig (e.g. aerobat.hummingbird())")
+        self.params = ArenaParams() if params is None else check_type("params", params, ArenaParams,
+                                                                      "ArenaParams or None")
+        self.seed = check_int("seed", seed, low=0, high=2**63 - 1)
         self.feedback = as_feedback(feedback)
         self._fb_vector = feedback_vector(self.feedback)
         self.onboard, self.history = onboard_state()
@@ -376,6 +378,7 @@ class Arena:
     # ----------------------------------------------------------------- trial
     def fly(self, program: Program) -> Trial:
         """One supervised trial of ``program`` (Fig. 8)."""
+        check_type("program", program, Program, "a Program")
         p = self.params
         nan_state = np.full(N_STATE, np.nan)
         log = _Log(np.empty((4096, MOCAP_COLUMNS)))

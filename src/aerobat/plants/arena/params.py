@@ -15,7 +15,15 @@ from typing import Any
 
 import tomli_w
 
-from aerobat.config import check_range, dataclass_from_table, dataclass_to_table, read_toml
+from aerobat.config import (
+    as_path,
+    check_range,
+    check_type,
+    dataclass_from_table,
+    dataclass_to_table,
+    read_toml,
+    write_file,
+)
 
 __all__ = [
     "Aerodynamics",
@@ -265,12 +273,13 @@ class ArenaParams:
 
 def load_arena(path: str | Path) -> ArenaParams:
     """Read an arena TOML file: one table per section, any field may be omitted (defaults)."""
-    path = Path(path)
+    path = as_path(path)
     data = read_toml(path)
     return dataclass_from_table(ArenaParams, data, source=str(path))
 
 
 def save_arena(params: ArenaParams, path: str | Path) -> None:
-    Path(path).write_text(tomli_w.dumps(dataclass_to_table(params)))
+    check_type("params", params, ArenaParams, "ArenaParams")
+    write_file(path, tomli_w.dumps(dataclass_to_table(params)))
 
 

@@ -11,7 +11,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from aerobat.config import check_range, dataclass_from_table, dataclass_to_table, read_toml
+from aerobat.config import as_path, check_range, dataclass_from_table, dataclass_to_table, read_toml
 from aerobat.errors import ConfigError, MissingDependency
 from aerobat.plants.arena.params import MotionCapture, Supervisor, Volume
 
@@ -330,7 +330,7 @@ def load_rotorpy_settings(path: str | Path) -> RotorPySettings:
     ``[wind]``; and the arena's ``[motion_capture]``, ``[volume]``, ``[supervisor]``.
     Unknown tables or keys and wrong types raise :class:`ConfigError` naming the file and key.
     """
-    path = Path(path)
+    path = as_path(path)
     return settings_from_table(read_toml(path), source=str(path))
 
 

@@ -29,7 +29,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from aerobat.config import dataclass_from_table, dataclass_to_table, table_field
+from aerobat.config import check_real, check_type, dataclass_from_table, dataclass_to_table, short_repr, table_field
 from aerobat.core.maneuver import ErrorKind, ErrorSpec, ParameterSpec, check_parameters
 from aerobat.errors import ConfigError
 from aerobat.quadrotor.dynamics import POS, VEL, euler_zyx, hover_state, rotation_angles
@@ -89,6 +89,15 @@ class MultiFlip:
             raise ConfigError(f"MultiFlip: vehicle must be a VehicleParams, got {type(self.vehicle).__name__}{hint}")
         if isinstance(self.flips, bool) or not isinstance(self.flips, int) or not 1 <= self.flips <= 10:
             raise ConfigError(f"flips = {self.flips!r} is out of range: allowed integer in [1, 10]")
+        for option in ("max_rate_rad_s", "ramp_collective_s"):
+            check_real(option, getattr(self, option))
+        check_type("name", self.name, str, "a string")
+        for option, allowed in (("axis", ("roll", "pitch")), ("coast_collective", ("min", "max"))):
+            if not isinstance(getattr(self, option), str):
+                raise ConfigError(f"{option} = {short_repr(getattr(self, option))}: allowed "
+                                  f"{' or '.join(map(repr, allowed))}")
+        if isinstance(self.dims, bool) or not isinstance(self.dims, int | np.integer):
+            raise ConfigError(f"dims = {short_repr(self.dims)}: allowed 2 or 3")
         if not (math.isfinite(self.max_rate_rad_s) and 0.5 <= self.max_rate_rad_s <= 100.0):
             raise ConfigError(
                 f"max_rate_rad_s = {self.max_rate_rad_s} is out of range: allowed [0.5, 100] rad/s "

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.config import dataclass_from_table, dataclass_to_table, read_toml
+from aerobat.config import as_path, dataclass_from_table, dataclass_to_table, read_toml
 from aerobat.core.expressions import Expression, parse_expression
 from aerobat.core.maneuver import ErrorKind, ErrorSpec, ParameterSpec, check_parameters
 from aerobat.errors import ConfigError
@@ -383,7 +383,7 @@ def _plain(value: Any) -> Any:
 
 def load_maneuver_file(path: str | Path, vehicle: VehicleParams) -> StagedManeuver:
     """The maneuver a file describes, designed for ``vehicle``; :class:`ConfigError` naming the file and field."""
-    path = Path(path)
+    path = as_path(path)
     table = read_toml(path)
     _plain(table)
     return StagedManeuver(vehicle=vehicle, table=table, source=str(path))

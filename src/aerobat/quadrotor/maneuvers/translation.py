@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.config import dataclass_from_table, dataclass_to_table
+from aerobat.config import check_number, check_real, check_type, dataclass_from_table, dataclass_to_table, short_repr
 from aerobat.core.maneuver import ErrorKind, ErrorSpec, ParameterSpec, check_parameters
 from aerobat.errors import ConfigError, SolveFailed
 from aerobat.quadrotor.dynamics import POS, VEL, hover_state, rotation_angles
@@ -33,6 +33,14 @@ from aerobat.quadrotor.program import Program, RampDown, Switch
 from aerobat.quadrotor.vehicle import VehicleConfig, VehicleParams
 
 __all__ = ["Translation", "translation_from_solution", "translation_from_spec", "translation_maneuver"]
+
+
+def _pair(name: str, value: object) -> None:
+    """Two real numbers (a tuple, a list or an array of two); :class:`ConfigError` naming ``name`` otherwise."""
+    if isinstance(value, str | bytes) or not hasattr(value, "__len__") or len(value) != 2:  # type: ignore[arg-type]
+        raise ConfigError(f"{name}: expected two numbers, got {type(value).__name__} {short_repr(value)}")
+    for k in range(2):
+        check_real(f"{name}[{k}]", value[k])  # type: ignore[index]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -61,6 +69,19 @@ class Translation:
     errors: tuple[ErrorSpec, ...] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
+        check_type("vehicle", self.vehicle, VehicleParams, "a VehicleParams (a VehicleConfig's .vehicle)")
+        _pair("target_yz", self.target_yz)
+        check_real("final_angle_rad", self.final_angle_rad)
+        check_real("ramp_s", self.ramp_s)
+        check_type("name", self.name, str, "a string")
+        for field_name in ("guess_times_s", "interval_inputs"):
+            value = getattr(self, field_name)
+            if isinstance(value, str) or not isinstance(value, tuple | list):
+                raise ConfigError(f"{field_name}: expected a tuple, got {type(value).__name__} {short_repr(value)}")
+        for k, t in enumerate(self.guess_times_s):
+            check_real(f"guess_times_s[{k}]", t)
+        for k, pair in enumerate(self.interval_inputs):
+            _pair(f"interval_inputs[{k}]", pair)
         n = len(self.guess_times_s)
         if n < 1 or len(self.interval_inputs) != n:
             raise ConfigError(f"need one input pair per interval: {len(self.interval_inputs)} inputs, {n} times")
@@ -167,6 +188,10 @@ def translation_maneuver(
     """
     from aerobat.quadrotor.timeoptimal import BenchmarkLimits, solve_translation
 
+    check_type("config", config, VehicleConfig, "a VehicleConfig (e.g. aerobat.hummingbird())")
+    _pair("target_yz", target_yz)
+    check_number("final_angle_rad", final_angle_rad, unit="rad")
+    check_number("ramp_s", ramp_s, low=0.0, high=1.0, unit="s")
     v = config.vehicle
     if math.hypot(float(target_yz[0]), float(target_yz[1])) < 1e-3 and abs(final_angle_rad) < 1e-6:
         raise ConfigError(f"translation to {tuple(target_yz)}: the target is the start; a translation needs a "

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.quadrotor.timeoptimal.solution import BenchmarkLimits, StageFailure
+from aerobat.quadrotor.timeoptimal.transcription import run_solver
 
 _PRUNE_TOL_S = 1e-7  # arcs shorter than this are removed and the refinement re-solved
 _GL_PANELS = 4  # composite Gauss-Legendre on singular pieces: worst-case error
@@ -238,7 +239,7 @@ def _refine_once(
     lbx = np.concatenate([np.zeros(npc), np.full(nl, -1.0)])
     ubx = np.concatenate([np.full(npc, np.inf), np.full(nl, 1.0)])
     x0 = np.concatenate([st.d0, st.line0 if st.has_singular else []])
-    res = solver(x0=x0, p=[target[0], target[1], final_angle], lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+    res = run_solver(solver, x0=x0, p=[target[0], target[1], final_angle], lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
     stats = solver.stats()
     xopt = np.asarray(res["x"], dtype=float).ravel()
     line_opt = xopt[npc:] if st.has_singular else None

@@ -18,7 +18,7 @@ from aerobat.quadrotor.timeoptimal.transcription import best_transcription, tran
 def _validate_number(name: str, value: Any, allowed: str) -> float:
     try:
         v = float(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ConfigError(f"{name}={value!r} is invalid: must be a real number ({allowed})") from None
     if isinstance(value, bool) or not math.isfinite(v):
         raise ConfigError(f"{name}={value!r} is invalid: allowed range is {allowed}")
@@ -99,10 +99,11 @@ def solve_translation(
     y_t = _validate_number("target_y_m", target_y_m, "(-inf, inf), finite")
     z_t = _validate_number("target_z_m", target_z_m, "(-inf, inf), finite")
     angle = _validate_number("final_angle_rad", final_angle_rad, "(-inf, inf), finite")
-    if isinstance(intervals, bool) or not isinstance(intervals, (int, np.integer)) or intervals < 10:
-        raise ConfigError(f"intervals={intervals!r} is invalid: allowed range is integers >= 10")
-    if isinstance(ipopt_max_iter, bool) or not isinstance(ipopt_max_iter, (int, np.integer)) or ipopt_max_iter < 1:
-        raise ConfigError(f"ipopt_max_iter={ipopt_max_iter!r} is invalid: allowed range is integers >= 1")
+    if isinstance(intervals, bool) or not isinstance(intervals, (int, np.integer)) or not 10 <= intervals <= 10_000:
+        raise ConfigError(f"intervals={intervals!r} is invalid: allowed range is integers 10 … 10000")
+    if (isinstance(ipopt_max_iter, bool) or not isinstance(ipopt_max_iter, (int, np.integer))
+            or not 1 <= ipopt_max_iter <= 10**7):
+        raise ConfigError(f"ipopt_max_iter={ipopt_max_iter!r} is invalid: allowed range is integers 1 … 10^7")
     if limits is None:
         limits = BenchmarkLimits()
     elif not isinstance(limits, BenchmarkLimits):

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import functools
 import math
+import signal
+import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -12,6 +14,37 @@ import numpy as np
 from aerobat.quadrotor.timeoptimal.solution import BenchmarkLimits, StageFailure
 
 _COARSE_INTERVALS = 30
+
+
+def run_solver(solver: Any, **kwargs: Any) -> Any:
+    """``solver(**kwargs)``, where Ctrl-C stops the program.
+
+    CasADi checks for signals during an IPOPT solve, but turns the resulting KeyboardInterrupt
+    into a failed solve (``NonIpopt_Exception_Thrown``): the benchmark would go on and report a
+    failure. Here the interrupt is noted as it happens and raised again once IPOPT returns.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return solver(**kwargs)
+    previous = signal.getsignal(signal.SIGINT)
+    if not callable(previous):
+        return solver(**kwargs)
+    interrupted: list[int] = []
+
+    def handler(signum: int, frame: Any) -> None:
+        try:
+            previous(signum, frame)
+        except KeyboardInterrupt:
+            interrupted.append(signum)
+            raise
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        result = solver(**kwargs)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if interrupted:
+        raise KeyboardInterrupt
+    return result
 
 
 @functools.lru_cache(maxsize=16)
@@ -134,7 +167,7 @@ def _run_transcription(
     lbx, ubx = _pack_bounds(n, target, final_angle, lim)
     w0 = np.clip(w0, lbx, ubx)
     try:
-        res = solver(x0=w0, lbx=lbx, ubx=ubx, lbg=0.0, ubg=0.0)
+        res = run_solver(solver, x0=w0, lbx=lbx, ubx=ubx, lbg=0.0, ubg=0.0)
     except RuntimeError as exc:  # pragma: no cover - CasADi evaluation errors
         return False, f"IPOPT raised {exc}", math.nan, np.empty((0, 5)), np.empty((0, 2)), np.empty((0, 5))
     stats = solver.stats()

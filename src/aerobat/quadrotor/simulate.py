@@ -67,7 +67,7 @@ def _closed_loop_derivative(t, x, cmd, plant, ctrl, ft, dx):  # pragma: no cover
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
 def _run_continuous(x, bp, coeffs, nseg, plant, ctrl, max_step, rec_t, rec_x, rec_u):  # pragma: no cover
     """Continuous-time playback; ``x`` is advanced in place. Records every step if rec_t is non-empty."""
-    n = x.shape[0]
+    n = N_STATE
     k1 = np.empty(n)
     k2 = np.empty(n)
     k3 = np.empty(n)
@@ -120,7 +120,7 @@ def _run_continuous(x, bp, coeffs, nseg, plant, ctrl, max_step, rec_t, rec_x, re
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def rk4_plant_step(t, x, ft, plant, h, k1, k2, k3, k4, tmp):  # pragma: no cover - compiled
     """One RK4 step of the plant with motor commands ``ft`` held constant."""
-    n = x.shape[0]
+    n = N_STATE
     plant_derivative(t, x, ft, plant, k1)
     for j in range(n):
         tmp[j] = x[j] + 0.5 * h * k1[j]
@@ -139,7 +139,7 @@ def rk4_plant_step(t, x, ft, plant, h, k1, k2, k3, k4, tmp):  # pragma: no cover
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
 def _run_sampled(x, bp, coeffs, nseg, plant, ctrl, tick, substeps, rec_t, rec_x, rec_u):  # pragma: no cover
     """Onboard playback: sample the program and run the controller every ``tick``; ZOH between."""
-    n = x.shape[0]
+    n = N_STATE
     k1 = np.empty(n)
     k2 = np.empty(n)
     k3 = np.empty(n)

@@ -6,6 +6,12 @@ not), the rate controller with gyro latency, scale error and bias, zero-order
 hold of motor commands, RK4 of the true plant, and motion-capture sampling with
 pre-drawn noise. No randomness inside: every noise sample comes from the
 arena's seeded generator.
+
+``supervise`` is the one entry point; every kernel it calls is ``inline="always"``, so it
+is compiled as one unit. (Calling separately compiled numba functions made the result
+depend on numba's cache: a freshly compiled ``supervise`` and one loaded from the cache
+differed in the last bits, so the first run after a change and every later run of the same
+seeded session disagreed by up to ~1e-9 m.)
 """
 
 from __future__ import annotations
@@ -24,7 +30,7 @@ __all__ = ["MOCAP_COLUMNS", "advance", "estimate_pose", "mocap_sample", "pd_comm
 MOCAP_COLUMNS = 8
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def advance(x, gyro_prev, tick0, n_ticks, tick_s, plant, ctrl, sensor, latency, radio_cmd,
             bp, coeffs, nseg, man_start_tick, duration_s, mocap_every, mocap_noise, mocap_out):  # pragma: no cover
     """Advance the true vehicle ``n_ticks`` onboard ticks from global tick ``tick0``.
@@ -98,7 +104,7 @@ def mocap_sample(x, t, noise, out):  # pragma: no cover - compiled
     out[7] = qw * dz + qx * dy - qy * dx + qz * dw
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def pd_command(pos, vel, quat, target, integral, gains, limits, dt, out):  # pragma: no cover - compiled
     """Cascaded PD(+I) hover controller: position → acceleration → attitude → body rates.
 
@@ -174,7 +180,7 @@ def pd_command(pos, vel, quat, target, integral, gains, limits, dt, out):  # pra
     out[3] = min(max(-kyaw * ez, -limits[3]), limits[3])
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def estimate_pose(log, available, est_pos, est_vel, est_quat):  # pragma: no cover - compiled
     """Supervisor's estimate from the first ``available`` mocap rows: last pose, line-fit velocity."""
     if available <= 0:

@@ -177,6 +177,11 @@ def _run_sampled(x, bp, coeffs, nseg, plant, ctrl, tick, substeps, rec_t, rec_x,
     return idx
 
 
+_NO_T = np.empty(0)
+_NO_X = np.empty((0, N_STATE))
+_NO_U = np.empty((0, 4))
+
+
 @nb.njit(cache=True, fastmath=True, error_model="numpy", parallel=True)
 def _batch_continuous(x0, bp, coeffs, nseg, plant, ctrl, max_step, out):  # pragma: no cover - compiled
     empty_t = np.empty(0)
@@ -330,7 +335,7 @@ def simulate_batch(
 
     Returns
     -------
-    (B, N_STATE) final states.
+    (B, N_STATE) final states, bit for bit those :func:`simulate` computes one at a time.
     """
     if not max_step_s > 0 or not math.isfinite(max_step_s):
         raise ConfigError(f"max_step_s = {max_step_s} must be finite and > 0 (s)")
@@ -341,20 +346,15 @@ def simulate_batch(
     cfgs = [configs] * B if isinstance(configs, VehicleConfig) else list(configs)
     if len(cfgs) != B:
         raise ConfigError(f"got {B} programs but {len(cfgs)} vehicles")
-    kmax = max(len(c.breakpoints_s) - 1 for c in compiled)
-    bp = np.zeros((B, kmax + 1))
-    coeffs = np.zeros((B, kmax, 4, 3))
-    nseg = np.zeros(B, dtype=np.int64)
-    for b, c in enumerate(compiled):
-        k = len(c.breakpoints_s) - 1
-        bp[b, : k + 1] = c.breakpoints_s
-        coeffs[b, :k] = c.coefficients
-        nseg[b] = k
+    one = all(c is cfgs[0] for c in cfgs)  # one vehicle for all: its vectors once
     if plants is None:
-        plants = np.stack([plant_vector(c.vehicle) for c in cfgs])
-    ctrl = np.stack([controller_vector(c.controller) for c in cfgs])
+        plants = np.tile(plant_vector(cfgs[0].vehicle), (B, 1)) if one else np.stack(
+            [plant_vector(c.vehicle) for c in cfgs])
+    ctrl = np.tile(controller_vector(cfgs[0].controller), (B, 1)) if one else np.stack(
+        [controller_vector(c.controller) for c in cfgs])
     if initial_states is None:
-        initial_states = np.stack([hover_state(c.vehicle) for c in cfgs])
+        initial_states = np.tile(hover_state(cfgs[0].vehicle), (B, 1)) if one else np.stack(
+            [hover_state(c.vehicle) for c in cfgs])
     x0 = np.ascontiguousarray(initial_states, dtype=float)
     plants = np.ascontiguousarray(plants, dtype=float)
     if x0.shape != (B, N_STATE):
@@ -363,7 +363,27 @@ def simulate_batch(
         raise ConfigError(f"plants must have shape ({B}, {N_PLANT}), got {plants.shape}")
     if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(plants))):
         raise ConfigError("initial_states and plants must be finite")
-    out = np.empty_like(x0)
+    return _final_states(compiled, x0, plants, ctrl, max_step_s)
+
+
+def _final_states(compiled: Sequence[CompiledProgram], x0: np.ndarray, plants: np.ndarray, ctrl: np.ndarray,
+                  max_step_s: float) -> np.ndarray:
+    """Run checked, contiguous inputs: one program on this thread, several on all cores."""
+    B = len(compiled)
+    out = x0.copy()
+    if B == 1:  # no parallel region to start (and no worker threads to wake) for one simulation
+        c = compiled[0]
+        _run_continuous(out[0], c.breakpoints_s, c.coefficients, len(c.breakpoints_s) - 1, plants[0], ctrl[0],
+                        max_step_s, _NO_T, _NO_X, _NO_U)
+        return out
+    nseg = np.array([len(c.breakpoints_s) - 1 for c in compiled], dtype=np.int64)
+    kmax = int(nseg.max())
+    bp = np.zeros((B, kmax + 1))
+    coeffs = np.zeros((B, kmax, 4, 3))
+    for b, c in enumerate(compiled):
+        k = nseg[b]
+        bp[b, : k + 1] = c.breakpoints_s
+        coeffs[b, :k] = c.coefficients
     _batch_continuous(x0, bp, coeffs, nseg, plants, ctrl, max_step_s, out)
     return out
 
@@ -375,14 +395,26 @@ class NominalModel:
     """
 
     def __init__(self, config: VehicleConfig, *, max_step_s: float = DEFAULT_MAX_STEP_S) -> None:
+        if not max_step_s > 0 or not math.isfinite(max_step_s):
+            raise ConfigError(f"max_step_s = {max_step_s} must be finite and > 0 (s)")
         self.config = config
         self.max_step_s = max_step_s
         self._plant = plant_vector(config.vehicle)
+        self._ctrl = controller_vector(config.controller)
+        self._hover = hover_state(config.vehicle)
 
-    def final_states(self, programs: Sequence[Program], initial_states: np.ndarray | None = None) -> np.ndarray:
-        plants = np.tile(self._plant, (len(programs), 1))
-        return simulate_batch(programs, self.config, initial_states=initial_states, plants=plants,
-                              max_step_s=self.max_step_s)
+    def final_states(self, programs: Sequence[Program | CompiledProgram],
+                     initial_states: np.ndarray | None = None) -> np.ndarray:
+        """(B, N_STATE) final states of ``programs`` from ``initial_states`` (default: hover at the origin)."""
+        if initial_states is not None:
+            return simulate_batch(programs, self.config, initial_states=initial_states,
+                                  plants=np.tile(self._plant, (len(programs), 1)), max_step_s=self.max_step_s)
+        compiled = [p.compile() if isinstance(p, Program) else p for p in programs]
+        B = len(compiled)
+        if B == 0:
+            return np.empty((0, N_STATE))
+        return _final_states(compiled, np.tile(self._hover, (B, 1)), np.tile(self._plant, (B, 1)),
+                             np.tile(self._ctrl, (B, 1)), self.max_step_s)
 
     def trajectory(self, program: Program, initial_state: np.ndarray | None = None) -> Trajectory:
         return simulate(program, self.config, initial_state=initial_state, max_step_s=self.max_step_s)

@@ -213,7 +213,9 @@ def _difference_batch(maneuver: Maneuver, p: np.ndarray, relative_step: float) -
 
 def _jacobian_from(errs: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n = steps.size
-    J = (errs[1 : n + 1] - errs[n + 1 :]).T / steps[None, :]
+    # C order, as a design read back from the store has it: products with J (BLAS) round the same
+    # way in a running session and in a resumed one
+    J = np.ascontiguousarray((errs[1 : n + 1] - errs[n + 1 :]).T / steps[None, :])
     return J, errs[0]
 
 

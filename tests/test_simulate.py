@@ -17,9 +17,11 @@ from aerobat.quadrotor.dynamics import (
     RATE_INT,
     THRUST,
     VEL,
+    controller_constants,
     controller_vector,
     euler_zyx,
     hover_state,
+    plant_constants,
     plant_vector,
     rotation_angles,
     rotation_matrices,
@@ -178,6 +180,7 @@ def _solve_ivp_reference(program: Program, config: VehicleConfig) -> np.ndarray:
     compiled = program.compile()
     plant = plant_vector(config.vehicle)
     ctrl = controller_vector(config.controller)
+    constants, mix = plant_constants(plant), controller_constants(ctrl)
     derivative = _closed_loop_derivative.py_func
     x = hover_state(config.vehicle)
     bp = compiled.breakpoints_s
@@ -188,7 +191,7 @@ def _solve_ivp_reference(program: Program, config: VehicleConfig) -> np.ndarray:
             tau = t - t0
             cmd = coeff[:, 0] + tau * (coeff[:, 1] + tau * coeff[:, 2])
             dx = np.empty(N_STATE)
-            derivative(t, y, cmd, plant, ctrl, np.empty(4), dx)
+            derivative(t, y, cmd, plant, constants, mix, False, dx)
             return dx
 
         sol = solve_ivp(rhs, (t0, bp[k + 1]), x, method="DOP853", rtol=1e-10, atol=1e-12)

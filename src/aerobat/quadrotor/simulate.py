@@ -27,18 +27,21 @@ import numpy as np
 
 from aerobat.errors import ConfigError
 from aerobat.quadrotor.dynamics import (
+    K_AERO,
     N_PLANT,
     N_STATE,
     POS,
     VEL,
-    controller_thrusts,
+    controller_constants,
     controller_vector,
+    derivative,
     euler_zyx,
     hover_state,
     normalize_quaternion,
-    plant_derivative,
+    plant_constants,
     plant_vector,
     rotation_angles,
+    thrust_commands,
 )
 from aerobat.quadrotor.program import CompiledProgram, Program
 from aerobat.quadrotor.vehicle import VehicleConfig
@@ -61,84 +64,111 @@ DEFAULT_TICK_S = 1.0 / 800.0
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _command(coeffs, k, tau, cmd):  # pragma: no cover - compiled
-    for ch in range(4):
-        cmd[ch] = coeffs[k, ch, 0] + tau * (coeffs[k, ch, 1] + tau * coeffs[k, ch, 2])
+def _segment(coeffs, k):  # pragma: no cover - compiled
+    """Segment ``k``'s 12 coefficients as a tuple (held in registers through the segment's steps)."""
+    return (coeffs[k, 0, 0], coeffs[k, 0, 1], coeffs[k, 0, 2], coeffs[k, 1, 0], coeffs[k, 1, 1], coeffs[k, 1, 2],
+            coeffs[k, 2, 0], coeffs[k, 2, 1], coeffs[k, 2, 2], coeffs[k, 3, 0], coeffs[k, 3, 1], coeffs[k, 3, 2])
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _closed_loop_derivative(t, x, cmd, plant, ctrl, ft, dx):  # pragma: no cover - compiled
-    controller_thrusts(cmd, x[10], x[11], x[12], ctrl, ft)
-    plant_derivative(t, x, ft, plant, dx)
+def _command_at(c, tau):  # pragma: no cover - compiled
+    """The four commands at local time ``tau`` of a segment (:func:`_segment`)."""
+    return (c[0] + tau * (c[1] + tau * c[2]), c[3] + tau * (c[4] + tau * c[5]),
+            c[6] + tau * (c[7] + tau * c[8]), c[9] + tau * (c[10] + tau * c[11]))
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _closed_loop_derivative(t, x, cmd, plant, k, mix, aero, dx):  # pragma: no cover - compiled
+    derivative(t, x, thrust_commands(cmd, x[10], x[11], x[12], mix), plant, k, aero, dx)
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
 def _run_continuous(x, bp, coeffs, nseg, plant, ctrl, max_step, rec_t, rec_x, rec_u):  # pragma: no cover
     """Continuous-time playback; ``x`` is advanced in place. Records every step if rec_t is non-empty."""
+    k = plant_constants(plant)
+    mix = controller_constants(ctrl)
+    # the same loop compiled twice: without and with the aerodynamic terms
+    if k[K_AERO] != 0.0:
+        return _continuous(x, bp, coeffs, nseg, plant, k, mix, True, max_step, rec_t, rec_x, rec_u)
+    return _continuous(x, bp, coeffs, nseg, plant, k, mix, False, max_step, rec_t, rec_x, rec_u)
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _continuous(x, bp, coeffs, nseg, plant, k, mix, aero, max_step, rec_t, rec_x, rec_u):  # pragma: no cover
     n = N_STATE
-    k1 = np.empty(n)
-    k2 = np.empty(n)
-    k3 = np.empty(n)
-    k4 = np.empty(n)
-    tmp = np.empty(n)
-    cmd0 = np.empty(4)
-    cmdm = np.empty(4)
-    cmd1 = np.empty(4)
-    ft = np.empty(4)
+    work = np.empty((6, n))  # the state and the stages side by side
+    xs = work[0]
+    k1 = work[1]
+    k2 = work[2]
+    k3 = work[3]
+    k4 = work[4]
+    tmp = work[5]
+    for j in range(n):
+        xs[j] = x[j]
     record = rec_t.shape[0] > 0
     idx = 0
     if record:
-        _command(coeffs, 0, 0.0, cmd0)
+        cmd = _command_at(_segment(coeffs, 0), 0.0)
         rec_t[0] = bp[0]
         rec_x[0, :] = x
-        rec_u[0, :] = cmd0
+        for ch in range(4):
+            rec_u[0, ch] = cmd[ch]
         idx = 1
-    for k in range(nseg):
-        t0 = bp[k]
-        length = bp[k + 1] - t0
+    for seg in range(nseg):
+        t0 = bp[seg]
+        length = bp[seg + 1] - t0
         m = max(1, int(math.ceil(length / max_step - 1e-9)))
         h = length / m
+        poly = _segment(coeffs, seg)
+        # the program is sampled at each step's start, middle and end; the end is the next start
+        cmd1 = _command_at(poly, 0.0)
         for i in range(m):
             tau = i * h
             t = t0 + tau
-            _command(coeffs, k, tau, cmd0)
-            _command(coeffs, k, tau + 0.5 * h, cmdm)
-            _command(coeffs, k, tau + h, cmd1)
-            _closed_loop_derivative(t, x, cmd0, plant, ctrl, ft, k1)
+            cmd0 = cmd1
+            cmdm = _command_at(poly, tau + 0.5 * h)
+            cmd1 = _command_at(poly, (i + 1) * h)
+            _closed_loop_derivative(t, xs, cmd0, plant, k, mix, aero, k1)
             for j in range(n):
-                tmp[j] = x[j] + 0.5 * h * k1[j]
-            _closed_loop_derivative(t + 0.5 * h, tmp, cmdm, plant, ctrl, ft, k2)
+                tmp[j] = xs[j] + 0.5 * h * k1[j]
+            _closed_loop_derivative(t + 0.5 * h, tmp, cmdm, plant, k, mix, aero, k2)
             for j in range(n):
-                tmp[j] = x[j] + 0.5 * h * k2[j]
-            _closed_loop_derivative(t + 0.5 * h, tmp, cmdm, plant, ctrl, ft, k3)
+                tmp[j] = xs[j] + 0.5 * h * k2[j]
+            _closed_loop_derivative(t + 0.5 * h, tmp, cmdm, plant, k, mix, aero, k3)
             for j in range(n):
-                tmp[j] = x[j] + h * k3[j]
-            _closed_loop_derivative(t + h, tmp, cmd1, plant, ctrl, ft, k4)
+                tmp[j] = xs[j] + h * k3[j]
+            _closed_loop_derivative(t + h, tmp, cmd1, plant, k, mix, aero, k4)
             for j in range(n):
-                x[j] += h / 6.0 * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
-            normalize_quaternion(x)
+                xs[j] += h / 6.0 * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
+            normalize_quaternion(xs)
             if record:
-                rec_t[idx] = t0 + (i + 1) * h if i + 1 < m else bp[k + 1]
-                rec_x[idx, :] = x
-                rec_u[idx, :] = cmd1
+                rec_t[idx] = t0 + (i + 1) * h if i + 1 < m else bp[seg + 1]
+                rec_x[idx, :] = xs
+                for ch in range(4):
+                    rec_u[idx, ch] = cmd1[ch]
                 idx += 1
+    for j in range(n):
+        x[j] = xs[j]
     return idx
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def rk4_plant_step(t, x, ft, plant, h, k1, k2, k3, k4, tmp):  # pragma: no cover - compiled
-    """One RK4 step of the plant with motor commands ``ft`` held constant."""
+def rk4_plant_step(t, x, ft, plant, k, aero, h, k1, k2, k3, k4, tmp):  # pragma: no cover - compiled
+    """One RK4 step of the plant with motor commands ``ft`` held constant.
+
+    ``k`` and ``aero`` as for :func:`~aerobat.quadrotor.dynamics.derivative`.
+    """
     n = N_STATE
-    plant_derivative(t, x, ft, plant, k1)
+    derivative(t, x, ft, plant, k, aero, k1)
     for j in range(n):
         tmp[j] = x[j] + 0.5 * h * k1[j]
-    plant_derivative(t + 0.5 * h, tmp, ft, plant, k2)
+    derivative(t + 0.5 * h, tmp, ft, plant, k, aero, k2)
     for j in range(n):
         tmp[j] = x[j] + 0.5 * h * k2[j]
-    plant_derivative(t + 0.5 * h, tmp, ft, plant, k3)
+    derivative(t + 0.5 * h, tmp, ft, plant, k, aero, k3)
     for j in range(n):
         tmp[j] = x[j] + h * k3[j]
-    plant_derivative(t + h, tmp, ft, plant, k4)
+    derivative(t + h, tmp, ft, plant, k, aero, k4)
     for j in range(n):
         x[j] += h / 6.0 * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
     normalize_quaternion(x)
@@ -153,34 +183,38 @@ def _run_sampled(x, bp, coeffs, nseg, plant, ctrl, tick, substeps, rec_t, rec_x,
     k3 = np.empty(n)
     k4 = np.empty(n)
     tmp = np.empty(n)
-    cmd = np.empty(4)
-    ft = np.empty(4)
+    k = plant_constants(plant)
+    aero = k[K_AERO] != 0.0
+    mix = controller_constants(ctrl)
+    cmd = (0.0, 0.0, 0.0, 0.0)
     end = bp[nseg]
     record = rec_t.shape[0] > 0
     idx = 0
-    k = 0
+    seg = 0
     tick_index = 0
     t = 0.0
     while t < end - 1e-12:
-        while k < nseg - 1 and bp[k + 1] <= t + 1e-12:
-            k += 1
-        _command(coeffs, k, t - bp[k], cmd)
+        while seg < nseg - 1 and bp[seg + 1] <= t + 1e-12:
+            seg += 1
+        cmd = _command_at(_segment(coeffs, seg), t - bp[seg])
         if record:
             rec_t[idx] = t
             rec_x[idx, :] = x
-            rec_u[idx, :] = cmd
+            for ch in range(4):
+                rec_u[idx, ch] = cmd[ch]
             idx += 1
-        controller_thrusts(cmd, x[10], x[11], x[12], ctrl, ft)
+        ft = thrust_commands(cmd, x[10], x[11], x[12], mix)  # held until the next tick
         t_next = min((tick_index + 1) * tick, end)
         h = (t_next - t) / substeps
         for s in range(substeps):
-            rk4_plant_step(t + s * h, x, ft, plant, h, k1, k2, k3, k4, tmp)
+            rk4_plant_step(t + s * h, x, ft, plant, k, aero, h, k1, k2, k3, k4, tmp)
         tick_index += 1
         t = t_next
     if record:
         rec_t[idx] = end
         rec_x[idx, :] = x
-        rec_u[idx, :] = cmd
+        for ch in range(4):
+            rec_u[idx, ch] = cmd[ch]
         idx += 1
     return idx
 

@@ -46,7 +46,7 @@ from aerobat.plants import Arena  # noqa: E402
 from aerobat.quadrotor.dynamics import N_STATE, controller_vector, hover_state, plant_vector  # noqa: E402
 from aerobat.quadrotor.maneuvers import MultiFlip  # noqa: E402
 from aerobat.quadrotor.program import RampDown  # noqa: E402
-from aerobat.quadrotor.simulate import NominalModel, _batch_continuous, _run_continuous, _steps  # noqa: E402
+from aerobat.quadrotor.simulate import NominalModel, _run_batch, _run_continuous, _steps  # noqa: E402
 
 CONFIG = hummingbird()
 OTHER_MARKER = "<!-- other benchmarks: kept by make bench -->"
@@ -60,6 +60,7 @@ TRIPLE_3D = MultiFlip(vehicle=CONFIG.vehicle, flips=3, dims=3)
 # kernel meets (constant, linear and quadratic commands, both ramps)
 WORKLOAD = dataclasses.replace(TRIPLE_3D.program(P0_3D), ramp_down=RampDown(collective_s=0.1, rates_s=0.15))
 FIXED_CMD = np.array([12.0, 3.0, -1.0, 0.5])  # the reference's one constant command
+EMPTY = (np.empty(0), np.empty((0, N_STATE)), np.empty((0, 4)))  # nothing recorded
 
 
 def load() -> str:
@@ -98,12 +99,14 @@ def bench_kernel(rounds: int = 31) -> dict:
     plant, ctrl = plant_vector(CONFIG.vehicle), controller_vector(CONFIG.controller)
     x0 = hover_state(CONFIG.vehicle)
     c = constants(CONFIG.vehicle, CONFIG.controller)
-    empty = (np.empty(0), np.empty((0, N_STATE)), np.empty((0, 4)))
     repeats = 20
 
-    def kernel():
+    one = (x0[None, :], bp[None, :], coeffs[None], np.array([len(bp) - 1]), plant[None, :], ctrl[None, :], MAX_STEP_S,
+           np.empty((1, N_STATE)), 0, 1, *EMPTY)
+
+    def kernel():  # one vehicle, one program, nothing recorded: what simulate(record=False) runs
         for _ in range(repeats):
-            _run_continuous(x0.copy(), bp, coeffs, len(bp) - 1, plant, ctrl, MAX_STEP_S, *empty)
+            _run_continuous(*one)
 
     def reference():
         for _ in range(repeats):
@@ -139,7 +142,7 @@ def bench_batch(n: int = 1000, rounds: int = 9) -> dict:
     threads = numba.config.NUMBA_NUM_THREADS
 
     def batch():
-        _batch_continuous(x0, bp, coeffs, nseg, plants, ctrl, MAX_STEP_S, out)
+        _run_batch(x0, bp, coeffs, nseg, plants, ctrl, MAX_STEP_S, out)
 
     def reference():  # the same number of vehicle-steps through the reference
         for b in range(n):

@@ -17,8 +17,9 @@ The kernels are compiled with numba and allocate nothing inside their loops;
 from __future__ import annotations
 
 import math
-import os
+import threading
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Literal
 
@@ -48,13 +49,6 @@ from aerobat.quadrotor.vehicle import VehicleConfig
 
 __all__ = ["NominalModel", "Trajectory", "final_state_summary", "simulate", "simulate_batch"]
 
-# numba's OpenMP workers busy-wait after each parallel region by default. The design alternates
-# short batches (a few ms) with Python work, and on a machine with other jobs the spinning
-# workers take the cores that work needs: the 3D design ran 2-4x slower. Passive workers sleep
-# instead (waking one costs microseconds). Set before numba starts its thread pool, unless the
-# user chose otherwise.
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-
 Mode = Literal["continuous", "sampled"]
 DEFAULT_MAX_STEP_S = 5e-4
 DEFAULT_TICK_S = 1.0 / 800.0
@@ -82,8 +76,8 @@ def _closed_loop_derivative(t, x, cmd, plant, k, mix, aero, dx):  # pragma: no c
     derivative(t, x, thrust_commands(cmd, x[10], x[11], x[12], mix), plant, k, aero, dx)
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
-def _run_continuous(x, bp, coeffs, nseg, plant, ctrl, max_step, rec_t, rec_x, rec_u):  # pragma: no cover
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _playback(x, bp, coeffs, nseg, plant, ctrl, max_step, rec_t, rec_x, rec_u):  # pragma: no cover
     """Continuous-time playback; ``x`` is advanced in place. Records every step if rec_t is non-empty."""
     k = plant_constants(plant)
     mix = controller_constants(ctrl)
@@ -224,15 +218,66 @@ _NO_X = np.empty((0, N_STATE))
 _NO_U = np.empty((0, 4))
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy", parallel=True)
-def _batch_continuous(x0, bp, coeffs, nseg, plant, ctrl, max_step, out):  # pragma: no cover - compiled
-    empty_t = np.empty(0)
-    empty_x = np.empty((0, x0.shape[1]))
-    empty_u = np.empty((0, 4))
-    for b in nb.prange(x0.shape[0]):
-        x = x0[b].copy()
-        _run_continuous(x, bp[b], coeffs[b], nseg[b], plant[b], ctrl[b], max_step, empty_t, empty_x, empty_u)
-        out[b, :] = x
+@nb.njit(cache=True, fastmath=True, error_model="numpy", nogil=True)
+def _run_continuous(x0, bp, coeffs, nseg, plant, ctrl, max_step, out, start, stop,
+                    rec_t, rec_x, rec_u):  # pragma: no cover - compiled
+    """Continuous playback of programs ``start … stop − 1`` of a batch, one after the other.
+
+    Row b: start state ``x0[b]``, final state into ``out[b]``. With non-empty ``rec_*`` (one
+    program) every step is recorded; returns the number of records. Every continuous-mode
+    simulation runs through this one compiled function (``simulate``, and each thread's share
+    of a batch), so they agree bit for bit whatever the batch; the playback is inlined here
+    rather than called, since a kernel calling another compiled kernel ran ~8 % slower once
+    numba had loaded it from its cache.
+    """
+    count = 0
+    for b in range(start, stop):
+        for j in range(x0.shape[1]):
+            out[b, j] = x0[b, j]
+        count = _playback(out[b], bp[b], coeffs[b], nseg[b], plant[b], ctrl[b], max_step, rec_t, rec_x, rec_u)
+    return count
+
+
+class _Workers:
+    """Threads for batches: each runs chunks of a batch through :func:`_run_continuous`.
+
+    The kernel releases the GIL, so plain threads run it in parallel, and each runs the very
+    code a single simulation runs (same results bit for bit, same speed: a numba ``prange``
+    around the kernel ran ~10 % slower per simulation, and its OpenMP workers spun between the
+    design's short batches, taking the cores the Python work in between needed). As many
+    threads as ``numba.get_num_threads()`` says (``NUMBA_NUM_THREADS``, ``numba.set_num_threads``).
+    """
+
+    lock = threading.Lock()
+    pool: ThreadPoolExecutor | None = None
+    size = 0
+
+    @classmethod
+    def get(cls, threads: int) -> ThreadPoolExecutor:
+        with cls.lock:
+            if cls.pool is None or cls.size != threads:
+                if cls.pool is not None:
+                    cls.pool.shutdown(wait=False)
+                cls.pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="aerobat-batch")
+                cls.size = threads
+            return cls.pool
+
+
+def _run_batch(x0: np.ndarray, bp: np.ndarray, coeffs: np.ndarray, nseg: np.ndarray, plants: np.ndarray,
+               ctrl: np.ndarray, max_step_s: float, out: np.ndarray) -> None:
+    """Final states of a packed batch into ``out``: one program on this thread, several on all threads."""
+    count = x0.shape[0]
+    threads = min(count, nb.get_num_threads()) if count > 1 else 1
+    if threads == 1:  # nothing to hand over
+        _run_continuous(x0, bp, coeffs, nseg, plants, ctrl, max_step_s, out, 0, count, _NO_T, _NO_X, _NO_U)
+        return
+    chunks = min(count, 4 * threads)  # a few per thread even out programs of different lengths
+    bounds = [c * count // chunks for c in range(chunks + 1)]
+    pool = _Workers.get(threads)
+    jobs = [pool.submit(_run_continuous, x0, bp, coeffs, nseg, plants, ctrl, max_step_s, out, bounds[c],
+                        bounds[c + 1], _NO_T, _NO_X, _NO_U) for c in range(chunks)]
+    for job in jobs:
+        job.result()
 
 
 # ------------------------------------------------------------------- results
@@ -349,7 +394,10 @@ def simulate(
     rec_x = np.empty((size, N_STATE))
     rec_u = np.empty((size, 4))
     if mode == "continuous":
-        count = _run_continuous(x, bp, coeffs, nseg, plant_v, ctrl_v, max_step_s, rec_t, rec_x, rec_u)
+        final = np.empty((1, N_STATE))
+        count = _run_continuous(x[None, :], bp[None, :], coeffs[None], np.array([nseg]), plant_v[None, :],
+                                ctrl_v[None, :], max_step_s, final, 0, 1, rec_t, rec_x, rec_u)
+        x = final[0]
     else:
         count = _run_sampled(x, bp, coeffs, nseg, plant_v, ctrl_v, tick_s, substeps, rec_t, rec_x, rec_u)
     if not record:
@@ -410,14 +458,9 @@ def simulate_batch(
 
 def _final_states(compiled: Sequence[CompiledProgram], x0: np.ndarray, plants: np.ndarray, ctrl: np.ndarray,
                   max_step_s: float) -> np.ndarray:
-    """Run checked, contiguous inputs: one program on this thread, several on all cores."""
+    """Run checked, contiguous inputs: pack the programs, one row each, and run the batch."""
     B = len(compiled)
-    out = x0.copy()
-    if B == 1:  # no parallel region to start (and no worker threads to wake) for one simulation
-        c = compiled[0]
-        _run_continuous(out[0], c.breakpoints_s, c.coefficients, len(c.breakpoints_s) - 1, plants[0], ctrl[0],
-                        max_step_s, _NO_T, _NO_X, _NO_U)
-        return out
+    out = np.empty_like(x0)
     nseg = np.array([len(c.breakpoints_s) - 1 for c in compiled], dtype=np.int64)
     kmax = int(nseg.max())
     bp = np.zeros((B, kmax + 1))
@@ -426,7 +469,7 @@ def _final_states(compiled: Sequence[CompiledProgram], x0: np.ndarray, plants: n
         k = nseg[b]
         bp[b, : k + 1] = c.breakpoints_s
         coeffs[b, :k] = c.coefficients
-    _batch_continuous(x0, bp, coeffs, nseg, plants, ctrl, max_step_s, out)
+    _run_batch(x0, bp, coeffs, nseg, plants, ctrl, max_step_s, out)
     return out
 
 

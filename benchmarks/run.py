@@ -102,7 +102,7 @@ def bench_kernel(rounds: int = 31) -> dict:
     repeats = 20
 
     one = (x0[None, :], bp[None, :], coeffs[None], np.array([len(bp) - 1]), plant[None, :], ctrl[None, :], MAX_STEP_S,
-           np.empty((1, N_STATE)), 0, 1, *EMPTY)
+           np.empty((1, N_STATE)), np.zeros(1, dtype=np.int64), *EMPTY)
 
     def kernel():  # one vehicle, one program, nothing recorded: what simulate(record=False) runs
         for _ in range(repeats):

@@ -350,7 +350,7 @@ def _hold(x: np.ndarray, ft: np.ndarray, times: list[float], h: float = 1e-4) ->
     for t_target in times:
         n_target = round(t_target / h)
         while step < n_target:
-            rk4_plant_step(step * h, x, ft, plant, k, False, h, *work)
+            rk4_plant_step(step * h, x, ft, plant, k, h, *work)
             step += 1
         out.append(x.copy())
     return np.array(out)

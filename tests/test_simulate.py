@@ -19,19 +19,20 @@ from aerobat.quadrotor.dynamics import (
     VEL,
     controller_constants,
     controller_vector,
+    derivative,
     euler_zyx,
     hover_state,
     plant_constants,
     plant_vector,
     rotation_angles,
     rotation_matrices,
+    thrust_commands,
 )
 from aerobat.quadrotor.program import Program, RampDown, Switch, load_program
 from aerobat.quadrotor.simulate import (
     DEFAULT_MAX_STEP_S,
     DEFAULT_TICK_S,
     Trajectory,
-    _closed_loop_derivative,
     final_state_summary,
     simulate,
     simulate_batch,
@@ -181,7 +182,10 @@ def _solve_ivp_reference(program: Program, config: VehicleConfig) -> np.ndarray:
     plant = plant_vector(config.vehicle)
     ctrl = controller_vector(config.controller)
     constants, mix = plant_constants(plant), controller_constants(ctrl)
-    derivative = _closed_loop_derivative.py_func
+
+    def closed_loop(t, y, cmd, dx):
+        derivative(t, y, thrust_commands(cmd, y[10], y[11], y[12], ctrl, mix), plant, constants, dx)
+
     x = hover_state(config.vehicle)
     bp = compiled.breakpoints_s
     for k in range(len(bp) - 1):
@@ -191,7 +195,7 @@ def _solve_ivp_reference(program: Program, config: VehicleConfig) -> np.ndarray:
             tau = t - t0
             cmd = coeff[:, 0] + tau * (coeff[:, 1] + tau * coeff[:, 2])
             dx = np.empty(N_STATE)
-            derivative(t, y, cmd, plant, constants, mix, False, dx)
+            closed_loop(t, y, cmd, dx)
             return dx
 
         sol = solve_ivp(rhs, (t0, bp[k + 1]), x, method="DOP853", rtol=1e-10, atol=1e-12)

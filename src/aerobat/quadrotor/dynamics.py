@@ -32,8 +32,6 @@ import numpy as np
 from aerobat.quadrotor.vehicle import ControllerParams, VehicleParams
 
 __all__ = [
-    "N_CONTROLLER_CONSTANTS",
-    "N_PLANT_CONSTANTS",
     "N_STATE",
     "OMEGA",
     "POS",
@@ -174,89 +172,66 @@ def hover_state(vehicle: VehicleParams, position_m: tuple[float, float, float] =
 # ------------------------------------------------------------------ kernels
 #
 # The kernels never divide inside the integration loop: what the model divides by (mass,
-# inertias, arm length, yaw coefficient) is inverted once per run, from the parameter
-# vectors as they are then, into the constant vectors below. The mixer and the motor forces
-# are sums of products with those constants.
+# inertias, arm length, yaw coefficient) is inverted once per run, from the parameter vectors
+# as they are then (plant_constants, controller_constants), and the controller hands its four
+# thrusts to the motor model as values, not through an array.
 
-# plant constants: the tuple plant_constants returns (a tuple, so the compiled loops keep the
-# constants in registers: nothing the loop writes can alias them)
+# plant_constants(plant) = (1/m, 1/Ixx, 1/Iyy, 1/Izz, aerodynamic terms present)
 K_INV_MASS = 0
-K_INV_I = 1  # 3: 1/Ixx, 1/Iyy, 1/Izz
-K_GAIN = 4  # 4 per-motor thrust gains
-K_ROLL = 8  # 4 roll-moment arm × gain: τx = Σ K_ROLL_j f_j
-K_PITCH = 12  # 4: −x_j × gain
-K_YAW = 16  # 4: κ_j × gain
-K_AERO = 20  # 1 if drag, rotor drag or rotational damping act, else 0
-K_FMIN = 21
-K_FMAX = 22
-K_RATE_UP = 23
-K_RATE_DN = 24
-K_GRAV = 25
-K_GYRO = 26  # 3: Izz − Iyy, Ixx − Izz, Iyy − Ixx
-N_PLANT_CONSTANTS = 29
-
-# controller constants: the tuple controller_constants returns
-Q_MIX = 0  # 4 × 4, row per physical motor slot: f̃ = Σ Q_MIX[slot, c] · (m·a, m_p, m_q, m_r)_c (eqs 17–21)
-Q_MASS = 16
-Q_I = 17  # 3: Ixx, Iyy, Izz
-Q_GAIN = 20  # 3 rate gains
-Q_GYRO = 23  # 3: Izz − Iyy, Ixx − Izz, Iyy − Ixx
-N_CONTROLLER_CONSTANTS = 26
+K_INV_I = 1  # 3
+K_AERO = 4
+# controller_constants(ctrl) = (2/l, 1/κ, the command (0-based) that motor slot 0, 1, 2, 3 receives)
+Q_TWO_OVER_ARM = 0
+Q_INV_KAPPA = 1
+Q_SOURCE_0 = 2
+Q_SOURCE_1 = 3
+Q_SOURCE_2 = 4
+Q_SOURCE_3 = 5
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def plant_constants(plant):  # pragma: no cover - compiled
-    """The plant's reciprocals and motor force coefficients (a tuple, layout ``K_*``), once per run."""
-    g0 = plant[P_GAIN]
-    g1 = plant[P_GAIN + 1]
-    g2 = plant[P_GAIN + 2]
-    g3 = plant[P_GAIN + 3]
+    """(1/m, 1/Ixx, 1/Iyy, 1/Izz, aero) of a plant vector; ``aero`` = 1 if drag, rotor drag or damping act."""
     aero = (plant[P_BODY_DRAG] != 0.0 or plant[P_ROTOR_DRAG] != 0.0 or plant[P_ROT_DAMP] != 0.0
             or plant[P_ROT_DAMP + 1] != 0.0 or plant[P_ROT_DAMP + 2] != 0.0)
-    return (1.0 / plant[P_MASS], 1.0 / plant[P_IXX], 1.0 / plant[P_IYY], 1.0 / plant[P_IZZ],
-            g0, g1, g2, g3,
-            plant[P_MY] * g0, plant[P_MY + 1] * g1, plant[P_MY + 2] * g2, plant[P_MY + 3] * g3,
-            -plant[P_MX] * g0, -plant[P_MX + 1] * g1, -plant[P_MX + 2] * g2, -plant[P_MX + 3] * g3,
-            plant[P_KYAW] * g0, plant[P_KYAW + 1] * g1, plant[P_KYAW + 2] * g2, plant[P_KYAW + 3] * g3,
-            1.0 if aero else 0.0, plant[P_FMIN], plant[P_FMAX], plant[P_RATE_UP], plant[P_RATE_DN], plant[P_GRAV],
-            plant[P_IZZ] - plant[P_IYY], plant[P_IXX] - plant[P_IZZ], plant[P_IYY] - plant[P_IXX])
+    return (1.0 / plant[P_MASS], 1.0 / plant[P_IXX], 1.0 / plant[P_IYY], 1.0 / plant[P_IZZ], 1.0 if aero else 0.0)
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def controller_constants(ctrl):  # pragma: no cover - compiled
-    """The controller's numbers and its mixer with the motor order folded in (a tuple, layout ``Q_*``)."""
-    two_over_l = 2.0 / ctrl[C_ARM]
-    inv_kappa = 1.0 / ctrl[C_KAPPA]
-    # command i (paper numbering) = ¼ (m·a ± m_r/κ ∓ (2/l) m), m = m_q for commands 1, 3 and m_p for 2, 4
-    rows = ((0.25, 0.0, -0.25 * two_over_l, 0.25 * inv_kappa),
-            (0.25, 0.25 * two_over_l, 0.0, -0.25 * inv_kappa),
-            (0.25, 0.0, 0.25 * two_over_l, 0.25 * inv_kappa),
-            (0.25, -0.25 * two_over_l, 0.0, -0.25 * inv_kappa))
-    mix = np.zeros((4, 4))
+    """(2/l, 1/κ, s0, s1, s2, s3) of a controller vector: s_j is the command (0-based) motor slot j receives."""
+    source = np.zeros(4, dtype=np.int64)
     for i in range(4):
-        slot = int(ctrl[C_ORDER + i])
-        for c in range(4):
-            mix[slot, c] = rows[i][c]
-    ixx = ctrl[C_IXX]
-    iyy = ctrl[C_IYY]
-    izz = ctrl[C_IZZ]
-    return (mix[0, 0], mix[0, 1], mix[0, 2], mix[0, 3], mix[1, 0], mix[1, 1], mix[1, 2], mix[1, 3],
-            mix[2, 0], mix[2, 1], mix[2, 2], mix[2, 3], mix[3, 0], mix[3, 1], mix[3, 2], mix[3, 3],
-            ctrl[C_MASS], ixx, iyy, izz, ctrl[C_GAIN], ctrl[C_GAIN + 1], ctrl[C_GAIN + 2],
-            izz - iyy, ixx - izz, iyy - ixx)
+        source[int(ctrl[C_ORDER + i])] = i
+    return (2.0 / ctrl[C_ARM], 1.0 / ctrl[C_KAPPA], source[0], source[1], source[2], source[3])
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def thrust_commands(cmd, p, q, r, cc):  # pragma: no cover - compiled
-    """Eqs 14–21 with the constants ``cc`` of :func:`controller_constants`: f̃ of the four physical slots."""
-    mp = cc[Q_I] * (cc[Q_GAIN] * (cmd[1] - p)) + q * r * cc[Q_GYRO]
-    mq = cc[Q_I + 1] * (cc[Q_GAIN + 1] * (cmd[2] - q)) + r * p * cc[Q_GYRO + 1]
-    mr = cc[Q_I + 2] * (cc[Q_GAIN + 2] * (cmd[3] - r)) + p * q * cc[Q_GYRO + 2]
-    total = cc[Q_MASS] * cmd[0]
-    return ((cc[0] * total + cc[3] * mr) + (cc[1] * mp + cc[2] * mq),
-            (cc[4] * total + cc[7] * mr) + (cc[5] * mp + cc[6] * mq),
-            (cc[8] * total + cc[11] * mr) + (cc[9] * mp + cc[10] * mq),
-            (cc[12] * total + cc[15] * mr) + (cc[13] * mp + cc[14] * mq))
+def _pick(c0, c1, c2, c3, i):  # pragma: no cover - compiled
+    return c0 if i == 0 else (c1 if i == 1 else (c2 if i == 2 else c3))
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def thrust_commands(cmd, p, q, r, ctrl, cc):  # pragma: no cover - compiled
+    """Eqs 14–21 with ``cc`` = :func:`controller_constants`: the desired thrusts f̃ of motor slots 0–3."""
+    ixx = ctrl[C_IXX]
+    iyy = ctrl[C_IYY]
+    izz = ctrl[C_IZZ]
+    ap = ctrl[C_GAIN] * (cmd[1] - p)
+    aq = ctrl[C_GAIN + 1] * (cmd[2] - q)
+    ar = ctrl[C_GAIN + 2] * (cmd[3] - r)
+    mp = ixx * ap + q * r * (izz - iyy)
+    mq = iyy * aq + r * p * (ixx - izz)
+    mr = izz * ar + p * q * (iyy - ixx)
+    total = ctrl[C_MASS] * cmd[0]
+    yaw = mr * cc[Q_INV_KAPPA]
+    two_over_l = cc[Q_TWO_OVER_ARM]
+    c0 = 0.25 * (total + yaw - two_over_l * mq)
+    c1 = 0.25 * (total - yaw + two_over_l * mp)
+    c2 = 0.25 * (total + yaw + two_over_l * mq)
+    c3 = 0.25 * (total - yaw - two_over_l * mp)
+    return (_pick(c0, c1, c2, c3, cc[Q_SOURCE_0]), _pick(c0, c1, c2, c3, cc[Q_SOURCE_1]),
+            _pick(c0, c1, c2, c3, cc[Q_SOURCE_2]), _pick(c0, c1, c2, c3, cc[Q_SOURCE_3]))
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
@@ -265,25 +240,20 @@ def controller_thrusts(cmd, p, q, r, ctrl, out):  # pragma: no cover - compiled
 
     ``cmd`` = (collective [m/s²], p̂, q̂, r̂ [rad/s]); ``p, q, r`` = gyro-measured
     body rates [rad/s]; ``out`` receives the desired motor thrusts f̃ [N] in
-    physical motor slots. (The kernels call :func:`thrust_commands` with the mixer
-    built once per run.)
+    physical motor slots. (The kernels call :func:`thrust_commands`, with the
+    controller's constants computed once per run.)
     """
-    f = thrust_commands(cmd, p, q, r, controller_constants(ctrl))
-    out[0] = f[0]
-    out[1] = f[1]
-    out[2] = f[2]
-    out[3] = f[3]
+    f = thrust_commands(cmd, p, q, r, ctrl, controller_constants(ctrl))
+    for j in range(4):
+        out[j] = f[j]
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def derivative(t, x, ftilde, plant, k, aero, dx):  # pragma: no cover - compiled
-    """Eqs 8–12 plus the plant's extra effects with constants ``k`` (:func:`plant_constants`).
+def derivative(t, x, ftilde, plant, k, dx):  # pragma: no cover - compiled
+    """Eqs 8–12 plus the plant's extra effects, with ``k`` = :func:`plant_constants`; dx/dt into ``dx``.
 
-    ``ftilde`` holds the four desired motor thrusts (any indexable: an array, or the tuple
+    ``ftilde``: the desired thrusts of motor slots 0–3 (an array, or the tuple
     :func:`thrust_commands` returns).
-
-    ``aero`` is ``k[K_AERO] != 0``, passed on its own so that a kernel can compile the
-    paper's model (False) and the one with drag, wind and damping (True) as two loops.
     """
     qw = x[_IQ]
     qx = x[_IQ + 1]
@@ -292,32 +262,30 @@ def derivative(t, x, ftilde, plant, k, aero, dx):  # pragma: no cover - compiled
     p = x[_IW]
     q = x[_IW + 1]
     r = x[_IW + 2]
-    fmin = k[K_FMIN]
-    fmax = k[K_FMAX]
-    up = k[K_RATE_UP]
-    down = k[K_RATE_DN]
-    d0 = min(max(ftilde[0], fmin), fmax) - x[_IF]
-    d1 = min(max(ftilde[1], fmin), fmax) - x[_IF + 1]
-    d2 = min(max(ftilde[2], fmin), fmax) - x[_IF + 2]
-    d3 = min(max(ftilde[3], fmin), fmax) - x[_IF + 3]
-    dx[_IF] = (up if d0 > 0.0 else down) * d0
-    dx[_IF + 1] = (up if d1 > 0.0 else down) * d1
-    dx[_IF + 2] = (up if d2 > 0.0 else down) * d2
-    dx[_IF + 3] = (up if d3 > 0.0 else down) * d3
-    f0 = x[_IF]
-    f1 = x[_IF + 1]
-    f2 = x[_IF + 2]
-    f3 = x[_IF + 3]
-    total = (k[K_GAIN] * f0 + k[K_GAIN + 1] * f1) + (k[K_GAIN + 2] * f2 + k[K_GAIN + 3] * f3)
-    tx = (k[K_ROLL] * f0 + k[K_ROLL + 1] * f1) + (k[K_ROLL + 2] * f2 + k[K_ROLL + 3] * f3)
-    ty = (k[K_PITCH] * f0 + k[K_PITCH + 1] * f1) + (k[K_PITCH + 2] * f2 + k[K_PITCH + 3] * f3)
-    tz = (k[K_YAW] * f0 + k[K_YAW + 1] * f1) + (k[K_YAW + 2] * f2 + k[K_YAW + 3] * f3)
+    r13 = 2.0 * (qx * qz + qw * qy)
+    r23 = 2.0 * (qy * qz - qw * qx)
+    r33 = 1.0 - 2.0 * (qx * qx + qy * qy)
+    fmin = plant[P_FMIN]
+    fmax = plant[P_FMAX]
+    up = plant[P_RATE_UP]
+    down = plant[P_RATE_DN]
+    for j in range(4):
+        diff = min(max(ftilde[j], fmin), fmax) - x[_IF + j]
+        dx[_IF + j] = (up if diff > 0.0 else down) * diff
+    f0 = plant[P_GAIN] * x[_IF]
+    f1 = plant[P_GAIN + 1] * x[_IF + 1]
+    f2 = plant[P_GAIN + 2] * x[_IF + 2]
+    f3 = plant[P_GAIN + 3] * x[_IF + 3]
+    total = (f0 + f1) + (f2 + f3)
+    tx = (plant[P_MY] * f0 + plant[P_MY + 1] * f1) + (plant[P_MY + 2] * f2 + plant[P_MY + 3] * f3)
+    ty = -((plant[P_MX] * f0 + plant[P_MX + 1] * f1) + (plant[P_MX + 2] * f2 + plant[P_MX + 3] * f3))
+    tz = (plant[P_KYAW] * f0 + plant[P_KYAW + 1] * f1) + (plant[P_KYAW + 2] * f2 + plant[P_KYAW + 3] * f3)
     inv_m = k[K_INV_MASS]
     a_t = total * inv_m
-    ax = 2.0 * (qx * qz + qw * qy) * a_t
-    ay = 2.0 * (qy * qz - qw * qx) * a_t
-    az = (1.0 - 2.0 * (qx * qx + qy * qy)) * a_t - k[K_GRAV]
-    if aero:
+    ax = r13 * a_t
+    ay = r23 * a_t
+    az = r33 * a_t - plant[P_GRAV]
+    if k[K_AERO] != 0.0:
         wx = plant[P_WIND]
         wy = plant[P_WIND + 1]
         wz = plant[P_WIND + 2]
@@ -351,6 +319,9 @@ def derivative(t, x, ftilde, plant, k, aero, dx):  # pragma: no cover - compiled
         tx -= plant[P_ROT_DAMP] * p
         ty -= plant[P_ROT_DAMP + 1] * q
         tz -= plant[P_ROT_DAMP + 2] * r
+    ixx = plant[P_IXX]
+    iyy = plant[P_IYY]
+    izz = plant[P_IZZ]
     dx[0] = x[3]
     dx[1] = x[4]
     dx[2] = x[5]
@@ -361,9 +332,9 @@ def derivative(t, x, ftilde, plant, k, aero, dx):  # pragma: no cover - compiled
     dx[_IQ + 1] = 0.5 * (qw * p + qy * r - qz * q)
     dx[_IQ + 2] = 0.5 * (qw * q + qz * p - qx * r)
     dx[_IQ + 3] = 0.5 * (qw * r + qx * q - qy * p)
-    dx[_IW] = (tx - q * r * k[K_GYRO]) * k[K_INV_I]
-    dx[_IW + 1] = (ty - r * p * k[K_GYRO + 1]) * k[K_INV_I + 1]
-    dx[_IW + 2] = (tz - p * q * k[K_GYRO + 2]) * k[K_INV_I + 2]
+    dx[_IW] = (tx - q * r * (izz - iyy)) * k[K_INV_I]
+    dx[_IW + 1] = (ty - r * p * (ixx - izz)) * k[K_INV_I + 1]
+    dx[_IW + 2] = (tz - p * q * (iyy - ixx)) * k[K_INV_I + 2]
     dx[_II] = p
     dx[_II + 1] = q
     dx[_II + 2] = r
@@ -373,10 +344,9 @@ def derivative(t, x, ftilde, plant, k, aero, dx):  # pragma: no cover - compiled
 def plant_derivative(t, x, ftilde, plant, dx):  # pragma: no cover - compiled
     """Eqs 8–12 plus the plant's extra effects; writes dx/dt into ``dx``.
 
-    (The kernels call :func:`derivative` with the plant's constants computed once per run.)
+    (The kernels call :func:`derivative`, with the plant's constants computed once per run.)
     """
-    k = plant_constants(plant)
-    derivative(t, x, ftilde, plant, k, k[K_AERO] != 0.0, dx)
+    derivative(t, x, ftilde, plant, plant_constants(plant), dx)
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")

@@ -28,7 +28,6 @@ import numpy as np
 
 from aerobat.errors import ConfigError
 from aerobat.quadrotor.dynamics import (
-    K_AERO,
     N_PLANT,
     N_STATE,
     POS,
@@ -58,111 +57,111 @@ DEFAULT_TICK_S = 1.0 / 800.0
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _segment(coeffs, k):  # pragma: no cover - compiled
-    """Segment ``k``'s 12 coefficients as a tuple (held in registers through the segment's steps)."""
-    return (coeffs[k, 0, 0], coeffs[k, 0, 1], coeffs[k, 0, 2], coeffs[k, 1, 0], coeffs[k, 1, 1], coeffs[k, 1, 2],
-            coeffs[k, 2, 0], coeffs[k, 2, 1], coeffs[k, 2, 2], coeffs[k, 3, 0], coeffs[k, 3, 1], coeffs[k, 3, 2])
+def _command(poly, tau, cmd):  # pragma: no cover - compiled
+    """The commands at local time ``tau`` of a segment with coefficients ``poly`` (4 × 3) into ``cmd``."""
+    for ch in range(4):
+        cmd[ch] = poly[ch, 0] + tau * (poly[ch, 1] + tau * poly[ch, 2])
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _command_at(c, tau):  # pragma: no cover - compiled
-    """The four commands at local time ``tau`` of a segment (:func:`_segment`)."""
-    return (c[0] + tau * (c[1] + tau * c[2]), c[3] + tau * (c[4] + tau * c[5]),
-            c[6] + tau * (c[7] + tau * c[8]), c[9] + tau * (c[10] + tau * c[11]))
+@nb.njit(cache=True, fastmath=True, error_model="numpy", nogil=True)
+def _run_continuous(x0, bp, coeffs, nseg, plant, ctrl, max_step, out, rows, rec_t, rec_x,
+                    rec_u):  # pragma: no cover - compiled
+    """Continuous-time playback of the batch rows ``rows``, one after the other.
 
-
-@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _closed_loop_derivative(t, x, cmd, plant, k, mix, aero, dx):  # pragma: no cover - compiled
-    derivative(t, x, thrust_commands(cmd, x[10], x[11], x[12], mix), plant, k, aero, dx)
-
-
-@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _playback(x, bp, coeffs, nseg, plant, ctrl, max_step, rec_t, rec_x, rec_u):  # pragma: no cover
-    """Continuous-time playback; ``x`` is advanced in place. Records every step if rec_t is non-empty."""
-    k = plant_constants(plant)
-    mix = controller_constants(ctrl)
-    # the same loop compiled twice: without and with the aerodynamic terms
-    if k[K_AERO] != 0.0:
-        return _continuous(x, bp, coeffs, nseg, plant, k, mix, True, max_step, rec_t, rec_x, rec_u)
-    return _continuous(x, bp, coeffs, nseg, plant, k, mix, False, max_step, rec_t, rec_x, rec_u)
-
-
-@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _continuous(x, bp, coeffs, nseg, plant, k, mix, aero, max_step, rec_t, rec_x, rec_u):  # pragma: no cover
+    Row b: start state ``x0[b]``, final state into ``out[b]``. With non-empty ``rec_*`` (one
+    program) every step is recorded; returns the number of records. Every continuous-mode
+    simulation runs through this one compiled function (``simulate``, and each thread's share
+    of a batch), so they agree bit for bit whatever the batch. Everything it calls is inlined
+    (a kernel that calls another compiled kernel ran ~8 % slower once numba loaded it from
+    its cache), one level deep (nested inlining multiplied the compile time).
+    """
     n = N_STATE
-    work = np.empty((6, n))  # the state and the stages side by side
+    work = np.empty((6, n))  # the state and the four stages side by side
     xs = work[0]
     k1 = work[1]
     k2 = work[2]
     k3 = work[3]
     k4 = work[4]
     tmp = work[5]
-    for j in range(n):
-        xs[j] = x[j]
+    cmds = np.empty((3, 4))
+    cmd0 = cmds[0]
+    cmdm = cmds[1]
+    cmd1 = cmds[2]
+    poly = np.empty((4, 3))  # the current segment's coefficients
     record = rec_t.shape[0] > 0
     idx = 0
-    if record:
-        cmd = _command_at(_segment(coeffs, 0), 0.0)
-        rec_t[0] = bp[0]
-        rec_x[0, :] = x
-        for ch in range(4):
-            rec_u[0, ch] = cmd[ch]
-        idx = 1
-    for seg in range(nseg):
-        t0 = bp[seg]
-        length = bp[seg + 1] - t0
-        m = max(1, int(math.ceil(length / max_step - 1e-9)))
-        h = length / m
-        poly = _segment(coeffs, seg)
-        # the program is sampled at each step's start, middle and end; the end is the next start
-        cmd1 = _command_at(poly, 0.0)
-        for i in range(m):
-            tau = i * h
-            t = t0 + tau
-            cmd0 = cmd1
-            cmdm = _command_at(poly, tau + 0.5 * h)
-            cmd1 = _command_at(poly, (i + 1) * h)
-            _closed_loop_derivative(t, xs, cmd0, plant, k, mix, aero, k1)
-            for j in range(n):
-                tmp[j] = xs[j] + 0.5 * h * k1[j]
-            _closed_loop_derivative(t + 0.5 * h, tmp, cmdm, plant, k, mix, aero, k2)
-            for j in range(n):
-                tmp[j] = xs[j] + 0.5 * h * k2[j]
-            _closed_loop_derivative(t + 0.5 * h, tmp, cmdm, plant, k, mix, aero, k3)
-            for j in range(n):
-                tmp[j] = xs[j] + h * k3[j]
-            _closed_loop_derivative(t + h, tmp, cmd1, plant, k, mix, aero, k4)
-            for j in range(n):
-                xs[j] += h / 6.0 * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
-            normalize_quaternion(xs)
-            if record:
-                rec_t[idx] = t0 + (i + 1) * h if i + 1 < m else bp[seg + 1]
-                rec_x[idx, :] = xs
+    for b in rows:
+        pl = plant[b]
+        ct = ctrl[b]
+        breaks = bp[b]
+        cf = coeffs[b]
+        pc = plant_constants(pl)
+        cc = controller_constants(ct)
+        for j in range(n):
+            xs[j] = x0[b, j]
+        if record:
+            for ch in range(4):
+                for power in range(3):
+                    poly[ch, power] = cf[0, ch, power]
+            _command(poly, 0.0, cmd0)
+            rec_t[0] = breaks[0]
+            rec_x[0, :] = xs
+            rec_u[0, :] = cmd0
+            idx = 1
+        for seg in range(nseg[b]):
+            t0 = breaks[seg]
+            length = breaks[seg + 1] - t0
+            m = max(1, int(math.ceil(length / max_step - 1e-9)))
+            h = length / m
+            for ch in range(4):
+                for power in range(3):
+                    poly[ch, power] = cf[seg, ch, power]
+            # the program is sampled at each step's start, middle and end; the end is the next start
+            _command(poly, 0.0, cmd1)
+            for i in range(m):
+                tau = i * h
+                t = t0 + tau
                 for ch in range(4):
-                    rec_u[idx, ch] = cmd1[ch]
-                idx += 1
-    for j in range(n):
-        x[j] = xs[j]
+                    cmd0[ch] = cmd1[ch]
+                _command(poly, tau + 0.5 * h, cmdm)
+                _command(poly, (i + 1) * h, cmd1)
+                derivative(t, xs, thrust_commands(cmd0, xs[10], xs[11], xs[12], ct, cc), pl, pc, k1)
+                for j in range(n):
+                    tmp[j] = xs[j] + 0.5 * h * k1[j]
+                derivative(t + 0.5 * h, tmp, thrust_commands(cmdm, tmp[10], tmp[11], tmp[12], ct, cc), pl, pc, k2)
+                for j in range(n):
+                    tmp[j] = xs[j] + 0.5 * h * k2[j]
+                derivative(t + 0.5 * h, tmp, thrust_commands(cmdm, tmp[10], tmp[11], tmp[12], ct, cc), pl, pc, k3)
+                for j in range(n):
+                    tmp[j] = xs[j] + h * k3[j]
+                derivative(t + h, tmp, thrust_commands(cmd1, tmp[10], tmp[11], tmp[12], ct, cc), pl, pc, k4)
+                for j in range(n):
+                    xs[j] += h / 6.0 * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
+                normalize_quaternion(xs)
+                if record:
+                    rec_t[idx] = t0 + (i + 1) * h if i + 1 < m else breaks[seg + 1]
+                    rec_x[idx, :] = xs
+                    rec_u[idx, :] = cmd1
+                    idx += 1
+        for j in range(n):
+            out[b, j] = xs[j]
     return idx
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def rk4_plant_step(t, x, ft, plant, k, aero, h, k1, k2, k3, k4, tmp):  # pragma: no cover - compiled
-    """One RK4 step of the plant with motor commands ``ft`` held constant.
-
-    ``k`` and ``aero`` as for :func:`~aerobat.quadrotor.dynamics.derivative`.
-    """
+def rk4_plant_step(t, x, ft, plant, pc, h, k1, k2, k3, k4, tmp):  # pragma: no cover - compiled
+    """One RK4 step of the plant with motor commands ``ft`` held constant (``pc``: plant_constants)."""
     n = N_STATE
-    derivative(t, x, ft, plant, k, aero, k1)
+    derivative(t, x, ft, plant, pc, k1)
     for j in range(n):
         tmp[j] = x[j] + 0.5 * h * k1[j]
-    derivative(t + 0.5 * h, tmp, ft, plant, k, aero, k2)
+    derivative(t + 0.5 * h, tmp, ft, plant, pc, k2)
     for j in range(n):
         tmp[j] = x[j] + 0.5 * h * k2[j]
-    derivative(t + 0.5 * h, tmp, ft, plant, k, aero, k3)
+    derivative(t + 0.5 * h, tmp, ft, plant, pc, k3)
     for j in range(n):
         tmp[j] = x[j] + h * k3[j]
-    derivative(t + h, tmp, ft, plant, k, aero, k4)
+    derivative(t + h, tmp, ft, plant, pc, k4)
     for j in range(n):
         x[j] += h / 6.0 * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
     normalize_quaternion(x)
@@ -177,10 +176,9 @@ def _run_sampled(x, bp, coeffs, nseg, plant, ctrl, tick, substeps, rec_t, rec_x,
     k3 = np.empty(n)
     k4 = np.empty(n)
     tmp = np.empty(n)
-    k = plant_constants(plant)
-    aero = k[K_AERO] != 0.0
-    mix = controller_constants(ctrl)
-    cmd = (0.0, 0.0, 0.0, 0.0)
+    cmd = np.empty(4)
+    pc = plant_constants(plant)
+    cc = controller_constants(ctrl)
     end = bp[nseg]
     record = rec_t.shape[0] > 0
     idx = 0
@@ -190,25 +188,23 @@ def _run_sampled(x, bp, coeffs, nseg, plant, ctrl, tick, substeps, rec_t, rec_x,
     while t < end - 1e-12:
         while seg < nseg - 1 and bp[seg + 1] <= t + 1e-12:
             seg += 1
-        cmd = _command_at(_segment(coeffs, seg), t - bp[seg])
+        _command(coeffs[seg], t - bp[seg], cmd)
         if record:
             rec_t[idx] = t
             rec_x[idx, :] = x
-            for ch in range(4):
-                rec_u[idx, ch] = cmd[ch]
+            rec_u[idx, :] = cmd
             idx += 1
-        ft = thrust_commands(cmd, x[10], x[11], x[12], mix)  # held until the next tick
+        ft = thrust_commands(cmd, x[10], x[11], x[12], ctrl, cc)  # held until the next tick
         t_next = min((tick_index + 1) * tick, end)
         h = (t_next - t) / substeps
         for s in range(substeps):
-            rk4_plant_step(t + s * h, x, ft, plant, k, aero, h, k1, k2, k3, k4, tmp)
+            rk4_plant_step(t + s * h, x, ft, plant, pc, h, k1, k2, k3, k4, tmp)
         tick_index += 1
         t = t_next
     if record:
         rec_t[idx] = end
         rec_x[idx, :] = x
-        for ch in range(4):
-            rec_u[idx, ch] = cmd[ch]
+        rec_u[idx, :] = cmd
         idx += 1
     return idx
 
@@ -216,26 +212,6 @@ def _run_sampled(x, bp, coeffs, nseg, plant, ctrl, tick, substeps, rec_t, rec_x,
 _NO_T = np.empty(0)
 _NO_X = np.empty((0, N_STATE))
 _NO_U = np.empty((0, 4))
-
-
-@nb.njit(cache=True, fastmath=True, error_model="numpy", nogil=True)
-def _run_continuous(x0, bp, coeffs, nseg, plant, ctrl, max_step, out, start, stop,
-                    rec_t, rec_x, rec_u):  # pragma: no cover - compiled
-    """Continuous playback of programs ``start … stop − 1`` of a batch, one after the other.
-
-    Row b: start state ``x0[b]``, final state into ``out[b]``. With non-empty ``rec_*`` (one
-    program) every step is recorded; returns the number of records. Every continuous-mode
-    simulation runs through this one compiled function (``simulate``, and each thread's share
-    of a batch), so they agree bit for bit whatever the batch; the playback is inlined here
-    rather than called, since a kernel calling another compiled kernel ran ~8 % slower once
-    numba had loaded it from its cache.
-    """
-    count = 0
-    for b in range(start, stop):
-        for j in range(x0.shape[1]):
-            out[b, j] = x0[b, j]
-        count = _playback(out[b], bp[b], coeffs[b], nseg[b], plant[b], ctrl[b], max_step, rec_t, rec_x, rec_u)
-    return count
 
 
 class _Workers:
@@ -269,13 +245,12 @@ def _run_batch(x0: np.ndarray, bp: np.ndarray, coeffs: np.ndarray, nseg: np.ndar
     count = x0.shape[0]
     threads = min(count, nb.get_num_threads()) if count > 1 else 1
     if threads == 1:  # nothing to hand over
-        _run_continuous(x0, bp, coeffs, nseg, plants, ctrl, max_step_s, out, 0, count, _NO_T, _NO_X, _NO_U)
+        _run_continuous(x0, bp, coeffs, nseg, plants, ctrl, max_step_s, out, np.arange(count), _NO_T, _NO_X, _NO_U)
         return
     chunks = min(count, 4 * threads)  # a few per thread even out programs of different lengths
-    bounds = [c * count // chunks for c in range(chunks + 1)]
     pool = _Workers.get(threads)
-    jobs = [pool.submit(_run_continuous, x0, bp, coeffs, nseg, plants, ctrl, max_step_s, out, bounds[c],
-                        bounds[c + 1], _NO_T, _NO_X, _NO_U) for c in range(chunks)]
+    jobs = [pool.submit(_run_continuous, x0, bp, coeffs, nseg, plants, ctrl, max_step_s, out, rows, _NO_T, _NO_X,
+                        _NO_U) for rows in np.array_split(np.arange(count), chunks)]
     for job in jobs:
         job.result()
 
@@ -396,7 +371,7 @@ def simulate(
     if mode == "continuous":
         final = np.empty((1, N_STATE))
         count = _run_continuous(x[None, :], bp[None, :], coeffs[None], np.array([nseg]), plant_v[None, :],
-                                ctrl_v[None, :], max_step_s, final, 0, 1, rec_t, rec_x, rec_u)
+                                ctrl_v[None, :], max_step_s, final, np.zeros(1, dtype=np.int64), rec_t, rec_x, rec_u)
         x = final[0]
     else:
         count = _run_sampled(x, bp, coeffs, nseg, plant_v, ctrl_v, tick_s, substeps, rec_t, rec_x, rec_u)

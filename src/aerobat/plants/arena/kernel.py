@@ -21,7 +21,7 @@ import math
 import numba as nb
 import numpy as np
 
-from aerobat.quadrotor.dynamics import K_AERO, controller_constants, plant_constants, thrust_commands
+from aerobat.quadrotor.dynamics import controller_constants, plant_constants, thrust_commands
 from aerobat.quadrotor.simulate import rk4_plant_step
 
 __all__ = ["MOCAP_COLUMNS", "advance", "estimate_pose", "mocap_sample", "pd_command", "supervise"]
@@ -44,9 +44,8 @@ def advance(x, gyro_prev, tick0, n_ticks, tick_s, plant, ctrl, sensor, latency, 
     k4 = np.empty(n)
     tmp = np.empty(n)
     cmd = np.empty(4)
-    k = plant_constants(plant)
-    aero = k[K_AERO] != 0.0
-    mix = controller_constants(ctrl)
+    pc = plant_constants(plant)
+    cc = controller_constants(ctrl)
     rows = 0
     seg = 0
     for i in range(n_ticks):
@@ -72,13 +71,13 @@ def advance(x, gyro_prev, tick0, n_ticks, tick_s, plant, ctrl, sensor, latency, 
         gq = (1.0 + sensor[1]) * x[11] + sensor[4]
         gr = (1.0 + sensor[2]) * x[12] + sensor[5]
         if latency > 0:
-            ft = thrust_commands(cmd, gyro_prev[0], gyro_prev[1], gyro_prev[2], mix)
+            ft = thrust_commands(cmd, gyro_prev[0], gyro_prev[1], gyro_prev[2], ctrl, cc)
         else:
-            ft = thrust_commands(cmd, gp, gq, gr, mix)
+            ft = thrust_commands(cmd, gp, gq, gr, ctrl, cc)
         gyro_prev[0] = gp
         gyro_prev[1] = gq
         gyro_prev[2] = gr
-        rk4_plant_step(t, x, ft, plant, k, aero, tick_s, k1, k2, k3, k4, tmp)
+        rk4_plant_step(t, x, ft, plant, pc, tick_s, k1, k2, k3, k4, tmp)
         for j in range(n):
             if not math.isfinite(x[j]):
                 return rows, 1

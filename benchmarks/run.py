@@ -46,7 +46,14 @@ from aerobat.plants import Arena  # noqa: E402
 from aerobat.quadrotor.dynamics import N_STATE, controller_vector, hover_state, plant_vector  # noqa: E402
 from aerobat.quadrotor.maneuvers import MultiFlip  # noqa: E402
 from aerobat.quadrotor.program import RampDown  # noqa: E402
-from aerobat.quadrotor.simulate import NominalModel, _run_batch, _run_continuous, _steps  # noqa: E402
+from aerobat.quadrotor.simulate import (  # noqa: E402
+    NominalModel,
+    _run_batch,
+    _run_continuous,
+    _steps,
+    batch_threads,
+    set_batch_threads,
+)
 
 CONFIG = hummingbird()
 OTHER_MARKER = "<!-- other benchmarks: kept by make bench -->"
@@ -139,7 +146,7 @@ def bench_batch(n: int = 1000, rounds: int = 9) -> dict:
     x0, bp, coeffs, nseg, plants, ctrl, steps = _batch_inputs(n)
     out = np.empty_like(x0)
     c = constants(CONFIG.vehicle, CONFIG.controller)
-    threads = numba.config.NUMBA_NUM_THREADS
+    threads = batch_threads()
 
     def batch():
         _run_batch(x0, bp, coeffs, nseg, plants, ctrl, MAX_STEP_S, out)
@@ -148,18 +155,18 @@ def bench_batch(n: int = 1000, rounds: int = 9) -> dict:
         for b in range(n):
             reference_run(x0[b].copy(), FIXED_CMD, c, MAX_STEP_S, steps // n)
 
-    numba.set_num_threads(1)
+    set_batch_threads(1)
     try:
         t1 = interleaved({"batch": batch, "reference": reference}, rounds, clock=time.thread_time)
     finally:
-        numba.set_num_threads(threads)
+        set_batch_threads(None)
 
     def one_thread():
-        numba.set_num_threads(1)
+        set_batch_threads(1)
         try:
             batch()
         finally:
-            numba.set_num_threads(threads)
+            set_batch_threads(None)
 
     # wall clock (the worker threads run on other cores), and the process's CPU time alongside: on a
     # loaded machine the wall clock also counts time the scheduler gave to other jobs, the CPU time does not
@@ -314,8 +321,7 @@ def machine() -> str:
     except OSError:
         pass
     return (f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, numba {numba.__version__}, "
-            f"numpy {np.__version__}, {platform.system()} {platform.release()}, threading layer "
-            f"{numba.config.THREADING_LAYER}")
+            f"numpy {np.__version__}, {platform.system()} {platform.release()}")
 
 
 # ------------------------------------------------------------------ report

@@ -33,7 +33,9 @@ from aerobat.quadrotor.simulate import (
     DEFAULT_MAX_STEP_S,
     DEFAULT_TICK_S,
     Trajectory,
+    batch_threads,
     final_state_summary,
+    set_batch_threads,
     simulate,
     simulate_batch,
 )
@@ -333,6 +335,25 @@ def test_batch_equals_separate_runs_bit_for_bit(single_flip):
     assert batch.shape == (8, N_STATE)
     assert batch.tobytes() == separate.tobytes()
     assert np.unique(batch[:, POS], axis=0).shape[0] == 8  # the programs really differ
+
+
+@pytest.mark.parametrize("threads", [1, 3])
+def test_batch_threads_change_nothing_but_the_threads(single_flip, threads):
+    programs = _varied_programs(single_flip)
+    default = simulate_batch(programs, CFG)
+    set_batch_threads(threads)
+    try:
+        assert batch_threads() == threads
+        assert simulate_batch(programs, CFG).tobytes() == default.tobytes()
+    finally:
+        set_batch_threads(None)
+    assert batch_threads() >= 1
+
+
+@pytest.mark.parametrize("threads", [0, -1, 1.5, True, "2"])
+def test_bad_batch_threads(threads):
+    with pytest.raises(ValueError, match="threads"):
+        set_batch_threads(threads)
 
 
 def test_batch_with_vehicles_states_and_plants(single_flip):

@@ -46,7 +46,8 @@ from aerobat.quadrotor.dynamics import (
 from aerobat.quadrotor.program import CompiledProgram, Program
 from aerobat.quadrotor.vehicle import VehicleConfig
 
-__all__ = ["NominalModel", "Trajectory", "final_state_summary", "simulate", "simulate_batch"]
+__all__ = ["NominalModel", "Trajectory", "batch_threads", "final_state_summary", "set_batch_threads", "simulate",
+           "simulate_batch"]
 
 Mode = Literal["continuous", "sampled"]
 DEFAULT_MAX_STEP_S = 5e-4
@@ -220,13 +221,13 @@ class _Workers:
     The kernel releases the GIL, so plain threads run it in parallel, and each runs the very
     code a single simulation runs (same results bit for bit, same speed: a numba ``prange``
     around the kernel ran ~10 % slower per simulation, and its OpenMP workers spun between the
-    design's short batches, taking the cores the Python work in between needed). As many
-    threads as ``numba.get_num_threads()`` says (``NUMBA_NUM_THREADS``, ``numba.set_num_threads``).
+    design's short batches, taking the cores the Python work in between needed).
     """
 
     lock = threading.Lock()
     pool: ThreadPoolExecutor | None = None
     size = 0
+    threads: int | None = None  # set_batch_threads
 
     @classmethod
     def get(cls, threads: int) -> ThreadPoolExecutor:
@@ -239,11 +240,23 @@ class _Workers:
             return cls.pool
 
 
+def set_batch_threads(threads: int | None) -> None:
+    """How many threads :func:`simulate_batch` and :class:`NominalModel` use; None: :func:`batch_threads`' default."""
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+        raise ConfigError(f"threads = {threads!r}: allowed an integer >= 1, or None")
+    _Workers.threads = threads
+
+
+def batch_threads() -> int:
+    """Threads a batch runs on: :func:`set_batch_threads`, else numba's ``NUMBA_NUM_THREADS`` (all cores)."""
+    return _Workers.threads if _Workers.threads is not None else int(nb.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
+
+
 def _run_batch(x0: np.ndarray, bp: np.ndarray, coeffs: np.ndarray, nseg: np.ndarray, plants: np.ndarray,
                ctrl: np.ndarray, max_step_s: float, out: np.ndarray) -> None:
     """Final states of a packed batch into ``out``: one program on this thread, several on all threads."""
     count = x0.shape[0]
-    threads = min(count, nb.get_num_threads()) if count > 1 else 1
+    threads = min(count, batch_threads()) if count > 1 else 1
     if threads == 1:  # nothing to hand over
         _run_continuous(x0, bp, coeffs, nseg, plants, ctrl, max_step_s, out, np.arange(count), _NO_T, _NO_X, _NO_U)
         return

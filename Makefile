@@ -3,6 +3,12 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.stamp-installed
+# numba compiles the kernels on first use and caches them (in __pycache__ beside the sources, or
+# under NUMBA_CACHE_DIR); setup compiles them once so the first command starts at once. numba
+# checks only a function's own file, not the kernels it inlines from other files, so any change
+# under these folders clears aerobat's cache and compiles it again.
+COMPILED := $(VENV)/.stamp-compiled
+KERNEL_SOURCES := $(wildcard src/aerobat/quadrotor/*.py src/aerobat/plants/arena/*.py)
 OUT ?= out
 
 .PHONY: demo test test-slow bench lint clean setup betaflight
@@ -23,19 +29,24 @@ $(STAMP): pyproject.toml
 betaflight:
 	@$(PY) -m aerobat.plants.betaflight.build || echo "warning: the Betaflight SITL was not built (see above); --plant betaflight and its tests are unavailable until 'make betaflight' succeeds"
 
-setup: $(STAMP)
+$(COMPILED): $(STAMP) $(KERNEL_SOURCES)
+	find src/aerobat -name '*.nbi' -delete -o -name '*.nbc' -delete
+	$(PY) -m aerobat.experiments.warmup
+	touch $(COMPILED)
 
-demo: $(STAMP)
+setup: $(STAMP) $(COMPILED)
+
+demo: $(COMPILED)
 	$(VENV)/bin/aerobat learn flip --flips 3 --max-rate-deg-s 1800 --dims 3 --plant arena --seed 1 \
 		--trials 30 --out $(OUT)/demo
 
-test: $(STAMP)
+test: $(COMPILED)
 	$(PY) -m pytest -q -m "not slow"; rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; exit 0; fi; exit $$rc
 
-test-slow: $(STAMP)
+test-slow: $(COMPILED)
 	$(PY) -m pytest -q -m slow
 
-bench: $(STAMP)
+bench: $(COMPILED)
 	$(PY) benchmarks/run.py --write docs/performance.md
 
 lint: $(STAMP)

@@ -17,6 +17,13 @@ from aerobat.quadrotor.vehicle import VehicleConfig, VehicleParams
 CONFIG = hummingbird()
 MODEL = NominalModel(CONFIG)
 REFERENCE_P0 = np.array([21.14, 0.249, 0.410, 21.17, 0.259])  # ../shared/design.md
+# p⁰ of the 3D triple flip as designed before the performance work of issue 18 (commit 37db7a2):
+# faster kernels, batched and remembered evaluations must land on the same solution
+PINNED_P0_3D = np.array([21.147414905322183, 0.2489405172107463, 0.40965469406191607, 21.281144061832844,
+                         0.2944397583640787, 8.21327673052149e-05, 0.005610005735469527, -0.0021228918136138486,
+                         -0.009274212359579277])
+PINNED_P0_2D = np.array([21.147459390404254, 0.2489529815133276, 0.40965493125636276, 21.281139372106892,
+                         0.2944406463477793])
 
 
 def flip(**kw):
@@ -74,6 +81,24 @@ def test_3d_triple_flip_jacobian_full_rank_and_ill_conditioned():
     Js = (d.jacobian / np.array([e.scale for e in m.errors])[:, None]) * np.array([p.scale for p in m.parameters])
     weakest = np.linalg.svd(Js)[2][-1]
     assert np.sum(weakest[6:9] ** 2) > 0.9
+
+
+@pytest.mark.parametrize("dims, pinned", [(3, PINNED_P0_3D), (2, PINNED_P0_2D)])
+def test_triple_flip_p0_is_pinned(dims, pinned):
+    d = design(flip(flips=3, dims=dims), MODEL)
+    assert d.converged, d.message
+    np.testing.assert_allclose(d.p_nominal, pinned, rtol=0, atol=1e-9)
+
+
+def test_design_matches_the_public_jacobian_at_p0():
+    """The design's remembered, batched evaluations give exactly what a fresh Jacobian computes."""
+    from aerobat.core.design import finite_difference_jacobian
+
+    m = flip(flips=3, dims=3)
+    d = design(m, MODEL)
+    J, e = finite_difference_jacobian(m, MODEL, d.p_nominal)
+    assert J.tobytes() == d.jacobian.tobytes()
+    assert e.tobytes() == d.residual.tobytes()
 
 
 def test_correction_is_a_right_inverse():

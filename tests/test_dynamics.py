@@ -26,6 +26,7 @@ from aerobat.quadrotor.dynamics import (
     controller_vector,
     euler_zyx,
     hover_state,
+    plant_constants,
     plant_derivative,
     plant_vector,
     rotation_angles,
@@ -341,6 +342,7 @@ def test_compiled_and_python_plant_agree():
 def _hold(x: np.ndarray, ft: np.ndarray, times: list[float], h: float = 1e-4) -> np.ndarray:
     """Integrate the plant with motor commands ``ft`` held; states at ``times`` (multiples of h)."""
     plant = plant_vector(V)
+    k = plant_constants(plant)
     work = [np.empty(N_STATE) for _ in range(5)]
     x = x.copy()
     out = []
@@ -348,7 +350,7 @@ def _hold(x: np.ndarray, ft: np.ndarray, times: list[float], h: float = 1e-4) ->
     for t_target in times:
         n_target = round(t_target / h)
         while step < n_target:
-            rk4_plant_step(step * h, x, ft, plant, h, *work)
+            rk4_plant_step(step * h, x, ft, plant, k, h, *work)
             step += 1
         out.append(x.copy())
     return np.array(out)

@@ -17,20 +17,25 @@ from aerobat.quadrotor.dynamics import (
     RATE_INT,
     THRUST,
     VEL,
+    controller_constants,
     controller_vector,
+    derivative,
     euler_zyx,
     hover_state,
+    plant_constants,
     plant_vector,
     rotation_angles,
     rotation_matrices,
+    thrust_commands,
 )
 from aerobat.quadrotor.program import Program, RampDown, Switch, load_program
 from aerobat.quadrotor.simulate import (
     DEFAULT_MAX_STEP_S,
     DEFAULT_TICK_S,
     Trajectory,
-    _closed_loop_derivative,
+    batch_threads,
     final_state_summary,
+    set_batch_threads,
     simulate,
     simulate_batch,
 )
@@ -178,7 +183,11 @@ def _solve_ivp_reference(program: Program, config: VehicleConfig) -> np.ndarray:
     compiled = program.compile()
     plant = plant_vector(config.vehicle)
     ctrl = controller_vector(config.controller)
-    derivative = _closed_loop_derivative.py_func
+    constants, mix = plant_constants(plant), controller_constants(ctrl)
+
+    def closed_loop(t, y, cmd, dx):
+        derivative(t, y, thrust_commands(cmd, y[10], y[11], y[12], ctrl, mix), plant, constants, dx)
+
     x = hover_state(config.vehicle)
     bp = compiled.breakpoints_s
     for k in range(len(bp) - 1):
@@ -188,7 +197,7 @@ def _solve_ivp_reference(program: Program, config: VehicleConfig) -> np.ndarray:
             tau = t - t0
             cmd = coeff[:, 0] + tau * (coeff[:, 1] + tau * coeff[:, 2])
             dx = np.empty(N_STATE)
-            derivative(t, y, cmd, plant, ctrl, np.empty(4), dx)
+            closed_loop(t, y, cmd, dx)
             return dx
 
         sol = solve_ivp(rhs, (t0, bp[k + 1]), x, method="DOP853", rtol=1e-10, atol=1e-12)
@@ -326,6 +335,25 @@ def test_batch_equals_separate_runs_bit_for_bit(single_flip):
     assert batch.shape == (8, N_STATE)
     assert batch.tobytes() == separate.tobytes()
     assert np.unique(batch[:, POS], axis=0).shape[0] == 8  # the programs really differ
+
+
+@pytest.mark.parametrize("threads", [1, 3])
+def test_batch_threads_change_nothing_but_the_threads(single_flip, threads):
+    programs = _varied_programs(single_flip)
+    default = simulate_batch(programs, CFG)
+    set_batch_threads(threads)
+    try:
+        assert batch_threads() == threads
+        assert simulate_batch(programs, CFG).tobytes() == default.tobytes()
+    finally:
+        set_batch_threads(None)
+    assert batch_threads() >= 1
+
+
+@pytest.mark.parametrize("threads", [0, -1, 1.5, True, "2"])
+def test_bad_batch_threads(threads):
+    with pytest.raises(ValueError, match="threads"):
+        set_batch_threads(threads)
 
 
 def test_batch_with_vehicles_states_and_plants(single_flip):

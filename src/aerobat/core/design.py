@@ -14,11 +14,10 @@ from enum import StrEnum
 from typing import Any, Protocol
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from aerobat.config import as_float_array, check_int, check_number, check_type, short_repr
 from aerobat.core.correction import CorrectionKind, correction_matrix, svd_info
-from aerobat.core.maneuver import Maneuver, bounds_arrays, check_maneuver, error_scales, parameter_scales
+from aerobat.core.maneuver import Maneuver, batch_errors, bounds_arrays, check_maneuver, error_scales, parameter_scales
 from aerobat.errors import ConfigError, DesignFailed
 
 __all__ = ["Design", "DesignFailed", "DesignStatus", "FinalStateModel", "design", "finite_difference_jacobian"]
@@ -168,20 +167,35 @@ class _CountingModel:
 
 
 def _errors(maneuver: Maneuver, model: FinalStateModel, params: np.ndarray) -> np.ndarray:
-    """(B, n_err) errors for a batch of parameter vectors (B, n_par)."""
+    """(B, n_err) errors for a batch of parameter vectors (B, n_par): one model call."""
     programs = [maneuver.program(p) for p in params]
-    finals = model.final_states(programs)
-    return np.stack([maneuver.error(f) for f in finals])
+    return batch_errors(maneuver, model.final_states(programs))
 
 
-def finite_difference_jacobian(
-    maneuver: Maneuver, model: FinalStateModel, p: np.ndarray, *, relative_step: float = 1e-3
-) -> tuple[np.ndarray, np.ndarray]:
-    """Central-difference J at ``p`` with steps ``relative_step`` × each parameter's scale.
+class _Evaluations:
+    """e(p) during one design: every batch is one model call, and no p is simulated twice.
 
-    Steps are shrunk (one-sided if needed) to stay inside the parameter bounds.
-    Returns (J, e(p)). All 2·n + 1 simulations run as one parallel batch.
+    The simulations are deterministic, so a remembered e(p) is exactly what simulating p again
+    would give; Newton's iterates, their Jacobians' centre points and the final J at p⁰ recur.
     """
+
+    def __init__(self, maneuver: Maneuver, model: FinalStateModel) -> None:
+        self.maneuver = maneuver
+        self.model = model
+        self.known: dict[bytes, np.ndarray] = {}
+
+    def __call__(self, params: np.ndarray) -> np.ndarray:
+        params = np.asarray(params, dtype=float)
+        keys = [p.tobytes() for p in params]
+        todo = {k: p for k, p in zip(keys, params, strict=True) if k not in self.known}
+        if todo:
+            errs = _errors(self.maneuver, self.model, np.array(list(todo.values())))
+            self.known.update(zip(todo, errs, strict=True))
+        return np.array([self.known[k] for k in keys])
+
+
+def _difference_batch(maneuver: Maneuver, p: np.ndarray, relative_step: float) -> tuple[np.ndarray, np.ndarray]:
+    """The 2·n + 1 parameter vectors of a central-difference J at ``p``, and the steps taken."""
     p = np.asarray(p, dtype=float)
     n = p.size
     lower, upper = bounds_arrays(maneuver.parameters)
@@ -195,11 +209,33 @@ def finite_difference_jacobian(
         batch[1 + i, i] = plus[i]
         batch[1 + n + i] = p
         batch[1 + n + i, i] = minus[i]
-    errs = _errors(maneuver, model, batch)
+    return batch, plus - minus
+
+
+def _jacobian_from(errs: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    n = steps.size
     # C order, as a design read back from the store has it: products with J (BLAS) round the same
     # way in a running session and in a resumed one
-    J = np.ascontiguousarray((errs[1 : n + 1] - errs[n + 1 :]).T / (plus - minus)[None, :])
+    J = np.ascontiguousarray((errs[1 : n + 1] - errs[n + 1 :]).T / steps[None, :])
     return J, errs[0]
+
+
+def finite_difference_jacobian(
+    maneuver: Maneuver, model: FinalStateModel, p: np.ndarray, *, relative_step: float = 1e-3
+) -> tuple[np.ndarray, np.ndarray]:
+    """Central-difference J at ``p`` with steps ``relative_step`` × each parameter's scale.
+
+    Steps are shrunk (one-sided if needed) to stay inside the parameter bounds.
+    Returns (J, e(p)). All 2·n + 1 simulations run as one parallel batch.
+    """
+    batch, steps = _difference_batch(maneuver, p, relative_step)
+    return _jacobian_from(_errors(maneuver, model, batch), steps)
+
+
+def _jacobian(evaluate: _Evaluations, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`finite_difference_jacobian` through the design's evaluations (one batch, nothing repeated)."""
+    batch, steps = _difference_batch(evaluate.maneuver, p, 1e-3)
+    return _jacobian_from(evaluate(batch), steps)
 
 
 def design(
@@ -239,35 +275,26 @@ def design(
     p_scales = parameter_scales(maneuver.parameters)
     e_scales = error_scales(maneuver.errors)
     x0 = np.clip(guess, lower, upper)
-    cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
-
-    def both(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        key = p.tobytes()
-        if key not in cache:
-            J, e = finite_difference_jacobian(maneuver, model, p)
-            cache.clear()
-            cache[key] = (J, e)
-        return cache[key]
+    evaluate = _Evaluations(maneuver, model)
 
     def residual(p: np.ndarray) -> np.ndarray:
-        key = p.tobytes()
-        if key in cache:
-            return cache[key][1] / e_scales
-        return _errors(maneuver, model, p[None, :])[0] / e_scales
+        return evaluate(p[None, :])[0] / e_scales
 
     def jac(p: np.ndarray) -> np.ndarray:
-        return both(p)[0] / e_scales[:, None]
+        return _jacobian(evaluate, p)[0] / e_scales[:, None]
 
     status = DesignStatus.CONVERGED
     message = ""
     # Newton in two passes: first ignoring nearly unobservable directions (they send a full
     # Newton step wandering along a valley), then a polishing pass with all of them
-    coarse = _newton(maneuver, model, x0, lower, upper, p_scales, e_scales, 1e5 * tolerance, rcond=1e-4,
+    coarse = _newton(evaluate, x0, lower, upper, p_scales, e_scales, 1e5 * tolerance, rcond=1e-4,
                      max_iterations=15)[0]
-    p0, solver_message, ok = _newton(maneuver, model, coarse, lower, upper, p_scales, e_scales, tolerance)
+    p0, solver_message, ok = _newton(evaluate, coarse, lower, upper, p_scales, e_scales, tolerance)
     if not ok:
         # Newton did not get there: a bounded trust-region solve finds the best reachable
         # parameters, so the failure message can say which limits are in the way
+        from scipy.optimize import least_squares  # only here: importing it costs half a second
+
         try:
             result = least_squares(
                 residual, x0, jac=jac, bounds=(lower, upper), x_scale=p_scales, method="trf",
@@ -278,7 +305,7 @@ def design(
         except (ValueError, FloatingPointError) as exc:  # non-finite model output
             p0 = x0
             solver_message = f"solver aborted: {exc}"
-    J, e0 = finite_difference_jacobian(maneuver, model, p0)
+    J, e0 = _jacobian(evaluate, p0)
     residual_norm = float(np.linalg.norm(e0))
     converged = bool(np.all(np.isfinite(e0)) and residual_norm < tolerance)
     pinned = _pinned(maneuver, p0, lower, upper)
@@ -339,8 +366,7 @@ def design(
 
 
 def _newton(
-    maneuver: Maneuver,
-    model: FinalStateModel,
+    evaluate: _Evaluations,
     x0: np.ndarray,
     lower: np.ndarray,
     upper: np.ndarray,
@@ -350,15 +376,19 @@ def _newton(
     max_iterations: int = 25,
     max_scaled_step: float = 5.0,
     rcond: float = 1e-8,
+    line_batch: int = 2,
 ) -> tuple[np.ndarray, str, bool]:
     """Bounded Newton iteration in scaled coordinates with backtracking.
 
     A fresh finite-difference Jacobian whenever progress is slow, chord steps (reusing
-    it) while the residual falls fast. Returns (best p, message, converged).
+    it) while the residual falls fast. The backtracking line search tries its step lengths
+    1, ½, ¼, … ``line_batch`` at a time in one model call (they run in parallel) and takes
+    the first that lowers the residual, as a one-at-a-time search would. Returns (best p,
+    message, converged).
     """
     x = x0.copy()
     try:
-        J, e = finite_difference_jacobian(maneuver, model, x)
+        J, e = _jacobian(evaluate, x)
     except ValueError as exc:
         return x, f"Jacobian not computable at the initial guess: {exc}", False
     if not np.all(np.isfinite(e)):
@@ -379,27 +409,44 @@ def _newton(
         if longest > max_scaled_step:  # stay where the linear model means something
             scaled_step *= max_scaled_step / longest
         step = -p_scales * scaled_step
-        t = 1.0
-        while True:
-            candidate = np.clip(x + t * step, lower, upper)
-            try:
-                e_new = _errors(maneuver, model, candidate[None, :])[0]
-            except ValueError:  # the step left the maneuver's valid set (e.g. absurd commands)
-                e_new = np.full_like(e, np.nan)
-            if np.all(np.isfinite(e_new)) and np.linalg.norm(e_new / e_scales) < np.linalg.norm(e / e_scales):
-                break
-            t *= 0.5
-            if t < 1.0 / 64:
-                return x, f"no descent after {iteration} Newton iterations (residual {norm:.3g})", norm < tolerance
+        accepted = _line_search(evaluate, x, step, e, lower, upper, e_scales, line_batch)
+        if accepted is None:
+            return x, f"no descent after {iteration} Newton iterations (residual {norm:.3g})", norm < tolerance
+        t, candidate, e_new = accepted
         slow = np.linalg.norm(e_new) > 0.1 * norm
         x, e = candidate, e_new
         if slow or t < 1.0:  # otherwise a chord step: keep the Jacobian
             try:
-                J, e = finite_difference_jacobian(maneuver, model, x)
+                J, e = _jacobian(evaluate, x)
             except ValueError as exc:
                 return x, f"Jacobian not computable near the iterate: {exc}", False
     norm = float(np.linalg.norm(e))
     return x, f"Newton stopped after {max_iterations} iterations (residual {norm:.3g})", norm < tolerance
+
+
+def _line_search(evaluate: _Evaluations, x: np.ndarray, step: np.ndarray, e: np.ndarray, lower: np.ndarray,
+                 upper: np.ndarray, e_scales: np.ndarray, batch: int) -> tuple[float, np.ndarray, np.ndarray] | None:
+    """(t, x + t·step clipped, its errors) for the longest t in 1, ½, … ¼⁶ that lowers the scaled residual."""
+    lengths = [0.5**k for k in range(7)]  # down to 1/64, as the one-at-a-time search went
+    target = np.linalg.norm(e / e_scales)
+    for first in range(0, len(lengths), batch):
+        ts = lengths[first : first + batch]
+        candidates = np.array([np.clip(x + t * step, lower, upper) for t in ts])
+        try:
+            errs = evaluate(candidates)
+        except ValueError:  # a step left the maneuver's valid set (e.g. absurd commands): try them one by one
+            errs = np.array([_or_nan(evaluate, c, e) for c in candidates])
+        for t, candidate, e_new in zip(ts, candidates, errs, strict=True):
+            if np.all(np.isfinite(e_new)) and np.linalg.norm(e_new / e_scales) < target:
+                return t, candidate, e_new
+    return None
+
+
+def _or_nan(evaluate: _Evaluations, p: np.ndarray, like: np.ndarray) -> np.ndarray:
+    try:
+        return evaluate(p[None, :])[0]
+    except ValueError:
+        return np.full_like(like, np.nan)
 
 
 def _pinned(maneuver: Maneuver, p: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> list[tuple[bool, str]]:

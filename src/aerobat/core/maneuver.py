@@ -22,6 +22,7 @@ __all__ = [
     "ErrorSpec",
     "Maneuver",
     "ParameterSpec",
+    "batch_errors",
     "bounds_arrays",
     "check_maneuver",
     "check_parameters",
@@ -96,7 +97,12 @@ class ErrorSpec:
 
 @runtime_checkable
 class Maneuver(Protocol):
-    """What the design and learning stages need from a maneuver."""
+    """What the design and learning stages need from a maneuver.
+
+    Optionally, ``error_batch(final_states) -> (B, n_err)`` computes the errors of a (B, N)
+    batch of final states in one call, bit for bit what ``error`` gives one state at a time
+    (the design evaluates hundreds; see :func:`batch_errors`).
+    """
 
     @property
     def name(self) -> str:
@@ -153,6 +159,14 @@ def check_maneuver(value: Any, name: str = "maneuver") -> Maneuver:
         raise ConfigError(f"{name}: expected a maneuver (MultiFlip, a translation, a maneuver file…), got "
                           f"{type(value).__name__} {text[:60]}".rstrip() + f" (no {', '.join(missing[:3])})")
     return value  # type: ignore[no-any-return]
+
+
+def batch_errors(maneuver: Maneuver, final_states: np.ndarray) -> np.ndarray:
+    """(B, n_err) errors of a (B, N) batch of final states: the maneuver's ``error_batch`` if it has one."""
+    vectorized = getattr(maneuver, "error_batch", None)
+    if vectorized is not None:
+        return np.asarray(vectorized(final_states), dtype=float)
+    return np.array([maneuver.error(f) for f in final_states], dtype=float).reshape(len(final_states), -1)
 
 
 def bounds_arrays(parameters: tuple[ParameterSpec, ...]) -> tuple[np.ndarray, np.ndarray]:

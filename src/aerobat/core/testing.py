@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.core.design import Design, FinalStateModel, design
-from aerobat.core.maneuver import ErrorKind, ErrorSpec, Maneuver, ParameterSpec, check_parameters
+from aerobat.core.maneuver import ErrorKind, ErrorSpec, Maneuver, ParameterSpec, batch_errors, check_parameters
 from aerobat.core.plant import Plant, StatefulPlant, Trial, TrialStatus
 from aerobat.core.rules.base import UpdateRule
 from aerobat.errors import ConfigError
@@ -228,6 +228,11 @@ def check_maneuver(maneuver: Maneuver, *, model: FinalStateModel | None = None,
     e0 = np.asarray(maneuver.error(x0), dtype=float)
     _require(e0.shape == (len(maneuver.errors),), what,
              f"error(initial_state()) has shape {e0.shape}, expected ({len(maneuver.errors)},)")
+    if hasattr(maneuver, "error_batch"):
+        states = np.stack([x0, x0 + 0.01 * np.arange(x0.size)])
+        one_by_one = np.stack([np.asarray(maneuver.error(s), dtype=float) for s in states])
+        _require(batch_errors(maneuver, states).tobytes() == one_by_one.tobytes(), what,
+                 "error_batch() differs from error() state by state")
     outside = guess.copy()
     spec0 = maneuver.parameters[0]
     if math.isfinite(spec0.upper):

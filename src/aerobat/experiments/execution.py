@@ -15,7 +15,6 @@ from __future__ import annotations
 import multiprocessing
 import os
 import signal
-import sys
 import threading
 from collections.abc import Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -76,21 +75,14 @@ class Executor(Protocol):
 
 
 def _worker_init() -> None:
-    # one numba thread per worker process: the pool already uses every core. The variable is set
-    # only before numba is imported: numba re-reads it when it compiles, and a value that differs
-    # from the one its thread pool started with is an error
-    if "numba" not in sys.modules:
-        os.environ["NUMBA_NUM_THREADS"] = "1"
-    try:
-        import numba
+    # one simulation thread per worker process: the pool already uses every core
+    from aerobat.quadrotor.simulate import set_batch_threads
 
-        numba.set_num_threads(1)
-    except (ImportError, ValueError):
-        pass
+    set_batch_threads(1)
 
 
 class LocalExecutor:
-    """A process pool on this machine (spawned workers, one numba thread each)."""
+    """A process pool on this machine (spawned workers, one simulation thread each)."""
 
     def __init__(self, workers: int | None = None) -> None:
         self.workers = workers or os.cpu_count() or 1
@@ -102,8 +94,7 @@ class LocalExecutor:
         jobs = list(jobs)
         if not jobs:
             return
-        if self.workers == 1:
-            _worker_init()
+        if self.workers == 1:  # in this process, whose batches may use every core
             for job in jobs:
                 yield job, run_job(job)
             return

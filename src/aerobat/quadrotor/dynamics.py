@@ -39,13 +39,20 @@ __all__ = [
     "RATE_INT",
     "THRUST",
     "VEL",
+    "controller_constants",
+    "controller_thrusts",
     "controller_vector",
+    "derivative",
     "euler_zyx",
     "hover_state",
     "model_plant_vector",
+    "normalize_quaternion",
+    "plant_constants",
+    "plant_derivative",
     "plant_vector",
     "rotation_angles",
     "rotation_matrices",
+    "thrust_commands",
 ]
 
 # ---------------------------------------------------------------- state layout
@@ -189,16 +196,48 @@ def hover_state(vehicle: VehicleParams, position_m: tuple[float, float, float] =
 
 
 # ------------------------------------------------------------------ kernels
+#
+# What the kernels need from the parameter vectors besides their entries is computed once per
+# run, from the vectors as they are then (plant_constants, controller_constants), and the
+# controller hands its four thrusts to the motor model as values, not through an array. The
+# arithmetic is the model's own, operation for operation: a division stays a division (x/I and
+# x·(1/I) differ in the last bit, and the learned sessions are reproduced bit for bit).
+
+# plant_constants(plant) = (1/m, drag terms present)
+K_INV_MASS = 0
+K_AERO = 1
+# controller_constants(ctrl) = (2/l, the command (0-based) that motor slot 0, 1, 2, 3 receives)
+Q_TWO_OVER_ARM = 0
+Q_SOURCE_0 = 1
+Q_SOURCE_1 = 2
+Q_SOURCE_2 = 3
+Q_SOURCE_3 = 4
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def controller_thrusts(cmd, p, q, r, ctrl, out):  # pragma: no cover - compiled
-    """Eqs 14–21: rate P loop, moment inversion with nominal constants, mixer.
+def plant_constants(plant):  # pragma: no cover - compiled
+    """(1/m, aero) of a plant vector; ``aero`` = 1 if body drag, rotor drag or axial rotor drag act."""
+    aero = plant[P_BODY_DRAG] != 0.0 or plant[P_ROTOR_DRAG] != 0.0 or plant[P_AXIAL_DRAG] != 0.0
+    return (1.0 / plant[P_MASS], 1.0 if aero else 0.0)
 
-    ``cmd`` = (collective [m/s²], p̂, q̂, r̂ [rad/s]); ``p, q, r`` = gyro-measured
-    body rates [rad/s]; ``out`` receives the desired motor thrusts f̃ [N] in
-    physical motor slots.
-    """
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def controller_constants(ctrl):  # pragma: no cover - compiled
+    """(2/l, s0, s1, s2, s3) of a controller vector: s_j is the command (0-based) motor slot j receives."""
+    source = np.zeros(4, dtype=np.int64)
+    for i in range(4):
+        source[int(ctrl[C_ORDER + i])] = i
+    return (2.0 / ctrl[C_ARM], source[0], source[1], source[2], source[3])
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _pick(c0, c1, c2, c3, i):  # pragma: no cover - compiled
+    return c0 if i == 0 else (c1 if i == 1 else (c2 if i == 2 else c3))
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def thrust_commands(cmd, p, q, r, ctrl, cc):  # pragma: no cover - compiled
+    """Eqs 14–21 with ``cc`` = :func:`controller_constants`: the desired thrusts f̃ of motor slots 0–3."""
     ixx = ctrl[C_IXX]
     iyy = ctrl[C_IYY]
     izz = ctrl[C_IZZ]
@@ -210,16 +249,36 @@ def controller_thrusts(cmd, p, q, r, ctrl, out):  # pragma: no cover - compiled
     mr = izz * ar + p * q * (iyy - ixx)
     total = ctrl[C_MASS] * cmd[0]
     yaw = mr / ctrl[C_KAPPA]
-    two_over_l = 2.0 / ctrl[C_ARM]
-    out[int(ctrl[C_ORDER])] = 0.25 * (total + yaw - two_over_l * mq)
-    out[int(ctrl[C_ORDER + 1])] = 0.25 * (total - yaw + two_over_l * mp)
-    out[int(ctrl[C_ORDER + 2])] = 0.25 * (total + yaw + two_over_l * mq)
-    out[int(ctrl[C_ORDER + 3])] = 0.25 * (total - yaw - two_over_l * mp)
+    two_over_l = cc[Q_TWO_OVER_ARM]
+    c0 = 0.25 * (total + yaw - two_over_l * mq)
+    c1 = 0.25 * (total - yaw + two_over_l * mp)
+    c2 = 0.25 * (total + yaw + two_over_l * mq)
+    c3 = 0.25 * (total - yaw - two_over_l * mp)
+    return (_pick(c0, c1, c2, c3, cc[Q_SOURCE_0]), _pick(c0, c1, c2, c3, cc[Q_SOURCE_1]),
+            _pick(c0, c1, c2, c3, cc[Q_SOURCE_2]), _pick(c0, c1, c2, c3, cc[Q_SOURCE_3]))
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def plant_derivative(t, x, ftilde, plant, dx):  # pragma: no cover - compiled
-    """Eqs 8–12 plus the plant's extra effects; writes dx/dt into ``dx``."""
+def controller_thrusts(cmd, p, q, r, ctrl, out):  # pragma: no cover - compiled
+    """Eqs 14–21: rate P loop, moment inversion with nominal constants, mixer.
+
+    ``cmd`` = (collective [m/s²], p̂, q̂, r̂ [rad/s]); ``p, q, r`` = gyro-measured
+    body rates [rad/s]; ``out`` receives the desired motor thrusts f̃ [N] in
+    physical motor slots. (The kernels call :func:`thrust_commands`, with the
+    controller's constants computed once per run.)
+    """
+    f = thrust_commands(cmd, p, q, r, ctrl, controller_constants(ctrl))
+    for j in range(4):
+        out[j] = f[j]
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def derivative(t, x, ftilde, plant, k, dx):  # pragma: no cover - compiled
+    """Eqs 8–12 plus the plant's extra effects, with ``k`` = :func:`plant_constants`; dx/dt into ``dx``.
+
+    ``ftilde``: the desired thrusts of motor slots 0–3 (an array, or the tuple
+    :func:`thrust_commands` returns).
+    """
     qw = x[_IQ]
     qx = x[_IQ + 1]
     qy = x[_IQ + 2]
@@ -232,6 +291,8 @@ def plant_derivative(t, x, ftilde, plant, dx):  # pragma: no cover - compiled
     r33 = 1.0 - 2.0 * (qx * qx + qy * qy)
     fmin = plant[P_FMIN]
     fmax = plant[P_FMAX]
+    up = plant[P_RATE_UP]
+    down = plant[P_RATE_DN]
     total = 0.0
     tx = 0.0
     ty = 0.0
@@ -240,18 +301,18 @@ def plant_derivative(t, x, ftilde, plant, dx):  # pragma: no cover - compiled
         fj = x[_IF + j]
         fc = min(max(ftilde[j], fmin), fmax)
         diff = fc - fj
-        dx[_IF + j] = (plant[P_RATE_UP] if diff > 0.0 else plant[P_RATE_DN]) * diff
+        dx[_IF + j] = (up if diff > 0.0 else down) * diff
         force = plant[P_GAIN + j] * fj
         total += force
         tx += plant[P_MY + j] * force
         ty -= plant[P_MX + j] * force
         tz += plant[P_KYAW + j] * force
-    inv_m = 1.0 / plant[P_MASS]
+    inv_m = k[K_INV_MASS]
     a_t = total * inv_m
     ax = r13 * a_t
     ay = r23 * a_t
     az = r33 * a_t - plant[P_GRAV]
-    if plant[P_BODY_DRAG] != 0.0 or plant[P_ROTOR_DRAG] != 0.0 or plant[P_AXIAL_DRAG] != 0.0:
+    if k[K_AERO] != 0.0:
         wx = plant[P_WIND]
         wy = plant[P_WIND + 1]
         wz = plant[P_WIND + 2]
@@ -310,6 +371,15 @@ def plant_derivative(t, x, ftilde, plant, dx):  # pragma: no cover - compiled
     dx[_II] = p
     dx[_II + 1] = q
     dx[_II + 2] = r
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def plant_derivative(t, x, ftilde, plant, dx):  # pragma: no cover - compiled
+    """Eqs 8–12 plus the plant's extra effects; writes dx/dt into ``dx``.
+
+    (The kernels call :func:`derivative`, with the plant's constants computed once per run.)
+    """
+    derivative(t, x, ftilde, plant, plant_constants(plant), dx)
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")

@@ -143,36 +143,19 @@ class Program:
         if not _finite(self.hover_collective_m_s2) or self.hover_collective_m_s2 <= 0:
             raise ConfigError(f"hover_collective_m_s2 = {self.hover_collective_m_s2} must be finite and > 0 (m/s²)")
         seen: dict[tuple[str, float], int] = {}
+        end = self.duration_s
         for index, sw in enumerate(self.switches):
-            where = f"switch {index}"
-            if not isinstance(sw, Switch):
-                raise ConfigError(f"{where}: expected a Switch, got {type(sw).__name__}")
-            if sw.channel not in CHANNELS:
-                raise ConfigError(f"{where}: unknown channel {sw.channel!r}; allowed: {', '.join(CHANNELS)}")
-            for attr in ("time_s", "value"):
-                v = getattr(sw, attr)
-                if isinstance(v, bool) or not isinstance(v, int | float):
-                    raise ConfigError(f"{where}: {attr} must be a number, got {v!r}")
-                if not _finite(v):
-                    raise ConfigError(f"{where} ({sw.channel}): {attr} = {v} is not finite")
-            if sw.time_s < 0:
-                raise ConfigError(f"{where} ({sw.channel}): time_s = {sw.time_s:g} is negative; "
-                                  f"allowed [0, duration_s)")
-            if sw.time_s >= self.duration_s:
-                raise ConfigError(
-                    f"{where} ({sw.channel}): time_s = {sw.time_s:g} is at or after the program end "
-                    f"duration_s = {self.duration_s:g}; allowed [0, duration_s)"
-                )
-            low, high = _channel_limits(sw.channel)
-            if not low <= sw.value <= high:
-                raise ConfigError(
-                    f"{where} ({sw.channel}): value = {sw.value:g} is out of range: allowed "
-                    f"[{low:g}, {high:g}] ({CHANNEL_UNITS[sw.channel]})"
-                )
+            # the common case in a few comparisons (programs are built inside every design iteration);
+            # anything unusual goes through the checks below, which say what is wrong
+            limits = _LIMITS.get(getattr(sw, "channel", None))  # type: ignore[arg-type]
+            if (limits is None or not isinstance(sw, Switch) or type(sw.time_s) not in _PLAIN
+                    or type(sw.value) not in _PLAIN or not 0.0 <= sw.time_s < end
+                    or not limits[0] <= sw.value <= limits[1]):
+                _check_switch(index, sw, end)
             key = (sw.channel, float(sw.time_s))
             if key in seen:
                 raise ConfigError(
-                    f"{where} ({sw.channel}): overlaps switch {seen[key]} — two switches on one channel at "
+                    f"switch {index} ({sw.channel}): overlaps switch {seen[key]} — two switches on one channel at "
                     f"time_s = {sw.time_s:g}"
                 )
             seen[key] = index
@@ -184,6 +167,39 @@ class Program:
     def commands_at(self, times_s: np.ndarray) -> np.ndarray:
         """Exact commands (collective, p̂, q̂, r̂) at ``times_s`` [s]; shape (N, 4). Hover after the end."""
         return self.compile().evaluate(np.asarray(times_s, dtype=float))
+
+
+_LIMITS = {channel: _channel_limits(channel) for channel in CHANNELS}
+_PLAIN = (float, int)
+
+
+def _check_switch(index: int, sw: Any, end: float) -> None:
+    """Raise the ConfigError that says what is wrong with switch ``index`` (nothing if it is fine)."""
+    where = f"switch {index}"
+    if not isinstance(sw, Switch):
+        raise ConfigError(f"{where}: expected a Switch, got {type(sw).__name__}")
+    if sw.channel not in CHANNELS:
+        raise ConfigError(f"{where}: unknown channel {sw.channel!r}; allowed: {', '.join(CHANNELS)}")
+    for attr in ("time_s", "value"):
+        v = getattr(sw, attr)
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            raise ConfigError(f"{where}: {attr} must be a number, got {v!r}")
+        if not _finite(v):
+            raise ConfigError(f"{where} ({sw.channel}): {attr} = {v} is not finite")
+    if sw.time_s < 0:
+        raise ConfigError(f"{where} ({sw.channel}): time_s = {sw.time_s:g} is negative; "
+                          f"allowed [0, duration_s)")
+    if sw.time_s >= end:
+        raise ConfigError(
+            f"{where} ({sw.channel}): time_s = {sw.time_s:g} is at or after the program end "
+            f"duration_s = {end:g}; allowed [0, duration_s)"
+        )
+    low, high = _LIMITS[sw.channel]
+    if not low <= sw.value <= high:
+        raise ConfigError(
+            f"{where} ({sw.channel}): value = {sw.value:g} is out of range: allowed "
+            f"[{low:g}, {high:g}] ({CHANNEL_UNITS[sw.channel]})"
+        )
 
 
 @dataclass(frozen=True)
@@ -218,43 +234,46 @@ class CompiledProgram:
         return out
 
 
+_CHANNEL_INDEX = {channel: i for i, channel in enumerate(CHANNELS)}
+
+
 def _compile(program: Program) -> CompiledProgram:
+    # plain floats and locals: this runs for every program of every design iteration
     T = float(program.duration_s)
     ramp_c = float(program.ramp_down.collective_s)
     ramp_r = float(program.ramp_down.rates_s)
+    switches = program.switches
     times = {0.0, T}
-    for sw in program.switches:
-        times.add(float(sw.time_s))
+    times.update([float(sw.time_s) for sw in switches])
     for ramp in (ramp_c, ramp_r):
         if 0.0 < ramp < T:
             times.add(T - ramp)
-    bp = np.array(sorted(times))
-    K = len(bp) - 1
-    ordered = sorted(program.switches, key=lambda s: (s.time_s, CHANNELS.index(s.channel)))
+    breaks = sorted(times)
+    K = len(breaks) - 1
+    index = _CHANNEL_INDEX
+    ordered = sorted(switches, key=lambda s: (s.time_s, index[s.channel]))
     g = program.hover_collective_m_s2
-    value = {"collective": g, "rate_p": 0.0, "rate_q": 0.0, "rate_r": 0.0,
-             "accel_p": 0.0, "accel_q": 0.0, "accel_r": 0.0}
+    value = [g, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]  # latest value per channel, in CHANNELS order
     integral = [0.0, 0.0, 0.0]  # ∫ accel up to the current segment start
-    rows: list[list[float]] = []  # plain floats: this runs inside every design iteration
-    breaks = bp.tolist()
+    rows: list[float] = []
+    count = len(ordered)
     j = 0
     for k in range(K):
         t0, t1 = breaks[k], breaks[k + 1]
-        while j < len(ordered) and ordered[j].time_s <= t0:
-            value[ordered[j].channel] = float(ordered[j].value)
+        while j < count and ordered[j].time_s <= t0:
+            value[index[ordered[j].channel]] = float(ordered[j].value)
             j += 1
         wc0, wc1 = _envelope(t0, T, ramp_c)
         wr0, wr1 = _envelope(t0, T, ramp_r)
-        raw_c = value["collective"]
-        row = [g + wc0 * (raw_c - g), wc1 * (raw_c - g), 0.0]
-        for axis, name in enumerate("pqr"):
-            accel = value["accel_" + name]
-            rate0 = value["rate_" + name] + integral[axis]
-            row += [wr0 * rate0, wr0 * accel + wr1 * rate0, wr1 * accel]
+        raw_c = value[0]
+        rows += (g + wc0 * (raw_c - g), wc1 * (raw_c - g), 0.0)
+        for axis in range(3):
+            accel = value[4 + axis]
+            rate0 = value[1 + axis] + integral[axis]
+            rows += (wr0 * rate0, wr0 * accel + wr1 * rate0, wr1 * accel)
             integral[axis] += accel * (t1 - t0)
-        rows.append(row)
     coeffs = np.array(rows, dtype=float).reshape(K, 4, 3)
-    return CompiledProgram(bp, coeffs, np.array([g, 0.0, 0.0, 0.0]))
+    return CompiledProgram(np.array(breaks), coeffs, np.array([g, 0.0, 0.0, 0.0]))
 
 
 def _envelope(t0: float, T: float, ramp: float) -> tuple[float, float]:

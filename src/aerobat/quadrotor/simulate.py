@@ -18,13 +18,16 @@ the rate at the start before that). With zero latency the kernels run exactly th
 arithmetic they always did.
 
 The kernels are compiled with numba and allocate nothing inside their loops;
-:func:`simulate_batch` runs many (program, vehicle) pairs in parallel threads.
+:func:`simulate_batch` runs many (program, vehicle) pairs in parallel threads
+(:func:`set_batch_threads`).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+import threading
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -38,19 +41,22 @@ from aerobat.quadrotor.dynamics import (
     N_STATE,
     POS,
     VEL,
-    controller_thrusts,
+    controller_constants,
     controller_vector,
+    derivative,
     euler_zyx,
     hover_state,
     model_plant_vector,
     normalize_quaternion,
-    plant_derivative,
+    plant_constants,
     rotation_angles,
+    thrust_commands,
 )
 from aerobat.quadrotor.program import CompiledProgram, Program
 from aerobat.quadrotor.vehicle import VehicleConfig
 
-__all__ = ["NominalModel", "Trajectory", "final_state_summary", "simulate", "simulate_batch"]
+__all__ = ["NominalModel", "Trajectory", "batch_threads", "final_state_summary", "set_batch_threads", "simulate",
+           "simulate_batch"]
 
 Mode = Literal["continuous", "sampled"]
 DEFAULT_MAX_STEP_S = 5e-4
@@ -61,15 +67,10 @@ DEFAULT_TICK_S = 1.0 / 800.0
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _command(coeffs, k, tau, cmd):  # pragma: no cover - compiled
+def _command(poly, tau, cmd):  # pragma: no cover - compiled
+    """The commands at local time ``tau`` of a segment with coefficients ``poly`` (4 × 3) into ``cmd``."""
     for ch in range(4):
-        cmd[ch] = coeffs[k, ch, 0] + tau * (coeffs[k, ch, 1] + tau * coeffs[k, ch, 2])
-
-
-@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _closed_loop_derivative(t, x, cmd, plant, ctrl, ft, dx):  # pragma: no cover - compiled
-    controller_thrusts(cmd, x[10], x[11], x[12], ctrl, ft)
-    plant_derivative(t, x, ft, plant, dx)
+        cmd[ch] = poly[ch, 0] + tau * (poly[ch, 1] + tau * poly[ch, 2])
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
@@ -97,112 +98,141 @@ def _delayed_rates(hist_t, hist_w, count, t, x, delay, out):  # pragma: no cover
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _loop_derivative(t, x, cmd, plant, ctrl, ft, dx, hist_t, hist_w, count, delay, rates):  # pragma: no cover
-    """The closed loop with the controller acting on delayed rates (latency), or on ``x``'s if there is none."""
-    if count == 0:
-        _closed_loop_derivative(t, x, cmd, plant, ctrl, ft, dx)
+def _rates(x, delayed, hist_t, hist_w, count, t, delay, out):  # pragma: no cover - compiled
+    """The body rates the controller acts on: ``x``'s, or with latency those :func:`_delayed_rates` gives."""
+    if delayed:
+        _delayed_rates(hist_t, hist_w, count, t, x, delay, out)
     else:
-        _delayed_rates(hist_t, hist_w, count, t, x, delay, rates)
-        controller_thrusts(cmd, rates[0], rates[1], rates[2], ctrl, ft)
-        plant_derivative(t, x, ft, plant, dx)
+        out[0] = x[10]
+        out[1] = x[11]
+        out[2] = x[12]
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
-def _run_continuous(x, bp, coeffs, nseg, plant, ctrl, max_step, rec_t, rec_x, rec_u):  # pragma: no cover
-    """Continuous-time playback without latency; ``x`` is advanced in place. Records every step if rec_t has room."""
-    return _run_continuous_delayed(x, bp, coeffs, nseg, plant, ctrl, max_step, rec_t, rec_x, rec_u, np.zeros(3))
+@nb.njit(cache=True, fastmath=True, error_model="numpy", nogil=True)
+def _run_continuous(x0, bp, coeffs, nseg, plant, ctrl, delays, max_step, out, rows, rec_t, rec_x,
+                    rec_u):  # pragma: no cover - compiled
+    """Continuous-time playback of the batch rows ``rows``, one after the other.
 
-
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
-def _run_continuous_delayed(x, bp, coeffs, nseg, plant, ctrl, max_step, rec_t, rec_x, rec_u,
-                            delay):  # pragma: no cover - compiled
-    """Continuous-time playback with per-axis rate-loop latency ``delay`` [s] (zeros: none)."""
-    n = x.shape[0]
-    k1 = np.empty(n)
-    k2 = np.empty(n)
-    k3 = np.empty(n)
-    k4 = np.empty(n)
-    tmp = np.empty(n)
-    cmd0 = np.empty(4)
-    cmdm = np.empty(4)
-    cmd1 = np.empty(4)
-    ft = np.empty(4)
+    Row b: start state ``x0[b]``, final state into ``out[b]``, per-axis rate-loop latency
+    ``delays[b]`` [s] (zeros: none). With non-empty ``rec_*`` (one program) every step is
+    recorded; returns the number of records. Every continuous-mode simulation runs through this
+    one compiled function (``simulate``, and each thread's share of a batch), so they agree bit
+    for bit whatever the batch. Everything it calls is inlined (a kernel that calls another
+    compiled kernel ran ~8 % slower once numba loaded it from its cache), one level deep (nested
+    inlining multiplied the compile time).
+    """
+    n = N_STATE
+    work = np.empty((6, n))  # the state and the four stages side by side
+    xs = work[0]
+    k1 = work[1]
+    k2 = work[2]
+    k3 = work[3]
+    k4 = work[4]
+    tmp = work[5]
+    cmds = np.empty((3, 4))
+    cmd0 = cmds[0]
+    cmdm = cmds[1]
+    cmd1 = cmds[2]
+    poly = np.empty((4, 3))  # the current segment's coefficients
     rates = np.empty(3)
-    delayed = delay[0] > 0.0 or delay[1] > 0.0 or delay[2] > 0.0
-    steps = 0
-    if delayed:
-        for k in range(nseg):
-            steps += max(1, int(math.ceil((bp[k + 1] - bp[k]) / max_step - 1e-9)))
-    hist_t = np.empty(steps + 1 if delayed else 0)
-    hist_w = np.empty((steps + 1 if delayed else 0, 3))
-    count = 0
-    if delayed:
-        hist_t[0] = bp[0]
-        hist_w[0, 0] = x[10]
-        hist_w[0, 1] = x[11]
-        hist_w[0, 2] = x[12]
-        count = 1
     record = rec_t.shape[0] > 0
     idx = 0
-    if record:
-        _command(coeffs, 0, 0.0, cmd0)
-        rec_t[0] = bp[0]
-        rec_x[0, :] = x
-        rec_u[0, :] = cmd0
-        idx = 1
-    for k in range(nseg):
-        t0 = bp[k]
-        length = bp[k + 1] - t0
-        m = max(1, int(math.ceil(length / max_step - 1e-9)))
-        h = length / m
-        for i in range(m):
-            tau = i * h
-            t = t0 + tau
-            _command(coeffs, k, tau, cmd0)
-            _command(coeffs, k, tau + 0.5 * h, cmdm)
-            _command(coeffs, k, tau + h, cmd1)
-            _loop_derivative(t, x, cmd0, plant, ctrl, ft, k1, hist_t, hist_w, count, delay, rates)
-            for j in range(n):
-                tmp[j] = x[j] + 0.5 * h * k1[j]
-            _loop_derivative(t + 0.5 * h, tmp, cmdm, plant, ctrl, ft, k2, hist_t, hist_w, count, delay, rates)
-            for j in range(n):
-                tmp[j] = x[j] + 0.5 * h * k2[j]
-            _loop_derivative(t + 0.5 * h, tmp, cmdm, plant, ctrl, ft, k3, hist_t, hist_w, count, delay, rates)
-            for j in range(n):
-                tmp[j] = x[j] + h * k3[j]
-            _loop_derivative(t + h, tmp, cmd1, plant, ctrl, ft, k4, hist_t, hist_w, count, delay, rates)
-            for j in range(n):
-                x[j] += h / 6.0 * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
-            normalize_quaternion(x)
-            t_end = t0 + (i + 1) * h if i + 1 < m else bp[k + 1]
-            if delayed:
-                hist_t[count] = t_end
-                hist_w[count, 0] = x[10]
-                hist_w[count, 1] = x[11]
-                hist_w[count, 2] = x[12]
-                count += 1
-            if record:
-                rec_t[idx] = t_end
-                rec_x[idx, :] = x
-                rec_u[idx, :] = cmd1
-                idx += 1
+    for b in rows:
+        pl = plant[b]
+        ct = ctrl[b]
+        breaks = bp[b]
+        cf = coeffs[b]
+        delay = delays[b]
+        pc = plant_constants(pl)
+        cc = controller_constants(ct)
+        for j in range(n):
+            xs[j] = x0[b, j]
+        # latency: the rates the controller acts on come from a history of the integration steps
+        delayed = delay[0] > 0.0 or delay[1] > 0.0 or delay[2] > 0.0
+        steps = 0
+        if delayed:
+            for seg in range(nseg[b]):
+                steps += max(1, int(math.ceil((breaks[seg + 1] - breaks[seg]) / max_step - 1e-9)))
+        hist_t = np.empty(steps + 1 if delayed else 0)
+        hist_w = np.empty((steps + 1 if delayed else 0, 3))
+        count = 0
+        if delayed:
+            hist_t[0] = breaks[0]
+            hist_w[0, 0] = xs[10]
+            hist_w[0, 1] = xs[11]
+            hist_w[0, 2] = xs[12]
+            count = 1
+        if record:
+            for ch in range(4):
+                for power in range(3):
+                    poly[ch, power] = cf[0, ch, power]
+            _command(poly, 0.0, cmd0)
+            rec_t[0] = breaks[0]
+            rec_x[0, :] = xs
+            rec_u[0, :] = cmd0
+            idx = 1
+        for seg in range(nseg[b]):
+            t0 = breaks[seg]
+            length = breaks[seg + 1] - t0
+            m = max(1, int(math.ceil(length / max_step - 1e-9)))
+            h = length / m
+            for ch in range(4):
+                for power in range(3):
+                    poly[ch, power] = cf[seg, ch, power]
+            for i in range(m):
+                tau = i * h
+                t = t0 + tau
+                _command(poly, tau, cmd0)
+                _command(poly, tau + 0.5 * h, cmdm)
+                _command(poly, tau + h, cmd1)
+                _rates(xs, delayed, hist_t, hist_w, count, t, delay, rates)
+                derivative(t, xs, thrust_commands(cmd0, rates[0], rates[1], rates[2], ct, cc), pl, pc, k1)
+                for j in range(n):
+                    tmp[j] = xs[j] + 0.5 * h * k1[j]
+                _rates(tmp, delayed, hist_t, hist_w, count, t + 0.5 * h, delay, rates)
+                derivative(t + 0.5 * h, tmp, thrust_commands(cmdm, rates[0], rates[1], rates[2], ct, cc), pl, pc, k2)
+                for j in range(n):
+                    tmp[j] = xs[j] + 0.5 * h * k2[j]
+                _rates(tmp, delayed, hist_t, hist_w, count, t + 0.5 * h, delay, rates)
+                derivative(t + 0.5 * h, tmp, thrust_commands(cmdm, rates[0], rates[1], rates[2], ct, cc), pl, pc, k3)
+                for j in range(n):
+                    tmp[j] = xs[j] + h * k3[j]
+                _rates(tmp, delayed, hist_t, hist_w, count, t + h, delay, rates)
+                derivative(t + h, tmp, thrust_commands(cmd1, rates[0], rates[1], rates[2], ct, cc), pl, pc, k4)
+                for j in range(n):
+                    xs[j] += h / 6.0 * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
+                normalize_quaternion(xs)
+                t_end = t0 + (i + 1) * h if i + 1 < m else breaks[seg + 1]
+                if delayed:
+                    hist_t[count] = t_end
+                    hist_w[count, 0] = xs[10]
+                    hist_w[count, 1] = xs[11]
+                    hist_w[count, 2] = xs[12]
+                    count += 1
+                if record:
+                    rec_t[idx] = t_end
+                    rec_x[idx, :] = xs
+                    rec_u[idx, :] = cmd1
+                    idx += 1
+        for j in range(n):
+            out[b, j] = xs[j]
     return idx
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def rk4_plant_step(t, x, ft, plant, h, k1, k2, k3, k4, tmp):  # pragma: no cover - compiled
-    """One RK4 step of the plant with motor commands ``ft`` held constant."""
-    n = x.shape[0]
-    plant_derivative(t, x, ft, plant, k1)
+def rk4_plant_step(t, x, ft, plant, pc, h, k1, k2, k3, k4, tmp):  # pragma: no cover - compiled
+    """One RK4 step of the plant with motor commands ``ft`` held constant (``pc``: plant_constants)."""
+    n = N_STATE
+    derivative(t, x, ft, plant, pc, k1)
     for j in range(n):
         tmp[j] = x[j] + 0.5 * h * k1[j]
-    plant_derivative(t + 0.5 * h, tmp, ft, plant, k2)
+    derivative(t + 0.5 * h, tmp, ft, plant, pc, k2)
     for j in range(n):
         tmp[j] = x[j] + 0.5 * h * k2[j]
-    plant_derivative(t + 0.5 * h, tmp, ft, plant, k3)
+    derivative(t + 0.5 * h, tmp, ft, plant, pc, k3)
     for j in range(n):
         tmp[j] = x[j] + h * k3[j]
-    plant_derivative(t + h, tmp, ft, plant, k4)
+    derivative(t + h, tmp, ft, plant, pc, k4)
     for j in range(n):
         x[j] += h / 6.0 * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
     normalize_quaternion(x)
@@ -220,24 +250,25 @@ def _run_sampled(x, bp, coeffs, nseg, plant, ctrl, tick, substeps, rec_t, rec_x,
     hist_w = np.empty((ticks, 3))
     count = 0
     rates = np.empty(3)
-    n = x.shape[0]
+    n = N_STATE
     k1 = np.empty(n)
     k2 = np.empty(n)
     k3 = np.empty(n)
     k4 = np.empty(n)
     tmp = np.empty(n)
     cmd = np.empty(4)
-    ft = np.empty(4)
+    pc = plant_constants(plant)
+    cc = controller_constants(ctrl)
     end = bp[nseg]
     record = rec_t.shape[0] > 0
     idx = 0
-    k = 0
+    seg = 0
     tick_index = 0
     t = 0.0
     while t < end - 1e-12:
-        while k < nseg - 1 and bp[k + 1] <= t + 1e-12:
-            k += 1
-        _command(coeffs, k, t - bp[k], cmd)
+        while seg < nseg - 1 and bp[seg + 1] <= t + 1e-12:
+            seg += 1
+        _command(coeffs[seg], t - bp[seg], cmd)
         if record:
             rec_t[idx] = t
             rec_x[idx, :] = x
@@ -249,14 +280,12 @@ def _run_sampled(x, bp, coeffs, nseg, plant, ctrl, tick, substeps, rec_t, rec_x,
             hist_w[count, 1] = x[11]
             hist_w[count, 2] = x[12]
             count += 1
-            _delayed_rates(hist_t, hist_w, count, t, x, delay, rates)
-            controller_thrusts(cmd, rates[0], rates[1], rates[2], ctrl, ft)
-        else:
-            controller_thrusts(cmd, x[10], x[11], x[12], ctrl, ft)
+        _rates(x, delayed, hist_t, hist_w, count, t, delay, rates)
+        ft = thrust_commands(cmd, rates[0], rates[1], rates[2], ctrl, cc)  # held until the next tick
         t_next = min((tick_index + 1) * tick, end)
         h = (t_next - t) / substeps
         for s in range(substeps):
-            rk4_plant_step(t + s * h, x, ft, plant, h, k1, k2, k3, k4, tmp)
+            rk4_plant_step(t + s * h, x, ft, plant, pc, h, k1, k2, k3, k4, tmp)
         tick_index += 1
         t = t_next
     if record:
@@ -267,27 +296,63 @@ def _run_sampled(x, bp, coeffs, nseg, plant, ctrl, tick, substeps, rec_t, rec_x,
     return idx
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy", parallel=True)
-def _batch_continuous(x0, bp, coeffs, nseg, plant, ctrl, max_step, out):  # pragma: no cover - compiled
-    empty_t = np.empty(0)
-    empty_x = np.empty((0, x0.shape[1]))
-    empty_u = np.empty((0, 4))
-    for b in nb.prange(x0.shape[0]):
-        x = x0[b].copy()
-        _run_continuous(x, bp[b], coeffs[b], nseg[b], plant[b], ctrl[b], max_step, empty_t, empty_x, empty_u)
-        out[b, :] = x
+_NO_T = np.empty(0)
+_NO_X = np.empty((0, N_STATE))
+_NO_U = np.empty((0, 4))
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy", parallel=True)
-def _batch_continuous_delayed(x0, bp, coeffs, nseg, plant, ctrl, max_step, delays, out):  # pragma: no cover
-    empty_t = np.empty(0)
-    empty_x = np.empty((0, x0.shape[1]))
-    empty_u = np.empty((0, 4))
-    for b in nb.prange(x0.shape[0]):
-        x = x0[b].copy()
-        _run_continuous_delayed(x, bp[b], coeffs[b], nseg[b], plant[b], ctrl[b], max_step, empty_t, empty_x,
-                                empty_u, delays[b])
-        out[b, :] = x
+class _Workers:
+    """Threads for batches: each runs chunks of a batch through :func:`_run_continuous`.
+
+    The kernel releases the GIL, so plain threads run it in parallel, and each runs the very
+    code a single simulation runs (same results bit for bit, same speed: a numba ``prange``
+    around the kernel ran ~10 % slower per simulation, and its OpenMP workers spun between the
+    design's short batches, taking the cores the Python work in between needed).
+    """
+
+    lock = threading.Lock()
+    pool: ThreadPoolExecutor | None = None
+    size = 0
+    threads: int | None = None  # set_batch_threads
+
+    @classmethod
+    def get(cls, threads: int) -> ThreadPoolExecutor:
+        with cls.lock:
+            if cls.pool is None or cls.size != threads:
+                if cls.pool is not None:
+                    cls.pool.shutdown(wait=False)
+                cls.pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="aerobat-batch")
+                cls.size = threads
+            return cls.pool
+
+
+def set_batch_threads(threads: int | None) -> None:
+    """How many threads :func:`simulate_batch` and :class:`NominalModel` use; None: :func:`batch_threads`' default."""
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+        raise ConfigError(f"threads = {threads!r}: allowed an integer >= 1, or None")
+    _Workers.threads = threads
+
+
+def batch_threads() -> int:
+    """Threads a batch runs on: :func:`set_batch_threads`, else numba's ``NUMBA_NUM_THREADS`` (all cores)."""
+    return _Workers.threads if _Workers.threads is not None else int(nb.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
+
+
+def _run_batch(x0: np.ndarray, bp: np.ndarray, coeffs: np.ndarray, nseg: np.ndarray, plants: np.ndarray,
+               ctrl: np.ndarray, delays: np.ndarray, max_step_s: float, out: np.ndarray) -> None:
+    """Final states of a packed batch into ``out``: one program on this thread, several on all threads."""
+    count = x0.shape[0]
+    threads = min(count, batch_threads()) if count > 1 else 1
+    if threads == 1:  # nothing to hand over
+        _run_continuous(x0, bp, coeffs, nseg, plants, ctrl, delays, max_step_s, out, np.arange(count), _NO_T, _NO_X,
+                        _NO_U)
+        return
+    chunks = min(count, 4 * threads)  # a few per thread even out programs of different lengths
+    pool = _Workers.get(threads)
+    jobs = [pool.submit(_run_continuous, x0, bp, coeffs, nseg, plants, ctrl, delays, max_step_s, out, rows, _NO_T,
+                        _NO_X, _NO_U) for rows in np.array_split(np.arange(count), chunks)]
+    for job in jobs:
+        job.result()
 
 
 # ------------------------------------------------------------------- results
@@ -462,7 +527,11 @@ def simulate(
     rec_x = np.empty((size, N_STATE))
     rec_u = np.empty((size, 4))
     if mode == "continuous":
-        count = _run_continuous_delayed(x, bp, coeffs, nseg, plant_v, ctrl_v, max_step_s, rec_t, rec_x, rec_u, delay)
+        final = np.empty((1, N_STATE))
+        count = _run_continuous(x[None, :], bp[None, :], coeffs[None], np.array([nseg]), plant_v[None, :],
+                                ctrl_v[None, :], delay[None, :], max_step_s, final, np.zeros(1, dtype=np.int64), rec_t,
+                                rec_x, rec_u)
+        x = final[0]
     else:
         count = _run_sampled(x, bp, coeffs, nseg, plant_v, ctrl_v, tick_s, substeps, rec_t, rec_x, rec_u, delay)
     if not record:
@@ -491,7 +560,7 @@ def simulate_batch(
 
     Returns
     -------
-    (B, N_STATE) final states.
+    (B, N_STATE) final states, bit for bit those :func:`simulate` computes one at a time.
     """
     max_step_s = check_max_step(max_step_s)
     check_type("programs", programs, Sequence, "a sequence of Programs")
@@ -505,30 +574,43 @@ def simulate_batch(
         raise ConfigError(f"got {B} programs but {len(cfgs)} vehicles")
     for k, cfg in enumerate(cfgs):
         check_type(f"configs[{k}]", cfg, VehicleConfig, "a VehicleConfig")
-    for one in compiled:
-        _check_steps(_step_count(one.breakpoints_s, max_step_s), f"max_step_s = {max_step_s:g}")
-    kmax = max(len(c.breakpoints_s) - 1 for c in compiled)
-    bp = np.zeros((B, kmax + 1))
-    coeffs = np.zeros((B, kmax, 4, 3))
-    nseg = np.zeros(B, dtype=np.int64)
-    for b, c in enumerate(compiled):
-        k = len(c.breakpoints_s) - 1
-        bp[b, : k + 1] = c.breakpoints_s
-        coeffs[b, :k] = c.coefficients
-        nseg[b] = k
+    one = all(c is cfgs[0] for c in cfgs)  # one vehicle for all: its vectors once
+
+    def rows(make: Callable[[VehicleConfig], np.ndarray]) -> np.ndarray:
+        return np.tile(make(cfgs[0]), (B, 1)) if one else np.stack([make(c) for c in cfgs])
+
     if plants is None:
-        plants = np.stack([model_plant_vector(c) for c in cfgs])
-    ctrl = np.stack([controller_vector(c.controller) for c in cfgs])
+        plants = rows(model_plant_vector)
+    ctrl = rows(lambda c: controller_vector(c.controller))
     if initial_states is None:
-        initial_states = np.stack([hover_state(c.vehicle) for c in cfgs])
+        initial_states = rows(lambda c: hover_state(c.vehicle))
     x0 = np.ascontiguousarray(as_float_array("initial_states", initial_states, (B, N_STATE)))
     plants = np.ascontiguousarray(as_float_array("plants", plants, (B, N_PLANT)))
+    delays = rows(lambda c: np.array(c.effects.rate_latency_s, dtype=float))
+    return _final_states(compiled, x0, plants, ctrl, delays, max_step_s)
+
+
+def _final_states(compiled: Sequence[CompiledProgram], x0: np.ndarray, plants: np.ndarray, ctrl: np.ndarray,
+                  delays: np.ndarray, max_step_s: float) -> np.ndarray:
+    """Run checked, contiguous inputs: pack the programs, one row each, check their step counts, run the batch."""
+    B = len(compiled)
     out = np.empty_like(x0)
-    delays = np.array([c.effects.rate_latency_s for c in cfgs], dtype=float)
-    if np.any(delays > 0.0):
-        _batch_continuous_delayed(x0, bp, coeffs, nseg, plants, ctrl, max_step_s, delays, out)
-    else:
-        _batch_continuous(x0, bp, coeffs, nseg, plants, ctrl, max_step_s, out)
+    nseg = np.array([len(c.breakpoints_s) - 1 for c in compiled], dtype=np.int64)
+    kmax = int(nseg.max())
+    bp = np.zeros((B, kmax + 1))
+    coeffs = np.zeros((B, kmax, 4, 3))
+    for b, c in enumerate(compiled):
+        k = nseg[b]
+        bp[b, : k + 1] = c.breakpoints_s
+        coeffs[b, :k] = c.coefficients
+    # the steps of every program at once (_step_count's arithmetic; the padding counts nothing)
+    with np.errstate(over="ignore", invalid="ignore"):
+        per_segment = np.maximum(1, np.ceil(np.diff(bp, axis=1) / max_step_s - 1e-9))
+    per_segment[np.arange(kmax)[None, :] >= nseg[:, None]] = 0.0
+    steps = per_segment.sum(axis=1)
+    if not np.all(steps <= MAX_STEPS):
+        _check_steps(float(steps[~(steps <= MAX_STEPS)][0]), f"max_step_s = {max_step_s:g}")
+    _run_batch(x0, bp, coeffs, nseg, plants, ctrl, delays, max_step_s, out)
     return out
 
 
@@ -542,12 +624,23 @@ class NominalModel:
         self.config = check_type("config", config, VehicleConfig, "a VehicleConfig (e.g. aerobat.hummingbird())")
         self.max_step_s = check_max_step(max_step_s)
         self._plant = model_plant_vector(config)
+        self._ctrl = controller_vector(config.controller)
+        self._hover = hover_state(config.vehicle)
+        self._delay = np.array(config.effects.rate_latency_s, dtype=float)
 
-    def final_states(self, programs: Sequence[Program], initial_states: np.ndarray | None = None) -> np.ndarray:
+    def final_states(self, programs: Sequence[Program | CompiledProgram],
+                     initial_states: np.ndarray | None = None) -> np.ndarray:
+        """(B, N_STATE) final states of ``programs`` from ``initial_states`` (default: hover at the origin)."""
         check_type("programs", programs, Sequence, "a sequence of Programs")
-        plants = np.tile(self._plant, (len(programs), 1))
-        return simulate_batch(programs, self.config, initial_states=initial_states, plants=plants,
-                              max_step_s=self.max_step_s)
+        if initial_states is not None:
+            return simulate_batch(programs, self.config, initial_states=initial_states,
+                                  plants=np.tile(self._plant, (len(programs), 1)), max_step_s=self.max_step_s)
+        compiled = [_compiled(p, f"programs[{k}]") for k, p in enumerate(programs)]
+        B = len(compiled)
+        if B == 0:
+            return np.empty((0, N_STATE))
+        return _final_states(compiled, np.tile(self._hover, (B, 1)), np.tile(self._plant, (B, 1)),
+                             np.tile(self._ctrl, (B, 1)), np.tile(self._delay, (B, 1)), self.max_step_s)
 
     def trajectory(self, program: Program, initial_state: np.ndarray | None = None) -> Trajectory:
         return simulate(program, self.config, initial_state=initial_state, max_step_s=self.max_step_s)

@@ -13,7 +13,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.optimize import lsq_linear
 
 from aerobat.core.design import Design
 from aerobat.core.maneuver import bounds_arrays, error_scales, parameter_scales
@@ -135,6 +134,8 @@ def bounded_solve(
     b = np.concatenate([target, np.zeros(Vt.shape[0])])
     lo2 = np.minimum(lo, 0.0)  # the current point (x = 0) is always feasible
     hi2 = np.maximum(hi, 0.0)
+    from scipy.optimize import lsq_linear  # here, not at import: loading scipy.optimize takes ~0.5 s
+
     res = lsq_linear(A, b, bounds=(lo2, hi2), method="bvls")
     return np.clip(res.x, lo2, hi2)
 

@@ -6,6 +6,12 @@ not), the rate controller with gyro latency, scale error and bias, zero-order
 hold of motor commands, RK4 of the true plant, and motion-capture sampling with
 pre-drawn noise. No randomness inside: every noise sample comes from the
 arena's seeded generator.
+
+``supervise`` is the one entry point; every kernel it calls is ``inline="always"``, so it
+is compiled as one unit. (Calling separately compiled numba functions made the result
+depend on numba's cache: a freshly compiled ``supervise`` and one loaded from the cache
+differed in the last bits, so the first run after a change and every later run of the same
+seeded session disagreed by up to ~1e-9 m.)
 """
 
 from __future__ import annotations
@@ -15,7 +21,7 @@ import math
 import numba as nb
 import numpy as np
 
-from aerobat.quadrotor.dynamics import controller_thrusts
+from aerobat.quadrotor.dynamics import controller_constants, plant_constants, thrust_commands
 from aerobat.quadrotor.feedback import apply_feedback, onboard_propagate, onboard_receive, relay_deviation
 from aerobat.quadrotor.simulate import rk4_plant_step
 
@@ -25,7 +31,7 @@ __all__ = ["MOCAP_COLUMNS", "advance", "estimate_pose", "mocap_sample", "pd_comm
 MOCAP_COLUMNS = 8
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def advance(x, gyro_prev, tick0, n_ticks, tick_s, plant, ctrl, sensor, latency, radio_cmd,
             bp, coeffs, nseg, man_start_tick, duration_s, mocap_every, mocap_noise, mocap_out,
             fb_gains, reference, onboard, history, scratch):  # pragma: no cover
@@ -45,7 +51,8 @@ def advance(x, gyro_prev, tick0, n_ticks, tick_s, plant, ctrl, sensor, latency, 
     k4 = np.empty(n)
     tmp = np.empty(n)
     cmd = np.empty(4)
-    ft = np.empty(4)
+    pc = plant_constants(plant)
+    cc = controller_constants(ctrl)
     rows = 0
     seg = 0
     for i in range(n_ticks):
@@ -78,13 +85,13 @@ def advance(x, gyro_prev, tick0, n_ticks, tick_s, plant, ctrl, sensor, latency, 
             else:
                 onboard_propagate(onboard, history, t, gp, gq, gr, tick_s)
         if latency > 0:
-            controller_thrusts(cmd, gyro_prev[0], gyro_prev[1], gyro_prev[2], ctrl, ft)
+            ft = thrust_commands(cmd, gyro_prev[0], gyro_prev[1], gyro_prev[2], ctrl, cc)
         else:
-            controller_thrusts(cmd, gp, gq, gr, ctrl, ft)
+            ft = thrust_commands(cmd, gp, gq, gr, ctrl, cc)
         gyro_prev[0] = gp
         gyro_prev[1] = gq
         gyro_prev[2] = gr
-        rk4_plant_step(t, x, ft, plant, tick_s, k1, k2, k3, k4, tmp)
+        rk4_plant_step(t, x, ft, plant, pc, tick_s, k1, k2, k3, k4, tmp)
         for j in range(n):
             if not math.isfinite(x[j]):
                 return rows, 1
@@ -112,7 +119,7 @@ def mocap_sample(x, t, noise, out):  # pragma: no cover - compiled
     out[7] = qw * dz + qx * dy - qy * dx + qz * dw
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def pd_command(pos, vel, quat, target, integral, gains, limits, dt, out, settling=False):  # pragma: no cover
     """Cascaded PD(+I) hover controller: position → acceleration → attitude → body rates.
 
@@ -192,7 +199,7 @@ def pd_command(pos, vel, quat, target, integral, gains, limits, dt, out, settlin
     out[3] = min(max(-kyaw * ez, -limits[3]), limits[3])
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def estimate_pose(log, available, est_pos, est_vel, est_quat):  # pragma: no cover - compiled
     """Supervisor's estimate from the first ``available`` mocap rows: last pose, line-fit velocity."""
     if available <= 0:

@@ -291,6 +291,21 @@ class MultiFlip:
             e += [pos[o], vel[o], other, euler[2]]
         return np.array(e)
 
+    def error_batch(self, final_states: np.ndarray) -> np.ndarray:
+        """(B, n_err) errors of (B, N_STATE) final states, bit for bit :meth:`error` of each."""
+        s = np.asarray(final_states, dtype=float)
+        angles = rotation_angles(s)
+        euler = euler_zyx(s)
+        if self.axis == "roll":
+            h, o, flip, other = 1, 0, angles[:, 0], euler[:, 1]
+        else:
+            h, o, flip, other = 0, 1, angles[:, 1], euler[:, 0]
+        pos, vel = s[:, POS], s[:, VEL]
+        columns = [pos[:, h], vel[:, h], pos[:, 2], vel[:, 2], flip - self.target_flip_angle_rad]
+        if self.dims == 3:
+            columns += [pos[:, o], vel[:, o], other, euler[:, 2]]
+        return np.stack(columns, axis=1)
+
     def spec(self) -> dict[str, Any]:
         return {
             "kind": "flip",

@@ -159,6 +159,14 @@ class Translation:
             roll - self.final_angle_rad,
         ])
 
+    def error_batch(self, final_states: np.ndarray) -> np.ndarray:
+        """(B, 5) errors of (B, N_STATE) final states, bit for bit :meth:`error` of each."""
+        s = np.asarray(final_states, dtype=float)
+        roll = rotation_angles(s)[:, 0]
+        pos, vel = s[:, POS], s[:, VEL]
+        return np.stack([pos[:, 1] - self.target_yz[0], vel[:, 1], pos[:, 2] - self.target_yz[1], vel[:, 2],
+                         roll - self.final_angle_rad], axis=1)
+
     def spec(self) -> dict[str, Any]:
         return {
             "kind": "translation",

@@ -2,18 +2,24 @@
 
 aerobat's simulation kernels are compiled by numba on first use and cached on disk
 (in ``__pycache__`` next to the sources, or under ``NUMBA_CACHE_DIR`` when it is set).
-Compiling them all takes 10–20 s, which the first ``aerobat learn`` would otherwise
+Compiling them all takes a minute of CPU, which the first ``aerobat learn`` would otherwise
 spend silently before its first trial. ``make setup`` runs this module once, so every
 later command loads the compiled code from the cache.
 
 It runs each compiled entry point once, on tiny inputs, through the public functions
 the commands use, so it compiles exactly the variants (argument types) they need:
-continuous and sampled playback, the parallel batch, and a complete arena trial.
+continuous and sampled playback, the parallel batch, a complete arena trial with the onboard
+feedback (the arena's default, tracking) and one in the open loop, and the kernels the RotorPy
+and Betaflight plants call one by one from Python (the onboard feedback, the supervisor's
+estimate and PD controller, motion capture, the Betaflight world and pilot), with the
+argument types those plants pass.
 """
 
 from __future__ import annotations
 
 import time
+
+import numpy as np
 
 __all__ = ["warm_up"]
 
@@ -32,8 +38,84 @@ def warm_up() -> float:
     simulate(program, config, mode="sampled")
     simulate_batch([program, program], config)
     NominalModel(config).final_states([program])
-    Arena(config, seed=0).fly(program)
+    Arena(config, seed=0, feedback="tracking").fly(program)
+    Arena(config, seed=0, feedback="none").fly(program)
+    _plant_kernels(simulate(program, config))
     return time.perf_counter() - start
+
+
+def _plant_kernels(nominal: object) -> None:
+    """The kernels RotorPy and Betaflight call from Python, once each with the types they pass."""
+    from aerobat.plants.arena.kernel import MOCAP_COLUMNS, estimate_pose, mocap_sample, pd_command
+    from aerobat.quadrotor.feedback import (
+        apply_feedback,
+        as_feedback,
+        feedback_vector,
+        onboard_propagate,
+        onboard_receive,
+        onboard_state,
+        reference_from_trajectory,
+        relay_deviation,
+    )
+
+    feedback = as_feedback("tracking")
+    reference = reference_from_trajectory(nominal.times_s, nominal.states,  # type: ignore[attr-defined]
+                                          feedback.gains.reference_rate_hz)
+    gains = feedback_vector(feedback)
+    x = nominal.states[-1].copy()  # type: ignore[attr-defined]
+    rows = np.zeros((8, MOCAP_COLUMNS))
+    noise = np.zeros((8, 6))
+    for k in range(rows.shape[0]):
+        mocap_sample(x, 0.01 * k, noise[k], rows[k])
+    pos, vel, quat = np.zeros(3), np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
+    estimate_pose(rows, rows.shape[0], pos, vel, quat)
+    cmd = np.array([9.81, 0.0, 0.0, 0.0])
+    pd_command(pos, vel, quat, np.zeros(3), np.zeros(3), np.array([4.0, 3.0, 10.0, 2.0, 1.0]),
+               np.array([0.0, 20.0, 5.0, 10.0, 9.81]), 1.0 / 70.0, cmd)
+    onboard, history = onboard_state()
+    scratch, relay = np.empty(10), np.empty(6)
+    moved = relay_deviation(rows, rows.shape[0], 0.0, np.zeros(3), reference.samples, reference.dt_s, scratch, relay)
+    onboard_receive(onboard, history, gains, float(rows[-1, 0]), rows[-1, 4:8].copy(), relay[0:3], relay[3:6], moved)
+    apply_feedback(cmd, onboard, gains, reference.samples, 0.0, 0.07, scratch)
+    onboard_propagate(onboard, history, 0.07, 0.0, 0.0, 0.0, 1.0 / 800.0)
+    _betaflight_kernels(x, cmd)
+
+
+def _betaflight_kernels(x: np.ndarray, cmd: np.ndarray) -> None:
+    """The Betaflight world's step and the pilot's sticks (no firmware needed to compile them)."""
+    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.plants.betaflight.physics import (
+        C_CONTACT,
+        C_DELAY,
+        N_COUNTERS,
+        PACKET_DOUBLES,
+        airframe_plant,
+        aux_vector,
+        ground_state,
+        prime,
+        step,
+    )
+    from aerobat.plants.betaflight.pilot import N_LIMITS, angle_sticks, program_sticks
+
+    params = BetaflightParams()
+    step_s = 1.0 / params.firmware.gyro_rate_hz
+    world = ground_state((0.0, 0.0, -2.5))
+    plant = airframe_plant(params)
+    aux = aux_vector(params, step_s=step_s, ground_z_m=-2.5, gravity_m_s2=9.81)
+    counters = np.zeros(N_COUNTERS, dtype=np.int64)
+    counters[C_DELAY] = 1
+    counters[C_CONTACT] = 1
+    noise = np.zeros((2, 6))
+    packet = np.zeros(PACKET_DOUBLES)
+    scratch = np.zeros((6, x.shape[0]))
+    prime(world, plant, aux, counters, noise[0], packet, scratch)
+    step(world, np.zeros(4, dtype=np.float32), plant, aux, np.zeros((2, 4)), counters, noise[1], packet, scratch)
+    limits = np.zeros(N_LIMITS)
+    limits[:] = 1.0
+    sticks = np.zeros(4)
+    program_sticks(cmd, limits, sticks)
+    angle_sticks(np.zeros(3), np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3), np.zeros(3),
+                 np.ones(4), limits, 1.0 / 50.0, sticks)
 
 
 def main() -> None:

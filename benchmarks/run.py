@@ -45,15 +45,9 @@ from aerobat.core.learning import learn  # noqa: E402
 from aerobat.plants import Arena  # noqa: E402
 from aerobat.quadrotor.dynamics import N_STATE, controller_vector, hover_state, plant_vector  # noqa: E402
 from aerobat.quadrotor.maneuvers import MultiFlip  # noqa: E402
+from aerobat.quadrotor.playback import run_continuous  # noqa: E402
 from aerobat.quadrotor.program import RampDown  # noqa: E402
-from aerobat.quadrotor.simulate import (  # noqa: E402
-    NominalModel,
-    _run_batch,
-    _run_continuous,
-    _steps,
-    batch_threads,
-    set_batch_threads,
-)
+from aerobat.quadrotor.simulate import NominalModel, _run_batch, _steps, batch_threads, set_batch_threads  # noqa: E402
 
 CONFIG = hummingbird()
 OTHER_MARKER = "<!-- other benchmarks: kept by make bench -->"
@@ -113,7 +107,7 @@ def bench_kernel(rounds: int = 31) -> dict:
 
     def kernel():  # one vehicle, one program, nothing recorded: what simulate(record=False) runs
         for _ in range(repeats):
-            _run_continuous(*one)
+            run_continuous(*one)
 
     def reference():
         for _ in range(repeats):

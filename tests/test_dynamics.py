@@ -32,7 +32,7 @@ from aerobat.quadrotor.dynamics import (
     rotation_angles,
     rotation_matrices,
 )
-from aerobat.quadrotor.simulate import rk4_plant_step
+from aerobat.quadrotor.playback import rk4_plant_step
 from aerobat.quadrotor.vehicle import ControllerParams, VehicleParams
 
 V = VehicleParams()

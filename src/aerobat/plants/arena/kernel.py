@@ -23,7 +23,7 @@ import numpy as np
 
 from aerobat.quadrotor.dynamics import controller_constants, plant_constants, thrust_commands
 from aerobat.quadrotor.feedback import apply_feedback, onboard_propagate, onboard_receive, relay_deviation
-from aerobat.quadrotor.simulate import rk4_plant_step
+from aerobat.quadrotor.playback import rk4_plant_step
 
 __all__ = ["MOCAP_COLUMNS", "advance", "estimate_pose", "mocap_sample", "pd_command", "supervise"]
 

@@ -343,6 +343,11 @@ def output_dir(path: str | Path) -> Path:
     """Create (if needed) and return an output folder; :class:`OutputError` naming it if that is impossible."""
     out = Path(path)
     try:
+        str(out).encode("utf-8")
+    except UnicodeEncodeError:  # bytes that are no text: the store records the folder as text
+        shown = str(out).encode("utf-8", "backslashreplace").decode("ascii", "backslashreplace")
+        raise ConfigError(f"--out {shown}: the name is not valid UTF-8 text; choose another folder name") from None
+    try:
         out.mkdir(parents=True, exist_ok=True)
     except FileExistsError:
         raise OutputError(f"--out {out}: exists and is not a folder") from None

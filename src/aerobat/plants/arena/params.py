@@ -248,6 +248,11 @@ class ArenaParams:
     supervisor: Supervisor = field(default_factory=Supervisor)
 
     def __post_init__(self) -> None:
+        sections = {"true_vehicle": TrueVehicle, "aerodynamics": Aerodynamics, "onboard": Onboard, "drift": Drift,
+                    "disturbances": Disturbances, "motion_capture": MotionCapture, "links": Links, "volume": Volume,
+                    "supervisor": Supervisor}
+        for name, kind in sections.items():
+            check_type(name, getattr(self, name), kind, f"a {kind.__name__}")
         # the radio delivers a command only if it arrives before the next one is sent (a newer
         # packet supersedes one still in flight): a longer latency would silently cut the link
         tick_s = 1.0 / self.onboard.rate_hz

@@ -197,7 +197,8 @@ def section_arena_flip(seeds: list[int], extra_runs: list[object], iterations: i
             m = MultiFlip(vehicle=config.vehicle, flips=3, dims=3)
             result = design(m, NominalModel(config))
             idx = position_indices(m.errors)
-            errors = [float(np.linalg.norm(m.error(Arena(H, seed=s, feedback="none").fly(m.program(result.p_nominal)).final_state)[idx]))
+            program = m.program(result.p_nominal)
+            errors = [float(np.linalg.norm(m.error(Arena(H, seed=s, feedback="none").fly(program).final_state)[idx]))
                       for s in seeds]
             print(f"  identified on arena seed {run.plant.seed}: {np.median(errors):.3f} m [{max(errors):.3f}]")
 

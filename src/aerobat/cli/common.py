@@ -242,8 +242,8 @@ def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | No
     p.add_argument("--seed", type=bounded_int(0, 2**63 - 1), default=0, help="seed of the plant's random generator")
     p.add_argument("--feedback", choices=("none", "attitude", "tracking"), default=None,
                    help="what the vehicle's onboard loop mixes into the program: none (the paper's open "
-                        "loop), attitude, tracking (docs/feedback.md; default: the plant's best measured, tracking on the arena "
-                        "and Betaflight, none on RotorPy)")
+                        "loop), attitude, tracking (docs/feedback.md; default: the plant's best measured, "
+                        "tracking on the arena and Betaflight, none on RotorPy)")
 
 
 def add_db_option(p: argparse.ArgumentParser) -> None:

@@ -8,8 +8,8 @@ aerodynamic magnitudes are listed in ``docs/plants.md``.
 
 from __future__ import annotations
 
-import math
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any

@@ -29,7 +29,7 @@ def main() -> None:
     config = hummingbird()
     flip = MultiFlip(vehicle=config.vehicle, flips=3, max_rate_rad_s=np.radians(1800), dims=3)
     nominal = design(flip, NominalModel(config))
-    session = learn(flip, nominal, Arena(config, seed=1), iterations=30)
+    session = learn(flip, nominal, Arena(config, seed=1, feedback="none"), iterations=30)
     model = simulate(flip.program(nominal.p_nominal), config)
     measured = [it for it in session.measured if it.trial is not None]
     flights = [("nominal (model)", model.times_s, model.states),

@@ -52,7 +52,7 @@ def measure_step(axis: str, rate_deg_s: float, seed: int = 1, params: Betaflight
                  ) -> tuple[np.ndarray, np.ndarray]:
     """Body rate (true, aerobat FLU) after an ACRO stick step from hover; t = 0 when the step reaches the receiver."""
     stick_index, state_index, sign, _, _ = AXES[axis]
-    plant = BetaflightPlant(CONFIG, params, seed=seed)
+    plant = BetaflightPlant(CONFIG, params, seed=seed, feedback="none")
     with plant.open_flight() as flight:
         plant.power_on_and_arm(flight)
         plant.settle(flight)
@@ -186,7 +186,7 @@ def learn_one(name: str, seed: int, iterations_target: int, db: Path) -> dict[st
     started = time.perf_counter()
     iterations: list[Any] = []
     with Store(db) as store:
-        run = start_session(store, maneuver, model=CONFIG, plant=PlantChoice("betaflight", seed=seed),
+        run = start_session(store, maneuver, model=CONFIG, plant=PlantChoice("betaflight", seed=seed, feedback="none"),
                             rule=RuleChoice(), iterations=iterations_target, design_result=nominal,
                             command=("scripts/results_betaflight.py", "learn", name, str(seed)))
         outcome = run.run(on_iteration=iterations.append)
@@ -249,7 +249,7 @@ def cmd_gyro() -> dict[str, Any]:
         params = BetaflightParams().replace(firmware__gyro_rate_hz=rate)
         trials = []
         for seed in (1, 2, 3):
-            plant = BetaflightPlant(CONFIG, params, seed=seed)
+            plant = BetaflightPlant(CONFIG, params, seed=seed, feedback="none")
             trial = plant.fly(maneuver.program(nominal.p_nominal))
             peak = float(np.degrees(np.abs(plant.last_truth[1][:, 10]).max()))
             trials.append({"error": maneuver.error(trial.final_state).tolist(), "peak_roll_rate_deg_s": peak,

@@ -49,7 +49,7 @@ def main() -> None:
         d = design(m, MODEL, correction=kind)
         rows = []
         for seed in range(1, 7):
-            s = learn(m, d, Arena(CONFIG, seed=seed), iterations=30)
+            s = learn(m, d, Arena(CONFIG, seed=seed, feedback="none"), iterations=30)
             first, late, ang = summarize(s, [0, 2, 5], [4, 7, 8])
             pinned = int(np.sum(np.isclose(s.final_params, [p.lower for p in m.parameters]) |
                                 np.isclose(s.final_params, [p.upper for p in m.parameters])))
@@ -66,7 +66,7 @@ def main() -> None:
     print("\n## 2D single flip at 800°/s on the arena (Fig. 11)")
     m1 = MultiFlip(vehicle=CONFIG.vehicle, flips=1, max_rate_rad_s=math.radians(800), dims=2)
     d1 = design(m1, MODEL)
-    s1 = learn(m1, d1, Arena(CONFIG, seed=1), iterations=20)
+    s1 = learn(m1, d1, Arena(CONFIG, seed=1, feedback="none"), iterations=20)
     first, late, ang = summarize(s1, [0, 2], [4])
     print(f"first {first:.3f} m, mean last 10 {late:.3f} m, angle {ang:.2f}°")
     _learning_figures(s1, CONFIG, OUT)

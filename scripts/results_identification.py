@@ -154,7 +154,7 @@ def first_and_trials(maneuver: MultiFlip, result, seeds: list[int], iterations: 
     idx = position_indices(maneuver.errors)
     firsts, ttt = [], []
     for seed in seeds:
-        session = learn(maneuver, result, Arena(H, seed=seed), iterations=iterations)
+        session = learn(maneuver, result, Arena(H, seed=seed, feedback="none"), iterations=iterations)
         errors = [float(np.linalg.norm(it.error[idx])) for it in session.measured]
         firsts.append(errors[0])
         ttt.append(next((k + 1 for k, e in enumerate(errors) if e < TOLERANCE_M), math.inf))
@@ -197,7 +197,8 @@ def section_arena_flip(seeds: list[int], extra_runs: list[object], iterations: i
             m = MultiFlip(vehicle=config.vehicle, flips=3, dims=3)
             result = design(m, NominalModel(config))
             idx = position_indices(m.errors)
-            errors = [float(np.linalg.norm(m.error(Arena(H, seed=s).fly(m.program(result.p_nominal)).final_state)[idx]))
+            program = m.program(result.p_nominal)
+            errors = [float(np.linalg.norm(m.error(Arena(H, seed=s, feedback="none").fly(program).final_state)[idx]))
                       for s in seeds]
             print(f"  identified on arena seed {run.plant.seed}: {np.median(errors):.3f} m [{max(errors):.3f}]")
 
@@ -219,7 +220,7 @@ def section_rotorpy(seeds: list[int]) -> None:
         idx = position_indices(m.errors)
         errors = []
         for seed in seeds:
-            trial = RotorPyPlant(H, seed=seed).fly(m.program(result.p_nominal))
+            trial = RotorPyPlant(H, seed=seed, feedback="none").fly(m.program(result.p_nominal))
             errors.append(float(np.linalg.norm(m.error(trial.final_state)[idx])))
         results[label] = errors
         print(f"design on {label}: {result.status.value}; first attempt on seeds {seeds}: "

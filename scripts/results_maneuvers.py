@@ -23,7 +23,8 @@ def main() -> None:
     print("|---|---|")
     for path in sorted((ROOT / "examples" / "maneuvers").glob("*.toml")):
         maneuver = load_maneuver_file(path, config.vehicle)
-        session = learn(maneuver, design(maneuver, NominalModel(config)), Arena(config, seed=1), iterations=30)
+        plant = Arena(config, seed=1, feedback="none")
+        session = learn(maneuver, design(maneuver, NominalModel(config)), plant, iterations=30)
         errors = session.position_errors_m()
         print(f"| `{path.name}` | {errors[0]:.3f} / {errors[-10:].mean():.3f} |")
 

@@ -136,3 +136,14 @@ def test_arena_file_round_trip_and_errors(tmp_path):
     bad.write_text('[true_vehicle]\nmass_scale = "heavy"\n')
     with pytest.raises(ConfigError, match=r"mass_scale.*expected a number"):
         load_arena(bad)
+    # a radio latency longer than its period would silently cut the supervisor's link
+    bad.write_text("[links]\ncommand_latency_s = 0.04\n")
+    with pytest.raises(ConfigError, match=r"bad.toml.*command_latency_s = 0.04 s: allowed at most 0.01375 s"):
+        load_arena(bad)
+
+
+def test_a_slow_radio_within_its_period_still_flies():
+    params = ArenaParams().replace(links__command_rate_hz=30.0, links__command_latency_s=0.03)
+    arena = Arena(CONFIG, params, seed=0)
+    statuses = [arena.fly(TRIPLE).status for _ in range(3)]
+    assert statuses.count("crashed") == 0 and "ok" in statuses

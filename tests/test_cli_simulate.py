@@ -117,7 +117,7 @@ def test_plot_without_json_reports_the_file(capsys, tmp_path):
     png = tmp_path / "hover.png"
     assert main(["simulate", str(EXAMPLES / "hover.toml"), "--plot", str(png)]) == 0
     out, _ = capsys.readouterr()
-    assert f"plot written to {png}" in out
+    assert f"figure written to {png}" in out
     assert png.read_bytes()[:4] == b"\x89PNG"
 
 

@@ -236,3 +236,15 @@ def test_learning_with_tracking_beats_the_open_loop_on_the_triple_flip():
         last[scheme], worst_angle[scheme] = float(np.mean(means)), float(np.max(np.mean(ang, axis=0)))
     assert last["none"] > 0.06 and worst_angle["none"] > 1.5  # the starting point
     assert last["tracking"] < 0.04 and worst_angle["tracking"] < 1.0, (last, worst_angle)
+
+
+def test_each_plant_defaults_to_its_best_measured_scheme():
+    from aerobat.plants import PlantChoice
+    from aerobat.quadrotor.feedback import FeedbackScheme
+
+    # docs/results.md, Feedback: tracking wins on the arena and through Betaflight; on RotorPy, with
+    # the default rule, the open loop does (tracking wins there only with the Broyden rule)
+    assert PlantChoice("arena").feedback.scheme is FeedbackScheme.TRACKING
+    assert PlantChoice("betaflight").feedback.scheme is FeedbackScheme.TRACKING
+    assert PlantChoice("rotorpy").feedback.scheme is FeedbackScheme.NONE
+    assert PlantChoice("rotorpy", feedback="tracking").feedback.scheme is FeedbackScheme.TRACKING

@@ -531,3 +531,23 @@ def test_ctrl_c_while_a_local_pool_runs_is_raised_between_waits():
         pool.close()
     assert len(seen) == 1 and seen[0] is not signal.default_int_handler
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_an_out_folder_whose_name_is_not_text_is_refused_before_the_study(tmp_path):
+    """Found by the fuzz campaign: the study ran, then storing its folder raised UnicodeEncodeError."""
+    out = os.fsdecode(bytes(tmp_path) + b"/\xff\xfe")
+    db = tmp_path / "s.sqlite"
+    code, stdout, err = call(["study", "envelope", "--dims", "2", "--workers", "1", "--rates-deg-s", "800",
+                              "--flips", "1", "--out", out, "--db", str(db)])
+    assert code == 2
+    one_error_line(err, "--out", "not valid UTF-8")
+    assert "jobs to run" not in stdout
+
+
+def test_arena_sections_of_the_wrong_type_are_config_errors():
+    """Found by the fuzz campaign: ArenaParams(links=5) raised AttributeError."""
+    from aerobat.errors import ConfigError
+    from aerobat.plants import ArenaParams
+
+    with pytest.raises(ConfigError, match="links: expected a Links, got int 5"):
+        ArenaParams(links=5)

@@ -242,7 +242,8 @@ def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | No
     p.add_argument("--seed", type=bounded_int(0, 2**63 - 1), default=0, help="seed of the plant's random generator")
     p.add_argument("--feedback", choices=("none", "attitude", "tracking"), default=None,
                    help="what the vehicle's onboard loop mixes into the program: none (the paper's open "
-                        "loop), attitude, tracking (docs/feedback.md; default: tracking, the best measured)")
+                        "loop), attitude, tracking (docs/feedback.md; default: the plant's best measured, "
+                        "tracking on the arena and Betaflight, none on RotorPy)")
 
 
 def add_db_option(p: argparse.ArgumentParser) -> None:
@@ -341,6 +342,11 @@ def open_store(args: argparse.Namespace, *, create: bool = True, **options: Any)
 def output_dir(path: str | Path) -> Path:
     """Create (if needed) and return an output folder; :class:`OutputError` naming it if that is impossible."""
     out = Path(path)
+    try:
+        str(out).encode("utf-8")
+    except UnicodeEncodeError:  # bytes that are no text: the store records the folder as text
+        shown = str(out).encode("utf-8", "backslashreplace").decode("ascii", "backslashreplace")
+        raise ConfigError(f"--out {shown}: the name is not valid UTF-8 text; choose another folder name") from None
     try:
         out.mkdir(parents=True, exist_ok=True)
     except FileExistsError:

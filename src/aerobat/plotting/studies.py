@@ -121,7 +121,11 @@ def plot_rules(curves: Mapping[str, Sequence[Sequence[float]]], trials: int, tol
     ax.set_yscale("log")
     ax.set_xlabel("trial")
     ax.set_ylabel("position error [m] (median, quartiles)")
-    ax.legend(fontsize=8)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=8)
+    else:  # every run failed before measuring a trial: say so rather than draw an empty panel
+        ax.text(0.5, 0.5, "no run measured a trial (see the table's failures)", transform=ax.transAxes,
+                ha="center", va="center", color="C3")
     return fig
 
 

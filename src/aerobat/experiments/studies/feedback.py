@@ -38,7 +38,7 @@ def _lossy(p: ArenaParams) -> ArenaParams:
 
 
 def _slow(p: ArenaParams) -> ArenaParams:
-    return dataclasses.replace(p, links=dataclasses.replace(p.links, command_latency_s=0.04))
+    return dataclasses.replace(p, links=dataclasses.replace(p.links, command_rate_hz=30.0, command_latency_s=0.03))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,7 +54,8 @@ SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
     Scenario("default", "the default arena", lambda p: p),
     Scenario("gyro-x5", "gyro scale errors and biases 5× the default: the estimator integrates a bad gyro", _gyro_x5),
     Scenario("lossy-link", "30 % of command packets lost, and the relayed estimates with them", _lossy),
-    Scenario("slow-link", "40 ms command latency (default 10 ms): relayed estimates arrive late", _slow),
+    Scenario("slow-link", "a 30 Hz radio with 30 ms latency (default 70 Hz, 10 ms): relayed estimates arrive "
+                          "late and seldom", _slow),
 )}
 """Scenarios of the feedback study (arena only; other plants run ``default``)."""
 

@@ -9,6 +9,7 @@ aerodynamic magnitudes are listed in ``docs/plants.md``.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -16,6 +17,7 @@ from typing import Any
 import tomli_w
 
 from aerobat.config import (
+    ConfigError,
     as_path,
     check_range,
     check_type,
@@ -244,6 +246,24 @@ class ArenaParams:
     links: Links = field(default_factory=Links)
     volume: Volume = field(default_factory=Volume)
     supervisor: Supervisor = field(default_factory=Supervisor)
+
+    def __post_init__(self) -> None:
+        sections = {"true_vehicle": TrueVehicle, "aerodynamics": Aerodynamics, "onboard": Onboard, "drift": Drift,
+                    "disturbances": Disturbances, "motion_capture": MotionCapture, "links": Links, "volume": Volume,
+                    "supervisor": Supervisor}
+        for name, kind in sections.items():
+            check_type(name, getattr(self, name), kind, f"a {kind.__name__}")
+        # the radio delivers a command only if it arrives before the next one is sent (a newer
+        # packet supersedes one still in flight): a longer latency would silently cut the link
+        tick_s = 1.0 / self.onboard.rate_hz
+        period_ticks = math.floor(1.0 / (self.links.command_rate_hz * tick_s) + 1e-9)
+        delay_ticks = math.ceil(self.links.command_latency_s / tick_s - 1e-9)
+        if delay_ticks > period_ticks:
+            raise ConfigError(
+                f"links.command_latency_s = {self.links.command_latency_s:g} s: allowed at most "
+                f"{period_ticks * tick_s:.5g} s ({period_ticks} onboard ticks) with links.command_rate_hz = "
+                f"{self.links.command_rate_hz:g} and onboard.rate_hz = {self.onboard.rate_hz:g}: the arena's radio "
+                f"delivers a command only before the next one is sent; lower the rate or the latency")
 
     @classmethod
     def ideal(cls) -> ArenaParams:

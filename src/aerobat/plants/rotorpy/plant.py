@@ -181,7 +181,8 @@ class RotorPyPlant:
     wind_profile : any object with RotorPy's wind interface ``update(t, position) -> (3,)`` [m/s];
         replaces ``settings.wind``.
     feedback : what the onboard loop mixes into the program (:mod:`aerobat.quadrotor.feedback`);
-        default the best scheme measured (``tracking``). The onboard estimator integrates RotorPy's
+        default ``none``, the best measured with the default update rule (``tracking`` wins only
+        with ``rule="broyden"``: docs/results.md, Feedback). The onboard estimator integrates RotorPy's
         body rates (its model has no gyro errors) and takes the supervisor's motion-capture estimate
         every supervisor period (``supervisor_rate_hz``; no radio here, so no drops).
     """
@@ -235,7 +236,8 @@ class RotorPyPlant:
         self._est_pos = np.zeros(3)
         self._est_vel = np.zeros(3)
         self._est_quat = np.array([1.0, 0.0, 0.0, 0.0])
-        self.feedback = as_feedback(feedback)
+        # None: RotorPy's default, the open loop (the best measured with the default rule)
+        self.feedback = Feedback(FeedbackScheme.NONE) if feedback is None else as_feedback(feedback)
         self._fb_vector = feedback_vector(self.feedback)
 
     # ---------------------------------------------------------------- state

@@ -34,6 +34,7 @@ __all__ = [
     "refuse_overwrite",
     "rule_choice_from_args",
     "session_ref",
+    "text_path",
 ]
 
 EXIT_USAGE = 2
@@ -343,17 +344,24 @@ def output_dir(path: str | Path) -> Path:
     """Create (if needed) and return an output folder; :class:`OutputError` naming it if that is impossible."""
     out = Path(path)
     try:
-        str(out).encode("utf-8")
-    except UnicodeEncodeError:  # bytes that are no text: the store records the folder as text
-        shown = str(out).encode("utf-8", "backslashreplace").decode("ascii", "backslashreplace")
-        raise ConfigError(f"--out {shown}: the name is not valid UTF-8 text; choose another folder name") from None
-    try:
         out.mkdir(parents=True, exist_ok=True)
     except FileExistsError:
         raise OutputError(f"--out {out}: exists and is not a folder") from None
     except OSError as exc:
         raise OutputError(f"--out {out}: cannot create the folder: {exc.strerror or exc}") from None
     return out
+
+
+def text_path(path: str | Path, option: str) -> str:
+    """``path`` as text the store can record; :class:`ConfigError` for a name with bytes that are not UTF-8."""
+    text = str(path)
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        shown = text.encode("utf-8", "backslashreplace").decode("ascii", "backslashreplace")
+        raise ConfigError(f"{option} {shown}: the name is not valid UTF-8 text, and the store records it; "
+                          f"choose another name") from None
+    return text
 
 
 def refuse_overwrite(path: Path, *, store_path: Path | None, force: bool, option: str) -> None:

@@ -33,6 +33,7 @@ from aerobat.cli.common import (
     output_dir,
     plant_choice_from_args,
     session_ref,
+    text_path,
 )
 from aerobat.errors import ConfigError, DesignFailed
 
@@ -43,8 +44,8 @@ def run_cli_study(args: argparse.Namespace, kind: str, spec: dict[str, Any], job
     """Run a study with progress lines; returns (outcome, output folder). Failed jobs are the caller's to report."""
     from aerobat.experiments.studies import run_study
 
-    if args.out is not None:
-        output_dir(args.out)  # an unusable --out (the store itself, a file) is refused before anything is written
+    if args.out is not None:  # an unusable --out (the store itself, a file, no text) is refused before anything runs
+        output_dir(text_path(args.out, "--out"))
     out_console = console(getattr(args, "json", False))
     started = time.perf_counter()
     state: dict[str, Any] = {"first": 0}

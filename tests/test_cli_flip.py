@@ -46,7 +46,8 @@ def test_infeasible_design_exits_nonzero_naming_the_limit(capsys, tmp_path):
 def test_learn_json_and_figures(capsys, tmp_path):
     out_dir = tmp_path / "out"
     code, out, _ = run(capsys, "learn", "flip", "--flips", "1", "--max-rate-deg-s", "800", "--dims", "2",
-                       "--plant", "arena", "--seed", "1", "--iterations", "4", "--out", str(out_dir), "--json")
+                       "--plant", "arena", "--seed", "1", "--iterations", "4", "--out", str(out_dir), "--json",
+                       "--db", str(tmp_path / "s.sqlite"))
     assert code == 0
     data = json.loads(out)
     assert data["error_names"] == ["y", "vy", "z", "vz", "flip_angle"]
@@ -60,7 +61,7 @@ def test_learn_json_and_figures(capsys, tmp_path):
 
 def test_learn_on_nominal_plant_table(capsys, tmp_path):
     code, out, _ = run(capsys, "learn", "flip", "--dims", "2", "--plant", "nominal", "--iterations", "2",
-                       "--out", str(tmp_path))
+                       "--out", str(tmp_path), "--db", str(tmp_path / "s.sqlite"))
     assert code == 0
     assert "p⁰" in out and "learned" in out
 

@@ -2,7 +2,8 @@
 
 aerobat's simulation kernels are compiled by numba on first use and cached on disk
 (in ``__pycache__`` next to the sources, or under ``NUMBA_CACHE_DIR`` when it is set).
-Compiling them all takes a minute of CPU, which the first ``aerobat learn`` would otherwise
+Compiling them all takes one to two minutes of CPU (the arena's supervisor, with the onboard
+feedback inlined, about 40 % of it), which the first ``aerobat learn`` would otherwise
 spend silently before its first trial. ``make setup`` runs this module once, so every
 later command loads the compiled code from the cache.
 

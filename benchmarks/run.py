@@ -102,8 +102,8 @@ def bench_kernel(rounds: int = 31) -> dict:
     c = constants(CONFIG.vehicle, CONFIG.controller)
     repeats = 20
 
-    one = (x0[None, :], bp[None, :], coeffs[None], np.array([len(bp) - 1]), plant[None, :], ctrl[None, :],
-           np.zeros((1, 3)), MAX_STEP_S, np.empty((1, N_STATE)), np.zeros(1, dtype=np.int64), *EMPTY)
+    one = (x0[None, :], bp[None, :], coeffs[None], np.array([len(bp) - 1]), plant[None, :], ctrl[None, :], MAX_STEP_S,
+           np.empty((1, N_STATE)), np.zeros(1, dtype=np.int64), *EMPTY)
 
     def kernel():  # one vehicle, one program, nothing recorded: what simulate(record=False) runs
         for _ in range(repeats):
@@ -255,13 +255,13 @@ def _cli_env(**extra: str) -> dict:
 
 
 def bench_first_learn(cold: bool = True) -> dict:
-    """Wall time from starting ``aerobat learn … --iterations 1`` to its first trial line.
+    """Wall time from starting ``aerobat learn … --trials 1`` to its first trial line.
 
     ``warm``: with the compiled code that ``make setup`` leaves in numba's cache (as a user's
     first command after setup); ``cold``: with an empty cache (what setup saves).
     """
     argv = [sys.executable, "-m", "aerobat.cli", "learn", "flip", "--flips", "3", "--dims", "3", "--plant", "arena",
-            "--iterations", "1", "--out", "out", "--db", "aerobat.sqlite"]
+            "--trials", "1", "--out", "out", "--db", "aerobat.sqlite"]
     result = {}
     runs = {"warm": {}}
     if cold:
@@ -377,7 +377,7 @@ def report(r: dict, betaflight: list[str] | None = None) -> str:
         ("design of the 2D triple flip (p⁰, J, C), warm", "—",
          f"{d['2']['median_s'] * 1e3:.0f} ms median, {d['2']['min_s'] * 1e3:.0f} ms best "
          f"({d['2']['evaluations']} simulations)"),
-        ("first `aerobat learn flip --flips 3 --dims 3 --plant arena --iterations 1` after `make setup`: "
+        ("first `aerobat learn flip --flips 3 --dims 3 --plant arena --trials 1` after `make setup`: "
          "start to its first trial line", "≤ 3 s", f"**{f['warm']['first_trial_s']:.2f} s**"),
     ]
     if "cold" in f:

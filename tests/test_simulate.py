@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -39,7 +40,7 @@ from aerobat.quadrotor.simulate import (
     simulate,
     simulate_batch,
 )
-from aerobat.quadrotor.vehicle import ControllerParams, VehicleConfig, VehicleParams, hummingbird
+from aerobat.quadrotor.vehicle import ControllerParams, ModelEffects, VehicleConfig, VehicleParams, hummingbird
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 CFG = hummingbird()
@@ -379,6 +380,23 @@ def test_batch_with_vehicles_states_and_plants(single_flip):
     assert simulate_batch([], CFG).shape == (0, N_STATE)
     with pytest.raises(ValueError, match="got 2 programs but 1 vehicles"):
         simulate_batch([single_flip, single_flip], [CFG])
+
+
+def test_batch_mixing_vehicles_with_and_without_latency_equals_separate_runs(single_flip):
+    """Rows with rate-loop latency run their own kernel, the others the plain one: same bits as simulate()."""
+    lagging = dataclasses.replace(CFG, effects=ModelEffects(rate_latency_s=(0.004, 0.006, 0.0),
+                                                            rotor_drag_axial_s_m=0.02))
+    configs = [CFG, lagging, lagging, CFG, lagging]
+    programs = _varied_programs(single_flip)[: len(configs)]
+    for threads in (1, 2):
+        set_batch_threads(threads)
+        try:
+            batch = simulate_batch(programs, configs)
+        finally:
+            set_batch_threads(None)
+        for b, config in enumerate(configs):
+            assert batch[b].tobytes() == simulate(programs[b], config, record=False).final_state.tobytes()
+    assert not np.array_equal(batch[0], simulate(programs[0], lagging, record=False).final_state)
 
 
 # ------------------------------------------------------------- bad input

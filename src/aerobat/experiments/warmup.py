@@ -2,21 +2,23 @@
 
 aerobat's simulation kernels are compiled by numba on first use and cached on disk
 (in ``__pycache__`` next to the sources, or under ``NUMBA_CACHE_DIR`` when it is set).
-Compiling them all takes a minute of CPU, which the first ``aerobat learn`` would otherwise
+Compiling them all takes one to two minutes of CPU (the arena's supervisor, with the onboard
+feedback inlined, about 40 % of it), which the first ``aerobat learn`` would otherwise
 spend silently before its first trial. ``make setup`` runs this module once, so every
 later command loads the compiled code from the cache.
 
 It runs each compiled entry point once, on tiny inputs, through the public functions
 the commands use, so it compiles exactly the variants (argument types) they need:
-continuous and sampled playback, the parallel batch, a complete arena trial with the onboard
-feedback (the arena's default, tracking) and one in the open loop, and the kernels the RotorPy
-and Betaflight plants call one by one from Python (the onboard feedback, the supervisor's
-estimate and PD controller, motion capture, the Betaflight world and pilot), with the
-argument types those plants pass.
+continuous playback (with and without rate-loop latency) and sampled playback, the parallel
+batch, a complete arena trial with the onboard feedback (the arena's default, tracking) and
+one in the open loop, and the kernels the RotorPy and Betaflight plants call one by one from
+Python (the onboard feedback, the supervisor's estimate and PD controller, motion capture,
+the Betaflight world and pilot), with the argument types those plants pass.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -30,12 +32,15 @@ def warm_up() -> float:
     from aerobat.plants.arena import Arena
     from aerobat.quadrotor.program import Program, Switch
     from aerobat.quadrotor.simulate import NominalModel, simulate, simulate_batch
-    from aerobat.quadrotor.vehicle import hummingbird
+    from aerobat.quadrotor.vehicle import ModelEffects, hummingbird
 
     config = hummingbird()
+    # an identified vehicle's rate-loop latency runs its own continuous kernel
+    lagging = dataclasses.replace(config, effects=ModelEffects(rate_latency_s=(0.005, 0.005, 0.005)))
     program = Program(switches=(Switch(time_s=0.0, channel="rate_p", value=1.0),), duration_s=0.05)
     simulate(program, config)
     simulate(program, config, mode="sampled")
+    simulate(program, lagging)
     simulate_batch([program, program], config)
     NominalModel(config).final_states([program])
     Arena(config, seed=0, feedback="tracking").fly(program)

@@ -3,7 +3,8 @@
 * :func:`run_continuous` — continuous mode (the design model): RK4 steps that land on every
   breakpoint, the program evaluated exactly at every stage, the controller acting on the
   body rates (or, with rate-loop latency, on the rates ``delay`` ago, interpolated in a
-  history of the steps). It plays the rows of a packed batch, one after the other.
+  history of the steps: :func:`run_continuous_delayed`). They play the rows of a packed batch,
+  one after the other.
 * :func:`run_sampled` — the onboard command generator: program and controller sampled every
   tick, motor commands held between ticks.
 * :func:`rk4_plant_step` — one RK4 step of the plant with the motor commands held (the
@@ -30,7 +31,7 @@ from aerobat.quadrotor.dynamics import (
     thrust_commands,
 )
 
-__all__ = ["rk4_plant_step", "run_continuous", "run_sampled"]
+__all__ = ["rk4_plant_step", "run_continuous", "run_continuous_delayed", "run_sampled"]
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
@@ -64,29 +65,19 @@ def _delayed_rates(hist_t, hist_w, count, t, x, delay, out):  # pragma: no cover
             out[a] = hist_w[j, a] + w * (hist_w[j + 1, a] - hist_w[j, a])
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _rates(x, delayed, hist_t, hist_w, count, t, delay, out):  # pragma: no cover - compiled
-    """The body rates the controller acts on: ``x``'s, or with latency those :func:`_delayed_rates` gives."""
-    if delayed:
-        _delayed_rates(hist_t, hist_w, count, t, x, delay, out)
-    else:
-        out[0] = x[10]
-        out[1] = x[11]
-        out[2] = x[12]
-
-
 @nb.njit(cache=True, fastmath=True, error_model="numpy", nogil=True)
-def run_continuous(x0, bp, coeffs, nseg, plant, ctrl, delays, max_step, out, rows, rec_t, rec_x,
+def run_continuous(x0, bp, coeffs, nseg, plant, ctrl, max_step, out, rows, rec_t, rec_x,
                    rec_u):  # pragma: no cover - compiled
-    """Continuous-time playback of the batch rows ``rows``, one after the other.
+    """Continuous-time playback of the batch rows ``rows``, one after the other (no rate-loop latency).
 
-    Row b: start state ``x0[b]``, final state into ``out[b]``, per-axis rate-loop latency
-    ``delays[b]`` [s] (zeros: none). With non-empty ``rec_*`` (one program) every step is
-    recorded; returns the number of records. Every continuous-mode simulation runs through this
-    one compiled function (``simulate``, and each thread's share of a batch), so they agree bit
-    for bit whatever the batch. Everything it calls is inlined (a kernel that calls another
-    compiled kernel ran ~8 % slower once numba loaded it from its cache), one level deep (nested
-    inlining multiplied the compile time).
+    Row b: start state ``x0[b]``, final state into ``out[b]``. With non-empty ``rec_*`` (one
+    program) every step is recorded; returns the number of records. Every continuous-mode
+    simulation without latency runs through this one compiled function (``simulate``, and each
+    thread's share of a batch), so they agree bit for bit whatever the batch. Everything it
+    calls is inlined (a kernel that calls another compiled kernel ran ~8 % slower once numba
+    loaded it from its cache), one level deep (nested inlining multiplied the compile time).
+    Vehicles with latency run :func:`run_continuous_delayed` (its history in this loop made
+    this one 3× slower).
     """
     n = N_STATE
     work = np.empty((6, n))  # the state and the four stages side by side
@@ -101,6 +92,86 @@ def run_continuous(x0, bp, coeffs, nseg, plant, ctrl, delays, max_step, out, row
     cmdm = cmds[1]
     cmd1 = cmds[2]
     poly = np.empty((4, 3))  # the current segment's coefficients
+    record = rec_t.shape[0] > 0
+    idx = 0
+    for b in rows:
+        pl = plant[b]
+        ct = ctrl[b]
+        breaks = bp[b]
+        cf = coeffs[b]
+        pc = plant_constants(pl)
+        cc = controller_constants(ct)
+        for j in range(n):
+            xs[j] = x0[b, j]
+        if record:
+            for ch in range(4):
+                for power in range(3):
+                    poly[ch, power] = cf[0, ch, power]
+            _command(poly, 0.0, cmd0)
+            rec_t[0] = breaks[0]
+            rec_x[0, :] = xs
+            rec_u[0, :] = cmd0
+            idx = 1
+        for seg in range(nseg[b]):
+            t0 = breaks[seg]
+            length = breaks[seg + 1] - t0
+            m = max(1, int(math.ceil(length / max_step - 1e-9)))
+            h = length / m
+            for ch in range(4):
+                for power in range(3):
+                    poly[ch, power] = cf[seg, ch, power]
+            for i in range(m):
+                tau = i * h
+                t = t0 + tau
+                # the program at the step's start, middle and end (tau + h, as the step's own end: the
+                # next start, (i + 1)·h, may round differently)
+                _command(poly, tau, cmd0)
+                _command(poly, tau + 0.5 * h, cmdm)
+                _command(poly, tau + h, cmd1)
+                derivative(t, xs, thrust_commands(cmd0, xs[10], xs[11], xs[12], ct, cc), pl, pc, k1)
+                for j in range(n):
+                    tmp[j] = xs[j] + 0.5 * h * k1[j]
+                derivative(t + 0.5 * h, tmp, thrust_commands(cmdm, tmp[10], tmp[11], tmp[12], ct, cc), pl, pc, k2)
+                for j in range(n):
+                    tmp[j] = xs[j] + 0.5 * h * k2[j]
+                derivative(t + 0.5 * h, tmp, thrust_commands(cmdm, tmp[10], tmp[11], tmp[12], ct, cc), pl, pc, k3)
+                for j in range(n):
+                    tmp[j] = xs[j] + h * k3[j]
+                derivative(t + h, tmp, thrust_commands(cmd1, tmp[10], tmp[11], tmp[12], ct, cc), pl, pc, k4)
+                for j in range(n):
+                    xs[j] += h / 6.0 * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
+                normalize_quaternion(xs)
+                if record:
+                    rec_t[idx] = t0 + (i + 1) * h if i + 1 < m else breaks[seg + 1]
+                    rec_x[idx, :] = xs
+                    rec_u[idx, :] = cmd1
+                    idx += 1
+        for j in range(n):
+            out[b, j] = xs[j]
+    return idx
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", nogil=True)
+def run_continuous_delayed(x0, bp, coeffs, nseg, plant, ctrl, delays, max_step, out, rows, rec_t, rec_x,
+                           rec_u):  # pragma: no cover - compiled
+    """:func:`run_continuous` for vehicles with rate-loop latency ``delays[b]`` [s] per axis.
+
+    The controller acts on the body rates ``delay`` before each stage's time, interpolated in
+    the history of the integration steps (the rate at the start before that).
+    """
+    n = N_STATE
+    work = np.empty((6, n))
+    xs = work[0]
+    k1 = work[1]
+    k2 = work[2]
+    k3 = work[3]
+    k4 = work[4]
+    tmp = work[5]
+    cmds = np.empty((3, 4))
+    cmd0 = cmds[0]
+    cmdm = cmds[1]
+    cmd1 = cmds[2]
+    poly = np.empty((4, 3))
     rates = np.empty(3)
     record = rec_t.shape[0] > 0
     idx = 0
@@ -114,21 +185,16 @@ def run_continuous(x0, bp, coeffs, nseg, plant, ctrl, delays, max_step, out, row
         cc = controller_constants(ct)
         for j in range(n):
             xs[j] = x0[b, j]
-        # latency: the rates the controller acts on come from a history of the integration steps
-        delayed = delay[0] > 0.0 or delay[1] > 0.0 or delay[2] > 0.0
         steps = 0
-        if delayed:
-            for seg in range(nseg[b]):
-                steps += max(1, int(math.ceil((breaks[seg + 1] - breaks[seg]) / max_step - 1e-9)))
-        hist_t = np.empty(steps + 1 if delayed else 0)
-        hist_w = np.empty((steps + 1 if delayed else 0, 3))
-        count = 0
-        if delayed:
-            hist_t[0] = breaks[0]
-            hist_w[0, 0] = xs[10]
-            hist_w[0, 1] = xs[11]
-            hist_w[0, 2] = xs[12]
-            count = 1
+        for seg in range(nseg[b]):
+            steps += max(1, int(math.ceil((breaks[seg + 1] - breaks[seg]) / max_step - 1e-9)))
+        hist_t = np.empty(steps + 1)
+        hist_w = np.empty((steps + 1, 3))
+        hist_t[0] = breaks[0]
+        hist_w[0, 0] = xs[10]
+        hist_w[0, 1] = xs[11]
+        hist_w[0, 2] = xs[12]
+        count = 1
         if record:
             for ch in range(4):
                 for power in range(3):
@@ -152,30 +218,29 @@ def run_continuous(x0, bp, coeffs, nseg, plant, ctrl, delays, max_step, out, row
                 _command(poly, tau, cmd0)
                 _command(poly, tau + 0.5 * h, cmdm)
                 _command(poly, tau + h, cmd1)
-                _rates(xs, delayed, hist_t, hist_w, count, t, delay, rates)
+                _delayed_rates(hist_t, hist_w, count, t, xs, delay, rates)
                 derivative(t, xs, thrust_commands(cmd0, rates[0], rates[1], rates[2], ct, cc), pl, pc, k1)
                 for j in range(n):
                     tmp[j] = xs[j] + 0.5 * h * k1[j]
-                _rates(tmp, delayed, hist_t, hist_w, count, t + 0.5 * h, delay, rates)
+                _delayed_rates(hist_t, hist_w, count, t + 0.5 * h, tmp, delay, rates)
                 derivative(t + 0.5 * h, tmp, thrust_commands(cmdm, rates[0], rates[1], rates[2], ct, cc), pl, pc, k2)
                 for j in range(n):
                     tmp[j] = xs[j] + 0.5 * h * k2[j]
-                _rates(tmp, delayed, hist_t, hist_w, count, t + 0.5 * h, delay, rates)
+                _delayed_rates(hist_t, hist_w, count, t + 0.5 * h, tmp, delay, rates)
                 derivative(t + 0.5 * h, tmp, thrust_commands(cmdm, rates[0], rates[1], rates[2], ct, cc), pl, pc, k3)
                 for j in range(n):
                     tmp[j] = xs[j] + h * k3[j]
-                _rates(tmp, delayed, hist_t, hist_w, count, t + h, delay, rates)
+                _delayed_rates(hist_t, hist_w, count, t + h, tmp, delay, rates)
                 derivative(t + h, tmp, thrust_commands(cmd1, rates[0], rates[1], rates[2], ct, cc), pl, pc, k4)
                 for j in range(n):
                     xs[j] += h / 6.0 * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
                 normalize_quaternion(xs)
                 t_end = t0 + (i + 1) * h if i + 1 < m else breaks[seg + 1]
-                if delayed:
-                    hist_t[count] = t_end
-                    hist_w[count, 0] = xs[10]
-                    hist_w[count, 1] = xs[11]
-                    hist_w[count, 2] = xs[12]
-                    count += 1
+                hist_t[count] = t_end
+                hist_w[count, 0] = xs[10]
+                hist_w[count, 1] = xs[11]
+                hist_w[count, 2] = xs[12]
+                count += 1
                 if record:
                     rec_t[idx] = t_end
                     rec_x[idx, :] = xs
@@ -247,8 +312,10 @@ def run_sampled(x, bp, coeffs, nseg, plant, ctrl, tick, substeps, rec_t, rec_x, 
             hist_w[count, 1] = x[11]
             hist_w[count, 2] = x[12]
             count += 1
-        _rates(x, delayed, hist_t, hist_w, count, t, delay, rates)
-        ft = thrust_commands(cmd, rates[0], rates[1], rates[2], ctrl, cc)  # held until the next tick
+            _delayed_rates(hist_t, hist_w, count, t, x, delay, rates)
+            ft = thrust_commands(cmd, rates[0], rates[1], rates[2], ctrl, cc)  # held until the next tick
+        else:
+            ft = thrust_commands(cmd, x[10], x[11], x[12], ctrl, cc)
         t_next = min((tick_index + 1) * tick, end)
         h = (t_next - t) / substeps
         for s in range(substeps):

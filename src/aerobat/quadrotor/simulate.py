@@ -47,7 +47,7 @@ from aerobat.quadrotor.dynamics import (
     model_plant_vector,
     rotation_angles,
 )
-from aerobat.quadrotor.playback import run_continuous, run_sampled
+from aerobat.quadrotor.playback import run_continuous, run_continuous_delayed, run_sampled
 from aerobat.quadrotor.program import CompiledProgram, Program
 from aerobat.quadrotor.vehicle import VehicleConfig
 
@@ -104,19 +104,29 @@ def batch_threads() -> int:
     return _Workers.threads if _Workers.threads is not None else int(nb.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
 
 
+def _play(rows: np.ndarray, x0: np.ndarray, bp: np.ndarray, coeffs: np.ndarray, nseg: np.ndarray, plants: np.ndarray,
+          ctrl: np.ndarray, delays: np.ndarray, max_step_s: float, out: np.ndarray) -> None:
+    """Rows ``rows`` of a packed batch into ``out``: the rows without rate-loop latency, then those with."""
+    lagged = np.any(delays[rows] > 0.0, axis=1)
+    if not lagged.all():
+        run_continuous(x0, bp, coeffs, nseg, plants, ctrl, max_step_s, out, rows[~lagged], _NO_T, _NO_X, _NO_U)
+    if lagged.any():
+        run_continuous_delayed(x0, bp, coeffs, nseg, plants, ctrl, delays, max_step_s, out, rows[lagged], _NO_T, _NO_X,
+                               _NO_U)
+
+
 def _run_batch(x0: np.ndarray, bp: np.ndarray, coeffs: np.ndarray, nseg: np.ndarray, plants: np.ndarray,
                ctrl: np.ndarray, delays: np.ndarray, max_step_s: float, out: np.ndarray) -> None:
     """Final states of a packed batch into ``out``: one program on this thread, several on all threads."""
     count = x0.shape[0]
     threads = min(count, batch_threads()) if count > 1 else 1
     if threads == 1:  # nothing to hand over
-        run_continuous(x0, bp, coeffs, nseg, plants, ctrl, delays, max_step_s, out, np.arange(count), _NO_T, _NO_X,
-                        _NO_U)
+        _play(np.arange(count), x0, bp, coeffs, nseg, plants, ctrl, delays, max_step_s, out)
         return
     chunks = min(count, 4 * threads)  # a few per thread even out programs of different lengths
     pool = _Workers.get(threads)
-    jobs = [pool.submit(run_continuous, x0, bp, coeffs, nseg, plants, ctrl, delays, max_step_s, out, rows, _NO_T,
-                        _NO_X, _NO_U) for rows in np.array_split(np.arange(count), chunks)]
+    jobs = [pool.submit(_play, rows, x0, bp, coeffs, nseg, plants, ctrl, delays, max_step_s, out)
+            for rows in np.array_split(np.arange(count), chunks)]
     for job in jobs:
         job.result()
 
@@ -294,9 +304,12 @@ def simulate(
     rec_u = np.empty((size, 4))
     if mode == "continuous":
         final = np.empty((1, N_STATE))
-        count = run_continuous(x[None, :], bp[None, :], coeffs[None], np.array([nseg]), plant_v[None, :],
-                                ctrl_v[None, :], delay[None, :], max_step_s, final, np.zeros(1, dtype=np.int64), rec_t,
-                                rec_x, rec_u)
+        packed = (x[None, :], bp[None, :], coeffs[None], np.array([nseg]), plant_v[None, :], ctrl_v[None, :])
+        row = np.zeros(1, dtype=np.int64)
+        if np.any(delay > 0.0):
+            count = run_continuous_delayed(*packed, delay[None, :], max_step_s, final, row, rec_t, rec_x, rec_u)
+        else:
+            count = run_continuous(*packed, max_step_s, final, row, rec_t, rec_x, rec_u)
         x = final[0]
     else:
         count = run_sampled(x, bp, coeffs, nseg, plant_v, ctrl_v, tick_s, substeps, rec_t, rec_x, rec_u, delay)

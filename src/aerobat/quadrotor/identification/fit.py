@@ -18,7 +18,6 @@ identifications (``docs/results.md`` has one over five seeds).
 
 from __future__ import annotations
 
-import contextlib
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -377,12 +376,10 @@ class _Problem:
 
 
 def _single_threaded_blas() -> Any:
-    """One BLAS thread while fitting, if threadpoolctl is installed: the solver's SVDs of a tall, narrow
-    Jacobian are several times faster that way on small machines (numba's threads are busy anyway)."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - an optional speed-up
-        return contextlib.nullcontext()
+    """One BLAS thread while fitting: the solver's SVDs of a tall, narrow Jacobian are several times
+    faster that way on small machines (numba's threads are busy anyway)."""
+    from threadpoolctl import threadpool_limits  # a declared dependency
+
     return threadpool_limits(limits=1, user_api="blas")
 
 

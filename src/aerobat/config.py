@@ -24,6 +24,7 @@ import numpy as np
 from aerobat.errors import ConfigError
 
 __all__ = [
+    "replace_sections",
     "ConfigError",
     "as_float_array",
     "as_path",
@@ -309,3 +310,16 @@ def table_field(table: Mapping[str, Any], name: str, source: str, expected: type
     if isinstance(value, float) and not math.isfinite(value):
         raise ConfigError(f"{source}.{name} = {value}: must be finite")
     return value
+
+
+def replace_sections(obj: Any, sections: Mapping[str, Any]) -> Any:
+    """Copy of a dataclass of sections with whole sections or ``section__field=value`` changes."""
+    changes: dict[str, Any] = {}
+    for key, value in sections.items():
+        if "__" in key:
+            sec, fld = key.split("__", 1)
+            current = changes.get(sec, getattr(obj, sec))
+            changes[sec] = dataclasses.replace(current, **{fld: value})
+        else:
+            changes[key] = value
+    return dataclasses.replace(obj, **changes)

@@ -8,7 +8,6 @@ aerodynamic magnitudes are listed in ``docs/plants.md``.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,6 +23,7 @@ from aerobat.config import (
     dataclass_from_table,
     dataclass_to_table,
     read_toml,
+    replace_sections,
     write_file,
 )
 
@@ -280,15 +280,8 @@ class ArenaParams:
 
     def replace(self, **sections: Any) -> ArenaParams:
         """Copy with whole sections or ``section__field=value`` changes."""
-        changes: dict[str, Any] = {}
-        for key, value in sections.items():
-            if "__" in key:
-                sec, fld = key.split("__", 1)
-                current = changes.get(sec, getattr(self, sec))
-                changes[sec] = dataclasses.replace(current, **{fld: value})
-            else:
-                changes[key] = value
-        return dataclasses.replace(self, **changes)
+        changed: ArenaParams = replace_sections(self, sections)
+        return changed
 
 
 def load_arena(path: str | Path) -> ArenaParams:

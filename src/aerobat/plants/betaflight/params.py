@@ -12,7 +12,6 @@ versioned ``settings.toml`` applied through Betaflight's CLI (:mod:`.settings`).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,7 +19,16 @@ from typing import Any
 
 import tomli_w
 
-from aerobat.config import check_range, dataclass_from_table, dataclass_to_table, read_toml
+from aerobat.config import (
+    as_path,
+    check_range,
+    check_type,
+    dataclass_from_table,
+    dataclass_to_table,
+    read_toml,
+    replace_sections,
+    write_file,
+)
 from aerobat.errors import ConfigError
 from aerobat.plants.arena.params import Aerodynamics, Disturbances, Drift, MotionCapture, Volume
 
@@ -271,22 +279,16 @@ class BetaflightParams:
 
     def replace(self, **sections: Any) -> BetaflightParams:
         """Copy with whole sections or ``section__field=value`` changes."""
-        changes: dict[str, Any] = {}
-        for key, value in sections.items():
-            if "__" in key:
-                sec, fld = key.split("__", 1)
-                current = changes.get(sec, getattr(self, sec))
-                changes[sec] = dataclasses.replace(current, **{fld: value})
-            else:
-                changes[key] = value
-        return dataclasses.replace(self, **changes)
+        changed: BetaflightParams = replace_sections(self, sections)
+        return changed
 
 
 def load_betaflight(path: str | Path) -> BetaflightParams:
     """Read a Betaflight plant TOML file; :class:`ConfigError` names the file, field and range."""
-    path = Path(path)
+    path = as_path(path)
     return dataclass_from_table(BetaflightParams, read_toml(path), source=str(path))
 
 
 def save_betaflight(params: BetaflightParams, path: str | Path) -> None:
-    Path(path).write_text(tomli_w.dumps(dataclass_to_table(params)))
+    check_type("params", params, BetaflightParams, "BetaflightParams")
+    write_file(path, tomli_w.dumps(dataclass_to_table(params)))

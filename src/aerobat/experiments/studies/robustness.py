@@ -129,7 +129,7 @@ def sample_betaflight(ranges: RobustnessRanges, seed: int,
         "noise_scale": u(ranges.noise_scale),
     }
     aero, noise = props["aerodynamics_scale"], props["noise_scale"]
-    ad, d, mc, s = base.aerodynamics, base.disturbances, base.motion_capture, base.sensors
+    s = base.sensors
     params = base.replace(
         airframe=dataclasses.replace(
             a, mass_kg=a.mass_kg * props["mass_scale"],
@@ -140,15 +140,7 @@ def sample_betaflight(ranges: RobustnessRanges, seed: int,
             thrust_gains=(a.thrust_gains[0] * float(g[0]), a.thrust_gains[1] * float(g[1]),
                           a.thrust_gains[2] * float(g[2]), a.thrust_gains[3] * float(g[3])),
             com_offset_m=(float(c[0]), float(c[1]), a.com_offset_m[2])),
-        aerodynamics=dataclasses.replace(
-            ad, body_drag_n_s2_m2=ad.body_drag_n_s2_m2 * aero, rotor_drag_s_m=ad.rotor_drag_s_m * aero,
-            rotational_damping_n_m_s=(ad.rotational_damping_n_m_s[0] * aero, ad.rotational_damping_n_m_s[1] * aero,
-                                      ad.rotational_damping_n_m_s[2] * aero)),
-        disturbances=dataclasses.replace(
-            d, wind_std_m_s=d.wind_std_m_s * noise, gust_amplitude_std_m_s=d.gust_amplitude_std_m_s * noise,
-            thrust_gain_jitter=d.thrust_gain_jitter * noise, motor_gain_jitter=d.motor_gain_jitter * noise),
-        motion_capture=dataclasses.replace(
-            mc, position_noise_m=mc.position_noise_m * noise, attitude_noise_rad=mc.attitude_noise_rad * noise),
+        **_scaled_environment(base, aero, noise),
         sensors=dataclasses.replace(
             s, gyro_noise_rad_s=s.gyro_noise_rad_s * noise, accel_noise_m_s2=s.accel_noise_m_s2 * noise),
     )
@@ -183,21 +175,12 @@ def sample_arena(ranges: RobustnessRanges, seed: int) -> tuple[dict[str, Any], d
         "aerodynamics_scale": aero,
         "noise_scale": noise,
     }
-    a, d, mc = base.aerodynamics, base.disturbances, base.motion_capture
     params = base.replace(
         true_vehicle=dataclasses.replace(
             base.true_vehicle, mass_scale=props["mass_scale"], inertia_scale=(ixx, iyy, izz),
             drag_constant_scale=props["drag_constant_scale"], motor_rate_up_per_s=props["motor_rate_up_per_s"],
             motor_rate_down_per_s=props["motor_rate_down_per_s"], thrust_gains=gains, com_offset_m=com),
-        aerodynamics=dataclasses.replace(
-            a, body_drag_n_s2_m2=a.body_drag_n_s2_m2 * aero, rotor_drag_s_m=a.rotor_drag_s_m * aero,
-            rotational_damping_n_m_s=(a.rotational_damping_n_m_s[0] * aero, a.rotational_damping_n_m_s[1] * aero,
-                                      a.rotational_damping_n_m_s[2] * aero)),
-        disturbances=dataclasses.replace(
-            d, wind_std_m_s=d.wind_std_m_s * noise, gust_amplitude_std_m_s=d.gust_amplitude_std_m_s * noise,
-            thrust_gain_jitter=d.thrust_gain_jitter * noise, motor_gain_jitter=d.motor_gain_jitter * noise),
-        motion_capture=dataclasses.replace(
-            mc, position_noise_m=mc.position_noise_m * noise, attitude_noise_rad=mc.attitude_noise_rad * noise),
+        **_scaled_environment(base, aero, noise),
     )
     return dataclass_to_table(params), props
 
@@ -275,3 +258,20 @@ def summarize_robustness(results: list[dict[str, Any]],
         final_errors_m=[float(r.get("final_error_m", math.nan)) for r in done],
         predictors=predictors,
     )
+
+
+def _scaled_environment(base: Any, aero: float, noise: float) -> dict[str, Any]:
+    """The aerodynamics, disturbance and motion-capture sections of ``base`` (arena or Betaflight
+    settings) with their coefficients scaled by ``aero`` and their noise levels by ``noise``."""
+    a, d, mc = base.aerodynamics, base.disturbances, base.motion_capture
+    return {
+        "aerodynamics": dataclasses.replace(
+            a, body_drag_n_s2_m2=a.body_drag_n_s2_m2 * aero, rotor_drag_s_m=a.rotor_drag_s_m * aero,
+            rotational_damping_n_m_s=(a.rotational_damping_n_m_s[0] * aero, a.rotational_damping_n_m_s[1] * aero,
+                                      a.rotational_damping_n_m_s[2] * aero)),
+        "disturbances": dataclasses.replace(
+            d, wind_std_m_s=d.wind_std_m_s * noise, gust_amplitude_std_m_s=d.gust_amplitude_std_m_s * noise,
+            thrust_gain_jitter=d.thrust_gain_jitter * noise, motor_gain_jitter=d.motor_gain_jitter * noise),
+        "motion_capture": dataclasses.replace(
+            mc, position_noise_m=mc.position_noise_m * noise, attitude_noise_rad=mc.attitude_noise_rad * noise),
+    }

@@ -453,7 +453,10 @@ def _pinned(maneuver: Maneuver, p: np.ndarray, lower: np.ndarray, upper: np.ndar
     """(has a named limit, description) of every parameter that sits on a bound."""
     out = []
     for spec, value, lo, hi in zip(maneuver.parameters, p, lower, upper, strict=True):
-        tol = 1e-6 * spec.scale
+        # within 1e-4 of its scale: a bounded trust-region solve that stops on `ftol` leaves a pinned
+        # parameter ~1e-5 scales inside its bound (the 1e-6 used before made the named reason depend
+        # on the last bits of the model)
+        tol = 1e-4 * spec.scale
         if math.isfinite(lo) and value <= lo + tol:
             bound, side, limit = spec.bound_names[0], "lower", lo
         elif math.isfinite(hi) and value >= hi - tol:

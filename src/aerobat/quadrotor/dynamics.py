@@ -197,37 +197,41 @@ def hover_state(vehicle: VehicleParams, position_m: tuple[float, float, float] =
 
 # ------------------------------------------------------------------ kernels
 #
-# What the kernels need from the parameter vectors besides their entries is computed once per
-# run, from the vectors as they are then (plant_constants, controller_constants), and the
-# controller hands its four thrusts to the motor model as values, not through an array. The
-# arithmetic is the model's own, operation for operation: a division stays a division (x/I and
-# x·(1/I) differ in the last bit, and the learned sessions are reproduced bit for bit).
+# The kernels never divide inside the integration loop: what the model divides by (mass,
+# inertias, arm length, yaw coefficient, the quaternion's norm) is inverted once per run (from
+# the parameter vectors as they are then: plant_constants, controller_constants) or once per
+# step, and the controller hands its four thrusts to the motor model as values, not through an
+# array. (x·(1/I) and x/I differ in the last bit: sessions recorded before aerobat 0.3.0 continue to
+# ~1e-9, not bit for bit; resume_session says so.)
 
-# plant_constants(plant) = (1/m, drag terms present)
+# plant_constants(plant) = (1/m, 1/Ixx, 1/Iyy, 1/Izz, drag or damping present)
 K_INV_MASS = 0
-K_AERO = 1
-# controller_constants(ctrl) = (2/l, the command (0-based) that motor slot 0, 1, 2, 3 receives)
+K_INV_I = 1  # 3
+K_AERO = 4
+# controller_constants(ctrl) = (2/l, 1/κ, the command (0-based) that motor slot 0, 1, 2, 3 receives)
 Q_TWO_OVER_ARM = 0
-Q_SOURCE_0 = 1
-Q_SOURCE_1 = 2
-Q_SOURCE_2 = 3
-Q_SOURCE_3 = 4
+Q_INV_KAPPA = 1
+Q_SOURCE_0 = 2
+Q_SOURCE_1 = 3
+Q_SOURCE_2 = 4
+Q_SOURCE_3 = 5
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def plant_constants(plant):  # pragma: no cover - compiled
-    """(1/m, aero) of a plant vector; ``aero`` = 1 if body drag, rotor drag or axial rotor drag act."""
-    aero = plant[P_BODY_DRAG] != 0.0 or plant[P_ROTOR_DRAG] != 0.0 or plant[P_AXIAL_DRAG] != 0.0
-    return (1.0 / plant[P_MASS], 1.0 if aero else 0.0)
+    """(1/m, 1/Ixx, 1/Iyy, 1/Izz, aero) of a plant vector; ``aero`` = 1 if any drag or rotational damping acts."""
+    aero = (plant[P_BODY_DRAG] != 0.0 or plant[P_ROTOR_DRAG] != 0.0 or plant[P_AXIAL_DRAG] != 0.0
+            or plant[P_ROT_DAMP] != 0.0 or plant[P_ROT_DAMP + 1] != 0.0 or plant[P_ROT_DAMP + 2] != 0.0)
+    return (1.0 / plant[P_MASS], 1.0 / plant[P_IXX], 1.0 / plant[P_IYY], 1.0 / plant[P_IZZ], 1.0 if aero else 0.0)
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def controller_constants(ctrl):  # pragma: no cover - compiled
-    """(2/l, s0, s1, s2, s3) of a controller vector: s_j is the command (0-based) motor slot j receives."""
+    """(2/l, 1/κ, s0, s1, s2, s3) of a controller vector: s_j is the command (0-based) motor slot j receives."""
     source = np.zeros(4, dtype=np.int64)
     for i in range(4):
         source[int(ctrl[C_ORDER + i])] = i
-    return (2.0 / ctrl[C_ARM], source[0], source[1], source[2], source[3])
+    return (2.0 / ctrl[C_ARM], 1.0 / ctrl[C_KAPPA], source[0], source[1], source[2], source[3])
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
@@ -248,7 +252,7 @@ def thrust_commands(cmd, p, q, r, ctrl, cc):  # pragma: no cover - compiled
     mq = iyy * aq + r * p * (ixx - izz)
     mr = izz * ar + p * q * (iyy - ixx)
     total = ctrl[C_MASS] * cmd[0]
-    yaw = mr / ctrl[C_KAPPA]
+    yaw = mr * cc[Q_INV_KAPPA]
     two_over_l = cc[Q_TWO_OVER_ARM]
     c0 = 0.25 * (total + yaw - two_over_l * mq)
     c1 = 0.25 * (total - yaw + two_over_l * mp)
@@ -293,20 +297,18 @@ def derivative(t, x, ftilde, plant, k, dx):  # pragma: no cover - compiled
     fmax = plant[P_FMAX]
     up = plant[P_RATE_UP]
     down = plant[P_RATE_DN]
-    total = 0.0
-    tx = 0.0
-    ty = 0.0
-    tz = 0.0
     for j in range(4):
-        fj = x[_IF + j]
-        fc = min(max(ftilde[j], fmin), fmax)
-        diff = fc - fj
+        diff = min(max(ftilde[j], fmin), fmax) - x[_IF + j]
         dx[_IF + j] = (up if diff > 0.0 else down) * diff
-        force = plant[P_GAIN + j] * fj
-        total += force
-        tx += plant[P_MY + j] * force
-        ty -= plant[P_MX + j] * force
-        tz += plant[P_KYAW + j] * force
+    f0 = plant[P_GAIN] * x[_IF]
+    f1 = plant[P_GAIN + 1] * x[_IF + 1]
+    f2 = plant[P_GAIN + 2] * x[_IF + 2]
+    f3 = plant[P_GAIN + 3] * x[_IF + 3]
+    # pairwise sums: two independent chains instead of one of four
+    total = (f0 + f1) + (f2 + f3)
+    tx = (plant[P_MY] * f0 + plant[P_MY + 1] * f1) + (plant[P_MY + 2] * f2 + plant[P_MY + 3] * f3)
+    ty = -((plant[P_MX] * f0 + plant[P_MX + 1] * f1) + (plant[P_MX + 2] * f2 + plant[P_MX + 3] * f3))
+    tz = (plant[P_KYAW] * f0 + plant[P_KYAW + 1] * f1) + (plant[P_KYAW + 2] * f2 + plant[P_KYAW + 3] * f3)
     inv_m = k[K_INV_MASS]
     a_t = total * inv_m
     ax = r13 * a_t
@@ -349,9 +351,9 @@ def derivative(t, x, ftilde, plant, k, dx):  # pragma: no cover - compiled
             ax -= ka * r13 * bz
             ay -= ka * r23 * bz
             az -= ka * r33 * bz
-    tx -= plant[P_ROT_DAMP] * p
-    ty -= plant[P_ROT_DAMP + 1] * q
-    tz -= plant[P_ROT_DAMP + 2] * r
+        tx -= plant[P_ROT_DAMP] * p
+        ty -= plant[P_ROT_DAMP + 1] * q
+        tz -= plant[P_ROT_DAMP + 2] * r
     ixx = plant[P_IXX]
     iyy = plant[P_IYY]
     izz = plant[P_IZZ]
@@ -365,9 +367,9 @@ def derivative(t, x, ftilde, plant, k, dx):  # pragma: no cover - compiled
     dx[_IQ + 1] = 0.5 * (qw * p + qy * r - qz * q)
     dx[_IQ + 2] = 0.5 * (qw * q + qz * p - qx * r)
     dx[_IQ + 3] = 0.5 * (qw * r + qx * q - qy * p)
-    dx[_IW] = (tx - q * r * (izz - iyy)) / ixx
-    dx[_IW + 1] = (ty - r * p * (ixx - izz)) / iyy
-    dx[_IW + 2] = (tz - p * q * (iyy - ixx)) / izz
+    dx[_IW] = (tx - q * r * (izz - iyy)) * k[K_INV_I]
+    dx[_IW + 1] = (ty - r * p * (ixx - izz)) * k[K_INV_I + 1]
+    dx[_IW + 2] = (tz - p * q * (iyy - ixx)) * k[K_INV_I + 2]
     dx[_II] = p
     dx[_II + 1] = q
     dx[_II + 2] = r
@@ -384,9 +386,9 @@ def plant_derivative(t, x, ftilde, plant, dx):  # pragma: no cover - compiled
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def normalize_quaternion(x):  # pragma: no cover - compiled
-    n = math.sqrt(x[_IQ] ** 2 + x[_IQ + 1] ** 2 + x[_IQ + 2] ** 2 + x[_IQ + 3] ** 2)
+    inv_norm = 1.0 / math.sqrt(x[_IQ] ** 2 + x[_IQ + 1] ** 2 + x[_IQ + 2] ** 2 + x[_IQ + 3] ** 2)
     for i in range(4):
-        x[_IQ + i] /= n
+        x[_IQ + i] *= inv_norm
 
 
 # ------------------------------------------------------------- conversions

@@ -120,14 +120,15 @@ def run_continuous(x0, bp, coeffs, nseg, plant, ctrl, max_step, out, rows, rec_t
             for ch in range(4):
                 for power in range(3):
                     poly[ch, power] = cf[seg, ch, power]
+            _command(poly, 0.0, cmd1)
             for i in range(m):
                 tau = i * h
                 t = t0 + tau
-                # the program at the step's start, middle and end (tau + h, as the step's own end: the
-                # next start, (i + 1)·h, may round differently)
-                _command(poly, tau, cmd0)
+                # the program at the step's start (the previous step's end), middle and end
+                for ch in range(4):
+                    cmd0[ch] = cmd1[ch]
                 _command(poly, tau + 0.5 * h, cmdm)
-                _command(poly, tau + h, cmd1)
+                _command(poly, (i + 1) * h, cmd1)
                 derivative(t, xs, thrust_commands(cmd0, xs[10], xs[11], xs[12], ct, cc), pl, pc, k1)
                 for j in range(n):
                     tmp[j] = xs[j] + 0.5 * h * k1[j]
@@ -212,12 +213,14 @@ def run_continuous_delayed(x0, bp, coeffs, nseg, plant, ctrl, delays, max_step, 
             for ch in range(4):
                 for power in range(3):
                     poly[ch, power] = cf[seg, ch, power]
+            _command(poly, 0.0, cmd1)
             for i in range(m):
                 tau = i * h
                 t = t0 + tau
-                _command(poly, tau, cmd0)
+                for ch in range(4):
+                    cmd0[ch] = cmd1[ch]
                 _command(poly, tau + 0.5 * h, cmdm)
-                _command(poly, tau + h, cmd1)
+                _command(poly, (i + 1) * h, cmd1)
                 _delayed_rates(hist_t, hist_w, count, t, xs, delay, rates)
                 derivative(t, xs, thrust_commands(cmd0, rates[0], rates[1], rates[2], ct, cc), pl, pc, k1)
                 for j in range(n):

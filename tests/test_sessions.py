@@ -138,3 +138,22 @@ def test_a_stored_session_loads_back_and_its_json_round_trips(tmp_path):
         assert np.allclose(a.error, b.error, equal_nan=True)
     with pytest.raises(ConfigError, match="session JSON"):
         session_from_json({"maneuver": data["maneuver"]})
+
+
+def test_a_session_recorded_before_the_reciprocal_kernels_resumes_and_says_it_is_not_bit_for_bit(tmp_path):
+    import sqlite3
+
+    path = tmp_path / "a.sqlite"
+    with Store(path) as store:
+        run = start_session(store, FLIP, model=CONFIG, plant=PlantChoice("arena", seed=5), iterations=4,
+                            design_result=DESIGN)
+        stops = iter([False, True])
+        assert run.run(should_stop=lambda: next(stops, True)).measured == 1
+        current = resume_session(store, run.id)
+        assert current.exact and current.inexact_because == ""  # recorded by this aerobat
+    with sqlite3.connect(path) as conn:  # as aerobat 0.2.0 (divisions in the kernels) wrote it
+        conn.execute("UPDATE sessions SET aerobat_version = '0.2.0' WHERE id = ?", (run.id,))
+    with Store(path) as store:
+        old = resume_session(store, run.id, take_over=True)
+        assert not old.exact and "aerobat 0.2.0" in old.inexact_because and "not bit for bit" in old.inexact_because
+        assert old.run().completed  # it continues all the same

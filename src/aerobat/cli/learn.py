@@ -178,8 +178,7 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
         f"(seed {run.plant_choice.seed}, feedback {run.plant_choice.feedback.scheme.value}, rule "
         f"{run.rule_choice.label}), {run.measured} of {run.target} measured iterations done")
     if not run.exact:
-        say(f"  note: the {run.plant_choice.kind} plant's state was not stored; resumed trials will not repeat an "
-            f"uninterrupted run exactly")
+        say(f"  note: resumed trials will not repeat an uninterrupted run exactly: {run.inexact_because}")
 
     def on_iteration(it: Any) -> None:  # printed only once committed: every line is a stored iteration
         if it.measured:

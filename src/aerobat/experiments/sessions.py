@@ -99,6 +99,7 @@ class StoredSession:
     target: int
     resumed: bool = False
     exact: bool = True
+    inexact_because: str = ""
     warnings: list[str] = field(default_factory=list)
 
     @property
@@ -310,6 +311,7 @@ def resume_session(store: Store, ref: int | str, *, iterations: int | None = Non
                       correction=rec.last_correction, index=rec.last_index, measured=rec.n_measured)
     last = store.last_iteration(session_id)
     exact = True
+    because = ""
     if last is not None:
         if last.learner_state is not None:
             learner.load_state(last.learner_state)
@@ -322,11 +324,32 @@ def resume_session(store: Store, ref: int | str, *, iterations: int | None = Non
                 raise ConfigError(f"{where}: stored plant state: {exc}") from None
         elif prec.kind != "nominal":
             exact = False  # the plant continues from a fresh random state
+            because = f"the {prec.kind} plant's state was not stored"
+    if exact and _rounds_differently(rec.aerobat_version):
+        exact = False
+        because = (f"it was recorded by aerobat {rec.aerobat_version}, whose simulation rounds differently in the "
+                   f"last bits (kernels without divisions since {KERNEL_ARITHMETIC_SINCE}): the resumed trials agree "
+                   f"with an uninterrupted run to ~1e-9, not bit for bit")
     store.claim_session(session_id, take_over=take_over)
     if target != rec.target_iterations:
         store.set_target(session_id, target)
     return StoredSession(store, session_id, maneuver, result, model, plant_choice, rule_choice, plant, learner,
-                         target, resumed=True, exact=exact)
+                         target, resumed=True, exact=exact, inexact_because=because)
+
+
+KERNEL_ARITHMETIC_SINCE = "0.3.0"
+"""The version whose simulation kernels' arithmetic (reciprocals instead of divisions) the current one shares."""
+
+
+def _rounds_differently(recorded_by: str | None) -> bool:
+    """Whether a session recorded by aerobat ``recorded_by`` simulated with arithmetic older than this one's."""
+    if not recorded_by:
+        return False
+    try:
+        version = tuple(int(part) for part in recorded_by.split(".")[:3])
+    except ValueError:
+        return False
+    return version < tuple(int(part) for part in KERNEL_ARITHMETIC_SINCE.split("."))
 
 
 def _replay_legacy(learner: Learner, store: Store, session_id: int, choice: RuleChoice, where: str) -> bool:

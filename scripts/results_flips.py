@@ -1,4 +1,8 @@
-"""Regenerate the flip numbers and figures of docs/results.md (about a minute).
+"""Regenerate the flip and translation numbers and figures of docs/results.md (about three minutes).
+
+Sections "Nominal designs", "Learning the 3D triple flip", "The 2D single flip" and the learnable
+translation's tables under "Time-optimal translation"; every learning run is the paper's open loop
+(``feedback="none"``) on the default arena.
 
 Run: .venv/bin/python scripts/results_flips.py
 """
@@ -10,11 +14,15 @@ from pathlib import Path
 
 import numpy as np
 
-from aerobat import hummingbird
-from aerobat.cli import _learning_figures
+from aerobat import hummingbird, simulate, translation_maneuver
 from aerobat.core.design import design
 from aerobat.core.learning import learn
+from aerobat.core.rules import RuleChoice
+from aerobat.experiments.setup import build_rule
 from aerobat.plants import Arena
+from aerobat.plotting import save_figure
+from aerobat.plotting.learning import plot_learning
+from aerobat.plotting.vehicle import plot_side_views
 from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel
 
@@ -32,6 +40,23 @@ def summarize(session, idx, angles):
     errs = np.array([it.error for it in session.measured])
     late = slice(len(pos) - 10, len(pos))
     return pos[0], pos[late].mean(), np.degrees(np.abs(errs[late][:, angles]).mean(axis=0)).max()
+
+
+def figures(session, name: str) -> None:
+    """``{name}_side_views.png`` (model, first attempt, learned) and ``{name}_learning.png`` into docs/figures."""
+    maneuver = session.maneuver
+    model = simulate(maneuver.program(session.design.p_nominal), CONFIG)
+    measured = [it for it in session.measured if it.trial is not None]
+    flights = [("nominal (model)", model.times_s, model.states),
+               (f"first attempt (iteration {measured[0].index})", measured[0].trial.times_s, measured[0].trial.states),
+               (f"learned (iteration {measured[-1].index})", measured[-1].trial.times_s, measured[-1].trial.states)]
+    save_figure(plot_side_views(flights, title=maneuver.name), OUT / f"{name}_side_views.png", dpi=130)
+    data = session.to_json_dict()
+    save_figure(plot_learning(data["iterations"], data["error_names"], data["error_units"], data["parameter_names"],
+                              data["parameter_units"], title=f"{maneuver.name} on the arena",
+                              error_scales=[e.scale for e in maneuver.errors],
+                              parameter_descriptions=[p.description for p in maneuver.parameters]),
+                OUT / f"{name}_learning.png")
 
 
 def main() -> None:
@@ -55,12 +80,15 @@ def main() -> None:
                                 np.isclose(s.final_params, [p.upper for p in m.parameters])))
             rows.append((seed, first, late, ang, s.final_params[8], pinned))
             if kind == "tsvd" and seed == 1:
-                _learning_figures(s, CONFIG, OUT)
-                (OUT / "side_views.png").rename(OUT / "triple_flip_3d_side_views.png")
-                (OUT / "learning.png").rename(OUT / "triple_flip_3d_learning.png")
+                figures(s, "triple_flip_3d")
+                errs = np.array([it.error for it in s.measured])
+                print(f"(tsvd, seed 1: first {first:.3f} m, iterations 21-30 mean {late:.3f} m = "
+                      f"{100 * late / first:.0f} % of the first, mean |angle errors| there "
+                      f"{np.array2string(np.degrees(np.abs(errs[-10:][:, [4, 7, 8]]).mean(axis=0)), precision=2)}°, "
+                      f"p8 {s.final_params[8]:+.3f} rad)")
         lates = np.array([r[2] for r in rows])
         print(f"| {kind} | " + " | ".join(f"{r[2]:.3f}" for r in rows) +
-              f" | {lates.mean():.3f} | first {np.mean([r[1] for r in rows]):.2f} m; "
+              f" | {lates.mean():.3f} | first {np.mean([r[1] for r in rows]):.2f} m (seed 1 {rows[0][1]:.2f}); "
               f"max angle {max(r[3] for r in rows):.1f}°; p8 {np.mean([r[4] for r in rows]):+.3f}; "
               f"pinned {sum(r[5] for r in rows)} |")
     print("\n## 2D single flip at 800°/s on the arena (Fig. 11)")
@@ -69,9 +97,34 @@ def main() -> None:
     s1 = learn(m1, d1, Arena(CONFIG, seed=1, feedback="none"), iterations=20)
     first, late, ang = summarize(s1, [0, 2], [4])
     print(f"first {first:.3f} m, mean last 10 {late:.3f} m, angle {ang:.2f}°")
-    _learning_figures(s1, CONFIG, OUT)
-    (OUT / "side_views.png").rename(OUT / "single_flip_2d_side_views.png")
-    (OUT / "learning.png").rename(OUT / "single_flip_2d_learning.png")
+    figures(s1, "single_flip_2d")
+    translation()
+
+
+def translation() -> None:
+    print("\n## The (5, 5) m translation as a learnable maneuver, 30 iterations")
+    m = translation_maneuver(CONFIG, (5.0, 5.0))
+    d = design(m, MODEL)
+    print(f"nominal full-model duration {d.duration_s:.3f} s ({d.status})")
+    firsts, lates = [], []
+    for seed in range(7):
+        s = learn(m, d, Arena(CONFIG, seed=seed, feedback="none"), iterations=30)
+        pos = s.position_errors_m()
+        firsts.append(pos[0])
+        lates.append(pos[-10:].mean())
+        print(f"seed {seed}: first {pos[0]:.2f} m, iterations 21-30 {lates[-1]:.3f} m "
+              f"({100 * lates[-1] / pos[0]:.0f} % of the first), learned duration "
+              f"{m.program(s.final_params).duration_s:.3f} s")
+        if seed == 1:
+            figures(s, "translation")
+    print("| first attempt [m] | " + " | ".join(f"{v:.2f}" for v in firsts) + " |")
+    print("| iterations 21–30 [m] | " + " | ".join(f"{v:.3f}" for v in lates) + " |")
+    print(f"mean {np.mean(lates):.3f} m, worst {np.max(lates):.3f} m")
+    for rule in ("tsvd", "kalman", "kalman+isc"):
+        means = [learn(m, d, Arena(CONFIG, seed=seed, feedback="none"), iterations=30,
+                       rule=build_rule(RuleChoice.parse(rule), d, CONFIG)).position_errors_m()[-10:].mean()
+                 for seed in range(1, 7)]
+        print(f"rule {rule}, seeds 1-6: mean {np.mean(means):.3f} m")
 
 
 if __name__ == "__main__":

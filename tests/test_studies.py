@@ -135,3 +135,9 @@ def test_envelope_study(tmp_path, capsys):
     assert triple["converged"] and 1.3 < triple["duration_s"] < 1.7 and triple["apex_m"] > 0.5
     for name in ("feasible", "duration_s", "apex_m", "condition_number"):
         assert (tmp_path / "env" / f"envelope_{name}.png").exists()
+
+
+def test_a_median_never_reached_reads_never_in_the_study_tables():
+    from aerobat.cli.study import trials_text
+
+    assert trials_text(float("inf")) == "never" and trials_text(3.0) == "3" and trials_text(2.5) == "2.5"

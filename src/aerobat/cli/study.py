@@ -40,6 +40,11 @@ from aerobat.errors import ConfigError, DesignFailed
 __all__ = ["add_execution_options", "register", "report_failures", "run_cli_study"]
 
 
+def trials_text(trials: float) -> str:
+    """A median number of trials to the tolerance as a person reads it: ``never`` when most runs did not get there."""
+    return f"{trials:g}" if math.isfinite(trials) else "never"
+
+
 def run_cli_study(args: argparse.Namespace, kind: str, spec: dict[str, Any], jobs: list[Any]) -> tuple[Any, Path]:
     """Run a study with progress lines; returns (outcome, output folder). Failed jobs are the caller's to report."""
     from aerobat.experiments.studies import run_study
@@ -148,7 +153,7 @@ def _cmd_robustness(args: argparse.Namespace) -> int:
                 f"({outcome.ran} run now, {outcome.skipped} already done, {len(outcome.failed)} failed)")
         c.print(f"success (mean of the last 10 position errors ≤ {args.tolerance_m:g} m): "
                 f"{100 * summary.success_rate:.1f} % of the vehicles learned")
-        c.print(f"median trials to {args.tolerance_m:g} m: {summary.median_trials_to_tolerance:g}")
+        c.print(f"median trials to {args.tolerance_m:g} m: {trials_text(summary.median_trials_to_tolerance)}")
         if summary.predictors:
             c.print("properties most correlated with failure: " + ", ".join(
                 f"{name} ({corr:+.2f})" for name, corr in summary.predictors[:4]))
@@ -256,7 +261,7 @@ def _cmd_rules(args: argparse.Namespace) -> int:
             table.add_column(col, justify="right" if col != "method" else "left")
         for r in rows:
             share = r["share_below_after"]
-            table.add_row(r["method"], f"{r['median_trials_to_tolerance']:g}", f"{r['reached']}/{r['runs']}",
+            table.add_row(r["method"], trials_text(r["median_trials_to_tolerance"]), f"{r['reached']}/{r['runs']}",
                           "—" if math.isnan(share) else f"{100 * share:.0f} %", f"{r['last10_mean_m']:.3f}",
                           str(r["failures"]), f"{r['wall_s']:.1f}")
         c = console()
@@ -325,7 +330,7 @@ def _cmd_feedback(args: argparse.Namespace) -> int:
         for r in rows:
             angles = "/".join(f"{a:.2f}" for a in r["last10_angle_deg"]) or "—"
             table.add_row(r["scenario"], r["scheme"], f"{r['last10_mean_m']:.3f}", f"{r['last10_worst_seed_m']:.3f}",
-                          angles, f"{r['median_trials_to_tolerance']:g}", f"{r['failures']}/{r['runs']}",
+                          angles, trials_text(r["median_trials_to_tolerance"]), f"{r['failures']}/{r['runs']}",
                           f"{r['wall_ms_per_trial']:.1f}")
         c = console()
         c.print(table)

@@ -50,7 +50,8 @@ def figures(session, name: str) -> None:
     flights = [("nominal (model)", model.times_s, model.states),
                (f"first attempt (iteration {measured[0].index})", measured[0].trial.times_s, measured[0].trial.states),
                (f"learned (iteration {measured[-1].index})", measured[-1].trial.times_s, measured[-1].trial.states)]
-    save_figure(plot_side_views(flights, title=maneuver.name), OUT / f"{name}_side_views.png", dpi=130)
+    target = tuple(getattr(maneuver, "target_yz", (0.0, 0.0)))
+    save_figure(plot_side_views(flights, title=maneuver.name, target=target), OUT / f"{name}_side_views.png", dpi=130)
     data = session.to_json_dict()
     save_figure(plot_learning(data["iterations"], data["error_names"], data["error_units"], data["parameter_names"],
                               data["parameter_units"], title=f"{maneuver.name} on the arena",

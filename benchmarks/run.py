@@ -371,9 +371,10 @@ def report(r: dict, betaflight: list[str] | None = None) -> str:
          f"**{b['batch_vs_reference']:.2f}**"),
         (f"batch of {b['vehicles']} vehicles, {n} threads ÷ 1 thread", "≥ 1.85",
          f"**{b['batch_speedup_threads']:.2f}** (medians: {b['batch_speedup_threads_median']:.2f})"),
-        ("design of the 3D triple flip (p⁰, J, C), warm", "≤ 100 ms",
+        ("design of the 3D triple flip (p⁰, J, C), warm; its p⁰ against the one pinned in tests/test_design.py",
+         "≤ 100 ms; 1e-9",
          f"**{d['3']['median_s'] * 1e3:.0f} ms** median, {d['3']['min_s'] * 1e3:.0f} ms best "
-         f"({d['3']['evaluations']} simulations)"),
+         f"({d['3']['evaluations']} simulations); p⁰ within {d['p0_3d_max_abs_diff']:.1e}"),
         ("design of the 2D triple flip (p⁰, J, C), warm", "—",
          f"{d['2']['median_s'] * 1e3:.0f} ms median, {d['2']['min_s'] * 1e3:.0f} ms best "
          f"({d['2']['evaluations']} simulations)"),

@@ -64,6 +64,16 @@ FIXED_CMD = np.array([12.0, 3.0, -1.0, 0.5])  # the reference's one constant com
 EMPTY = (np.empty(0), np.empty((0, N_STATE)), np.empty((0, 4)))  # nothing recorded
 
 
+def stolen_s() -> float | None:
+    """CPU time the hypervisor gave to other virtual machines so far (the ``steal`` of /proc/stat) [s]."""
+    try:
+        with open("/proc/stat") as f:
+            fields = f.readline().split()
+        return int(fields[8]) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return None
+
+
 def load() -> str:
     try:
         return "load average " + " ".join(f"{v:.1f}" for v in os.getloadavg())
@@ -340,12 +350,14 @@ def machine() -> str:
 
 
 def measure(quick: bool = False) -> dict:
+    stolen_before = stolen_s()
     kernel = bench_kernel(rounds=11 if quick else 31)
-    batch = bench_batch(n=200 if quick else 1000, rounds=5 if quick else 9)
+    batch = bench_batch(n=200 if quick else 1000, rounds=5 if quick else 15)
     des = bench_design(rounds=5 if quick else 15)
     first = bench_first_learn(cold=not quick)
     cli = bench_cli()
     arena = bench_arena()
+    stolen_after = stolen_s()
     return {
         "kernel_vs_reference": kernel["kernel_vs_reference"],
         "batch_vs_reference": batch["batch_vs_reference"],
@@ -357,6 +369,7 @@ def measure(quick: bool = False) -> dict:
         "kernel": kernel, "batch": batch, "design": {str(k): v for k, v in des.items()}, "first_learn": first,
         "cli": cli, "arena": arena, "machine": machine(), "cores": os.cpu_count(),
         "measured": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "stolen_s": None if stolen_before is None or stolen_after is None else stolen_after - stolen_before,
     }
 
 
@@ -409,7 +422,9 @@ def report(r: dict, betaflight: list[str] | None = None) -> str:
         "RK4 of the same model in `benchmarks/reference.py` (fixed inputs, no program, nothing recorded, constants",
         "precomputed, the machine's limit) and one thread against several. Single-thread rows use the thread's",
         "CPU clock; the thread-scaling row uses wall clock (best of the interleaved rounds).",
-        f"Measured: {r['measured']}; wall-clock rows under {d['load']} ({r['cores']} cores).",
+        f"Measured: {r['measured']}; wall-clock rows under {d['load']} ({r['cores']} cores)"
+        + ("." if r.get("stolen_s") is None else
+           f"; the hypervisor gave {r['stolen_s']:.1f} s of CPU time to other machines during the run."),
         "",
         "| what | target | measured |",
         "|---|---|---|",

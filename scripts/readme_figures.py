@@ -2,10 +2,11 @@
 
     .venv/bin/python scripts/readme_figures.py            # writes docs/figures/readme/
 
-It learns the 3D triple flip at 1800 deg/s on the arena exactly as `make demo` does (seed 1,
-30 measured iterations), draws the figures `aerobat plot` draws, and animates the nominal
-flight, the first attempt and the learned one side by side (a GIF, 25 frames per second of
-maneuver time shown at 10 frames per second: 2.5× slower than flown).
+It learns the 3D triple flip at 1800 deg/s on the arena as `make demo` does (seed 1, 30 measured
+iterations) but in the paper's pure open loop (`--feedback none`; the demo adds the onboard
+tracking feedback, whose first attempt misses far less), draws the figures `aerobat plot` draws,
+and animates the nominal flight, the first attempt and the learned one side by side (a GIF, 25
+frames per second of maneuver time shown at 10 frames per second: 2.5× slower than flown).
 """
 
 from __future__ import annotations
@@ -14,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from aerobat import Arena, MultiFlip, NominalModel, design, hummingbird, learn, simulate
+from aerobat import Arena, MultiFlip, NominalModel, design, hummingbird, learn
 from aerobat.plotting import new_figure, save_figure
-from aerobat.plotting.learning import plot_learning
-from aerobat.plotting.vehicle import draw_side_view, plot_side_views
+from aerobat.plotting.session import plot_session_learning, plot_session_side_views, session_flights
+from aerobat.plotting.vehicle import draw_side_view
 
 OUT = Path(__file__).resolve().parents[1] / "docs" / "figures" / "readme"
 
@@ -30,18 +31,9 @@ def main() -> None:
     flip = MultiFlip(vehicle=config.vehicle, flips=3, max_rate_rad_s=np.radians(1800), dims=3)
     nominal = design(flip, NominalModel(config))
     session = learn(flip, nominal, Arena(config, seed=1, feedback="none"), iterations=30)
-    model = simulate(flip.program(nominal.p_nominal), config)
-    measured = [it for it in session.measured if it.trial is not None]
-    flights = [("nominal (model)", model.times_s, model.states),
-               (f"first attempt (iteration {measured[0].index})", measured[0].trial.times_s, measured[0].trial.states),
-               (f"learned (iteration {measured[-1].index})", measured[-1].trial.times_s, measured[-1].trial.states)]
-    save_figure(plot_side_views(flights, title=flip.name), OUT / "side_views.png", dpi=110)
-    data = session.to_json_dict()
-    save_figure(plot_learning(data["iterations"], data["error_names"], data["error_units"], data["parameter_names"],
-                              data["parameter_units"], title=f"{flip.name} on the arena",
-                              error_scales=[e.scale for e in flip.errors],
-                              parameter_descriptions=[p.description for p in flip.parameters]),
-                OUT / "learning.png", dpi=90)
+    flights = session_flights(session, config)
+    save_figure(plot_session_side_views(session, config), OUT / "side_views.png", dpi=110)
+    save_figure(plot_session_learning(session, title=f"{flip.name} on the arena"), OUT / "learning.png", dpi=90)
     fig = new_figure(figsize=(9.0, 4.2))
     axes = fig.subplots(1, 3, sharex=True, sharey=True)
     end = max(float(t[-1]) for _, t, _ in flights)

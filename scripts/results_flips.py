@@ -14,15 +14,14 @@ from pathlib import Path
 
 import numpy as np
 
-from aerobat import hummingbird, simulate, translation_maneuver
+from aerobat import hummingbird, translation_maneuver
 from aerobat.core.design import design
 from aerobat.core.learning import learn
 from aerobat.core.rules import RuleChoice
 from aerobat.experiments.setup import build_rule
 from aerobat.plants import Arena
 from aerobat.plotting import save_figure
-from aerobat.plotting.learning import plot_learning
-from aerobat.plotting.vehicle import plot_side_views
+from aerobat.plotting.session import plot_session_learning, plot_session_side_views
 from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel
 
@@ -44,20 +43,9 @@ def summarize(session, idx, angles):
 
 def figures(session, name: str) -> None:
     """``{name}_side_views.png`` (model, first attempt, learned) and ``{name}_learning.png`` into docs/figures."""
-    maneuver = session.maneuver
-    model = simulate(maneuver.program(session.design.p_nominal), CONFIG)
-    measured = [it for it in session.measured if it.trial is not None]
-    flights = [("nominal (model)", model.times_s, model.states),
-               (f"first attempt (iteration {measured[0].index})", measured[0].trial.times_s, measured[0].trial.states),
-               (f"learned (iteration {measured[-1].index})", measured[-1].trial.times_s, measured[-1].trial.states)]
-    target = tuple(getattr(maneuver, "target_yz", (0.0, 0.0)))
-    save_figure(plot_side_views(flights, title=maneuver.name, target=target), OUT / f"{name}_side_views.png", dpi=130)
-    data = session.to_json_dict()
-    save_figure(plot_learning(data["iterations"], data["error_names"], data["error_units"], data["parameter_names"],
-                              data["parameter_units"], title=f"{maneuver.name} on the arena",
-                              error_scales=[e.scale for e in maneuver.errors],
-                              parameter_descriptions=[p.description for p in maneuver.parameters]),
-                OUT / f"{name}_learning.png")
+    save_figure(plot_session_side_views(session, CONFIG), OUT / f"{name}_side_views.png", dpi=130)
+    learning = plot_session_learning(session, title=f"{session.maneuver.name} on the arena")
+    save_figure(learning, OUT / f"{name}_learning.png")
 
 
 def main() -> None:

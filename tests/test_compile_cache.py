@@ -92,3 +92,19 @@ def test_compiled_and_cached_kernels_give_the_same_records_and_a_cold_killed_war
         assert 3 <= store.session(1).n_measured < TRIALS
     _run(cold, killed, "learn", "--resume", "1")
     _same(_records(killed), reference)
+
+
+@pytest.mark.slow  # ~45 s; every `make` target runs the warm-up itself on a fresh checkout
+def test_the_warm_up_fills_the_cache_in_two_processes_and_then_loads_it(tmp_path):
+    """``make setup``'s warm-up: two processes compile into an empty cache, then one loads it all."""
+    cache = tmp_path / "cache"
+    env = _env(cache)
+    cold = subprocess.run([sys.executable, "-m", "aerobat.experiments.warmup"], env=env, capture_output=True,
+                          text=True, timeout=600)
+    assert cold.returncode == 0 and "compiled kernels ready" in cold.stdout, cold.stderr
+    written = {path: path.stat().st_mtime_ns for path in cache.rglob("*.nb[ci]")}
+    assert len(written) >= 20  # both processes' kernels are there (index and data of each)
+    again = subprocess.run([sys.executable, "-c", "from aerobat.experiments.warmup import warm_up; warm_up(workers=1)"],
+                           env=env, capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stderr
+    assert {path: path.stat().st_mtime_ns for path in cache.rglob("*.nb[ci]")} == written  # loaded, none compiled

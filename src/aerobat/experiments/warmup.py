@@ -3,8 +3,8 @@
 aerobat's simulation kernels are compiled by numba on first use and cached on disk
 (in ``__pycache__`` next to the sources, or under ``NUMBA_CACHE_DIR`` when it is set).
 Compiling them all takes one to two minutes of CPU (the arena's supervisor, with the onboard
-feedback inlined, about 40 % of it), which the first ``aerobat learn`` would otherwise
-spend silently before its first trial. ``make setup`` runs this module once, so every
+feedback inlined, about half of it; two processes side by side take about a minute), which the
+first ``aerobat learn`` would otherwise spend silently before its first trial. ``make setup`` runs this module once, so every
 later command loads the compiled code from the cache.
 
 It runs each compiled entry point once, on tiny inputs, through the public functions
@@ -26,27 +26,49 @@ import numpy as np
 __all__ = ["warm_up"]
 
 
-def warm_up() -> float:
-    """Compile (or load from numba's cache) every kernel a command uses; returns the seconds it took."""
+def warm_up(workers: int = 2) -> float:
+    """Compile (or load from numba's cache) every kernel a command uses; returns the seconds it took.
+
+    The kernels fall into two groups of about equal compile time (the playback kernels with the
+    ones RotorPy and Betaflight call, and the arena's trial), compiled in ``workers`` processes
+    side by side (numba writes each cache file atomically, so a kernel both need is safe).
+    """
     start = time.perf_counter()
-    from aerobat.plants.arena import Arena
+    if workers > 1:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(min(workers, len(PARTS)), mp_context=multiprocessing.get_context("spawn")) as pool:
+            list(pool.map(_warm_part, PARTS))
+    else:
+        for part in PARTS:
+            _warm_part(part)
+    return time.perf_counter() - start
+
+
+PARTS = ("playback", "arena")
+
+
+def _warm_part(part: str) -> None:
     from aerobat.quadrotor.program import Program, Switch
     from aerobat.quadrotor.simulate import NominalModel, simulate, simulate_batch
     from aerobat.quadrotor.vehicle import ModelEffects, hummingbird
 
     config = hummingbird()
+    program = Program(switches=(Switch(time_s=0.0, channel="rate_p", value=1.0),), duration_s=0.05)
+    if part == "arena":
+        from aerobat.plants.arena import Arena
+
+        Arena(config, seed=0, feedback="tracking").fly(program)
+        Arena(config, seed=0, feedback="none").fly(program)
+        return
     # an identified vehicle's rate-loop latency runs its own continuous kernel
     lagging = dataclasses.replace(config, effects=ModelEffects(rate_latency_s=(0.005, 0.005, 0.005)))
-    program = Program(switches=(Switch(time_s=0.0, channel="rate_p", value=1.0),), duration_s=0.05)
-    simulate(program, config)
     simulate(program, config, mode="sampled")
     simulate(program, lagging)
     simulate_batch([program, program], config)
     NominalModel(config).final_states([program])
-    Arena(config, seed=0, feedback="tracking").fly(program)
-    Arena(config, seed=0, feedback="none").fly(program)
     _plant_kernels(simulate(program, config))
-    return time.perf_counter() - start
 
 
 def _plant_kernels(nominal: object) -> None:

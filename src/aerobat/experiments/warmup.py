@@ -4,8 +4,8 @@ aerobat's simulation kernels are compiled by numba on first use and cached on di
 (in ``__pycache__`` next to the sources, or under ``NUMBA_CACHE_DIR`` when it is set).
 Compiling them all takes one to two minutes of CPU (the arena's supervisor, with the onboard
 feedback inlined, about half of it; two processes side by side take about a minute), which the
-first ``aerobat learn`` would otherwise spend silently before its first trial. ``make setup`` runs this module once, so every
-later command loads the compiled code from the cache.
+first ``aerobat learn`` would otherwise spend silently before its first trial. ``make setup``
+runs this module once, so every later command loads the compiled code from the cache.
 
 It runs each compiled entry point once, on tiny inputs, through the public functions
 the commands use, so it compiles exactly the variants (argument types) they need:

@@ -1,0 +1,242 @@
+"""Betaflight blackbox logs (``.bbl``, ``.bfl``, ``.txt``), read with orangebox 0.4.0.
+
+A file often holds several logs (one per arming); each is a header of ``H name:value`` lines
+(the firmware, the board, the craft and the whole tune) and delta-encoded frames.
+orangebox decodes the frames; the raw header text is kept as written, so the tune can be
+applied to the firmware as the pilot had it (:mod:`aerobat.plants.betaflight`).
+
+Units (Betaflight 4.x, data version 2): ``time`` µs; ``gyroADC`` and ``setpoint[0..2]``
+deg/s; ``accSmooth`` in units of the header's ``acc_1G``; ``motor`` in the header's
+``motorOutput`` range (DShot 48..2047 is the full range, the low end of ``motorOutput`` is
+the idle); ``setpoint[3]`` throttle 0..1000; ``rcCommand[0..2]`` ±500; ``vbatLatest``
+0.01 V.
+
+Axes: Betaflight's gyro and accelerometer are body FLU (roll right, pitch nose down, yaw nose
+left positive; z up at rest), and so are its rate set points; sticks and PID terms keep the
+firmware's units and signs (``rcCommand`` yaw is the negated stick).
+
+Props in or out: 4.2 headers do not record ``yaw_motors_reversed``, but the log shows it. The
+mixer raises M1 and M4 for a positive yaw PID term with props in and M2 and M3 with props out,
+so the sign of the correlation between the logged yaw PID sum and M1 + M4 − M2 − M3 in flight
+tells which (both shared 5-inch logs: −0.78 and −0.995, props out); the notes say so.
+
+Motors: the QUADX mixer (M1 rear right, M2 front right, M3 rear left, M4 front left); with the
+default ``yaw_motors_reversed = OFF`` ("props in"), M1 and M4 turn clockwise and M2 and M3
+counter-clockwise seen from above. The headers of 4.2 do not record the mixer, so this layout
+is assumed and said in the log's notes.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import logging
+import re
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from aerobat.errors import ConfigError, MissingDependency
+from aerobat.quadrotor.flightlog import Channel, FlightLog, LogMetadata, LogSource, MotorLayout, Signal
+
+__all__ = ["QUADX_LAYOUT", "raw_headers", "read_blackbox"]
+
+G_M_S2 = 9.80665
+DSHOT_MIN, DSHOT_MAX = 48.0, 2047.0
+
+QUADX_LAYOUT = MotorLayout(
+    names=("M1", "M2", "M3", "M4"),
+    directions=((-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)),
+    spins=(-1, 1, 1, -1),
+    mixer="QUADX (props in)",
+)
+_REVERSED_LAYOUT = MotorLayout(names=QUADX_LAYOUT.names, directions=QUADX_LAYOUT.directions,
+                               spins=tuple(-s for s in QUADX_LAYOUT.spins), mixer="QUADX (props out)")
+_VERSION = re.compile(r"Betaflight\s+(\d+\.\d+(?:\.\d+)?)")
+
+
+@contextlib.contextmanager
+def _quiet_orangebox() -> Iterator[list[str]]:
+    """orangebox logs warnings (unknown event types) through :mod:`logging`; keep them as notes."""
+    records: list[str] = []
+
+    class Keep(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            if len(records) < 20:
+                records.append(record.getMessage())
+
+    logger = logging.getLogger("orangebox")
+    handler = Keep(level=logging.WARNING)
+    old_level, old_propagate = logger.level, logger.propagate
+    logger.addHandler(handler)
+    logger.setLevel(logging.WARNING)
+    logger.propagate = False
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):
+            yield records
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(old_level)
+        logger.propagate = old_propagate
+
+
+def _orangebox():
+    try:
+        import orangebox
+        import orangebox.reader  # noqa: F401
+    except ImportError as exc:
+        raise MissingDependency("orangebox", extra="logs", purpose="reading Betaflight blackbox logs",
+                                detail=str(exc)) from None
+    return orangebox
+
+
+def raw_headers(data: bytes, start: int) -> dict[str, str]:
+    """The ``H name:value`` lines of the log starting at byte ``start``, as text."""
+    headers: dict[str, str] = {}
+    at = start
+    while data.startswith(b"H ", at):
+        end = data.find(b"\n", at)
+        if end < 0:
+            end = len(data)
+        line = data[at + 2: end].decode("latin-1").rstrip("\r")
+        name, sep, value = line.partition(":")
+        if sep:
+            headers[name.strip()] = value.strip()
+        at = end + 1
+    return headers
+
+
+def _layout(headers: dict[str, str], motors: np.ndarray, table: np.ndarray, columns: dict[str, int]
+            ) -> tuple[MotorLayout, str]:
+    """The QUADX layout with props in or out: from the header if it says, else from the yaw mixing."""
+    raw = headers.get("yaw_motors_reversed")
+    if raw is not None:
+        reversed_ = raw.strip() in ("1", "ON")
+        return (_REVERSED_LAYOUT if reversed_ else QUADX_LAYOUT), f"mixer QUADX, yaw_motors_reversed = {raw}"
+    terms = [f"axis{x}[2]" for x in "PIF" if f"axis{x}[2]" in columns]
+    flying = np.all(motors > np.nanmin(motors, axis=0) + 40.0, axis=1)
+    if not terms or flying.sum() < 100:
+        return QUADX_LAYOUT, "the header does not record the mixer: QUADX with props in (Betaflight's default) assumed"
+    yaw_sum = sum(table[flying, columns[t]] for t in terms)
+    diff = motors[flying, 0] + motors[flying, 3] - motors[flying, 1] - motors[flying, 2]
+    corr = float(np.corrcoef(yaw_sum, diff)[0, 1])
+    if not np.isfinite(corr) or abs(corr) < 0.3:
+        return QUADX_LAYOUT, (f"the header does not record the mixer and the yaw mixing does not show it "
+                              f"(correlation {corr:.2f}): QUADX with props in (Betaflight's default) assumed")
+    layout = QUADX_LAYOUT if corr > 0 else _REVERSED_LAYOUT
+    return layout, (f"mixer QUADX with props {'in' if corr > 0 else 'out'}: the header does not record "
+                    f"yaw_motors_reversed, the yaw PID term and M1 + M4 − M2 − M3 correlate at {corr:+.2f}")
+
+
+def read_blackbox(path: Path) -> list[FlightLog]:
+    """Every log in a blackbox file, in order."""
+    orangebox = _orangebox()
+    data = path.read_bytes()
+    with _quiet_orangebox() as warnings:
+        try:
+            reader = orangebox.reader.Reader(str(path), allow_invalid_header=False)
+        except Exception as exc:  # noqa: BLE001 - orangebox raises bare exceptions on damaged files
+            raise ConfigError(f"{path}: not a readable blackbox log ({type(exc).__name__}: {exc})") from None
+        pointers = list(reader.log_pointers)
+        if not pointers:
+            raise ConfigError(f"{path}: no blackbox log in the file")
+        logs = [_read_one(path, orangebox, reader, data, i, len(pointers), pointers, warnings)
+                for i in range(1, len(pointers) + 1)]
+    return logs
+
+
+def _read_one(path: Path, orangebox, reader, data: bytes, index: int, count: int, pointers: list[int],
+              warnings: list[str]) -> FlightLog:
+    headers = raw_headers(data, pointers[index - 1])
+    where = f"{path}: log {index}"
+    if "Field I name" not in headers:
+        raise ConfigError(f"{where}: the header has no field definitions (a damaged or truncated header)")
+    warnings.clear()
+    try:
+        reader.set_log_index(index)
+        parser = orangebox.Parser(reader)
+        names = list(parser.field_names)
+        rows = [frame.data for frame in parser.frames()]
+    except Exception as exc:  # noqa: BLE001
+        raise ConfigError(f"{where}: not a readable blackbox log ({type(exc).__name__}: {exc})") from None
+    notes = [f"orangebox: {w}" for w in dict.fromkeys(warnings)]
+    if not rows:
+        raise ConfigError(f"{where}: the log holds no frames")
+    main = len(headers["Field I name"].split(","))  # the main frame's fields: integers, always present
+    try:
+        table = np.array([r[:main] for r in rows], dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{where}: frames that do not decode to numbers ({exc})") from None
+    columns = {name: i for i, name in enumerate(names[:main])}
+
+    def field(name: str) -> np.ndarray:
+        return table[:, columns[name]]
+
+    t_us = field("time")
+    order_ok = np.concatenate([[True], np.diff(t_us) > 0])
+    if not order_ok.all():
+        notes.append(f"{int((~order_ok).sum())} frames out of time order left out")
+        table = table[order_ok]
+        t_us = t_us[order_ok]
+    t = (t_us - t_us[0]) * 1e-6
+    signals: dict[Channel, Signal] = {}
+
+    def have(*fields: str) -> bool:
+        return all(f in columns for f in fields)
+
+    def vector(prefix: str, n: int) -> tuple[np.ndarray, tuple[str, ...]]:
+        fields = tuple(f"{prefix}[{i}]" for i in range(n))
+        return np.column_stack([field(f) for f in fields]), fields
+
+    xyz = ("x", "y", "z")
+    if have("gyroADC[0]", "gyroADC[1]", "gyroADC[2]"):
+        v, f = vector("gyroADC", 3)
+        signals[Channel.GYRO] = Signal(Channel.GYRO, t, np.radians(v), xyz, "rad/s", f)
+    if have("accSmooth[0]", "accSmooth[1]", "accSmooth[2]"):
+        one_g = float(headers.get("acc_1G", "2048"))
+        v, f = vector("accSmooth", 3)
+        signals[Channel.SPECIFIC_FORCE] = Signal(Channel.SPECIFIC_FORCE, t, v / one_g * G_M_S2, xyz, "m/s²", f)
+    if have("setpoint[0]", "setpoint[1]", "setpoint[2]"):
+        v, f = vector("setpoint", 3)
+        signals[Channel.RATE_SETPOINT] = Signal(Channel.RATE_SETPOINT, t, np.radians(v), xyz, "rad/s", f)
+    if have("setpoint[3]"):
+        signals[Channel.THROTTLE] = Signal(Channel.THROTTLE, t, field("setpoint[3]") / 1000.0, ("throttle",),
+                                           "fraction", ("setpoint[3]",))
+    if have("rcCommand[0]", "rcCommand[1]", "rcCommand[2]"):
+        v, f = vector("rcCommand", 3)
+        signals[Channel.STICKS] = Signal(Channel.STICKS, t, v / 500.0, ("roll", "pitch", "yaw"), "fraction", f)
+    motor_fields = [n for n in columns if n.startswith("motor[")]
+    layout = None
+    if motor_fields:
+        v = np.column_stack([field(n) for n in motor_fields])
+        signals[Channel.MOTOR_COMMAND] = Signal(Channel.MOTOR_COMMAND, t, (v - DSHOT_MIN) / (DSHOT_MAX - DSHOT_MIN),
+                                                tuple(f"M{i + 1}" for i in range(len(motor_fields))), "fraction",
+                                                tuple(motor_fields))
+        if len(motor_fields) == 4:
+            layout, note = _layout(headers, v, table, columns)
+            notes.append(note)
+    for channel, prefix, n in ((Channel.PID_P, "axisP", 3), (Channel.PID_I, "axisI", 3), (Channel.PID_D, "axisD", 2),
+                               (Channel.PID_F, "axisF", 3)):
+        fields = [f"{prefix}[{i}]" for i in range(n) if f"{prefix}[{i}]" in columns]
+        if fields:
+            v = np.column_stack([field(x) for x in fields])
+            signals[channel] = Signal(channel, t, v, ("roll", "pitch", "yaw")[: len(fields)], "firmware units",
+                                      tuple(fields))
+    if have("vbatLatest"):
+        signals[Channel.BATTERY_VOLTAGE] = Signal(Channel.BATTERY_VOLTAGE, t, field("vbatLatest") * 0.01, ("v",),
+                                                  "V", ("vbatLatest",))
+    revision = headers.get("Firmware revision", "")
+    version = _VERSION.search(revision)
+    motors = len(motor_fields)
+    metadata = LogMetadata(
+        firmware=revision.split(" ")[0] if revision else headers.get("Firmware type", "Betaflight"),
+        firmware_version=version.group(1) if version else "",
+        board=headers.get("Board information", ""),
+        craft_name=headers.get("Craft name", ""),
+        vehicle_type="multirotor" if motors >= 3 or not motors else f"{motors}-motor vehicle (not a multirotor)",
+        parameters=headers,
+        start_time=headers.get("Log start datetime", ""),
+    )
+    return FlightLog(path=path, index=index, logs_in_file=count, source=LogSource.BETAFLIGHT, metadata=metadata,
+                     signals=signals, motor_layout=layout, notes=tuple(notes))

@@ -48,6 +48,8 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     figure = Path(args.figure) if args.figure else out.with_suffix(".png")
     if figure == out:
         raise ConfigError(f"--figure {figure}: the same file as --output")
+    if args.log:
+        return _cmd_identify_log(args, out, figure)
     options = _options(args)
     say = console(args.json).print
     with open_store(args) as store:
@@ -96,6 +98,111 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     if not args.json:
         say(f"vehicle written to {out} (figure {figure}); use it with --vehicle {out}")
     return 0
+
+
+def _geometry(args: argparse.Namespace, prior: Any) -> Any:
+    from aerobat.quadrotor.identification.logfit import Geometry
+
+    v = prior.vehicle
+    half = v.arm_length_m / math.sqrt(2.0)
+    return Geometry(mass_kg=args.mass_kg if args.mass_kg is not None else v.mass_kg,
+                    motor_x_m=args.motor_x_m if args.motor_x_m is not None else half,
+                    motor_y_m=args.motor_y_m if args.motor_y_m is not None else half,
+                    inertia_zz_ratio=v.inertia_zz_kg_m2 / (v.inertia_xx_kg_m2 + v.inertia_yy_kg_m2))
+
+
+def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
+    """``identify --log FILE[:N] …``: fit the vehicle the logs flew, validate on the file's other logs."""
+    import tomli_w
+
+    from aerobat.experiments.log_identify import (
+        airframe_from_log_fit,
+        identify_from_logs,
+        parse_log_ref,
+        vehicle_from_log_fit,
+    )
+    from aerobat.plotting import save_figure, write_text
+    from aerobat.plotting.flightlog import plot_log_fit
+    from aerobat.quadrotor.identification.logdata import prepare_log
+    from aerobat.quadrotor.vehicle import save_vehicle, vehicle_from_name_or_file
+
+    refs = [parse_log_ref(text) for text in args.log]
+    for path in (out, figure, *([Path(args.airframe)] if args.airframe else [])):
+        refuse_overwrite(path, store_path=None, force=args.force, option="--output")
+    prior = vehicle_from_name_or_file(args.vehicle)
+    geometry = _geometry(args, prior)
+    say = console(args.json).print
+    say(f"identifying from {', '.join(str(r) for r in refs)}: mass {geometry.mass_kg:g} kg, motors at "
+        f"(±{geometry.motor_x_m:g}, ±{geometry.motor_y_m:g}) m, prior {prior.name}")
+    result = identify_from_logs(refs, geometry)
+    fit = result.fit
+    idle = _idle_command(refs)
+    config = vehicle_from_log_fit(fit, prior, name=args.name or out.stem, idle_command=idle)
+    save_vehicle(config, out, header=f"identified by aerobat identify --log from {fit.name}")
+    from aerobat.logs import read_logs
+
+    first = next(log for log in read_logs(refs[0].path) if refs[0].index in (None, log.index))
+    save_figure(plot_log_fit(fit, prepare_log(first)), figure)
+    airframe = None
+    if args.airframe:
+        airframe = airframe_from_log_fit(fit)
+        write_text(args.airframe, f"# [airframe] of the Betaflight plant, identified from {fit.name}\n"
+                                  + tomli_w.dumps({"airframe": airframe}))
+    if args.json:
+        print(json.dumps({
+            "logs": list(result.fitted), "values": {k: {"value": v, "sigma": s, "unit": u}
+                                                    for k, (v, s, u) in fit.values.items()},
+            "holdout": [m.__dict__ for m in fit.holdout_metrics], "fit": [m.__dict__ for m in fit.fit_metrics],
+            "validation": {name: (v if isinstance(v, str) else [m.__dict__ for m in v])
+                           for name, v in result.validations},
+            "fit_segments_s": fit.fit_segments_s, "holdout_segments_s": fit.holdout_segments_s,
+            "notes": list(fit.notes), "wall_s": fit.wall_s, "out": str(out), "figure": str(figure),
+            "airframe": args.airframe}, default=float))
+        return 0
+    _print_log_fit(result)
+    say(f"vehicle written to {out} (figure {figure}" + (f", airframe {args.airframe}" if args.airframe else "") +
+        f"); use it with --vehicle {out}")
+    return 0
+
+
+def _idle_command(refs: list[Any]) -> float | None:
+    """Betaflight's armed idle as a motor command (the low end of motorOutput), else None."""
+    from aerobat.logs import read_logs
+
+    log = read_logs(refs[0].path)[(refs[0].index or 1) - 1]
+    low = log.metadata.parameters.get("motorOutput", "").split(",")[0]
+    try:
+        return (float(low) - 48.0) / 1999.0 if low else None
+    except ValueError:
+        return None
+
+
+def _print_log_fit(result: Any) -> None:
+    from rich.table import Table
+
+    fit = result.fit
+    out = console()
+    table = Table(title=f"identified from {fit.name}: {sum(b - a for a, b in fit.fit_segments_s):.1f} s fitted, "
+                        f"{sum(b - a for a, b in fit.holdout_segments_s):.1f} s held out")
+    for name, justify in (("quantity", "left"), ("value", "right"), ("± 1σ", "right"), ("unit", "left")):
+        table.add_column(name, justify=justify)  # type: ignore[arg-type]
+    for name, (value, sigma, unit) in fit.values.items():
+        table.add_row(name, f"{value:.5g}", "fixed" if sigma != sigma else f"{sigma:.2g}", unit)
+    out.print(table)
+    check = Table(title="prediction (R² / correlation)")
+    check.add_column("flight")
+    for m in fit.holdout_metrics:
+        check.add_column(m.channel, justify="right")
+    check.add_row("held-out blocks", *[f"{m.r2:.2f} / {m.correlation:.2f}" for m in fit.holdout_metrics])
+    for name, metrics in result.validations:
+        if isinstance(metrics, str):
+            check.add_row(name, metrics, "", "", "")
+        else:
+            check.add_row(name, *[f"{m.r2:.2f} / {m.correlation:.2f}" for m in metrics])
+    out.print(check)
+    out.print(f"{fit.evaluations} model evaluations in {fit.wall_s:.1f} s")
+    for note in fit.notes:
+        out.print(f"note: {note}", highlight=False)
 
 
 def _print_fit(run: Any, fit: Any) -> None:
@@ -151,6 +258,17 @@ def register(sub: Any) -> None:
                    help="refuse a fit whose position residual is larger (RMS)")
     p.add_argument("--max-angle-rms-deg", type=finite_float(0.001, 170.0, "deg"), default=3.0,
                    help="refuse a fit whose attitude residual is larger (RMS)")
+    p.add_argument("--log", metavar="FILE[:N]", action="append", default=None,
+                   help="identify from real flight logs instead of flying: a blackbox, ULog or Crazyflie file, or "
+                        "log N of it; repeat to fit several together (the file's other logs validate)")
+    p.add_argument("--mass-kg", type=finite_float(0.005, 50.0, "kg"), default=None,
+                   help="with --log: take-off mass (default: the prior's)")
+    p.add_argument("--motor-x-m", type=finite_float(0.005, 2.0, "m"), default=None,
+                   help="with --log: motor distance from the centre along x (default: the prior's arm / √2)")
+    p.add_argument("--motor-y-m", type=finite_float(0.005, 2.0, "m"), default=None,
+                   help="with --log: motor distance from the centre along y (default: the prior's arm / √2)")
+    p.add_argument("--airframe", metavar="FILE.toml", default=None,
+                   help="with --log: also write the Betaflight plant's [airframe] section")
     p.add_argument("--from-session", metavar="SESSION", type=session_ref,
                    help="fit a stored identification session again instead of flying (id or 'last')")
     p.add_argument("--force", action="store_true", help="replace --output if it exists")

@@ -49,6 +49,7 @@ __all__ = [
     "fit_log",
     "metrics",
     "predict",
+    "targets",
     "thrust_curve",
     "validate",
 ]
@@ -202,7 +203,7 @@ def _regressors(log: PreparedLog, layout: MotorLayout, geometry: Geometry, tau_s
     return smooth(moments, log), smooth(collective, log)
 
 
-def _targets(log: PreparedLog) -> np.ndarray:
+def targets(log: PreparedLog) -> np.ndarray:
     """(n, 4) smoothed measured roll, pitch, yaw accelerations and body-z specific force."""
     acc = log.angular_acceleration()
     return np.column_stack([acc, smooth(log.specific_force_m_s2[:, 2], log)])
@@ -396,7 +397,7 @@ def fit_log(logs: PreparedLog | Sequence[PreparedLog], layout: MotorLayout, geom
         fixed_tau = x0[0]
         notes.append(f"motor commands logged at {slowest:.0f} Hz, too slow to show the motor's time "
                      f"constant: it is fixed at {fixed_tau * 1e3:.0f} ms, not identified")
-    y = np.vstack([_targets(log) for log in logs])
+    y = np.vstack([targets(log) for log in logs])
     train = np.concatenate([log.in_flight & ~log.holdout for log in logs])
     holdout = np.concatenate([log.holdout for log in logs])
     offsets = np.cumsum([0] + [int(log.block.max()) + 1 for log in logs[:-1]])
@@ -466,5 +467,5 @@ def measured_hover_command(logs: Sequence[PreparedLog]) -> tuple[float, float]:
 
 def validate(fit: LogFit, log: PreparedLog) -> tuple[ChannelMetrics, ...]:
     """Prediction quality of ``fit`` on every in-flight sample of another log of the same vehicle."""
-    y = _targets(log)
+    y = targets(log)
     return metrics(y, predict(log, fit.model, fit.layout, fit.geometry), log.in_flight)

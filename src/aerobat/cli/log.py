@@ -1,0 +1,176 @@
+"""``aerobat log info|plot|export FILE``: what a real flight log holds, as figures and as CSV."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+from pathlib import Path
+from typing import Any
+
+from aerobat.cli.common import HelpFormatter, bounded_int, console, output_dir, refuse_overwrite
+from aerobat.errors import ConfigError
+
+__all__ = ["log_summary", "register"]
+
+
+def _logs(args: argparse.Namespace) -> list[Any]:
+    from aerobat.logs import read_logs
+
+    logs = read_logs(args.file)
+    if getattr(args, "index", None) is not None:
+        if args.index > len(logs):
+            raise ConfigError(f"{args.file}: log {args.index} does not exist; the file holds {len(logs)} "
+                              f"log{'s' if len(logs) != 1 else ''}")
+        return [logs[args.index - 1]]
+    return logs
+
+
+_TUNE_KEYS = ("rollPID", "pitchPID", "yawPID", "rates_type", "rc_rates", "rates", "rc_expo", "feedforward_weight",
+              "looptime", "pid_process_denom", "gyro_lowpass_hz", "dterm_lowpass_hz", "dshot_idle_value",
+              "motorOutput", "MC_ROLLRATE_P", "MC_PITCHRATE_P", "MC_YAWRATE_P", "MPC_THR_HOVER", "MAV_TYPE",
+              "SYS_AUTOSTART", "event")
+
+
+def log_summary(log: Any) -> dict[str, Any]:
+    """One log as a JSON-ready table: durations, rates, fields, firmware and a tune summary."""
+    meta = log.metadata
+    return {
+        "file": str(log.path), "index": log.index, "logs_in_file": log.logs_in_file, "source": log.source.value,
+        "duration_s": round(log.duration_s, 3),
+        "firmware": meta.firmware, "firmware_version": meta.firmware_version, "board": meta.board,
+        "craft_name": meta.craft_name, "vehicle_type": meta.vehicle_type, "start_time": meta.start_time,
+        "signals": {ch.value: {"samples": s.samples, "rate_hz": round(s.rate_hz, 1), "unit": s.unit,
+                               "columns": list(s.columns), "from": list(s.source_fields)}
+                    for ch, s in log.signals.items()},
+        "motor_layout": log.motor_layout.mixer if log.motor_layout else None,
+        "tune": {k: meta.parameters[k] for k in _TUNE_KEYS if k in meta.parameters},
+        "parameters": len(meta.parameters),
+        "notes": list(log.notes),
+    }
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    summaries = [log_summary(log) for log in _logs(args)]
+    if args.json:
+        print(json.dumps({"file": str(args.file), "logs": summaries}))
+        return 0
+    say = console().print
+    say(f"{args.file}: {len(summaries)} log{'s' if len(summaries) != 1 else ''}")
+    for s in summaries:
+        who = " ".join(x for x in (s["firmware"], s["firmware_version"], s["board"], repr(s["craft_name"])
+                                   if s["craft_name"] else "") if x)
+        say(f"  log {s['index']}: {s['duration_s']:.1f} s, {s['source']} ({who}), {s['vehicle_type']}, "
+            f"motors: {s['motor_layout'] or 'no layout'}")
+        for name, sig in s["signals"].items():
+            say(f"      {name:16s} {sig['samples']:7d} samples at {sig['rate_hz']:7.1f} Hz  [{sig['unit']}]  "
+                f"{', '.join(sig['from'])}")
+        if s["tune"]:
+            say("      tune: " + "; ".join(f"{k} {v}" for k, v in s["tune"].items()))
+        say(f"      {s['parameters']} header fields / parameters kept")
+        for note in s["notes"]:
+            say(f"      note: {note}")
+    return 0
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    from aerobat.plotting import save_figure
+    from aerobat.plotting.flightlog import plot_log_spectra, plot_log_traces
+
+    logs = _logs(args)
+    out = Path(args.out) if args.out else Path("out") / f"log-{Path(args.file).name}"
+    out = output_dir(out)
+    window = tuple(args.window_s) if args.window_s else None
+    say = console().print
+    for log in logs:
+        stem = f"log{log.index}"
+        for suffix, fig in (("traces", plot_log_traces(log, window_s=window)), ("spectra", plot_log_spectra(log))):
+            path = out / f"{stem}_{suffix}.png"
+            refuse_overwrite(path, store_path=None, force=args.force, option="--out")
+            save_figure(fig, path)
+            say(f"wrote {path}")
+    return 0
+
+
+def _csv_text(log: Any) -> str:
+    """Every series of ``log`` on its own time base: one row per sample, long format."""
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(["signal", "unit", "time_s", *[f"v{i}" for i in range(4)], "columns"])
+    for ch, s in log.signals.items():
+        cols = "|".join(s.columns)
+        for t, row in zip(s.time_s, s.values, strict=True):
+            writer.writerow([ch.value, s.unit, f"{t:.6f}", *[f"{v:.7g}" for v in row], cols])
+    return buffer.getvalue()
+
+
+def _wide_csv(log: Any) -> str:
+    """The series that share the log's main time base side by side, one row per sample."""
+    import numpy as np
+
+    groups: dict[bytes, list[Any]] = {}
+    for s in log.signals.values():
+        groups.setdefault(s.time_s.tobytes(), []).append(s)
+    main = max(groups.values(), key=lambda g: (g[0].samples, len(g)))
+    header = ["time_s"] + [f"{s.channel.value}.{c}[{s.unit}]" for s in main for c in s.columns]
+    data = np.column_stack([main[0].time_s] + [s.values for s in main])
+    buffer = io.StringIO()
+    buffer.write(",".join(header) + "\n")
+    np.savetxt(buffer, data, delimiter=",", fmt="%.7g")
+    return buffer.getvalue()
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from aerobat.plotting import write_text
+
+    logs = _logs(args)
+    if args.output is not None and len(logs) > 1:
+        raise ConfigError(f"--output {args.output}: the file holds {len(logs)} logs; name one with --index, or give "
+                          "--out DIR for one CSV file per log")
+    render = _csv_text if args.long else _wide_csv
+    if args.output is None and args.out is None:
+        for log in logs:
+            print(render(log), end="")
+        return 0
+    for log in logs:
+        path = Path(args.output) if args.output else output_dir(Path(args.out)) / f"{Path(args.file).stem}-log{log.index}.csv"
+        refuse_overwrite(path, store_path=None, force=args.force, option="--output" if args.output else "--out")
+        write_text(path, render(log))
+        console().print(f"wrote {path}", highlight=False)
+    return 0
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser("log", help="read real flight logs: Betaflight blackbox, PX4 ULog, Crazyflie uSD",
+                       formatter_class=HelpFormatter)
+    cmds = p.add_subparsers(dest="log_command", metavar="COMMAND")
+
+    def common(q: argparse.ArgumentParser) -> None:
+        q.add_argument("file", metavar="FILE", help="a .bbl/.bfl/.txt blackbox log, a .ulg ULog or a Crazyflie log")
+        q.add_argument("--index", type=bounded_int(1, 10_000), default=None,
+                       help="only log N of the file (from 1; default: every log)")
+
+    q = cmds.add_parser("info", help="what a log file holds: logs, durations, rates, fields, firmware, tune",
+                        formatter_class=HelpFormatter)
+    common(q)
+    q.add_argument("--json", action="store_true", help="print one JSON object")
+    q.set_defaults(func=_cmd_info)
+    q = cmds.add_parser("plot", help="set point against gyro per axis, motors, throttle and their spectra",
+                        formatter_class=HelpFormatter)
+    common(q)
+    q.add_argument("--out", metavar="DIR", default=None, help="folder for the figures (default: out/log-FILE)")
+    q.add_argument("--window-s", nargs=2, type=float, metavar=("START", "END"), default=None,
+                   help="only this time window of the traces [s]")
+    q.add_argument("--force", action="store_true", help="replace figures that exist")
+    q.set_defaults(func=_cmd_plot)
+    q = cmds.add_parser("export", help="the log's series in SI units as CSV", formatter_class=HelpFormatter)
+    common(q)
+    q.add_argument("--format", choices=("csv",), default="csv", help="output format")
+    q.add_argument("--output", metavar="FILE", default=None, help="write one log's CSV here (default: stdout)")
+    q.add_argument("--out", metavar="DIR", default=None, help="write one CSV file per log into this folder")
+    q.add_argument("--long", action="store_true",
+                   help="one row per sample of every series on its own time base (default: the main time base, "
+                        "side by side)")
+    q.add_argument("--force", action="store_true", help="replace files that exist")
+    q.set_defaults(func=_cmd_export)

@@ -1,0 +1,194 @@
+"""A vehicle from its own flight logs: read, fit, validate on other flights, write a vehicle file.
+
+:func:`identify_from_logs` is what ``aerobat identify --log FILE`` runs. The logs named are
+fitted together (every fifth block of each is held out); every *other* log in the same files
+(a blackbox file often holds several flights of one quad) is a validation flight. The result
+turns into a vehicle file that ``design``, ``learn`` and ``study`` accept
+(:func:`vehicle_from_log_fit`) and, for the Betaflight plant, an ``[airframe]`` section
+(:func:`airframe_from_log_fit`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aerobat.errors import ConfigError, IdentificationFailed
+from aerobat.logs import read_logs
+from aerobat.quadrotor.flightlog import FlightLog
+from aerobat.quadrotor.identification import envelope_margins
+from aerobat.quadrotor.identification.logdata import prepare_log
+from aerobat.quadrotor.identification.logfit import (
+    ChannelMetrics,
+    Geometry,
+    LogFit,
+    LogFitOptions,
+    fit_log,
+    thrust_curve,
+    validate,
+)
+from aerobat.quadrotor.vehicle import ModelEffects, VehicleConfig, VehicleParams
+
+__all__ = ["LogIdentification", "LogRef", "airframe_from_log_fit", "identify_from_logs", "parse_log_ref",
+           "vehicle_from_log_fit"]
+
+
+@dataclass(frozen=True)
+class LogRef:
+    """A log in a file: ``path`` and ``index`` (from 1; None: every log in the file)."""
+
+    path: Path
+    index: int | None = None
+
+    def __str__(self) -> str:
+        return f"{self.path}" + (f":{self.index}" if self.index is not None else "")
+
+
+def parse_log_ref(text: str | os.PathLike[str]) -> LogRef:
+    """``FILE`` or ``FILE:N`` (log N of FILE, from 1)."""
+    raw = os.fspath(text)
+    head, sep, tail = raw.rpartition(":")
+    if sep and tail.isdigit() and head:
+        index = int(tail)
+        if index < 1:
+            raise ConfigError(f"{raw}: log numbers start at 1")
+        return LogRef(Path(head), index)
+    return LogRef(Path(raw))
+
+
+@dataclass(frozen=True)
+class LogIdentification:
+    """What :func:`identify_from_logs` found.
+
+    Attributes
+    ----------
+    fit : the fit on the logs named.
+    fitted : the logs fitted (``file#N``).
+    validations : per other log of the same files, its prediction metrics, or the reason it
+        could not be used.
+    """
+
+    fit: LogFit
+    fitted: tuple[str, ...]
+    validations: tuple[tuple[str, tuple[ChannelMetrics, ...] | str], ...]
+
+
+def _load(refs: Sequence[LogRef]) -> tuple[list[FlightLog], list[FlightLog]]:
+    chosen: list[FlightLog] = []
+    others: list[FlightLog] = []
+    for ref in refs:
+        logs = read_logs(ref.path)
+        if ref.index is not None and ref.index > len(logs):
+            raise ConfigError(f"{ref.path}: log {ref.index} does not exist; the file holds {len(logs)} "
+                              f"log{'s' if len(logs) != 1 else ''}")
+        for log in logs:
+            (chosen if ref.index is None or log.index == ref.index else others).append(log)
+    names = {log.name for log in chosen}
+    return chosen, [log for log in others if log.name not in names]
+
+
+def identify_from_logs(refs: Sequence[LogRef | str | os.PathLike[str]], geometry: Geometry, *,
+                       options: LogFitOptions | None = None) -> LogIdentification:
+    """Fit ``geometry``'s vehicle on the logs ``refs`` and validate on the other logs of the same files."""
+    refs = [r if isinstance(r, LogRef) else parse_log_ref(r) for r in refs]
+    if not refs:
+        raise ConfigError("identify: no log given")
+    chosen, others = _load(refs)
+    layouts = {log.motor_layout for log in chosen}
+    prepared = [prepare_log(log) for log in chosen]
+    if len(layouts) != 1 or None in layouts:
+        raise ConfigError("identify: the logs have different motor layouts (" +
+                          ", ".join(f"{log.name}: {log.motor_layout.mixer if log.motor_layout else 'none'}"
+                                    for log in chosen) + "); fit one vehicle at a time")
+    (layout,) = layouts
+    assert layout is not None
+    fit = fit_log(prepared, layout, geometry, options=options)
+    validations: list[tuple[str, tuple[ChannelMetrics, ...] | str]] = []
+    for log in others:
+        try:
+            validations.append((log.name, validate(fit, prepare_log(log, purpose="validation"))))
+        except ConfigError as exc:
+            validations.append((log.name, str(exc).split(": ", 1)[-1]))
+    return LogIdentification(fit=fit, fitted=tuple(log.name for log in chosen), validations=tuple(validations))
+
+
+def _require(fit: LogFit, name: str) -> float:
+    value = fit.value(name)
+    if not math.isfinite(value) or value <= 0:
+        raise IdentificationFailed(f"{fit.name}: {name} came out {value:g}; no vehicle file can be made from it")
+    return value
+
+
+def vehicle_from_log_fit(fit: LogFit, prior: VehicleConfig, *, name: str = "identified",
+                         idle_command: float | None = None) -> VehicleConfig:
+    """The identified vehicle as a design model: mass and geometry from ``fit.geometry``, the rest fitted.
+
+    The arm length is the motors' distance from the centre, √(x² + y²), as the shipped FPV
+    preset defines it; the reduced envelope keeps ``prior``'s margins; the prior's rate-loop
+    gains are kept (a log of another firmware's loop does not give the paper's P gains).
+    ``idle_command`` is the motor command of an armed, idling motor (Betaflight's idle), whose
+    thrust is the lower limit; default: the fit's thrust at zero command.
+    """
+    g = fit.geometry
+    f_max = _require(fit, "thrust_max_n")
+    u_idle = max(idle_command if idle_command is not None else 0.0, 1e-6)
+    f_min = float(f_max * thrust_curve(np.array([u_idle]), fit.model.r, fit.model.k)[0])
+    lower, upper = envelope_margins(prior.vehicle)
+    a_min, a_max = 4 * f_min / g.mass_kg, 4 * f_max / g.mass_kg
+    span = a_max - a_min
+    vehicle = VehicleParams(
+        mass_kg=g.mass_kg, arm_length_m=math.hypot(g.motor_x_m, g.motor_y_m),
+        inertia_xx_kg_m2=_require(fit, "inertia_xx_kg_m2"), inertia_yy_kg_m2=_require(fit, "inertia_yy_kg_m2"),
+        inertia_zz_kg_m2=_require(fit, "inertia_zz_kg_m2"),
+        motor_rate_up_per_s=1.0 / _require(fit, "motor_time_constant_s"),
+        motor_rate_down_per_s=1.0 / _require(fit, "motor_time_constant_s"),
+        rotor_thrust_min_n=f_min, rotor_thrust_max_n=f_max,
+        collective_reduced_min_m_s2=a_min + lower * span, collective_reduced_max_m_s2=a_max - upper * span,
+        drag_constant_m=min(max(_require(fit, "kappa_m"), 1e-5), 1.0), gravity_m_s2=prior.vehicle.gravity_m_s2,
+    )
+    source = {
+        "summary": f"identified from flight logs {fit.name} (aerobat identify --log)",
+        "mass_kg": f"[user] {g.mass_kg:g} kg given with --mass-kg",
+        "geometry": f"[user] motors at (±{g.motor_x_m:g}, ±{g.motor_y_m:g}) m; arm length = sqrt(x² + y²)",
+        "inertia_zz": f"[A] {g.inertia_zz_ratio:.3g} × (I_xx + I_yy): a log cannot separate I_zz from κ",
+        "fit": "; ".join(f"{k} = {v:.5g} ± {s:.2g} {u}" for k, (v, s, u) in fit.values.items()),
+        "controller": f"[prior] rate gains of {prior.name}",
+    }
+    return dataclasses.replace(prior.with_vehicle(vehicle, name=name), effects=ModelEffects(), source=source)
+
+
+def airframe_from_log_fit(fit: LogFit, *, base: Any | None = None) -> dict[str, Any]:
+    """The Betaflight plant's ``[airframe]`` table for the identified quad (fields of ``Airframe``).
+
+    ``base`` (an :class:`~aerobat.plants.betaflight.params.Airframe`) gives what a log does not
+    tell: motor spread, rotor inertia, output delay; its defaults otherwise.
+    """
+    from aerobat.plants.betaflight.params import Airframe
+
+    base = base or Airframe()
+    g = fit.geometry
+    tau = _require(fit, "motor_time_constant_s")
+    table = dataclasses.asdict(base)
+    table.update(
+        mass_kg=g.mass_kg,
+        inertia_kg_m2=[_require(fit, "inertia_xx_kg_m2"), _require(fit, "inertia_yy_kg_m2"),
+                       _require(fit, "inertia_zz_kg_m2")],
+        motor_x_m=g.motor_x_m, motor_y_m=g.motor_y_m,
+        thrust_max_n=_require(fit, "thrust_max_n"),
+        curve_min_speed_ratio=min(max(fit.model.r, 0.0), 0.9), curve_shape=min(max(fit.model.k, 0.0), 1.0),
+        motor_tau_up_s=tau, motor_tau_down_s=tau,
+        kappa_m=min(max(_require(fit, "kappa_m"), 1e-4), 0.5),
+        output_delay_s=min(max(fit.model.delay_s, 0.0), 0.05),
+    )
+    for key, value in list(table.items()):
+        if isinstance(value, tuple):
+            table[key] = list(value)
+    Airframe(**{k: tuple(v) if isinstance(v, list) else v for k, v in table.items()})  # validates
+    return table

@@ -143,6 +143,9 @@ def vehicle_from_log_fit(fit: LogFit, prior: VehicleConfig, *, name: str = "iden
     lower, upper = envelope_margins(prior.vehicle)
     a_min, a_max = 4 * f_min / g.mass_kg, 4 * f_max / g.mass_kg
     span = a_max - a_min
+    # Table 1's margins scale with the thrust span; on a vehicle with T/W of 5 and more they would put
+    # β̲ above hover, so β̲ is at most 0.9 g (the shipped FPV preset's)
+    beta_min = min(a_min + lower * span, 0.9 * prior.vehicle.gravity_m_s2)
     vehicle = VehicleParams(
         mass_kg=g.mass_kg, arm_length_m=math.hypot(g.motor_x_m, g.motor_y_m),
         inertia_xx_kg_m2=_require(fit, "inertia_xx_kg_m2"), inertia_yy_kg_m2=_require(fit, "inertia_yy_kg_m2"),
@@ -150,7 +153,7 @@ def vehicle_from_log_fit(fit: LogFit, prior: VehicleConfig, *, name: str = "iden
         motor_rate_up_per_s=1.0 / _require(fit, "motor_time_constant_s"),
         motor_rate_down_per_s=1.0 / _require(fit, "motor_time_constant_s"),
         rotor_thrust_min_n=f_min, rotor_thrust_max_n=f_max,
-        collective_reduced_min_m_s2=a_min + lower * span, collective_reduced_max_m_s2=a_max - upper * span,
+        collective_reduced_min_m_s2=beta_min, collective_reduced_max_m_s2=a_max - upper * span,
         drag_constant_m=min(max(_require(fit, "kappa_m"), 1e-5), 1.0), gravity_m_s2=prior.vehicle.gravity_m_s2,
     )
     source = {

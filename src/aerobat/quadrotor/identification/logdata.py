@@ -27,6 +27,7 @@ BLOCK_S = 2.0           # length of a fit/validation block [s]
 HOLDOUT_EVERY = 5       # every fifth block is held out for validation
 MIN_FLIGHT_S = 8.0      # identification needs at least this much flight [s]
 MIN_RATE_HZ = 100.0     # the gyro must be logged at least this fast to differentiate it
+HIGHPASS_HZ = float(__import__("os").environ.get("AEROBAT_HP", "1.0"))
 CUTOFF_HZ = 20.0        # comparison low-pass corner [Hz]: well above the motors' (~5 Hz), below vibration
 FLYING_ABOVE_IDLE = 0.1  # in the air: the mean motor command this far above its idle (fraction)
 GAP_S = 0.3             # motors below that for less than this: still in the air [s]
@@ -77,15 +78,38 @@ class PreparedLog:
     def flight_s(self) -> float:
         return float(sum(b - a for a, b in self.segments_s))
 
+    def smoothed_gyro(self) -> np.ndarray:
+        """(n, 3) the gyro through :func:`smooth` (computed once)."""
+        cached = self.__dict__.get("_smoothed_gyro")
+        if cached is None:
+            cached = band(self.gyro_rad_s, self)
+            self.__dict__["_smoothed_gyro"] = cached
+        return cached
+
     def angular_acceleration(self) -> np.ndarray:
         """(n, 3) smoothed derivative of the gyro [rad/s²]."""
-        return smooth(np.gradient(self.gyro_rad_s, self.time_s, axis=0), self)
+        return band(np.gradient(self.gyro_rad_s, self.time_s, axis=0), self)
 
 
 def smooth(x: np.ndarray, log: PreparedLog) -> np.ndarray:
     """Zero-phase 4th-order Butterworth low-pass at ``log.cutoff_hz``, along time, segment by segment."""
     out = np.array(x, dtype=float, copy=True)
     sos = sps.butter(2, log.cutoff_hz, fs=1.0 / log.dt_s, output="sos")
+    for start, end in _runs(log.in_flight):
+        if end - start > 30:
+            out[start:end] = sps.sosfiltfilt(sos, out[start:end], axis=0)
+    return out
+
+
+def band(x: np.ndarray, log: PreparedLog) -> np.ndarray:
+    """:func:`smooth`, then a zero-phase 2nd-order high-pass at :data:`HIGHPASS_HZ`, segment by segment.
+
+    For the moments: slow changes of the motor differential answer slow disturbance moments
+    (airspeed, a shifting centre of thrust) and make no angular acceleration; above about 1 Hz
+    the differential is the pilot's and the rate loop's, and its effect is what the log shows.
+    """
+    out = smooth(x, log)
+    sos = sps.butter(1, HIGHPASS_HZ, btype="highpass", fs=1.0 / log.dt_s, output="sos")
     for start, end in _runs(log.in_flight):
         if end - start > 30:
             out[start:end] = sps.sosfiltfilt(sos, out[start:end], axis=0)

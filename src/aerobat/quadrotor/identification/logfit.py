@@ -37,7 +37,7 @@ from scipy import signal as sps
 
 from aerobat.errors import ConfigError, IdentificationFailed
 from aerobat.quadrotor.flightlog import MotorLayout
-from aerobat.quadrotor.identification.logdata import PreparedLog, smooth
+from aerobat.quadrotor.identification.logdata import PreparedLog, band, smooth
 
 __all__ = [
     "CHANNELS",
@@ -107,7 +107,8 @@ class LogModel:
     ``tau_s, delay_s, r, k`` are the nonlinear parameters; ``gains[c], biases[c]`` per channel
     (roll, pitch, yaw: rad/s² per unit of normalized moment; specific force: f_max/m),
     and ``thrust_moments`` the roll, pitch and yaw
-    acceleration per unit of normalized collective (a moment proportional to thrust).
+    acceleration per unit of normalized collective (a moment proportional to thrust);
+    ``damping_per_s`` the rotational damping, angular acceleration per body rate [1/s].
     """
 
     tau_s: float
@@ -117,6 +118,7 @@ class LogModel:
     gains: tuple[float, float, float, float]
     biases: tuple[float, float, float, float]
     thrust_moments: tuple[float, float, float]
+    damping_per_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -192,15 +194,15 @@ def _delayed(u: np.ndarray, delay_s: float, dt_s: float) -> np.ndarray:
 
 
 def _regressors(log: PreparedLog, layout: MotorLayout, geometry: Geometry, tau_s: float, delay_s: float,
-                r: float, k: float) -> tuple[np.ndarray, np.ndarray]:
-    """Smoothed (n, 3) normalized moments and (n,) normalized collective."""
+                r: float, k: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Band-passed (n, 3) normalized moments, smoothed (n,) collective, band-passed (n, 3) rates and collective."""
     thrust = _lag(thrust_curve(_delayed(log.motor_command, delay_s, log.dt_s), r, k), tau_s, log.dt_s)
     arms = layout.moment_arms(1.0, 1.0)  # signs only: gains carry the lengths
     moments = thrust @ arms               # (n, 3): Σ y_i c_i, −Σ x_i c_i, −Σ spin_i c_i
     collective = thrust.sum(axis=1)
     if log.acc_filter_hz > 0:  # the firmware filtered its accelerometer before logging it
         collective = _lag(collective, 1.0 / (2 * math.pi * log.acc_filter_hz), log.dt_s)
-    return smooth(moments, log), smooth(collective, log)
+    return band(moments, log), smooth(collective, log), log.smoothed_gyro(), band(collective, log)
 
 
 def targets(log: PreparedLog) -> np.ndarray:
@@ -209,15 +211,15 @@ def targets(log: PreparedLog) -> np.ndarray:
     return np.column_stack([acc, smooth(log.specific_force_m_s2[:, 2], log)])
 
 
-def _design_matrices(reg: tuple[np.ndarray, np.ndarray]) -> list[np.ndarray]:
-    moments, collective = reg
-    one = np.ones_like(collective)
+def _design_matrices(reg: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]) -> list[np.ndarray]:
+    moments, collective, rates, band_collective = reg
     # the collective column on each axis: a moment proportional to thrust (centre of mass off the
     # thrust centre, uneven motors), as the motion-capture identification's A_p, A_q
     # no offset on the specific force: an accelerometer is calibrated to far better than the
     # thrust at zero command, and a free offset would trade against the thrust curve (it did:
     # +3.6 m/s² on the Crazyflie, and the curve's hover command 0.79 against 0.62 measured)
-    return [np.column_stack([moments[:, c], collective, one]) for c in range(3)] + \
+    # and the body rate: rotational damping (rotor and body drag), which a flip at 1000 °/s shows
+    return [np.column_stack([moments[:, c], band_collective, rates[:, c]]) for c in range(3)] + \
         [collective[:, None]]
 
 
@@ -232,7 +234,7 @@ def instruments(log: PreparedLog, mats: list[np.ndarray]) -> list[np.ndarray]:
     """
     if log.rate_setpoint_rad_s is None:
         return mats
-    demand = smooth(np.gradient(log.rate_setpoint_rad_s, log.time_s, axis=0), log)
+    demand = band(np.gradient(log.rate_setpoint_rad_s, log.time_s, axis=0), log)
     return [np.column_stack([demand[:, c], m[:, 1:]]) for c, m in enumerate(mats[:3])] + [mats[3]]
 
 
@@ -251,15 +253,16 @@ def _model(nonlinear: np.ndarray, coefs: list[np.ndarray]) -> LogModel:
     tau, delay, r, k = (float(v) for v in nonlinear)
     return LogModel(tau_s=tau, delay_s=delay, r=r, k=k,
                     gains=(float(coefs[0][0]), float(coefs[1][0]), float(coefs[2][0]), float(coefs[3][0])),
-                    biases=(float(coefs[0][-1]), float(coefs[1][-1]), float(coefs[2][-1]), 0.0),
-                    thrust_moments=(float(coefs[0][1]), float(coefs[1][1]), float(coefs[2][1])))
+                    biases=(0.0, 0.0, 0.0, 0.0),
+                    thrust_moments=(float(coefs[0][1]), float(coefs[1][1]), float(coefs[2][1])),
+                    damping_per_s=(-float(coefs[0][2]), -float(coefs[1][2]), -float(coefs[2][2])))
 
 
 def predict(log: PreparedLog, model: LogModel, layout: MotorLayout, geometry: Geometry) -> np.ndarray:
     """(n, 4) smoothed predicted roll, pitch, yaw accelerations and body-z specific force."""
     mats = _design_matrices(_regressors(log, layout, geometry, model.tau_s, model.delay_s, model.r, model.k))
     a = model.thrust_moments
-    coefs = [np.array([model.gains[c], a[c], model.biases[c]]) for c in range(3)] + \
+    coefs = [np.array([model.gains[c], a[c], -model.damping_per_s[c]]) for c in range(3)] + \
         [np.array([model.gains[3]])]
     return np.column_stack([a @ c for a, c in zip(mats, coefs, strict=True)])
 

@@ -119,6 +119,30 @@ def test_expressions_are_safe_and_errors_point_at_the_text():
             parse_expression(text, where="f.toml: stages[0].duration_s").evaluate({"p0": 1.0})
 
 
+@pytest.mark.parametrize(("text", "fragment"), [
+    ("sqrt(1, 2)", "sqrt takes 1 argument, got 2"), ("abs(-1, 2)", "abs takes 1 argument, got 2"),
+    ("atan2(1)", "atan2 takes 2 arguments, got 1"), ("min(1)", "min takes at least 2 arguments, got 1"),
+    ("max(p0)", "max takes at least 2 arguments"), ("(-8)**(1/3)", "a negative number to a fractional power"),
+    ("1" + "0" * 400, r"1000000000…000000 \(401 digits\) is too large for a float"),
+    ("1e400", "not finite"), ("10 ** 400", "cannot be evaluated here"),
+])
+def test_expressions_refuse_wrong_arity_complex_powers_and_huge_numbers(text, fragment):
+    """Issue 31 I2: TypeError, a complex number and OverflowError became aerobat's one-line errors."""
+    with pytest.raises(ConfigError, match=fragment) as info:
+        parse_expression(text, where="f.toml: stages[0].duration_s").evaluate({"p0": 1.0}, where="f.toml: x")
+    assert "\n" not in str(info.value) and str(info.value).startswith("f.toml")
+    assert parse_expression("(-8) ** 2 + max(1, 2, 3)", where="w").evaluate({}) == 67.0
+
+
+def test_a_bad_expression_in_a_file_exits_2_naming_the_file(tmp_path):
+    table = json.loads(json.dumps(read_toml(EXAMPLES / "yaw_pirouette.toml")))
+    table["stages"][0]["duration_s"] = "sqrt(1, 2)"
+    path = tmp_path / "arity.toml"
+    path.write_text(tomli_w.dumps(table))
+    code, _, err = call(["design", "--maneuver", str(path)])
+    assert code == 2 and str(path) in err and "sqrt takes 1 argument" in err and len(err.strip().splitlines()) == 1
+
+
 BASE = read_toml(EXAMPLES / "yaw_pirouette.toml")
 
 
@@ -141,6 +165,11 @@ BROKEN = {
     "guess out of bounds": (lambda t: t["parameters"]["p0"].update(guess=99.0), "guess"),
     "too many errors": (lambda t: t["errors"].extend([{"quantity": "position_x"}] * 3), "errors but only"),
     "bad name": (lambda t: t["parameters"].update({"1x": {"guess": 1.0}}), "not a valid name"),
+    # issue 31 I3: a list where a name belongs raised "TypeError: unhashable type"
+    "list quantity": (lambda t: t["errors"][2].update(quantity=["a", "b", "c"]), "errors[2].quantity: expected one"),
+    "list description": (lambda t: t["parameters"]["p0"].update(description=["a"]), "p0.description: expected a str"),
+    "list stage name": (lambda t: t["stages"][0].update(name={"a": 1}), "stages[0].name: expected a string"),
+    "list error name": (lambda t: t["errors"][0].update(name=[1]), "errors[0].name"),
 }
 
 

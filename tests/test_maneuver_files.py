@@ -7,6 +7,7 @@ import io
 import json
 import math
 import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -250,3 +251,83 @@ def test_a_staged_maneuver_rebuilds_from_its_spec():
     again = from_spec(json.loads(json.dumps(maneuver.spec())))
     assert isinstance(again, StagedManeuver) and again.spec() == maneuver.spec()
     assert math.isclose(again.duration_s(again.guess()), maneuver.duration_s(maneuver.guess()))
+
+
+# ------------------------------------------------------------------ issue 25 item 6: Python maneuvers
+
+
+def _aerobat_script(argv: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    """The installed ``aerobat`` command (its sys.path has no working directory, as for a user)."""
+    script = Path(sys.executable).parent / "aerobat"
+    return subprocess.run([str(script), *argv], capture_output=True, text=True, cwd=cwd, timeout=600,
+                          env={**os.environ, "PYTHONPATH": str(ROOT / "src")})
+
+
+@pytest.fixture()
+def user_folder(tmp_path):
+    (tmp_path / "examples").symlink_to(ROOT / "examples")
+    yield tmp_path
+    sys.modules.pop("custom_maneuver", None)
+
+
+def test_a_python_file_with_a_class_name_is_a_maneuver(user_folder):
+    result = _aerobat_script(["design", "--maneuver", "examples/custom_maneuver.py:VerticalHop", "--json"],
+                             user_folder)
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)["converged"] is True
+
+
+@pytest.mark.parametrize(("spelling", "fragment"), [
+    ("examples/custom_maneuver.py", "a Python file; name the maneuver in it as examples/custom_maneuver.py:Name "
+                                    "(maneuvers in it: VerticalHop)"),
+    ("examples.custom_maneuver:VerticalHop", "examples/custom_maneuver.py is a file here: name it as "
+                                             "examples/custom_maneuver.py:VerticalHop (or "
+                                             "aerobat.examples.custom_maneuver:VerticalHop"),
+    ("examples/custom_maneuver.py:Nope", "custom_maneuver has no callable Nope"),
+    ("examples/nothing.py:X", "examples/nothing.py is not a file"),
+])
+def test_python_maneuver_spellings_that_do_not_work_say_the_one_that_does(user_folder, spelling, fragment):
+    """Was "invalid TOML" for a .py file and "No module named 'examples'" for the dotted name."""
+    result = _aerobat_script(["design", "--maneuver", spelling], user_folder)
+    assert result.returncode == 2, result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and fragment in result.stderr, result.stderr
+    assert "invalid TOML" not in result.stderr
+
+
+def test_load_maneuver_is_one_call_for_every_spelling(user_folder, monkeypatch):
+    from aerobat import load_maneuver
+
+    monkeypatch.chdir(user_folder)
+    step = load_maneuver("examples/maneuvers/sideways_step.toml")
+    assert isinstance(step, StagedManeuver) and step.vehicle == CONFIG.vehicle
+    assert load_maneuver(Path("examples/maneuvers/sideways_step.toml"), CONFIG).spec() == step.spec()
+    hop = load_maneuver("examples/custom_maneuver.py:VerticalHop", CONFIG.vehicle)
+    assert hop.name == "vertical hop" and hop.guess().tolist() == [0.3, 0.3]
+    with pytest.raises(ConfigError, match="expected a maneuver file"):
+        load_maneuver("not a reference")
+
+
+def _wrong_sign(path: Path, tmp_path: Path) -> Path:
+    """The sideways step with the roll rates' signs flipped: it steps to −y instead of +y."""
+    text = path.read_text()
+    text = text.replace('rate_p_rad_s = "-w"', 'rate_p_rad_s = "MINUS"').replace('rate_p_rad_s = "w"',
+                                                                               'rate_p_rad_s = "-w"')
+    target = tmp_path / "wrong_sign.toml"
+    target.write_text(text.replace('"MINUS"', '"w"'))
+    return target
+
+
+def test_a_rate_of_the_wrong_sign_gets_a_hint(tmp_path):
+    wrong = _wrong_sign(EXAMPLES / "sideways_step.toml", tmp_path)
+    maneuver = load_maneuver_file(wrong, CONFIG.vehicle)
+    result = design(maneuver, NominalModel(CONFIG))
+    assert not result.converged
+    assert "hint: at the guess y ends at -1.48 m, the opposite sign of its target +1.5: a rate or acceleration " \
+           "of the wrong sign?" in result.message
+    code, _, err = call(["design", "--maneuver", str(wrong)])
+    assert code == 1 and "wrong sign" in err
+    # a design that fails for another reason gets no such hint
+    far = read_toml(EXAMPLES / "climb_pitch_flip.toml")
+    far["errors"][2]["target"] = 3.0
+    failed = design(StagedManeuver(vehicle=CONFIG.vehicle, table=far, source="far.toml"), NominalModel(CONFIG))
+    assert not failed.converged and "hint" not in failed.message

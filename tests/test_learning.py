@@ -146,11 +146,10 @@ def test_a_parameter_a_hair_inside_its_bound_is_held_not_scaling_the_step_to_zer
 
 def test_learn_refuses_a_design_that_did_not_converge_unless_forced():
     """Issue 25 item 6: the library flew a design that did not converge without a word (the CLI needs --force)."""
-    from aerobat.errors import DesignFailed
-
     from pathlib import Path
 
     from aerobat.config import read_toml
+    from aerobat.errors import DesignFailed
     from aerobat.quadrotor.maneuvers import StagedManeuver
 
     table = read_toml(Path(__file__).resolve().parents[1] / "examples" / "maneuvers" / "climb_pitch_flip.toml")

@@ -128,10 +128,11 @@ def _module_from_file(path: Path, reference: str, option: str) -> ModuleType:
     resolved = path.resolve()
     loaded = sys.modules.get(name)
     if loaded is not None:
-        if getattr(loaded, "__file__", None) and Path(loaded.__file__).resolve() == resolved:
+        where = getattr(loaded, "__file__", None)
+        if where and Path(where).resolve() == resolved:
             return loaded
         raise ConfigError(f"{option} {reference!r}: a module named {name} is already loaded from "
-                          f"{getattr(loaded, '__file__', None) or 'elsewhere'}; rename {path.name}")
+                          f"{where or 'elsewhere'}; rename {path.name}")
     folder = str(resolved.parent)
     if folder not in sys.path:
         sys.path.insert(0, folder)

@@ -116,3 +116,10 @@ def test_the_readmes_your_vehicle_commands_miss_less_than_table_1_with_the_defau
     assert [p.get("feedback", {}).get("scheme") for p in plants] == ["tracking", "tracking"], plants
     # measured: identified 0.007 m, Table 1 0.198 m (before the fix: identified 0.686 m)
     assert errors[0] < errors[1] / 3, errors
+
+
+def test_rotorpy_gets_the_design_model_too(identified):
+    pytest.importorskip("rotorpy")
+    plant = PlantChoice("rotorpy", seed=1, feedback="tracking").build(H, design_model=identified)
+    assert plant.config == H and plant.design_model == identified
+    assert PlantChoice("rotorpy", seed=1).build(identified).design_model == identified  # the plant is the vehicle

@@ -154,7 +154,7 @@ def first_and_trials(maneuver: MultiFlip, result, seeds: list[int], iterations: 
     idx = position_indices(maneuver.errors)
     firsts, ttt = [], []
     for seed in seeds:
-        session = learn(maneuver, result, Arena(H, seed=seed, feedback="none"), iterations=iterations)
+        session = learn(maneuver, result, Arena(H, seed=seed, feedback="none"), iterations=iterations, force=True)
         errors = [float(np.linalg.norm(it.error[idx])) for it in session.measured]
         firsts.append(errors[0])
         ttt.append(next((k + 1 for k, e in enumerate(errors) if e < TOLERANCE_M), math.inf))

@@ -286,7 +286,8 @@ def test_identified_model_learns_the_triple_flip_in_a_median_of_at_most_two_tria
     firsts, trials = [], []
     for seed in range(1, 21):
         errors = [float(np.linalg.norm(it.error[idx]))
-                  for it in learn(flip, result, Arena(H, seed=seed, feedback="none"), iterations=10).measured]
+                  for it in learn(flip, result, Arena(H, seed=seed, feedback="none"), iterations=10,
+                                    force=True).measured]
         firsts.append(errors[0])
         trials.append(next((k + 1 for k, e in enumerate(errors) if e < 0.12), math.inf))
     assert np.median(firsts) < 0.70 / 3

@@ -122,3 +122,42 @@ def test_plain_inverse_misbehaves_where_tsvd_does_not():
     tsvd = learn(FLIP3, DESIGN3, Arena(CONFIG, seed=1), iterations=15)
     assert position_errors(s)[10:15].mean() > 2 * position_errors(tsvd)[10:15].mean()
     assert math.isfinite(position_errors(s)[-1])
+
+
+def test_a_parameter_a_hair_inside_its_bound_is_held_not_scaling_the_step_to_zero():
+    """Issue 25 item 1: a design's trust-region solve leaves a pinned parameter ~1e-12 inside its bound;
+    the first correction then had scale 1.9e-10 ('scale=0.00'). Within 1e-9 of a bound counts as at it."""
+    from aerobat.core.learning import Learner
+
+    flip = MultiFlip(vehicle=CONFIG.vehicle, flips=1, max_rate_rad_s=math.radians(800), dims=2)
+    result = design(flip, NominalModel(CONFIG))
+    lower = flip.parameters[2].lower
+    scales = []
+    for offset in (0.0, 1e-13):
+        start = result.p_nominal.copy()
+        start[2] = lower + offset  # the coast duration: corrections push it below its bound
+        learner = Learner(flip, result, params=start)
+        it = learner.tell(Arena(CONFIG, seed=2).fly(learner.program()))
+        assert "held at a bound: p2" in it.message, (offset, it.message)
+        assert it.next_params[2] == start[2]
+        scales.append(it.scale)
+    assert scales[0] > 1e-3 and scales[1] == pytest.approx(scales[0], rel=1e-6), scales
+
+
+def test_learn_refuses_a_design_that_did_not_converge_unless_forced():
+    """Issue 25 item 6: the library flew a design that did not converge without a word (the CLI needs --force)."""
+    from pathlib import Path
+
+    from aerobat.config import read_toml
+    from aerobat.errors import DesignFailed
+    from aerobat.quadrotor.maneuvers import StagedManeuver
+
+    table = read_toml(Path(__file__).resolve().parents[1] / "examples" / "maneuvers" / "climb_pitch_flip.toml")
+    table["errors"][2]["target"] = 3.0  # 3 m higher with one flip: the design does not get there
+    flip = StagedManeuver(vehicle=CONFIG.vehicle, table=table, source="far.toml")
+    failed = design(flip, NominalModel(CONFIG))
+    assert not failed.converged
+    with pytest.raises(DesignFailed, match=r"design failed, nothing to learn: .*force=True"):
+        learn(flip, failed, NominalPlant(CONFIG), iterations=1)
+    session = learn(flip, failed, NominalPlant(CONFIG), iterations=1, force=True)
+    assert len(session.measured) == 1

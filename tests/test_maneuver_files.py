@@ -7,6 +7,7 @@ import io
 import json
 import math
 import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -119,6 +120,30 @@ def test_expressions_are_safe_and_errors_point_at_the_text():
             parse_expression(text, where="f.toml: stages[0].duration_s").evaluate({"p0": 1.0})
 
 
+@pytest.mark.parametrize(("text", "fragment"), [
+    ("sqrt(1, 2)", "sqrt takes 1 argument, got 2"), ("abs(-1, 2)", "abs takes 1 argument, got 2"),
+    ("atan2(1)", "atan2 takes 2 arguments, got 1"), ("min(1)", "min takes at least 2 arguments, got 1"),
+    ("max(p0)", "max takes at least 2 arguments"), ("(-8)**(1/3)", "a negative number to a fractional power"),
+    ("1" + "0" * 400, r"1000000000…000000 \(401 digits\) is too large for a float"),
+    ("1e400", "not finite"), ("10 ** 400", "cannot be evaluated here"),
+])
+def test_expressions_refuse_wrong_arity_complex_powers_and_huge_numbers(text, fragment):
+    """Issue 31 I2: TypeError, a complex number and OverflowError became aerobat's one-line errors."""
+    with pytest.raises(ConfigError, match=fragment) as info:
+        parse_expression(text, where="f.toml: stages[0].duration_s").evaluate({"p0": 1.0}, where="f.toml: x")
+    assert "\n" not in str(info.value) and str(info.value).startswith("f.toml")
+    assert parse_expression("(-8) ** 2 + max(1, 2, 3)", where="w").evaluate({}) == 67.0
+
+
+def test_a_bad_expression_in_a_file_exits_2_naming_the_file(tmp_path):
+    table = json.loads(json.dumps(read_toml(EXAMPLES / "yaw_pirouette.toml")))
+    table["stages"][0]["duration_s"] = "sqrt(1, 2)"
+    path = tmp_path / "arity.toml"
+    path.write_text(tomli_w.dumps(table))
+    code, _, err = call(["design", "--maneuver", str(path)])
+    assert code == 2 and str(path) in err and "sqrt takes 1 argument" in err and len(err.strip().splitlines()) == 1
+
+
 BASE = read_toml(EXAMPLES / "yaw_pirouette.toml")
 
 
@@ -141,6 +166,11 @@ BROKEN = {
     "guess out of bounds": (lambda t: t["parameters"]["p0"].update(guess=99.0), "guess"),
     "too many errors": (lambda t: t["errors"].extend([{"quantity": "position_x"}] * 3), "errors but only"),
     "bad name": (lambda t: t["parameters"].update({"1x": {"guess": 1.0}}), "not a valid name"),
+    # issue 31 I3: a list where a name belongs raised "TypeError: unhashable type"
+    "list quantity": (lambda t: t["errors"][2].update(quantity=["a", "b", "c"]), "errors[2].quantity: expected one"),
+    "list description": (lambda t: t["parameters"]["p0"].update(description=["a"]), "p0.description: expected a str"),
+    "list stage name": (lambda t: t["stages"][0].update(name={"a": 1}), "stages[0].name: expected a string"),
+    "list error name": (lambda t: t["errors"][0].update(name=[1]), "errors[0].name"),
 }
 
 
@@ -221,3 +251,83 @@ def test_a_staged_maneuver_rebuilds_from_its_spec():
     again = from_spec(json.loads(json.dumps(maneuver.spec())))
     assert isinstance(again, StagedManeuver) and again.spec() == maneuver.spec()
     assert math.isclose(again.duration_s(again.guess()), maneuver.duration_s(maneuver.guess()))
+
+
+# ------------------------------------------------------------------ issue 25 item 6: Python maneuvers
+
+
+def _aerobat_script(argv: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    """The installed ``aerobat`` command (its sys.path has no working directory, as for a user)."""
+    script = Path(sys.executable).parent / "aerobat"
+    return subprocess.run([str(script), *argv], capture_output=True, text=True, cwd=cwd, timeout=600,
+                          env={**os.environ, "PYTHONPATH": str(ROOT / "src")})
+
+
+@pytest.fixture()
+def user_folder(tmp_path):
+    (tmp_path / "examples").symlink_to(ROOT / "examples")
+    yield tmp_path
+    sys.modules.pop("custom_maneuver", None)
+
+
+def test_a_python_file_with_a_class_name_is_a_maneuver(user_folder):
+    result = _aerobat_script(["design", "--maneuver", "examples/custom_maneuver.py:VerticalHop", "--json"],
+                             user_folder)
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)["converged"] is True
+
+
+@pytest.mark.parametrize(("spelling", "fragment"), [
+    ("examples/custom_maneuver.py", "a Python file; name the maneuver in it as examples/custom_maneuver.py:Name "
+                                    "(maneuvers in it: VerticalHop)"),
+    ("examples.custom_maneuver:VerticalHop", "examples/custom_maneuver.py is a file here: name it as "
+                                             "examples/custom_maneuver.py:VerticalHop (or "
+                                             "aerobat.examples.custom_maneuver:VerticalHop"),
+    ("examples/custom_maneuver.py:Nope", "custom_maneuver has no callable Nope"),
+    ("examples/nothing.py:X", "examples/nothing.py is not a file"),
+])
+def test_python_maneuver_spellings_that_do_not_work_say_the_one_that_does(user_folder, spelling, fragment):
+    """Was "invalid TOML" for a .py file and "No module named 'examples'" for the dotted name."""
+    result = _aerobat_script(["design", "--maneuver", spelling], user_folder)
+    assert result.returncode == 2, result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and fragment in result.stderr, result.stderr
+    assert "invalid TOML" not in result.stderr
+
+
+def test_load_maneuver_is_one_call_for_every_spelling(user_folder, monkeypatch):
+    from aerobat import load_maneuver
+
+    monkeypatch.chdir(user_folder)
+    step = load_maneuver("examples/maneuvers/sideways_step.toml")
+    assert isinstance(step, StagedManeuver) and step.vehicle == CONFIG.vehicle
+    assert load_maneuver(Path("examples/maneuvers/sideways_step.toml"), CONFIG).spec() == step.spec()
+    hop = load_maneuver("examples/custom_maneuver.py:VerticalHop", CONFIG.vehicle)
+    assert hop.name == "vertical hop" and hop.guess().tolist() == [0.3, 0.3]
+    with pytest.raises(ConfigError, match="expected a maneuver file"):
+        load_maneuver("not a reference")
+
+
+def _wrong_sign(path: Path, tmp_path: Path) -> Path:
+    """The sideways step with the roll rates' signs flipped: it steps to −y instead of +y."""
+    text = path.read_text()
+    text = text.replace('rate_p_rad_s = "-w"', 'rate_p_rad_s = "MINUS"').replace('rate_p_rad_s = "w"',
+                                                                               'rate_p_rad_s = "-w"')
+    target = tmp_path / "wrong_sign.toml"
+    target.write_text(text.replace('"MINUS"', '"w"'))
+    return target
+
+
+def test_a_rate_of_the_wrong_sign_gets_a_hint(tmp_path):
+    wrong = _wrong_sign(EXAMPLES / "sideways_step.toml", tmp_path)
+    maneuver = load_maneuver_file(wrong, CONFIG.vehicle)
+    result = design(maneuver, NominalModel(CONFIG))
+    assert not result.converged
+    assert "hint: at the guess y ends at -1.48 m, the opposite sign of its target +1.5: a rate or acceleration " \
+           "of the wrong sign?" in result.message
+    code, _, err = call(["design", "--maneuver", str(wrong)])
+    assert code == 1 and "wrong sign" in err
+    # a design that fails for another reason gets no such hint
+    far = read_toml(EXAMPLES / "climb_pitch_flip.toml")
+    far["errors"][2]["target"] = 3.0
+    failed = design(StagedManeuver(vehicle=CONFIG.vehicle, table=far, source="far.toml"), NominalModel(CONFIG))
+    assert not failed.converged and "hint" not in failed.message

@@ -259,6 +259,10 @@ def test_toml_overrides_any_rotorpy_parameter(rp, tmp_path):
     np.testing.assert_allclose(plant.wind_profile.update(1.0, np.zeros(3)), [0.0, 0.0, 0.0], atol=1e-12)
 
 
+_ROTORS = ("[quad_params.rotor_pos]\nr1 = [{x}, 0.12, 0.0]\nr2 = [0.12, -0.12, 0.0]\nr3 = [-0.12, -0.12, 0.0]\n"
+           "r4 = [-0.12, 0.12, 0.0]\n")
+
+
 @pytest.mark.parametrize(
     ("text", "match"),
     [
@@ -275,6 +279,11 @@ def test_toml_overrides_any_rotorpy_parameter(rp, tmp_path):
         ('[simulation]\nintegrator = "euler"\n', r"integrator = 'euler'"),
         ('[wind]\nmodel = "storm"\n', r"wind\.model: expected one of"),
         ("[motion_capture]\nrate_hz = 5.0\n", r"rate_hz = 5 is out of range"),
+        # issue 31 E3: absurd rotor positions were accepted and the run exited 1
+        (_ROTORS.format(x="9223372036854775807"), r"quad_params\.rotor_pos\.r1\[0\] = 9\.22337e\+18 is out of range"),
+        (_ROTORS.format(x="1e30"), r"quad_params\.rotor_pos\.r1\[0\] = 1e\+30 is out of range: allowed \[-2, 2\] m"),
+        (_ROTORS.format(x="0.0").replace("0.12", "0.0"), r"rotor_pos .*no control of every moment"),
+        ("[quad_params]\nIxx = 1e30\n", r"quad_params\.Ixx = 1e\+30 is out of range"),
     ],
 )
 def test_bad_settings_file_names_the_file_and_key(rp, tmp_path, text, match):
@@ -283,6 +292,18 @@ def test_bad_settings_file_names_the_file_and_key(rp, tmp_path, text, match):
     with pytest.raises(ConfigError, match=match) as info:
         rp.RotorPyPlant(CONFIG, settings_path=path)
     assert str(path) in str(info.value)
+
+
+def test_absurd_rotor_positions_exit_2_naming_the_field(rp, tmp_path, capsys):
+    from aerobat.cli import main
+
+    path = tmp_path / "far.toml"
+    path.write_text(_ROTORS.format(x="1e30"))
+    code = main(["learn", "flip", "--flips", "1", "--plant", "rotorpy", "--rotorpy", str(path), "--trials", "1",
+                 "--db", str(tmp_path / "s.sqlite")])
+    err = capsys.readouterr().err
+    assert code == 2 and str(path) in err and "quad_params.rotor_pos.r1[0]" in err, err
+    assert len(err.strip().splitlines()) == 1
 
 
 def test_fixed_step_integrator_agrees_with_rotorpys_default_on_a_flip(rp, single_flip):

@@ -44,7 +44,8 @@ _HOME = {
     "Trajectory": "aerobat.quadrotor.simulate", "simulate": "aerobat.quadrotor.simulate",
     "simulate_batch": "aerobat.quadrotor.simulate", "NominalModel": "aerobat.quadrotor.simulate",
     "MultiFlip": "aerobat.quadrotor.maneuvers", "Translation": "aerobat.quadrotor.maneuvers",
-    "translation_maneuver": "aerobat.quadrotor.maneuvers", "solve_translation": "aerobat.quadrotor.timeoptimal",
+    "translation_maneuver": "aerobat.quadrotor.maneuvers", "load_maneuver": "aerobat.quadrotor.maneuvers",
+    "solve_translation": "aerobat.quadrotor.timeoptimal",
     # plants
     "Arena": "aerobat.plants", "ArenaParams": "aerobat.plants", "NominalPlant": "aerobat.plants",
     "PlantChoice": "aerobat.plants",

@@ -254,30 +254,19 @@ def add_db_option(p: argparse.ArgumentParser) -> None:
 # ------------------------------------------------------------------ objects from options
 
 
-def _exists(path: str) -> bool:
-    """Whether ``path`` names something; False for names the file system refuses (too long…)."""
-    try:
-        return Path(path).exists()
-    except (OSError, ValueError):
-        return False
-
-
 def maneuver_from_args(args: argparse.Namespace, config: Any) -> Any:
     """The maneuver the options describe, designed for ``config``."""
     source = getattr(args, "maneuver_source", None)
     if source is not None and args.maneuver is not None:
         raise ConfigError(f"name either a maneuver family ({args.maneuver}) or --maneuver {source}, not both")
     if source is None and args.maneuver is None:
-        raise ConfigError("name a maneuver: a family (flip, translation) or --maneuver FILE.toml|package.module:Name")
+        raise ConfigError("name a maneuver: a family (flip, translation) or --maneuver "
+                          "FILE.toml|FILE.py:Name|package.module:Name")
     _apply_family_defaults(args)
     if source is not None:
-        if source.endswith(".toml") or _exists(source):
-            from aerobat.quadrotor.maneuvers import load_maneuver_file
+        from aerobat.quadrotor.maneuvers import load_maneuver
 
-            return load_maneuver_file(source, config.vehicle)
-        from aerobat.quadrotor.maneuvers.plugins import load_plugin_maneuver
-
-        return load_plugin_maneuver(source, config.vehicle)
+        return load_maneuver(source, config.vehicle, option="--maneuver")
     if args.maneuver == "flip":
         from aerobat.quadrotor.maneuvers import MultiFlip
 

@@ -323,6 +323,9 @@ def design(
             # named limits first (the vehicle's envelope): they are what makes a maneuver infeasible
             pinned.sort(key=lambda limit: not limit[0])
             message += "; violated limits: " + "; ".join(text for _, text in pinned)
+        hint = _failure_hint(maneuver, evaluate, x0)
+        if hint:
+            message += f"; hint: {hint}"
     elif info.rank < n_err:
         status = DesignStatus.RANK_DEFICIENT
         message = (
@@ -363,6 +366,18 @@ def design(
     if raise_on_failure and not result_design.converged:
         raise DesignFailed(f"{maneuver.name}: design failed: {message}", result_design)
     return result_design
+
+
+def _failure_hint(maneuver: Maneuver, evaluate: _Evaluations, guess: np.ndarray) -> str | None:
+    """The maneuver's own reading of its error at the guess (optional ``failure_hint(params, error)``)."""
+    hint = getattr(maneuver, "failure_hint", None)
+    if not callable(hint):
+        return None
+    try:
+        text = hint(guess, evaluate(guess[None, :])[0])
+    except (ValueError, FloatingPointError, ConfigError):
+        return None
+    return text if isinstance(text, str) and text.strip() else None
 
 
 def _newton(

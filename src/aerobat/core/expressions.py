@@ -24,16 +24,29 @@ from dataclasses import dataclass
 
 from aerobat.errors import ConfigError
 
-__all__ = ["Expression", "FUNCTIONS", "parse_expression"]
+__all__ = ["ARITY", "Expression", "FUNCTIONS", "parse_expression"]
 
 FUNCTIONS: dict[str, Callable[..., float]] = {
     "sqrt": math.sqrt, "sin": math.sin, "cos": math.cos, "tan": math.tan, "atan2": math.atan2,
     "abs": abs, "min": min, "max": max, "radians": math.radians, "degrees": math.degrees, "exp": math.exp,
     "log": math.log,
 }
+ARITY: dict[str, tuple[int, int | None]] = {
+    name: (1, 1) for name in ("sqrt", "sin", "cos", "tan", "abs", "radians", "degrees", "exp", "log")
+} | {"atan2": (2, 2), "min": (2, None), "max": (2, None)}
+"""How many arguments each function takes: (at least, at most; None: any number)."""
 _CONSTANTS = {"pi": math.pi}
+
+
+def _power(base: float, exponent: float) -> float:
+    """``base ** exponent`` on reals: a negative base with a fractional exponent is an error, never complex."""
+    if base < 0.0 and exponent != math.floor(exponent):
+        raise ValueError(f"{base:g} ** {exponent:g}: a negative number to a fractional power has no real value")
+    return math.pow(base, exponent)
+
+
 _BINARY = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, ast.Div: operator.truediv,
-           ast.Pow: operator.pow}
+           ast.Pow: _power}
 
 Scope = Mapping[str, float]
 
@@ -76,7 +89,10 @@ def parse_expression(value: object, *, where: str, known: frozenset[str] | None 
         raise ConfigError(f"{where}: expected a number or an expression in quotes, got {type(value).__name__} "
                           f"{value!r}")
     if not isinstance(value, str):
-        number = float(value)
+        try:
+            number = float(value)
+        except OverflowError:
+            raise ConfigError(f"{where}: {short_number(value)} is too large for a float") from None
         if not math.isfinite(number):
             raise ConfigError(f"{where}: {value} is not finite")
         return Expression(repr(number), frozenset(), lambda scope: number)
@@ -100,6 +116,12 @@ def parse_expression(value: object, *, where: str, known: frozenset[str] | None 
     return Expression(text, frozenset(names), fn)
 
 
+def short_number(value: object) -> str:
+    """A number's text, its middle left out if it is long (a 400-digit integer in a message)."""
+    text = str(value)
+    return text if len(text) <= 24 else f"{text[:10]}…{text[-6:]} ({len(text)} digits)"
+
+
 def _printable(text: str) -> str:
     return "".join(c if c.isprintable() else c.encode("unicode_escape").decode() for c in text)
 
@@ -117,7 +139,12 @@ def _compile(node: ast.AST, text: str, where: str, names: set[str], depth: int) 
     if isinstance(node, ast.Constant):
         if isinstance(node.value, bool) or not isinstance(node.value, int | float):
             raise _refuse(node, text, where, "only numbers are allowed as literals")
-        number = float(node.value)
+        try:
+            number = float(node.value)
+        except OverflowError:
+            raise _refuse(node, text, where, f"{short_number(node.value)} is too large for a float") from None
+        if not math.isfinite(number):
+            raise _refuse(node, text, where, "the number is not finite (too large for a float)")
         return lambda scope: number
     if isinstance(node, ast.Name):
         name = node.id
@@ -143,7 +170,14 @@ def _compile(node: ast.AST, text: str, where: str, names: set[str], depth: int) 
             raise _refuse(node, text, where, "unknown function")
         if node.keywords or not node.args:
             raise _refuse(node, text, where, "functions take positional arguments")
-        function = FUNCTIONS[node.func.id]
+        name = node.func.id
+        low, high = ARITY[name]
+        count = len(node.args)
+        if count < low or (high is not None and count > high):
+            wanted = (f"{low}" if low == high else f"at least {low}" if high is None else f"{low} to {high}")
+            raise _refuse(node, text, where, f"{name} takes {wanted} argument{'' if wanted == '1' else 's'}, "
+                                             f"got {count}")
+        function = FUNCTIONS[name]
         args = [_compile(a, text, where, names, depth + 1) for a in node.args]
         return lambda scope: function(*(a(scope) for a in args))
     raise _refuse(node, text, where, f"{type(node).__name__} is not allowed")

@@ -26,7 +26,7 @@ from aerobat.core.maneuver import Maneuver, bounds_arrays, check_maneuver, error
 from aerobat.core.plant import Plant, Trial, TrialStatus
 from aerobat.core.rules.base import PaperRule, UpdateRule
 from aerobat.core.rules.registry import RuleChoice, make_rule
-from aerobat.errors import ConfigError
+from aerobat.errors import ConfigError, DesignFailed
 
 __all__ = [
     "Iteration",
@@ -312,7 +312,11 @@ class Learner:
         if self.hold_pinned:
             # a parameter already at a bound, pushed further out, would make the Sect. 4.2 scale
             # zero for the whole correction; hold just that parameter and correct with the rest
-            held = ((params <= lower) & (step < 0)) | ((params >= upper) & (step > 0))
+            # "at" a bound within the same 1e-9 the pinned check below uses: a design's trust-region
+            # solve leaves a pinned parameter a hair inside its bound, which would scale the step to ~0
+            near_lower = np.isfinite(lower) & (params - lower <= 1e-9 * np.maximum(1.0, np.abs(lower)))
+            near_upper = np.isfinite(upper) & (upper - params <= 1e-9 * np.maximum(1.0, np.abs(upper)))
+            held = (near_lower & (step < 0)) | (near_upper & (step > 0))
             if held.any() and not held.all():
                 step = np.where(held, 0.0, step)
                 note += "; held at a bound: " + ", ".join(self.maneuver.parameters[k].name
@@ -388,6 +392,7 @@ def learn(
     max_attempts: int | None = None,
     on_iteration: Callable[[Iteration], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
+    force: bool = False,
     **options: Any,
 ) -> Session:
     """Fly, measure, correct, repeat (Sect. 3, step 3).
@@ -404,11 +409,22 @@ def learn(
     max_attempts : cap on trials including lost and rejected ones (default 3 × iterations + 10).
     on_iteration : called with every record as soon as it exists (stores, progress output).
     should_stop : polled between trials; True ends the session as ``interrupted``.
+    force : learn even from a design that did not converge (``aerobat learn --force``).
     options : :class:`Learner` options (``absurd_limit``, ``pinned_warning_after``, ``hold_pinned``).
 
     A crashed or aborted trial ends the session with that status; lost triggers and lost
     contact are flown again; absurd measurements are rejected and flown again.
+
+    Raises
+    ------
+    DesignFailed
+        ``design`` did not converge (its p⁰ misses the target on the model) and ``force`` is not set.
     """
+    if not isinstance(force, bool):
+        raise ConfigError(f"force = {short_repr(force)}: expected True or False")
+    if not force and getattr(design, "converged", True) is False:
+        raise DesignFailed(f"design failed, nothing to learn: {design.message} (learn(..., force=True) learns from "
+                           f"it anyway)", design)
     if isinstance(iterations, bool) or not isinstance(iterations, int | np.integer) or iterations < 0:
         raise ConfigError(f"iterations = {short_repr(iterations)}: expected an integer >= 0")
     if not callable(getattr(plant, "fly", None)):

@@ -101,7 +101,9 @@ class Maneuver(Protocol):
 
     Optionally, ``error_batch(final_states) -> (B, n_err)`` computes the errors of a (B, N)
     batch of final states in one call, bit for bit what ``error`` gives one state at a time
-    (the design evaluates hundreds; see :func:`batch_errors`).
+    (the design evaluates hundreds; see :func:`batch_errors`). Optionally,
+    ``failure_hint(params, error) -> str | None`` reads the error at the guess when a design fails
+    (e.g. "a rate of the wrong sign?"); :func:`~aerobat.core.design.design` appends it to its message.
     """
 
     @property

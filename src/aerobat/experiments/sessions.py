@@ -154,8 +154,9 @@ class StoredSession:
                 on_iteration(it)
 
         try:
+            # start_session refused a design that did not converge unless forced; a resumed session continues
             session = learn(self.maneuver, self.design, self.plant, iterations=self.target - before,
-                            learner=self.learner, on_iteration=record, should_stop=should_stop)
+                            learner=self.learner, on_iteration=record, should_stop=should_stop, force=True)
             status, message = session.status, session.message
         except StoreError as exc:
             with contextlib.suppress(StoreError):
@@ -216,7 +217,8 @@ def start_session(
     model : the nominal vehicle (the design model; the plant's onboard controller inverts with it).
     plant_model : the vehicle the plant is built around, if not ``model`` — e.g. a vehicle identified
         on the arena is designed on, but the arena stays the one built around the Hummingbird
-        (its true vehicle and its onboard controller come from this one).
+        (its true vehicle and its onboard controller come from this one). The plant's feedback
+        still tracks ``model``'s flight of each program (the flight the design promises).
     plant : which plant flies (default: the arena, seed 0).
     rule : the update rule (default: the paper's).
     iterations : measured iterations to learn.
@@ -254,7 +256,7 @@ def start_session(
                            + ("" if force else " (force=True / --force learns anyway)"), result)
     update_rule = build_rule(rule, result, model)
     base = plant_model if plant_model is not None else model
-    flying = plant.build(base)
+    flying = plant.build(base, design_model=model)  # the feedback tracks the design model's flight
     start = (np.array(result.p_nominal, dtype=float) if start_params is None
              else as_float_array("start_params", start_params, (len(maneuver.parameters),)))
     learner = Learner(maneuver, result, rule=update_rule, params=start)
@@ -304,7 +306,7 @@ def resume_session(store: Store, ref: int | str, *, iterations: int | None = Non
     rule_choice = RuleChoice.from_table(rec.rule, source=f"{where} rule")
     update_rule = build_rule(rule_choice, result, model)
     plant_choice = plant_choice_from_record(prec.kind, prec.config, rec.seed, source=f"{where} plant")
-    plant = plant_choice.build(plant_vehicle)
+    plant = plant_choice.build(plant_vehicle, design_model=model)
     if not maneuver.is_valid(rec.current_params):
         raise ConfigError(f"{where}: stored parameters violate the maneuver's bounds")
     learner = Learner(maneuver, result, rule=update_rule, params=rec.current_params,

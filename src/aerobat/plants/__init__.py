@@ -42,10 +42,11 @@ __all__ = [
 ]
 
 
-def _rotorpy(config: VehicleConfig, settings: Any, seed: int, feedback: Any = None) -> Plant:
+def _rotorpy(config: VehicleConfig, settings: Any, seed: int, feedback: Any = None,
+            design_model: VehicleConfig | None = None) -> Plant:
     from aerobat.plants.rotorpy import RotorPyPlant
 
-    return RotorPyPlant(config, settings=settings, seed=seed, feedback=feedback)
+    return RotorPyPlant(config, settings=settings, seed=seed, feedback=feedback, design_model=design_model)
 
 
 def _rotorpy_load(path: str | Path) -> Any:
@@ -103,8 +104,9 @@ def _nominal(config: VehicleConfig, settings: Any, seed: int, feedback: Any = No
     return NominalPlant(config)  # the reference is its own flight: every correction would be zero
 
 
-def _arena(config: VehicleConfig, settings: Any, seed: int, feedback: Any = None) -> Plant:
-    return Arena(config, settings, seed=seed, feedback=feedback)
+def _arena(config: VehicleConfig, settings: Any, seed: int, feedback: Any = None,
+           design_model: VehicleConfig | None = None) -> Plant:
+    return Arena(config, settings, seed=seed, feedback=feedback, design_model=design_model)
 
 
 PLANTS.register("nominal", PlantSpec(
@@ -116,7 +118,7 @@ PLANTS.register("arena", PlantSpec(
     load_settings=load_arena,
     settings_from_table=lambda table, source: dataclass_from_table(ArenaParams, table, source=source),
     settings_to_table=dataclass_to_table, default_settings=ArenaParams, option="--arena",
-    feedback=_ALL_SCHEMES, default_feedback=DEFAULT_SCHEME))
+    feedback=_ALL_SCHEMES, default_feedback=DEFAULT_SCHEME, design_model=True))
 PLANTS.register("rotorpy", PlantSpec(
     "rotorpy", "RotorPy's Hummingbird (an independent simulator), supervised like the arena",
     _rotorpy, load_settings=_rotorpy_load, settings_from_table=_rotorpy_from_table,
@@ -124,7 +126,7 @@ PLANTS.register("rotorpy", PlantSpec(
     requires=(("rotorpy", "rotorpy"),), option="--rotorpy", feedback=_ALL_SCHEMES,
     # measured (docs/results.md, Feedback): with the default rule, tracking is worse than the open
     # loop on RotorPy (last-10 0.051 vs 0.041 m); it wins only with --rule broyden (0.012 m)
-    default_feedback=FeedbackScheme.NONE))
+    default_feedback=FeedbackScheme.NONE, design_model=True))
 PLANTS.register("betaflight", PlantSpec(
     "betaflight", "a 5-inch racer flown by Betaflight 4.6's own firmware (SITL in lockstep) in the arena",
     _betaflight, load_settings=_betaflight_load, settings_from_table=_betaflight_from_table,

@@ -40,6 +40,8 @@ class PlantSpec:
     feedback : the feedback schemes the plant's onboard loop can run (:mod:`aerobat.quadrotor.feedback`);
         a plant with more than ``none`` is built as ``build(config, settings, seed, feedback)``.
     default_feedback : the scheme used when none is chosen.
+    design_model : the plant takes ``design_model=`` (the model the programs were designed on, when it is
+        not the vehicle the plant is built around): its feedback tracks that model's flight.
     """
 
     name: str
@@ -53,6 +55,7 @@ class PlantSpec:
     option: str | None = None
     feedback: tuple[FeedbackScheme, ...] = (FeedbackScheme.NONE,)
     default_feedback: FeedbackScheme = FeedbackScheme.NONE
+    design_model: bool = False
 
     def check_feedback(self, feedback: Feedback) -> None:
         """Raise ConfigError if this plant cannot run ``feedback``'s scheme."""
@@ -149,12 +152,21 @@ class PlantChoice:
                     else OPEN_LOOP)
         return cls(spec.name, settings, int(table.get("seed", 0)), feedback)
 
-    def build(self, config: VehicleConfig) -> Plant:
-        """The plant, flying a true vehicle around the nominal ``config``."""
+    def build(self, config: VehicleConfig, *, design_model: VehicleConfig | None = None) -> Plant:
+        """The plant, flying a true vehicle around the nominal ``config``.
+
+        ``design_model`` is the model the programs are designed on when it is not ``config`` (a vehicle
+        identified on the arena, which stays built around the vehicle it was identified from): the
+        onboard feedback then tracks the design model's flight of each program, as it does when the
+        two are the same.
+        """
         spec = self.spec
         spec.check_available()
         if spec.feedback == (FeedbackScheme.NONE,):
             return spec.build(config, self.settings, self.seed)
+        if design_model is not None and design_model != config and spec.design_model:
+            return spec.build(config, self.settings, self.seed, self.feedback,  # type: ignore[call-arg]
+                              design_model=design_model)
         return spec.build(config, self.settings, self.seed, self.feedback)  # type: ignore[call-arg]
 
     def __repr__(self) -> str:

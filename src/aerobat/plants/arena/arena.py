@@ -80,13 +80,21 @@ class Arena:
     feedback : what the onboard loop mixes into the program (:mod:`aerobat.quadrotor.feedback`):
         a :class:`Feedback`, or a scheme name with default gains; default the best scheme measured
         (``tracking``); ``"none"`` is the paper's pure open loop.
+    design_model : the model the programs were designed on, if not ``config`` (a vehicle identified
+        on this arena, which stays built around ``config``). Its flight of each program is the
+        feedback's reference and the supervisor's prediction for the trigger check: tracking
+        ``config``'s flight of a program designed on another model would pull the vehicle onto a
+        flight that misses the target.
     """
 
     name = "arena"
 
     def __init__(self, config: VehicleConfig, params: ArenaParams | None = None, *, seed: int = 0,
-                 feedback: Feedback | FeedbackScheme | str | None = None) -> None:
+                 feedback: Feedback | FeedbackScheme | str | None = None,
+                 design_model: VehicleConfig | None = None) -> None:
         self.config = check_type("config", config, VehicleConfig, "a VehicleConfig (e.g. aerobat.hummingbird())")
+        self.design_model = config if design_model is None else check_type(
+            "design_model", design_model, VehicleConfig, "a VehicleConfig or None")
         self.params = ArenaParams() if params is None else check_type("params", params, ArenaParams,
                                                                       "ArenaParams or None")
         self.seed = check_int("seed", seed, low=0, high=2**63 - 1)
@@ -383,7 +391,7 @@ class Arena:
         nan_state = np.full(N_STATE, np.nan)
         log = _Log(np.empty((4096, MOCAP_COLUMNS)))
         self.plant = self._plant_vector()
-        nominal = simulate(program, self.config, record=True)
+        nominal = simulate(program, self.design_model, record=True)  # what the program was designed to fly
         if self.feedback.enabled:
             self._reference = reference_from_trajectory(nominal.times_s, nominal.states,
                                                         self.feedback.gains.reference_rate_hz)

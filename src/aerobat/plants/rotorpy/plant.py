@@ -185,13 +185,16 @@ class RotorPyPlant:
         with ``rule="broyden"``: docs/results.md, Feedback). The onboard estimator integrates RotorPy's
         body rates (its model has no gyro errors) and takes the supervisor's motion-capture estimate
         every supervisor period (``supervisor_rate_hz``; no radio here, so no drops).
+    design_model : the model the programs were designed on, if not ``config``: the feedback's reference is
+        its flight of each program.
     """
 
     name = "rotorpy"
 
     def __init__(self, config: VehicleConfig, settings_path: str | Path | None = None, seed: int = 0, *,
                  settings: RotorPySettings | None = None, wind_profile: Any | None = None,
-                 feedback: Feedback | FeedbackScheme | str | None = None) -> None:
+                 feedback: Feedback | FeedbackScheme | str | None = None,
+                 design_model: VehicleConfig | None = None) -> None:
         multirotor_cls, _ = import_rotorpy()
         if settings_path is not None and settings is not None:
             raise ValueError("give either settings_path or settings, not both")
@@ -200,6 +203,7 @@ class RotorPyPlant:
             settings or RotorPySettings())
         s = self.settings
         self.config = config
+        self.design_model = config if design_model is None else design_model
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         self.quad_params = build_quad_params(s, source=source)
@@ -501,7 +505,7 @@ class RotorPyPlant:
         """The program's ticks with the onboard feedback: the estimator starts from the supervisor's
         attitude estimate at the trigger, integrates the body rates every tick and takes in the
         supervisor's estimate (attitude, deviation from the reference) every supervisor period."""
-        nominal = simulate(compiled, self.config, record=True)
+        nominal = simulate(compiled, self.design_model, record=True)
         reference = reference_from_trajectory(nominal.times_s, nominal.states, self.feedback.gains.reference_rate_hz)
         onboard, history = onboard_state()
         est = self._feedback()

@@ -174,20 +174,33 @@ _NON_NEGATIVE = ("c_Dx", "c_Dy", "c_Dz", "k_m", "k_d", "k_z", "k_h", "k_flap", "
                  "motor_noise_std")
 
 
-def _number(value: Any, where: str) -> float:
+MAX_MAGNITUDE = 1e6
+"""Largest magnitude of any RotorPy parameter aerobat accepts (SI units; the largest shipped is 3000)."""
+ROTOR_POSITION_MAX_M = 2.0
+"""Largest rotor position component from the centre of mass [m] (the Hummingbird's is 0.12 m)."""
+
+
+def _number(value: Any, where: str, *, limit: float = MAX_MAGNITUDE, unit: str = "") -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise ConfigError(f"{where}: expected a number, got {type(value).__name__} {value!r}")
-    if not math.isfinite(value):
+    try:
+        number = float(value)
+    except OverflowError:
+        raise ConfigError(f"{where}: {str(value)[:12]}… is out of range: allowed [{-limit:g}, {limit:g}]"
+                          f"{unit}") from None
+    if not math.isfinite(number):
         raise ConfigError(f"{where}: {value} is not finite")
-    return float(value)
+    if abs(number) > limit:
+        raise ConfigError(f"{where} = {number:g} is out of range: allowed [{-limit:g}, {limit:g}]{unit}")
+    return number
 
 
-def _vector(value: Any, length: int, where: str) -> np.ndarray:
+def _vector(value: Any, length: int, where: str, **limits: Any) -> np.ndarray:
     if not isinstance(value, list | tuple | np.ndarray):
         raise ConfigError(f"{where}: expected an array of {length} numbers, got {type(value).__name__} {value!r}")
     if len(value) != length:
         raise ConfigError(f"{where}: expected an array of {length} numbers, got {len(value)}")
-    return np.array([_number(v, f"{where}[{i}]") for i, v in enumerate(value)])
+    return np.array([_number(v, f"{where}[{i}]", **limits) for i, v in enumerate(value)])
 
 
 def validate_overrides(overrides: Mapping[str, Any], base: Mapping[str, Any], *, source: str) -> dict[str, Any]:
@@ -215,7 +228,8 @@ def validate_overrides(overrides: Mapping[str, Any], base: Mapping[str, Any], *,
                 raise ConfigError(f"{where}: expected a table of rotor positions r1…r4, got {type(value).__name__}")
             if set(value) != set(default):
                 raise ConfigError(f"{where}: expected exactly the keys {', '.join(default)}, got {', '.join(value)}")
-            out[key] = {name: _vector(value[name], 3, f"{where}.{name}") for name in default}
+            out[key] = {name: _vector(value[name], 3, f"{where}.{name}", limit=ROTOR_POSITION_MAX_M, unit=" m")
+                        for name in default}
         elif key == "k_w":
             if isinstance(value, list | tuple | np.ndarray):
                 gains = _vector(value, 3, where)
@@ -244,7 +258,17 @@ def validate_overrides(overrides: Mapping[str, Any], base: Mapping[str, Any], *,
 
 
 def _check_flyable(qp: Mapping[str, Any], source: str) -> None:
-    """The combined parameters must allow a hover with margin."""
+    """The combined parameters must allow a hover with margin, and the rotors must reach every moment."""
+    # RotorPy's control allocation (thrust, roll, pitch, yaw moments from the four rotor thrusts) is
+    # inverted when the vehicle is built: rotors on a line or at the centre make it singular
+    arm = qp["k_m"] / qp["k_eta"]
+    positions = [np.asarray(qp["rotor_pos"][name], dtype=float) for name in qp["rotor_pos"]]
+    allocation = np.array([[1.0] * len(positions), [r[1] for r in positions], [-r[0] for r in positions],
+                           [arm * d for d in np.asarray(qp["rotor_directions"], dtype=float)]])
+    if not np.all(np.isfinite(allocation)) or np.linalg.cond(allocation) > 1e8:
+        raise ConfigError(f"{source}: quad_params.rotor_pos with rotor_directions and k_m/k_eta = {arm:g} m give no "
+                          f"control of every moment (rotors at the centre or on one line): place the rotors "
+                          f"around the centre of mass, e.g. RotorPy's ±0.12 m in x and y")
     if qp["rotor_speed_min"] >= qp["rotor_speed_max"]:
         raise ConfigError(f"{source}: rotor_speed_min = {qp['rotor_speed_min']:g} must be below "
                           f"rotor_speed_max = {qp['rotor_speed_max']:g} rad/s")

@@ -5,6 +5,7 @@ Both are registered as maneuver kinds (``flip``, ``translation``) through the
 """
 
 from aerobat.quadrotor.maneuvers.flip import FlipStages, MultiFlip, flip_from_spec
+from aerobat.quadrotor.maneuvers.plugins import load_maneuver
 from aerobat.quadrotor.maneuvers.staged import StagedManeuver, load_maneuver_file, staged_from_spec
 from aerobat.quadrotor.maneuvers.translation import (
     Translation,
@@ -19,6 +20,7 @@ __all__ = [
     "StagedManeuver",
     "Translation",
     "flip_from_spec",
+    "load_maneuver",
     "load_maneuver_file",
     "staged_from_spec",
     "translation_from_solution",

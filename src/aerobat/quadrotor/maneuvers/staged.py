@@ -79,6 +79,14 @@ def _check_keys(table: Mapping[str, Any], allowed: tuple[str, ...], where: str) 
         raise ConfigError(f"{where}: unknown field(s) {', '.join(unknown)}; allowed: {', '.join(allowed)}")
 
 
+def _text(table: Mapping[str, Any], key: str, default: str, where: str) -> str:
+    """A string field (default if absent); :class:`ConfigError` naming the field if it is anything else."""
+    value = table.get(key, default)
+    if not isinstance(value, str):
+        raise ConfigError(f"{where}.{key}: expected a string in quotes, got {type(value).__name__} {value!r}")
+    return value
+
+
 def _identifier(name: Any, where: str) -> str:
     if not isinstance(name, str) or not name.isidentifier() or name.startswith("__"):
         raise ConfigError(f"{where}: {name!r} is not a valid name ({_NAME_OK})")
@@ -173,14 +181,16 @@ class StagedManeuver:
             bounds = [parse_expression(entry.get(b, inf), where=f"{where}.{b}", known=frozenset(base)).evaluate(
                 base, where=f"{where}.{b}") if b in entry else inf for b, inf in (("lower", -math.inf),
                                                                                  ("upper", math.inf))]
+            texts = {k: _text(entry, k, key if k == "description" else "", where)
+                     for k in ("description", "unit", "lower_name", "upper_name")}
             try:
                 specs.append(ParameterSpec(
-                    name=key, description=str(entry.get("description", key)), unit=str(entry.get("unit", "")),
+                    name=key, description=texts["description"], unit=texts["unit"],
                     lower=bounds[0], upper=bounds[1],
                     scale=_number(parse_expression(entry.get("scale", 1.0), where=f"{where}.scale",
                                                    known=frozenset(base)).evaluate(base, where=f"{where}.scale"),
                                   f"{where}.scale", low=1e-12),
-                    bound_names=(str(entry.get("lower_name", "")), str(entry.get("upper_name", "")))))
+                    bound_names=(texts["lower_name"], texts["upper_name"])))
             except ConfigError as exc:
                 raise ConfigError(f"{where}: {exc}") from None
             if "guess" not in entry:
@@ -209,7 +219,7 @@ class StagedManeuver:
                 raise ConfigError(f"{where}: missing required field duration_s")
             inputs = tuple((CHANNEL_FIELDS[f], parse_expression(entry[f], where=f"{where}.{f}", known=names))
                            for f in CHANNEL_FIELDS if f in entry)
-            stages.append(_Stage(str(entry.get("name", f"stage {k + 1}")),
+            stages.append(_Stage(_text(entry, "name", f"stage {k + 1}", where),
                                  parse_expression(entry["duration_s"], where=f"{where}.duration_s", known=names),
                                  inputs))
         ramp = _table(t.get("ramp_down", {}), f"{src}.ramp_down")
@@ -229,6 +239,9 @@ class StagedManeuver:
             entry = _table(entry, where)
             _check_keys(entry, ("name", "quantity", "target", "scale"), where)
             quantity = entry.get("quantity")
+            if not isinstance(quantity, str):
+                raise ConfigError(f"{where}.quantity: expected one name in quotes, got {type(quantity).__name__} "
+                                  f"{quantity!r}; allowed: {', '.join(QUANTITIES)}")
             if quantity not in QUANTITIES:
                 raise ConfigError(f"{where}.quantity: {quantity!r}; allowed: {', '.join(QUANTITIES)}")
             unit, kind = QUANTITIES[quantity]
@@ -364,6 +377,29 @@ class StagedManeuver:
             index = "xyz".index(axis) if axis else ("roll", "pitch", "yaw").index(kind)
             values.append({"position": s[POS], "velocity": s[VEL], "rotation": unwrapped}.get(kind, euler)[index])
         return np.array(values) - c["targets"]
+
+    def failure_hint(self, params: np.ndarray, error: np.ndarray) -> str | None:
+        """Why a design from ``params`` (the guess) may fail: a target reached with the wrong sign.
+
+        A component that ends on the opposite side of a non-zero target (by more than half the
+        target) is what a rate or acceleration of the wrong sign does: a roll flip turned the other
+        way, a step taken to the other side. None if nothing suggests it.
+        """
+        c = self.__dict__["_compiled"]
+        error = np.asarray(error, dtype=float)
+        if error.shape != c["targets"].shape or not np.all(np.isfinite(error)):
+            return None
+        wrong = []
+        for spec, target, e in zip(self.errors, c["targets"], error, strict=True):
+            reached = target + e
+            if target != 0.0 and reached * target < 0.0 and abs(reached) > 0.5 * abs(target):
+                wrong.append((abs(e) / spec.scale, spec, target, reached))
+        if not wrong:
+            return None
+        _, spec, target, reached = max(wrong, key=lambda w: w[0])
+        return (f"at the guess {spec.name} ends at {reached:+.3g} {spec.unit}, the opposite sign of its target "
+                f"{target:+.3g}: a rate or acceleration of the wrong sign? (a positive roll rate tilts the thrust "
+                f"toward -y, a positive pitch rate toward +x; docs/maneuvers.md, 'Frames and signs')")
 
     def spec(self) -> dict[str, Any]:
         return {"kind": "staged", "source": self.source, "maneuver": _plain(self.table),

@@ -134,7 +134,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
             print(render(log), end="")
         return 0
     for log in logs:
-        path = Path(args.output) if args.output else output_dir(Path(args.out)) / f"{Path(args.file).stem}-log{log.index}.csv"
+        name = f"{Path(args.file).stem}-log{log.index}.csv"
+        path = Path(args.output) if args.output else output_dir(Path(args.out)) / name
         refuse_overwrite(path, store_path=None, force=args.force, option="--output" if args.output else "--out")
         write_text(path, render(log))
         console().print(f"wrote {path}", highlight=False)

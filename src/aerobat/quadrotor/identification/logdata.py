@@ -27,7 +27,7 @@ BLOCK_S = 2.0           # length of a fit/validation block [s]
 HOLDOUT_EVERY = 5       # every fifth block is held out for validation
 MIN_FLIGHT_S = 8.0      # identification needs at least this much flight [s]
 MIN_RATE_HZ = 100.0     # the gyro must be logged at least this fast to differentiate it
-HIGHPASS_HZ = float(__import__("os").environ.get("AEROBAT_HP", "1.0"))
+HIGHPASS_HZ = 2.0       # angular channels: high-pass corner of the comparison band [Hz]
 CUTOFF_HZ = 20.0        # comparison low-pass corner [Hz]: well above the motors' (~5 Hz), below vibration
 FLYING_ABOVE_IDLE = 0.1  # in the air: the mean motor command this far above its idle (fraction)
 GAP_S = 0.3             # motors below that for less than this: still in the air [s]
@@ -152,7 +152,7 @@ def _fill_dropouts(u: np.ndarray, dt: float) -> tuple[np.ndarray, int]:
 
 
 def acc_filter_hz(log: FlightLog) -> float:
-    """The firmware's accelerometer low-pass corner recorded in the log (Betaflight's acc_lpf_hz, ×100 in 4.x headers)."""
+    """The firmware's accelerometer low-pass corner in the log (Betaflight's acc_lpf_hz, ×100 in 4.x headers)."""
     raw = log.metadata.parameters.get("acc_lpf_hz") if log.metadata.firmware == "Betaflight" else None
     try:
         return float(raw) / 100.0 if raw else 0.0
@@ -216,7 +216,8 @@ def prepare_log(log: FlightLog, *, purpose: str = "identification") -> PreparedL
         notes.append(f"{dropouts} samples where every motor command reads 0 for less than {DROPOUT_S * 1e3:.0f} ms "
                      "inside flight were held at the previous command (logger dropouts)")
     nyquist = 0.5 / dt
-    return PreparedLog(notes=tuple(notes), name=log.name, time_s=t, dt_s=dt, gyro_rad_s=w, specific_force_m_s2=f, motor_command=u,
+    return PreparedLog(notes=tuple(notes), name=log.name, time_s=t, dt_s=dt, gyro_rad_s=w, specific_force_m_s2=f,
+                       motor_command=u,
                        motor_rate_hz=motors.rate_hz, in_flight=in_flight, block=block, holdout=holdout,
                        segments_s=tuple(segments), cutoff_hz=min(CUTOFF_HZ, 0.4 * nyquist),
                        acc_filter_hz=acc_filter_hz(log),

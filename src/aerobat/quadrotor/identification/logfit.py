@@ -90,12 +90,16 @@ class LogFitOptions:
     Attributes
     ----------
     jackknife_groups : block groups left out in turn for the uncertainties (0: none).
+    instrument_setpoint : fit the moments with the set point's rate of change as instrument
+        (instrumental variables) instead of least squares; see :func:`instruments` (off: on the
+        shared 5-inch logs it gave negative held-out R², docs/logs.md).
     fixed_time_constant_s : use this motor time constant instead of fitting it (it is fixed
         anyway when the motor commands are logged slower than 50 Hz).
     max_delay_s : upper bound of the command-to-thrust delay [s].
     """
 
     jackknife_groups: int = 5
+    instrument_setpoint: bool = False
     fixed_time_constant_s: float | None = None
     max_delay_s: float = 0.02
 
@@ -288,14 +292,14 @@ def _segments(log: PreparedLog, rows: np.ndarray) -> tuple[tuple[float, float], 
                                                                                    strict=True))
 
 
-def _stacked(logs: Sequence[PreparedLog], layout: MotorLayout, geometry: Geometry, theta: np.ndarray
-             ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+def _stacked(logs: Sequence[PreparedLog], layout: MotorLayout, geometry: Geometry, theta: np.ndarray,
+             iv: bool = False) -> tuple[list[np.ndarray], list[np.ndarray | None]]:
     """Design matrices and instruments of every log, stacked along time."""
     mats, zs = [], []
     for log in logs:
         m = _design_matrices(_regressors(log, layout, geometry, *theta))
         mats.append(m)
-        zs.append(instruments(log, m))
+        zs.append(instruments(log, m) if iv else m)
     return ([np.vstack([m[c] for m in mats]) for c in range(4)],
             [np.vstack([z[c] for z in zs]) if any(z[c] is not m[c] for z, m in zip(zs, mats, strict=True))
              else None for c in range(4)])
@@ -308,7 +312,7 @@ def _solve(mats: list[np.ndarray], zs: list[np.ndarray | None], y: np.ndarray, r
 
 def _fit_rows(logs: Sequence[PreparedLog], layout: MotorLayout, geometry: Geometry, y: np.ndarray,
               rows: np.ndarray, x0: np.ndarray, bounds: tuple[np.ndarray, np.ndarray], fixed_tau: float | None,
-              max_nfev: int = 60) -> tuple[np.ndarray, list[np.ndarray], int]:
+              max_nfev: int = 60, iv: bool = False) -> tuple[np.ndarray, list[np.ndarray], int]:
     scale = np.std(y[rows], axis=0)
     scale[scale <= 0] = 1.0
     sub = np.flatnonzero(rows)
@@ -320,7 +324,7 @@ def _fit_rows(logs: Sequence[PreparedLog], layout: MotorLayout, geometry: Geomet
     def residuals(theta: np.ndarray) -> np.ndarray:
         nonlocal evaluations
         evaluations += 1
-        mats, zs = _stacked(logs, layout, geometry, full(theta))
+        mats, zs = _stacked(logs, layout, geometry, full(theta), iv)
         coefs = _solve(mats, zs, y, rows)
         return np.concatenate([(y[sub, c] - mats[c][sub] @ coefs[c]) / scale[c] for c in range(4)])
 
@@ -329,7 +333,7 @@ def _fit_rows(logs: Sequence[PreparedLog], layout: MotorLayout, geometry: Geomet
     sol = optimize.least_squares(residuals, start, bounds=(lower, upper), x_scale="jac", diff_step=1e-3,
                                  xtol=1e-6, ftol=1e-8, max_nfev=max_nfev)
     theta = full(sol.x)
-    mats, zs = _stacked(logs, layout, geometry, theta)
+    mats, zs = _stacked(logs, layout, geometry, theta, iv)
     return theta, _solve(mats, zs, y, rows), evaluations
 
 
@@ -388,12 +392,11 @@ def fit_log(logs: PreparedLog | Sequence[PreparedLog], layout: MotorLayout, geom
     options = options or LogFitOptions()
     started = time.perf_counter()
     notes: list[str] = [f"{log.name}: {note}" for log in logs for note in log.notes]
-    if any(log.rate_setpoint_rad_s is None for log in logs):
-        notes.append("no rate set point in the log: the moments are fitted by least squares, which the rate "
-                     "loop's answer to disturbances biases toward smaller gains (larger inertias)")
-    else:
-        notes.append("moments fitted with the set point's rate of change as the instrument (the rate loop's "
-                     "answer to disturbances would bias least squares)")
+    iv = options.instrument_setpoint
+    if iv and any(log.rate_setpoint_rad_s is None for log in logs):
+        raise ConfigError(f"{', '.join(log.name for log in logs)}: instrument_setpoint needs a logged rate set point")
+    notes.append("moments fitted in the 2-20 Hz band " + ("with the set point's rate of change as the instrument"
+                                                          if iv else "by least squares"))
     fixed_tau = options.fixed_time_constant_s
     slowest = min(log.motor_rate_hz for log in logs)
     if fixed_tau is None and slowest < MIN_MOTOR_RATE_HZ:
@@ -409,7 +412,7 @@ def fit_log(logs: PreparedLog | Sequence[PreparedLog], layout: MotorLayout, geom
     lo = np.array([0.003, 0.0, 0.0, 0.0])
     hi = np.array([0.3, options.max_delay_s, 0.6, 1.0])
     start = np.clip(np.array(x0, dtype=float), lo + 1e-6, hi - 1e-6)
-    theta, coefs, evaluations = _fit_rows(logs, layout, geometry, y, train, start, (lo, hi), fixed_tau)
+    theta, coefs, evaluations = _fit_rows(logs, layout, geometry, y, train, start, (lo, hi), fixed_tau, iv=iv)
     model = _model(theta, coefs)
     names = ", ".join(log.name for log in logs)
     if min(model.gains) <= 0:
@@ -426,7 +429,8 @@ def fit_log(logs: PreparedLog | Sequence[PreparedLog], layout: MotorLayout, geom
         samples = []
         for g in range(groups):
             drop = np.isin(block, blocks[g::groups])
-            th, cf, n = _fit_rows(logs, layout, geometry, y, train & ~drop, theta, (lo, hi), fixed_tau, max_nfev=25)
+            th, cf, n = _fit_rows(logs, layout, geometry, y, train & ~drop, theta, (lo, hi), fixed_tau, max_nfev=25,
+                                  iv=iv)
             evaluations += n
             samples.append(_quantities(_model(th, cf), geometry))
         for name in best:

@@ -58,7 +58,6 @@ def plot_log_traces(log: FlightLog, *, window_s: tuple[float, float] | None = No
     axes[4].grid(alpha=0.3)
     meta = log.metadata
     fig.suptitle(f"{log.name}: {meta.firmware} {meta.firmware_version} {meta.board} {meta.craft_name}".strip())
-    fig.tight_layout()
     return fig
 
 
@@ -79,7 +78,7 @@ def plot_log_spectra(log: FlightLog) -> Any:
         g = log.signals[Channel.GYRO]
         for k, name in enumerate(_AXES):
             f, p = _psd(g.time_s, np.degrees(g.values[:, k]))
-            ax_gyro.semilogy(f, p, lw=0.8, label=name)
+            ax_gyro.semilogy(f[p > 0], p[p > 0], lw=0.8, label=name)
         ax_gyro.set_title(f"gyro (logged at {g.rate_hz:.0f} Hz)")
         ax_gyro.set_ylabel("PSD [(°/s)²/Hz]")
         ax_gyro.legend()
@@ -87,7 +86,7 @@ def plot_log_spectra(log: FlightLog) -> Any:
         m = log.signals[Channel.MOTOR_COMMAND]
         for j, name in enumerate(m.columns):
             f, p = _psd(m.time_s, m.values[:, j])
-            ax_motor.semilogy(f, p, lw=0.8, label=name)
+            ax_motor.semilogy(f[p > 0], p[p > 0], lw=0.8, label=name)
         ax_motor.set_title(f"motor commands (logged at {m.rate_hz:.0f} Hz)")
         ax_motor.set_ylabel("PSD [1/Hz]")
         ax_motor.legend()
@@ -95,7 +94,6 @@ def plot_log_spectra(log: FlightLog) -> Any:
         ax.set_xlabel("frequency [Hz]")
         ax.grid(alpha=0.3, which="both")
     fig.suptitle(f"{log.name}: spectra")
-    fig.tight_layout()
     return fig
 
 
@@ -124,5 +122,4 @@ def plot_log_fit(fit: Any, log: Any, *, seconds: float = 6.0) -> Any:
         axes[0].legend(loc="upper right")
         axes[-1].set_xlabel(f"held-out time [s] (blocks from t = {t[0]:.1f} s on, back to back)")
     fig.suptitle(f"{fit.name}: identified model against the log")
-    fig.tight_layout()
     return fig

@@ -333,6 +333,16 @@ def bench_betaflight_section() -> list[str]:
             "2.5 m below the start, settling, the flip, the return, landing and disarming.", ""]
 
 
+def bench_logs_section() -> list[str]:
+    """Reading and identifying from real flight logs (``benchmarks/bench_logs.py``), as markdown lines."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import bench_logs
+
+    rows = bench_logs.run()
+    return ["## Real flight logs (`benchmarks/bench_logs.py`)", "", "| what | target | measured |", "|---|---|---|",
+            *[f"| {a} | {b} | {c} |" for a, b, c in rows], ""]
+
+
 def machine() -> str:
     cpu = "unknown CPU"
     try:
@@ -457,7 +467,8 @@ def main() -> None:
     if args.json:
         print(json.dumps(results, default=float))
         return
-    text = report(results, bench_betaflight_section())  # the firmware bench: the report only, not --json
+    # the firmware and log benches: the report only, not --json
+    text = report(results, bench_betaflight_section() + bench_logs_section())
     print(text)
     if args.write:
         # keep the hand-measured sections that follow the marker (other benchmark scripts)

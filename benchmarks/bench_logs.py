@@ -1,0 +1,85 @@
+"""Real flight logs: how long `aerobat log info` and `aerobat identify --log` take (issue "Real flights in").
+
+Each figure is a whole process (interpreter, imports, reading, fitting), as a user runs it, from
+the shared logs at ../shared/data/flight-logs. Wall time moves with the machine's load, so the
+process's own CPU time (user + system) is given beside it, and orangebox's decode alone, the part
+a faster reader would replace. ``python benchmarks/bench_logs.py`` prints the rows.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT.parent / "shared" / "data" / "flight-logs"
+GECKO = DATA / "betaflight" / "aikonf7-gecko.bbl"
+ROMA = DATA / "betaflight" / "diatone-roma-f5.bbl"
+CF15 = DATA / "crazyflie" / "log15"
+
+
+def _process(argv: list[str]) -> tuple[float, float]:
+    """(wall, CPU) seconds of one process running ``aerobat argv``."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    started = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "aerobat.cli", *argv], check=True, capture_output=True, timeout=600)
+    wall = time.perf_counter() - started
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def _best(argv: list[str], rounds: int) -> tuple[float, float]:
+    runs = [_process(argv) for _ in range(rounds)]
+    return min(r[0] for r in runs), min(r[1] for r in runs)
+
+
+def _decode_only(path: Path) -> float:
+    import orangebox.reader
+    from orangebox import Parser
+
+    from aerobat.logs.betaflight import _quiet_orangebox
+
+    started = time.perf_counter()
+    with _quiet_orangebox():
+        reader = orangebox.reader.Reader(str(path))
+        for index in range(1, reader.log_count + 1):
+            reader.set_log_index(index)
+            for _ in Parser(reader).frames():
+                pass
+    return time.perf_counter() - started
+
+
+def run(rounds: int = 3) -> list[tuple[str, str, str]]:
+    """Rows (what, target, measured)."""
+    if not DATA.is_dir():
+        return [("flight logs", "—", f"not measured: {DATA} is absent")]
+    load = os.getloadavg()[0]
+    info = _best(["log", "info", str(GECKO)], rounds)
+    decode = min(_decode_only(GECKO) for _ in range(rounds))
+    with tempfile.TemporaryDirectory() as tmp:
+        roma = _best(["identify", "--log", f"{ROMA}:1", "--vehicle", "fpv5", "--mass-kg", "0.55", "--motor-x-m",
+                      "0.08", "--motor-y-m", "0.08", "--output", f"{tmp}/r.toml", "--force"], 1)
+        cf = _best(["identify", "--log", str(CF15), "--vehicle", "crazyflie21", "--mass-kg", "0.027",
+                    "--motor-x-m", "0.028", "--motor-y-m", "0.028", "--output", f"{tmp}/c.toml", "--force"], 1)
+    after = os.getloadavg()[0]
+    return [
+        ("`aerobat log info` on the 151 s Gecko blackbox log (66,638 frames), a whole process", "≤ 3 s",
+         f"**{info[0]:.2f} s** wall, {info[1]:.2f} s CPU (best of {rounds})"),
+        ("… of which orangebox 0.4.0 decoding the frames, in-process", "—", f"{decode:.2f} s"),
+        ("`aerobat identify --log` on the ROMA F5's first log (66 s, 250 Hz, 5 jackknife refits), a whole process",
+         "≤ 15 s", f"**{roma[0]:.1f} s** wall, {roma[1]:.1f} s CPU"),
+        ("`aerobat identify --log` on the Crazyflie's log15 (62 s at 1 kHz, averaged to 253 Hz)", "≤ 15 s",
+         f"**{cf[0]:.1f} s** wall, {cf[1]:.1f} s CPU"),
+        ("1-minute load average before / after these rows (2 cores: above 2 means shared)", "—",
+         f"{load:.1f} / {after:.1f}"),
+    ]
+
+
+if __name__ == "__main__":
+    for what, target, measured in run():
+        print(f"| {what} | {target} | {measured} |")

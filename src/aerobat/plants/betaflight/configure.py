@@ -129,6 +129,7 @@ def ensure_eeprom(
     cache_dir: Path | None = None,
     verify: bool = True,
     progress: Progress | None = None,
+    settings: BetaflightSettings | None = None,
 ) -> Path:
     """Return a configured ``eeprom.bin`` for ``binary``, creating it on first use.
 
@@ -144,6 +145,9 @@ def ensure_eeprom(
         Read the values back from the saved eeprom in a second process.
     progress : callable, optional
         Called with one line of text per stage.
+    settings : BetaflightSettings, optional
+        Settings already loaded (e.g. with a tune, :meth:`.BetaflightSettings.with_tune`); overrides
+        ``settings_path``.
 
     Returns
     -------
@@ -159,7 +163,7 @@ def ensure_eeprom(
     """
     say = progress or (lambda _line: None)
     binary = Path(binary) if binary is not None else ensure_sitl(cache_dir, progress=progress)
-    settings = load_settings(settings_path)
+    settings = settings if settings is not None else load_settings(settings_path)
     eeprom = binary.parent / f"eeprom-{settings.sha256[:12]}.bin"
     if eeprom.is_file():
         return eeprom

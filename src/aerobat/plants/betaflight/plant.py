@@ -113,8 +113,14 @@ class BetaflightPlant:
         self.trials_flown = 0
         self.capacity = 1.0
         self.settings = settings or load_settings()
+        self.tune_report = None
+        if self.params.tune is not None and self.settings.tune is None:
+            from aerobat.plants.betaflight.translate import translate
+
+            self.tune_report = translate(self.params.tune)
+            self.settings = self.settings.with_tune(self.tune_report)
         self.binary = Path(binary) if binary is not None else ensure_sitl()
-        self.eeprom = Path(eeprom) if eeprom is not None else ensure_eeprom(self.binary, self.settings.path)
+        self.eeprom = Path(eeprom) if eeprom is not None else ensure_eeprom(self.binary, settings=self.settings)
         self.start_m = np.zeros(3)
         self.gravity = config.vehicle.gravity_m_s2
         pilot = self.params.pilot
@@ -202,7 +208,8 @@ class BetaflightPlant:
         plant = self._trial_plant(rng)
         self.trials_flown += 1
         info: dict[str, Any] = {"firmware": f"Betaflight 4.6.0 SITL lockstep, settings revision "
-                                            f"{self.settings.revision} ({self.settings.sha256[:12]})"}
+                                            f"{self.settings.revision} ({self.settings.sha256[:12]})"
+                                            + (f", tune {self.params.tune.source}" if self.params.tune else "")}
         flight = None
         try:
             flight = self.open_flight(rng, plant)

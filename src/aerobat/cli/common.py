@@ -336,7 +336,7 @@ def with_tune_from_args(args: argparse.Namespace, choice: Any) -> Any:
     from aerobat.plants.betaflight.translate import translate
     from aerobat.plants.betaflight.tune import load_tune
 
-    tune = load_tune(tune_path, log_index=1 if log_index is None else log_index)
+    tune = load_tune(tune_path, log_index=log_index)
     report = translate(tune)  # unknown settings raise here, naming the file and line
     print(report.text(), file=sys.stderr)
     return PlantChoice(choice.kind, dataclasses.replace(choice.settings, tune=tune), choice.seed, choice.feedback)

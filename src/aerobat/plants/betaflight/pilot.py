@@ -65,6 +65,8 @@ N_TABLE = 129  # samples per table: stick |x| = i/(N-1), or throttle pulse 1000 
 L_ROLL_TABLE = 13  # rate [rad/s] at stick i/(N-1), roll, pitch, yaw one after the other
 L_MOTOR_TABLE = L_ROLL_TABLE + 3 * N_TABLE  # motor command at pulse 1000 + 1000 i/(N-1) us
 N_LIMITS = L_MOTOR_TABLE + N_TABLE
+_HOVER_WINDOW_M = 0.5  # height error within which the hover-throttle integral acts [m]
+_HOVER_AUTHORITY = 0.35  # the largest collective the hover integral adds or takes away [fraction of g]
 
 
 @dataclass(frozen=True)
@@ -239,8 +241,13 @@ def angle_sticks(pos, vel, quat, target, integral, gains, limits, dt, out):  # p
     a = np.empty(3)
     for i in range(3):
         err = target[i] - pos[i]
-        if abs(err) < 0.15:
+        if i < 2 and abs(err) < 0.15:
             integral[i] = min(max(integral[i] + err * dt, -0.5), 0.5)
+        elif i == 2 and abs(err) < _HOVER_WINDOW_M and ki > 0.0:
+            # the hover throttle: the pilot's model of mass and thrust may be off by tens of percent
+            # (a battery, a worn prop); the integral may take up HOVER_AUTHORITY of g either way
+            most = _HOVER_AUTHORITY * g / ki
+            integral[i] = min(max(integral[i] + err * dt, -most), most)
         # a velocity loop around a limited position loop: the plain PD near the target
         v_des = kp / kd * err
         if i == 2:

@@ -408,7 +408,7 @@ class BetaflightPlant:
             flight.frame(self.channels(sticks, arm=True, angle=False))
             truth.append(np.concatenate([[flight.time_s], flight.x]))
             self._check_volume(flight)
-        self._integral = np.zeros(3)
+        self._integral[0:2] = 0.0  # the hover throttle's integral (the pilot's mass error) carries into the return
         return start_time
 
     def _pilot_feedback(self, compiled: CompiledProgram, start_time: float) -> Any:

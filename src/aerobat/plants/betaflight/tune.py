@@ -307,10 +307,11 @@ def tune_from_blackbox_header(header: Mapping[str, str], *, source: str) -> Tune
     return Tune(firmware, _version(firmware), source, "blackbox", 0, 0, tuple(lines))
 
 
-def load_tune(path: str | Path, *, log_index: int = 1) -> Tune:
+def load_tune(path: str | Path, *, log_index: int | None = None) -> Tune:
     """A tune from a CLI ``diff``/``dump`` or from a blackbox log's header (``.bbl``, ``.bfl``, ``.txt``).
 
-    ``log_index`` picks the log of a file that holds several (counting from 1).
+    ``log_index`` picks the log of a file that holds several (counting from 1; default 1); a CLI file
+    takes none.
 
     Raises
     ------
@@ -321,6 +322,7 @@ def load_tune(path: str | Path, *, log_index: int = 1) -> Tune:
     data = _read(path)
     if data.lstrip().startswith(b"H Product:") or b"\nH Product:" in data[:4096]:
         headers = read_blackbox_headers(data)
+        log_index = 1 if log_index is None else log_index
         if isinstance(log_index, bool) or not isinstance(log_index, int) or not 1 <= log_index <= len(headers):
             raise TuneError(f"{path}: --tune-log-index {log_index!r}: the file holds {len(headers)} log(s), "
                             f"allowed 1..{len(headers)}")
@@ -330,4 +332,6 @@ def load_tune(path: str | Path, *, log_index: int = 1) -> Tune:
     except UnicodeDecodeError:
         raise TuneError(f"{path}: neither a Betaflight CLI diff/dump (text) nor a blackbox log (no 'H Product:' "
                         "header)") from None
+    if log_index is not None:
+        raise TuneError(f"{path}: --tune-log-index {log_index}: the file is a CLI diff/dump, not a blackbox log")
     return parse_cli(text, source=str(path))

@@ -121,8 +121,9 @@ def test_out_of_range_values_are_refused_not_flown() -> None:
 ])
 def test_rate_curves_of_every_type_and_the_pilot_inverts_them(kind: str, rc_rate: int, srate: int, expo: int,
                                                               stick: float, deg_s: float) -> None:
-    text = "# Betaflight / X 4.6.0\n" + f"set rates_type = {kind}\n" + "".join(
-        f"set {a}_rc_rate = {rc_rate}\nset {a}_srate = {srate}\nset {a}_expo = {expo}\n" for a in ("roll", "pitch", "yaw"))
+    axes = "".join(f"set {a}_rc_rate = {rc_rate}\nset {a}_srate = {srate}\nset {a}_expo = {expo}\n"
+                   for a in ("roll", "pitch", "yaw"))
+    text = f"# Betaflight / X 4.6.0\nset rates_type = {kind}\n{axes}"
     settings = load_settings().with_tune(translate(parse_cli(text, source="t")))
     assert settings.rate_deg_s("roll", stick) == pytest.approx(deg_s, rel=1e-6)
     limits = StickMap.from_settings(settings, Airframe(), 0.752).limits(max_tilt_rad=0.6, max_climb_m_s=2.5,

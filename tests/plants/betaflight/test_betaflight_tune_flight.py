@@ -84,3 +84,40 @@ def test_a_bad_tune_is_refused_before_anything_flies(tmp_path: Path, capsys: pyt
     assert main([*learn, "--plant", "betaflight", "--tune-log-index", "2"]) == 2  # a diff holds no logs
     assert "--tune-log-index" in capsys.readouterr().err
     assert not db.exists()  # nothing flown, nothing stored
+
+
+@pytest.mark.skipif(not DIFF.is_file(), reason="the shared real data is absent")
+def test_a_resumed_session_flies_the_stored_tune(firmware: tuple[Path, Path], tmp_path: Path) -> None:
+    from aerobat.experiments.sessions import resume_session, start_session
+    from aerobat.plants import PlantChoice
+    from aerobat.store import Store
+
+    tune = load_tune(DIFF)
+    flip, _ = _flip(420.0)
+    with Store(tmp_path / "s.sqlite") as store:
+        run = start_session(store, flip, model=FPV, plant=PlantChoice("betaflight", BetaflightParams(tune=tune), 1),
+                            iterations=1)
+        assert run.run().measured == 1
+    with Store(tmp_path / "s.sqlite") as store:
+        resumed = resume_session(store, "last", iterations=2)
+        assert resumed.plant_choice.settings.tune == tune  # from the store, not the file
+        assert resumed.plant.settings.value("roll_rc_rate") == "202"
+        assert resumed.plant.eeprom == run.plant.eeprom  # the same tuned firmware
+        assert resumed.run().measured == 2
+
+
+def test_settings_that_would_not_arm_get_a_clear_message(firmware: tuple[Path, Path]) -> None:
+    import dataclasses
+
+    from aerobat.plants.betaflight.configure import check_arms
+    from aerobat.plants.betaflight.errors import ConfigureFailed
+    from aerobat.plants.betaflight.settings import load_settings
+
+    binary, eeprom = firmware
+    settings = load_settings()
+    check_arms(binary, eeprom, settings)  # the shipped settings arm
+    # the pilot's ARM pulse on a channel the firmware does not watch: it never arms, and says why
+    moved = dataclasses.replace(settings, modes={**settings.modes,
+                                                 "ARM": dataclasses.replace(settings.modes["ARM"], aux=3)})
+    with pytest.raises(ConfigureFailed, match=r"would not arm with these settings: the ARM switch \(AUX3\) did not arm it"):
+        check_arms(binary, eeprom, moved)

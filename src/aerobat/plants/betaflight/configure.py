@@ -29,7 +29,7 @@ from .packets import SitlState
 from .settings import BetaflightSettings, load_settings
 from .sitl import SitlProcess
 
-__all__ = ["AT_REST_LEVEL", "ensure_eeprom", "step_at_rest"]
+__all__ = ["AT_REST_LEVEL", "check_arms", "ensure_eeprom", "step_at_rest"]
 
 AT_REST_LEVEL = SitlState(
     time_s=0.0,
@@ -122,6 +122,40 @@ def _verify(sitl: SitlProcess, settings: BetaflightSettings) -> None:
         stepper.stop()
 
 
+def check_arms(binary: Path, eeprom: Path, settings: BetaflightSettings, *, calibration_s: float = 1.6) -> None:
+    """Power a fresh process from ``eeprom`` on at rest, give ARM as the pilot does, and raise unless it arms.
+
+    Raises
+    ------
+    ConfigureFailed
+        The firmware refuses to arm; the message names the arming-disable flags it reports (MSP_STATUS_EX).
+    """
+    from .rc import AUX_CHANNEL_COUNT, RC_MID_US, RC_MIN_US
+
+    def channels(arm: bool) -> tuple[int, ...]:
+        aux = settings.aux_us(ARM=arm, ANGLE=True)
+        return (RC_MID_US, RC_MID_US, RC_MIN_US, RC_MID_US, *aux, *([RC_MIN_US] * (AUX_CHANNEL_COUNT - len(aux))))
+
+    with SitlProcess(binary, eeprom) as sitl:
+        period_s = sitl.gyro_period_us / 1e6
+        sitl.set_rc(channels(False))
+        step_at_rest(sitl, lambda: False, steps=int(calibration_s / period_s))
+        sitl.set_rc(channels(True))
+        for _ in range(int(1.0 / period_s)):
+            motors = sitl.step(AT_REST_LEVEL._replace(time_s=(sitl.steps + 1) * period_s))
+            if min(motors) > 0.0:
+                return
+        stepper = _Stepper(sitl)
+        try:
+            with sitl.open_link() as link:
+                flags = link.msp.status_ex().arming_disable_flags
+        finally:
+            stepper.stop()
+    why = (f"arming disabled by {', '.join(flags)}" if flags else
+           f"the ARM switch (AUX{settings.modes['ARM'].aux}) did not arm it and it reports no arming-disable flag")
+    raise ConfigureFailed(f"the firmware would not arm with these settings: {why}")
+
+
 def ensure_eeprom(
     binary: Path | None = None,
     settings_path: Path | None = None,
@@ -188,6 +222,9 @@ def ensure_eeprom(
             try:
                 with SitlProcess(binary, staged) as check:
                     _verify(check, settings)
+                if settings.tune is not None:  # a tune may hold what keeps the firmware from arming
+                    say("checking that the firmware arms with the tune")
+                    check_arms(binary, staged, settings)
             except BaseException:
                 staged.unlink(missing_ok=True)
                 raise

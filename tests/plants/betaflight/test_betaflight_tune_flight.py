@@ -119,5 +119,5 @@ def test_settings_that_would_not_arm_get_a_clear_message(firmware: tuple[Path, P
     # the pilot's ARM pulse on a channel the firmware does not watch: it never arms, and says why
     moved = dataclasses.replace(settings, modes={**settings.modes,
                                                  "ARM": dataclasses.replace(settings.modes["ARM"], aux=3)})
-    with pytest.raises(ConfigureFailed, match=r"would not arm with these settings: the ARM switch \(AUX3\) did not arm it"):
+    with pytest.raises(ConfigureFailed, match=r"would not arm with these settings: the ARM switch \(AUX3\) did not"):
         check_arms(binary, eeprom, moved)

@@ -10,7 +10,7 @@ import pytest
 
 from aerobat.cli import main
 from aerobat.core.design import design
-from aerobat.plants.betaflight.configure import _Stepper
+from aerobat.plants.betaflight.configure import AtRestStepper
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.plant import BetaflightPlant
 from aerobat.plants.betaflight.sitl import SitlProcess
@@ -33,7 +33,7 @@ def test_the_431_diff_lands_in_the_sitl_which_arms_and_flies_a_trial(firmware: t
     plant = BetaflightPlant(FPV, BetaflightParams(tune=load_tune(DIFF)), seed=1)
     # what the saved eeprom holds, asked through the SITL's own CLI
     with SitlProcess(plant.binary, plant.eeprom) as sitl:
-        stepper = _Stepper(sitl)
+        stepper = AtRestStepper(sitl)
         try:
             with sitl.open_link() as link:
                 link.cli.enter()
@@ -121,3 +121,16 @@ def test_settings_that_would_not_arm_get_a_clear_message(firmware: tuple[Path, P
                                                  "ARM": dataclasses.replace(settings.modes["ARM"], aux=3)})
     with pytest.raises(ConfigureFailed, match=r"would not arm with these settings: the ARM switch \(AUX3\) did not"):
         check_arms(binary, eeprom, moved)
+
+
+def test_the_shipped_settings_table_is_what_the_built_sitl_accepts(firmware: tuple[Path, Path]) -> None:
+    import json
+
+    from aerobat.plants.betaflight.sitl_table import SITL_TABLE_PATH
+    from aerobat.plants.betaflight.table_reader import read_table
+
+    shipped = json.loads(SITL_TABLE_PATH.read_text())
+    read = read_table(firmware[0])
+    assert read["firmware"] == shipped["firmware"] and read["features"] == shipped["features"]
+    assert read["settings"] == shipped["settings"]
+    assert len(read["settings"]) == 347 and set(read["settings"]) <= set(shipped["all_4_6_names"])

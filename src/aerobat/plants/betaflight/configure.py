@@ -29,7 +29,7 @@ from .packets import SitlState
 from .settings import BetaflightSettings, load_settings
 from .sitl import SitlProcess
 
-__all__ = ["AT_REST_LEVEL", "check_arms", "ensure_eeprom", "step_at_rest"]
+__all__ = ["AT_REST_LEVEL", "AtRestStepper", "check_arms", "ensure_eeprom", "step_at_rest"]
 
 AT_REST_LEVEL = SitlState(
     time_s=0.0,
@@ -42,7 +42,7 @@ AT_REST_LEVEL = SitlState(
 Progress = Callable[[str], None]
 
 
-class _Stepper:
+class AtRestStepper:
     """Keeps a SITL stepping at rest from a background thread until stopped or the firmware exits."""
 
     def __init__(self, sitl: SitlProcess) -> None:
@@ -78,7 +78,7 @@ def step_at_rest(sitl: SitlProcess, stop: Callable[[], bool], steps: int | None 
 
 def _apply(sitl: SitlProcess, settings: BetaflightSettings, say: Progress) -> str:
     """Apply the settings over the CLI and save; returns the CLI transcript."""
-    stepper = _Stepper(sitl)
+    stepper = AtRestStepper(sitl)
     transcript = []
     try:
         with sitl.open_link() as link:
@@ -105,7 +105,7 @@ _GET_PATTERN = re.compile(r"^(\w+) = (.*?)\s*$", re.MULTILINE)
 
 def _verify(sitl: SitlProcess, settings: BetaflightSettings) -> None:
     """Read every configured value back through the CLI of a process started from the saved eeprom."""
-    stepper = _Stepper(sitl)
+    stepper = AtRestStepper(sitl)
     try:
         with sitl.open_link() as link:
             link.cli.enter()
@@ -145,7 +145,7 @@ def check_arms(binary: Path, eeprom: Path, settings: BetaflightSettings, *, cali
             motors = sitl.step(AT_REST_LEVEL._replace(time_s=(sitl.steps + 1) * period_s))
             if min(motors) > 0.0:
                 return
-        stepper = _Stepper(sitl)
+        stepper = AtRestStepper(sitl)
         try:
             with sitl.open_link() as link:
                 flags = link.msp.status_ex().arming_disable_flags

@@ -19,9 +19,21 @@ from aerobat.errors import ConfigError
 
 from .rc import AUX_CHANNEL_COUNT, RC_MAX_US, RC_MIN_US
 
-__all__ = ["DEFAULT_SETTINGS_PATH", "BetaflightSettings", "ModeRange", "load_settings"]
+__all__ = ["DEFAULT_SETTINGS_PATH", "PINNED", "BetaflightSettings", "ModeRange", "load_settings"]
 
 DEFAULT_SETTINGS_PATH = Path(__file__).with_name("settings.toml")
+# settings.toml's [set] entries that a tune never changes, and why
+PINNED: dict[str, str] = {
+    "pwr_on_arm_grace": "arming: no grace time after boot, so a simulated run arms at once",
+    "small_angle": "arming: the pilot arms level; the SITL refuses arming beyond it",
+    "min_check": "radio calibration: aerobat's radio sends exact pulses; throttle low for arming",
+    "failsafe_delay": "failsafe: aerobat's lost-radio tests rely on the defaults",
+    "failsafe_procedure": "failsafe: aerobat's lost-radio tests rely on DROP",
+    "failsafe_throttle_low_delay": "failsafe",
+    "runaway_takeoff_prevention": "the offboard take-off at ~21 % throttle never ends the check, which then "
+                                  "disarms flips (measured, settings.toml)",
+    "yaw_motors_reversed": "the physics' propeller spin directions",
+}
 _AXES = ("roll", "pitch", "yaw")
 
 
@@ -93,9 +105,7 @@ class BetaflightSettings:
 
     def with_tune(self, report: Any) -> BetaflightSettings:
         """These settings with a translated tune applied: the firmware starts from 4.6's defaults, takes the
-        tune's commands, then aerobat's pinned ones (``translate.PINNED``, the mode ranges, AIR MODE, QUADX)."""
-        from .translate import PINNED
-
+        tune's commands, then aerobat's pinned ones (``PINNED``, the mode ranges, AIR MODE, QUADX)."""
         tuned = dict(report.values())
         pinned = [(name, value) for name, value in self.values if name in PINNED]
         values = tuple((n, v) for n, v in tuned.items() if n not in PINNED) + tuple(pinned)

@@ -29,23 +29,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from .settings import PINNED
 from .sitl_table import SitlTable, load_table
 from .tune import Tune, TuneError
 
 __all__ = ["PINNED", "TuneReport", "translate"]
 
-# settings.toml's [set] entries that a tune never changes, and why
-PINNED: dict[str, str] = {
-    "pwr_on_arm_grace": "arming: no grace time after boot, so a simulated run arms at once",
-    "small_angle": "arming: the pilot arms level; the SITL refuses arming beyond it",
-    "min_check": "radio calibration: aerobat's radio sends exact pulses; throttle low for arming",
-    "failsafe_delay": "failsafe: aerobat's lost-radio tests rely on the defaults",
-    "failsafe_procedure": "failsafe: aerobat's lost-radio tests rely on DROP",
-    "failsafe_throttle_low_delay": "failsafe",
-    "runaway_takeoff_prevention": "the offboard take-off at ~21 % throttle never ends the check, which then "
-                                  "disarms flips (measured, settings.toml)",
-    "yaw_motors_reversed": "the physics' propeller spin directions",
-}
 _PINNED_COMMANDS = {
     "aux": "mode switches: aerobat's ARM on AUX1 and ANGLE on AUX2 replace the quad's mode ranges",
     "map": "channel order: aerobat's radio sends AETR1234",

@@ -338,7 +338,12 @@ def with_tune_from_args(args: argparse.Namespace, choice: Any) -> Any:
 
     tune = load_tune(tune_path, log_index=log_index)
     report = translate(tune)  # unknown settings raise here, naming the file and line
-    print(report.text(), file=sys.stderr)
+    from aerobat.plants.betaflight.settings import load_settings
+
+    tuned = load_settings().with_tune(report)
+    rates = ", ".join(f"{axis} {tuned.rate_deg_s(axis, 1.0):.0f}" for axis in ("roll", "pitch", "yaw"))
+    print(f"{report.text()}\n  the tune's full-stick rates [deg/s] ({tuned.value('rates_type')}): {rates}; the pilot's "
+          "sticks invert its rate and throttle curves", file=sys.stderr)
     return PlantChoice(choice.kind, dataclasses.replace(choice.settings, tune=tune), choice.seed, choice.feedback)
 
 

@@ -164,3 +164,14 @@ def test_the_tune_is_stored_with_the_plant_and_comes_back() -> None:
     assert table["settings"]["tune"]["source"] == str(DIFF)
     assert PlantChoice.from_table(table, source="stored").settings.tune == tune
     assert "tune" not in PlantChoice("betaflight").to_table()["settings"]  # no tune: the table as before
+
+
+@needs_data
+def test_a_settings_file_keeps_the_tune(tmp_path: Path) -> None:
+    from aerobat.plants.betaflight.params import load_betaflight, save_betaflight
+
+    tune = load_tune(DIFF)
+    save_betaflight(BetaflightParams(tune=tune), tmp_path / "bf.toml")
+    assert load_betaflight(tmp_path / "bf.toml").tune == tune
+    save_betaflight(BetaflightParams(), tmp_path / "plain.toml")
+    assert "tune" not in (tmp_path / "plain.toml").read_text() and load_betaflight(tmp_path / "plain.toml").tune is None

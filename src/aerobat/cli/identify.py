@@ -123,12 +123,12 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
     )
     from aerobat.plotting import save_figure, write_text
     from aerobat.plotting.flightlog import plot_log_fit
-    from aerobat.quadrotor.identification.logdata import prepare_log
     from aerobat.quadrotor.vehicle import save_vehicle, vehicle_from_name_or_file
 
     refs = [parse_log_ref(text) for text in args.log]
-    for path in (out, figure, *([Path(args.airframe)] if args.airframe else [])):
-        refuse_overwrite(path, store_path=None, force=args.force, option="--output")
+    for path, option in ((out, "--output"), (figure, "--figure"),
+                         *([(Path(args.airframe), "--airframe")] if args.airframe else [])):
+        refuse_overwrite(path, store_path=None, force=args.force, option=option)
     prior = vehicle_from_name_or_file(args.vehicle)
     geometry = _geometry(args, prior)
     say = console(args.json).print
@@ -136,13 +136,9 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
         f"(±{geometry.motor_x_m:g}, ±{geometry.motor_y_m:g}) m, prior {prior.name}")
     result = identify_from_logs(refs, geometry)
     fit = result.fit
-    idle = _idle_command(refs)
-    config = vehicle_from_log_fit(fit, prior, name=args.name or out.stem, idle_command=idle)
+    config = vehicle_from_log_fit(fit, prior, name=args.name or out.stem, idle_command=result.idle_command)
     save_vehicle(config, out, header=f"identified by aerobat identify --log from {fit.name}")
-    from aerobat.logs import read_logs
-
-    first = next(log for log in read_logs(refs[0].path) if refs[0].index in (None, log.index))
-    save_figure(plot_log_fit(fit, prepare_log(first)), figure)
+    save_figure(plot_log_fit(fit, result.prepared[0]), figure)
     airframe = None
     if args.airframe:
         airframe = airframe_from_log_fit(fit)
@@ -163,18 +159,6 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
     say(f"vehicle written to {out} (figure {figure}" + (f", airframe {args.airframe}" if args.airframe else "") +
         f"); use it with --vehicle {out}")
     return 0
-
-
-def _idle_command(refs: list[Any]) -> float | None:
-    """Betaflight's armed idle as a motor command (the low end of motorOutput), else None."""
-    from aerobat.logs import read_logs
-
-    log = read_logs(refs[0].path)[(refs[0].index or 1) - 1]
-    low = log.metadata.parameters.get("motorOutput", "").split(",")[0]
-    try:
-        return (float(low) - 48.0) / 1999.0 if low else None
-    except ValueError:
-        return None
 
 
 def _print_log_fit(result: Any) -> None:

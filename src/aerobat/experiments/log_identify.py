@@ -24,7 +24,7 @@ from aerobat.errors import ConfigError, IdentificationFailed
 from aerobat.logs import read_logs
 from aerobat.quadrotor.flightlog import FlightLog
 from aerobat.quadrotor.identification import envelope_margins
-from aerobat.quadrotor.identification.logdata import prepare_log
+from aerobat.quadrotor.identification.logdata import PreparedLog, prepare_log
 from aerobat.quadrotor.identification.logfit import (
     ChannelMetrics,
     Geometry,
@@ -78,6 +78,17 @@ class LogIdentification:
     fit: LogFit
     fitted: tuple[str, ...]
     validations: tuple[tuple[str, tuple[ChannelMetrics, ...] | str], ...]
+    logs: tuple[FlightLog, ...] = ()
+    prepared: tuple[PreparedLog, ...] = ()
+
+    @property
+    def idle_command(self) -> float | None:
+        """Betaflight's armed idle as a motor command (the low end of the header's motorOutput), else None."""
+        for log in self.logs:
+            low = log.metadata.parameters.get("motorOutput", "").split(",")[0].strip()
+            if low.isdigit():
+                return (float(low) - 48.0) / 1999.0
+        return None
 
 
 def _load(refs: Sequence[LogRef]) -> tuple[list[FlightLog], list[FlightLog]]:
@@ -116,7 +127,8 @@ def identify_from_logs(refs: Sequence[LogRef | str | os.PathLike[str]], geometry
             validations.append((log.name, validate(fit, prepare_log(log, purpose="validation"))))
         except ConfigError as exc:
             validations.append((log.name, str(exc).split(": ", 1)[-1]))
-    return LogIdentification(fit=fit, fitted=tuple(log.name for log in chosen), validations=tuple(validations))
+    return LogIdentification(fit=fit, fitted=tuple(log.name for log in chosen), validations=tuple(validations),
+                             logs=tuple(chosen), prepared=tuple(prepared))
 
 
 def _require(fit: LogFit, name: str) -> float:

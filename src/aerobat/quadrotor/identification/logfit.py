@@ -429,7 +429,7 @@ def fit_log(logs: PreparedLog | Sequence[PreparedLog], layout: MotorLayout, geom
         samples = []
         for g in range(groups):
             drop = np.isin(block, blocks[g::groups])
-            th, cf, n = _fit_rows(logs, layout, geometry, y, train & ~drop, theta, (lo, hi), fixed_tau, max_nfev=25,
+            th, cf, n = _fit_rows(logs, layout, geometry, y, train & ~drop, theta, (lo, hi), fixed_tau, max_nfev=12,
                                   iv=iv)
             evaluations += n
             samples.append(_quantities(_model(th, cf), geometry))

@@ -167,6 +167,9 @@ def read_ulog(path: Path) -> list[FlightLog]:
     if bs is not None and "voltage_v" in bs:
         signals[Channel.BATTERY_VOLTAGE] = Signal(Channel.BATTERY_VOLTAGE, times(bs), bs["voltage_v"].astype(float),
                                                   ("v",), "V", ("battery_status.voltage_v",))
+    status = topics.get("vehicle_status")
+    if status is not None and "arming_state" in status and not np.any(status["arming_state"] == 2):
+        notes.append("vehicle_status.arming_state is never ARMED (2): the vehicle did not fly in this log")
     info = ulog.msg_info_dict
     vehicle_type = "multirotor" if mav_type in _MULTIROTOR_TYPES else _MAV_TYPE_NAMES.get(mav_type,
                                                                                           f"MAV_TYPE {mav_type}")

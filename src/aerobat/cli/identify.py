@@ -245,11 +245,11 @@ def register(sub: Any) -> None:
     p.add_argument("--log", metavar="FILE[:N]", action="append", default=None,
                    help="identify from real flight logs instead of flying: a blackbox, ULog or Crazyflie file, or "
                         "log N of it; repeat to fit several together (the file's other logs validate)")
-    p.add_argument("--mass-kg", type=finite_float(0.005, 50.0, "kg"), default=None,
+    p.add_argument("--mass-kg", type=finite_float(0.005, 50.0, "kg"), default=None, metavar="KG",
                    help="with --log: take-off mass (default: the prior's)")
-    p.add_argument("--motor-x-m", type=finite_float(0.005, 2.0, "m"), default=None,
+    p.add_argument("--motor-x-m", type=finite_float(0.005, 2.0, "m"), default=None, metavar="M",
                    help="with --log: motor distance from the centre along x (default: the prior's arm / √2)")
-    p.add_argument("--motor-y-m", type=finite_float(0.005, 2.0, "m"), default=None,
+    p.add_argument("--motor-y-m", type=finite_float(0.005, 2.0, "m"), default=None, metavar="M",
                    help="with --log: motor distance from the centre along y (default: the prior's arm / √2)")
     p.add_argument("--airframe", metavar="FILE.toml", default=None,
                    help="with --log: also write the Betaflight plant's [airframe] section")

@@ -82,14 +82,18 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("out") / f"log-{Path(args.file).name}"
     out = output_dir(out)
     window = tuple(args.window_s) if args.window_s else None
-    say = console().print
+    say = console(args.json).print
+    written = []
     for log in logs:
         stem = f"log{log.index}"
         for suffix, fig in (("traces", plot_log_traces(log, window_s=window)), ("spectra", plot_log_spectra(log))):
             path = out / f"{stem}_{suffix}.png"
             refuse_overwrite(path, store_path=None, force=args.force, option="--out")
             save_figure(fig, path)
+            written.append(str(path))
             say(f"wrote {path}")
+    if args.json:
+        print(json.dumps({"figures": written}))
     return 0
 
 
@@ -129,6 +133,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
         raise ConfigError(f"--output {args.output}: the file holds {len(logs)} logs; name one with --index, or give "
                           "--out DIR for one CSV file per log")
     render = _csv_text if args.long else _wide_csv
+    written: list[Path] = []
     if args.output is None and args.out is None:
         for log in logs:
             print(render(log), end="")
@@ -138,7 +143,10 @@ def _cmd_export(args: argparse.Namespace) -> int:
         path = Path(args.output) if args.output else output_dir(Path(args.out)) / name
         refuse_overwrite(path, store_path=None, force=args.force, option="--output" if args.output else "--out")
         write_text(path, render(log))
-        console().print(f"wrote {path}", highlight=False)
+        written.append(path)
+        console(args.json).print(f"wrote {path}", highlight=False)
+    if args.json:
+        print(json.dumps({"files": [str(p) for p in written]}))
     return 0
 
 
@@ -148,7 +156,8 @@ def register(sub: Any) -> None:
     cmds = p.add_subparsers(dest="log_command", metavar="COMMAND")
 
     def common(q: argparse.ArgumentParser) -> None:
-        q.add_argument("file", metavar="FILE", help="a .bbl/.bfl/.txt blackbox log, a .ulg ULog or a Crazyflie log")
+        q.add_argument("file", metavar="FILE",
+                       help="a .bbl/.bfl/.txt blackbox log, a .ulg ULog or a Crazyflie log (required)")
         q.add_argument("--index", type=bounded_int(1, 10_000), default=None, metavar="N",
                        help="only log N of the file (from 1; default: every log)")
 
@@ -162,16 +171,19 @@ def register(sub: Any) -> None:
     common(q)
     q.add_argument("--out", metavar="DIR", default=None, help="folder for the figures (default: out/log-FILE)")
     q.add_argument("--window-s", nargs=2, type=float, metavar=("START", "END"), default=None,
-                   help="only this time window of the traces [s]")
+                   help="only this time window of the traces [s] (default: the whole log)")
     q.add_argument("--force", action="store_true", help="replace figures that exist")
+    q.add_argument("--json", action="store_true", help="print the figures written as one JSON object")
     q.set_defaults(func=_cmd_plot)
     q = cmds.add_parser("export", help="the log's series in SI units as CSV", formatter_class=HelpFormatter)
     common(q)
     q.add_argument("--format", choices=("csv",), default="csv", help="output format")
     q.add_argument("--output", metavar="FILE", default=None, help="write one log's CSV here (default: stdout)")
-    q.add_argument("--out", metavar="DIR", default=None, help="write one CSV file per log into this folder")
+    q.add_argument("--out", metavar="DIR", default=None,
+                   help="write one CSV file per log into this folder (default: none, stdout)")
     q.add_argument("--long", action="store_true",
                    help="one row per sample of every series on its own time base (default: the main time base, "
                         "side by side)")
     q.add_argument("--force", action="store_true", help="replace files that exist")
+    q.add_argument("--json", action="store_true", help="print the files written as one JSON object")
     q.set_defaults(func=_cmd_export)

@@ -568,7 +568,7 @@ class _FlakyPlant:
 def test_rejected_measurements_are_stored_without_an_update(tmp_path, capsys, monkeypatch):
     from aerobat.plants import PlantChoice
 
-    monkeypatch.setattr(PlantChoice, "build", lambda self, config: _FlakyPlant(config))
+    monkeypatch.setattr(PlantChoice, "build", lambda self, config, **_: _FlakyPlant(config))
     db = str(tmp_path / "a.sqlite")
     code, out, err = run(capsys, "learn", *SMALL, "--plant", "nominal", "--iterations", "3", "--db", db,
                          "--out", str(tmp_path / "o"))

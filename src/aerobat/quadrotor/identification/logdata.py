@@ -203,7 +203,7 @@ def prepare_log(log: FlightLog, *, purpose: str = "identification") -> PreparedL
             in_flight[a:b] = True
             segments.append((float(t[a]), float(t[b - 1])))
     flight = float(in_flight.sum()) * dt
-    if not spinning.any():
+    if not spinning.any() and log.duration_s >= MIN_FLIGHT_S:
         raise ConfigError(f"{log.path}: log {log.index}: the motors never spin (the mean motor command stays at or "
                           f"below {float(np.nanmax(mean)):.3f} of full range for all {log.duration_s:.1f} s): the "
                           f"vehicle did not fly in this log, so {purpose} has nothing to fit")

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from aerobat.cli.common import (
+    HelpFormatter,
     add_db_option,
     add_plant_options,
     bounded_int,
@@ -221,7 +222,7 @@ def _print_fit(run: Any, fit: Any) -> None:
 
 def register(sub: Any) -> None:
     p = sub.add_parser("identify", help="identify the nominal model of the vehicle a plant flies, write a vehicle "
-                                        "file", formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                                        "file", formatter_class=HelpFormatter)
     add_plant_options(p)
     p.add_argument("--output", dest="out", default=None, metavar="FILE.toml",
                    help="the identified vehicle file to write (required)")
@@ -244,7 +245,8 @@ def register(sub: Any) -> None:
                    help="refuse a fit whose attitude residual is larger (RMS)")
     p.add_argument("--log", metavar="FILE[:N]", action="append", default=None,
                    help="identify from real flight logs instead of flying: a blackbox, ULog or Crazyflie file, or "
-                        "log N of it; repeat to fit several together (the file's other logs validate)")
+                        "log N of it; repeat to fit several together (the file's other logs validate); "
+                        "default: fly the sequence")
     p.add_argument("--mass-kg", type=finite_float(0.005, 50.0, "kg"), default=None, metavar="KG",
                    help="with --log: take-off mass (default: the prior's)")
     p.add_argument("--motor-x-m", type=finite_float(0.005, 2.0, "m"), default=None, metavar="M",
@@ -252,9 +254,9 @@ def register(sub: Any) -> None:
     p.add_argument("--motor-y-m", type=finite_float(0.005, 2.0, "m"), default=None, metavar="M",
                    help="with --log: motor distance from the centre along y (default: the prior's arm / √2)")
     p.add_argument("--airframe", metavar="FILE.toml", default=None,
-                   help="with --log: also write the Betaflight plant's [airframe] section")
+                   help="with --log: also write the Betaflight plant's [airframe] section (default: not written)")
     p.add_argument("--from-session", metavar="SESSION", type=session_ref,
-                   help="fit a stored identification session again instead of flying (id or 'last')")
+                   help="fit a stored identification session again instead of flying: an id or 'last' (default: fly)")
     p.add_argument("--force", action="store_true", help="replace --output if it exists")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     add_db_option(p)

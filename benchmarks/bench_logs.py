@@ -42,10 +42,10 @@ def _decode_only(path: Path) -> float:
     import orangebox.reader
     from orangebox import Parser
 
-    from aerobat.logs.betaflight import _quiet_orangebox
+    from aerobat.logs.betaflight import quiet_orangebox
 
     started = time.perf_counter()
-    with _quiet_orangebox():
+    with quiet_orangebox():
         reader = orangebox.reader.Reader(str(path))
         for index in range(1, reader.log_count + 1):
             reader.set_log_index(index)

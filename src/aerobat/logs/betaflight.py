@@ -40,7 +40,7 @@ import numpy as np
 from aerobat.errors import ConfigError, MissingDependency
 from aerobat.quadrotor.flightlog import Channel, FlightLog, LogMetadata, LogSource, MotorLayout, Signal
 
-__all__ = ["QUADX_LAYOUT", "raw_headers", "read_blackbox"]
+__all__ = ["QUADX_LAYOUT", "quiet_orangebox", "raw_headers", "read_blackbox"]
 
 G_M_S2 = 9.80665
 DSHOT_MIN, DSHOT_MAX = 48.0, 2047.0
@@ -57,7 +57,7 @@ _VERSION = re.compile(r"Betaflight\s+(\d+\.\d+(?:\.\d+)?)")
 
 
 @contextlib.contextmanager
-def _quiet_orangebox() -> Iterator[list[str]]:
+def quiet_orangebox() -> Iterator[list[str]]:
     """orangebox logs warnings (unknown event types) through :mod:`logging`; keep them as notes."""
     records: list[str] = []
 
@@ -133,7 +133,7 @@ def read_blackbox(path: Path) -> list[FlightLog]:
     """Every log in a blackbox file, in order."""
     orangebox = _orangebox()
     data = path.read_bytes()
-    with _quiet_orangebox() as warnings:
+    with quiet_orangebox() as warnings:
         try:
             reader = orangebox.reader.Reader(str(path), allow_invalid_header=False)
         except Exception as exc:  # noqa: BLE001 - orangebox raises bare exceptions on damaged files

@@ -31,6 +31,7 @@ __all__ = [
     "output_dir",
     "parse_pair",
     "plant_choice_from_args",
+    "with_tune_from_args",
     "refuse_overwrite",
     "rule_choice_from_args",
     "session_ref",
@@ -240,6 +241,12 @@ def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | No
         if spec.option is not None and name in choices:
             p.add_argument(spec.option, metavar="FILE.toml",
                           help=f"{name} settings (only with --plant {name}; default: the {name}'s defaults)")
+    if "betaflight" in choices:
+        p.add_argument("--tune", metavar="FILE",
+                       help="a real quad's Betaflight configuration flown by the SITL (only with --plant betaflight): "
+                            "a CLI diff/dump, or a blackbox log (.bbl/.bfl/.txt) whose header is used; default: aerobat's own settings")
+        p.add_argument("--tune-log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
+                       help="which log of a blackbox file holding several gives the tune (default 1)")
     p.add_argument("--seed", type=bounded_int(0, 2**63 - 1), default=0, help="seed of the plant's random generator")
     p.add_argument("--feedback", choices=("none", "attitude", "tracking"), default=None,
                    help="what the vehicle's onboard loop mixes into the program: none (the paper's open "
@@ -295,7 +302,38 @@ def plant_choice_from_args(args: argparse.Namespace) -> Any:
         if name != args.plant:
             raise ConfigError(f"{spec.option} applies only with --plant {name} (got --plant {args.plant})")
         path = given
-    return PlantChoice.from_file(args.plant, path, seed=args.seed, feedback=getattr(args, "feedback", None))
+    choice = PlantChoice.from_file(args.plant, path, seed=args.seed, feedback=getattr(args, "feedback", None))
+    return with_tune_from_args(args, choice)
+
+
+def with_tune_from_args(args: argparse.Namespace, choice: Any) -> Any:
+    """``choice`` with ``--tune FILE`` (``--tune-log-index N``) applied; prints what the tune became (stderr).
+
+    A tune that cannot be read or names an unknown setting is bad input (exit 2), before anything flies.
+    """
+    tune_path = getattr(args, "tune", None)
+    log_index = getattr(args, "tune_log_index", None)
+    if tune_path is None:
+        if log_index is not None:
+            raise ConfigError("--tune-log-index applies only with --tune FILE")
+        return choice
+    if choice.kind != "betaflight":
+        raise ConfigError(f"--tune applies only with --plant betaflight (got --plant {choice.kind})")
+    import dataclasses
+
+    from aerobat.plants import PlantChoice
+    from aerobat.plants.betaflight.translate import translate
+    from aerobat.plants.betaflight.tune import load_tune
+
+    tune = load_tune(tune_path, log_index=log_index)
+    report = translate(tune)  # unknown settings raise here, naming the file and line
+    from aerobat.plants.betaflight.settings import load_settings
+
+    tuned = load_settings().with_tune(report)
+    rates = ", ".join(f"{axis} {tuned.rate_deg_s(axis, 1.0):.0f}" for axis in ("roll", "pitch", "yaw"))
+    print(f"{report.text()}\n  the tune's full-stick rates [deg/s] ({tuned.value('rates_type')}): {rates}; the pilot's "
+          "sticks invert its rate and throttle curves", file=sys.stderr)
+    return PlantChoice(choice.kind, dataclasses.replace(choice.settings, tune=tune), choice.seed, choice.feedback)
 
 
 def rule_choice_from_args(args: argparse.Namespace) -> Any:

@@ -34,6 +34,7 @@ from aerobat.cli.common import (
     plant_choice_from_args,
     session_ref,
     text_path,
+    with_tune_from_args,
 )
 from aerobat.errors import ConfigError, DesignFailed
 
@@ -115,7 +116,10 @@ def _cmd_robustness(args: argparse.Namespace) -> int:
     ranges = load_ranges(args.ranges) if args.ranges else RobustnessRanges()
     if args.betaflight is not None and args.plant != "betaflight":
         raise ConfigError(f"--betaflight applies only with --plant betaflight (got --plant {args.plant})")
-    base = PlantChoice.from_file(args.plant, args.betaflight).settings if args.plant == "betaflight" else None
+    base = (with_tune_from_args(args, PlantChoice.from_file(args.plant, args.betaflight)).settings
+            if args.plant == "betaflight" else None)
+    if args.plant != "betaflight" and getattr(args, "tune", None) is not None:
+        raise ConfigError(f"--tune applies only with --plant betaflight (got --plant {args.plant})")
     properties = BETAFLIGHT_PROPERTIES if args.plant == "betaflight" else SAMPLED_PROPERTIES
     config, maneuver, nominal = _design(args)
     jobs = robustness_jobs(maneuver, nominal, config, vehicles=args.vehicles, iterations=args.iterations,
@@ -381,6 +385,10 @@ def register(sub: Any) -> None:
                      help="onboard feedback of every vehicle (default: the plant's best measured; docs/feedback.md)")
     rob.add_argument("--betaflight", metavar="FILE.toml",
                      help="Betaflight plant settings to sample around (default: the shipped ones)")
+    rob.add_argument("--tune", metavar="FILE", help="a real quad's Betaflight diff/dump or blackbox log, flown by "
+                                                   "every sampled vehicle (only with --plant betaflight)")
+    rob.add_argument("--tune-log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
+                     help="which log of a blackbox file gives the tune (default 1)")
     add_execution_options(rob)
     rob.set_defaults(func=_cmd_robustness)
 

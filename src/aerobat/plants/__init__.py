@@ -91,6 +91,12 @@ def _betaflight_from_table(table: Any, source: str) -> Any:
     return dataclass_from_table(BetaflightParams, table, source=source)
 
 
+def _betaflight_to_table(settings: Any) -> dict[str, Any]:
+    from aerobat.plants.betaflight.params import params_to_table
+
+    return params_to_table(settings)
+
+
 def _betaflight_default() -> Any:
     from aerobat.plants.betaflight.params import BetaflightParams
 
@@ -130,5 +136,5 @@ PLANTS.register("rotorpy", PlantSpec(
 PLANTS.register("betaflight", PlantSpec(
     "betaflight", "a 5-inch racer flown by Betaflight 4.6's own firmware (SITL in lockstep) in the arena",
     _betaflight, load_settings=_betaflight_load, settings_from_table=_betaflight_from_table,
-    settings_to_table=dataclass_to_table, default_settings=_betaflight_default, option="--betaflight",
+    settings_to_table=_betaflight_to_table, default_settings=_betaflight_default, option="--betaflight",
     feedback=_ALL_SCHEMES, default_feedback=DEFAULT_SCHEME))

@@ -23,7 +23,7 @@ from aerobat.core.rules import RuleChoice
 from aerobat.errors import ConfigError
 from aerobat.experiments.job import Job
 from aerobat.plants.arena.params import ArenaParams
-from aerobat.plants.betaflight.params import BetaflightParams
+from aerobat.plants.betaflight.params import BetaflightParams, params_to_table
 from aerobat.plants.spec import PLANTS
 from aerobat.quadrotor.feedback import Feedback, as_feedback
 from aerobat.quadrotor.vehicle import VehicleConfig, vehicle_table
@@ -62,6 +62,9 @@ class RobustnessRanges:
     aerodynamics_scale: tuple[float, float] = (0.7, 1.3)
     noise_scale: tuple[float, float] = (0.7, 1.3)
     motor_tau_scale: tuple[float, float] = (0.85, 1.25)
+    pilot_mass_scale: tuple[float, float] = (0.85, 1.15)
+    """Betaflight only: the mass the offboard pilot believes, relative to the published one (issue 31 B1: its
+    take-off, hover and return must hold with its model off by ±15 %); drawn after every other property."""
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -93,6 +96,7 @@ SAMPLED_PROPERTIES = (
 BETAFLIGHT_PROPERTIES = (
     "mass_scale", "inertia_xx_scale", "inertia_yy_scale", "inertia_zz_scale", "drag_constant_scale",
     "motor_tau_scale", "thrust_gain_min", "com_offset_norm_m", "aerodynamics_scale", "noise_scale",
+    "pilot_mass_scale",
 )
 
 
@@ -104,7 +108,7 @@ def sample_betaflight(ranges: RobustnessRanges, seed: int,
     thrust gains, centre-of-mass offset), the aerodynamics (drag and damping by one scale) and
     every noise (gyro, accelerometer, motion capture, wind, gusts, thrust jitter by one scale).
     Unchanged: the firmware and its settings, the thrust curve's shape, the rotor inertia, the
-    radio, and the pilot's model of the vehicle (it keeps flying with the published mass).
+    radio. The pilot's model of the vehicle is off by ``pilot_mass_scale`` (the mass it believes).
     """
     rng = np.random.default_rng(seed)
 
@@ -128,6 +132,7 @@ def sample_betaflight(ranges: RobustnessRanges, seed: int,
         "aerodynamics_scale": u(ranges.aerodynamics_scale),
         "noise_scale": u(ranges.noise_scale),
     }
+    props["pilot_mass_scale"] = u(ranges.pilot_mass_scale)
     aero, noise = props["aerodynamics_scale"], props["noise_scale"]
     s = base.sensors
     params = base.replace(
@@ -143,8 +148,9 @@ def sample_betaflight(ranges: RobustnessRanges, seed: int,
         **_scaled_environment(base, aero, noise),
         sensors=dataclasses.replace(
             s, gyro_noise_rad_s=s.gyro_noise_rad_s * noise, accel_noise_m_s2=s.accel_noise_m_s2 * noise),
+        pilot=dataclasses.replace(base.pilot, vehicle_mass_kg=base.pilot.vehicle_mass_kg * props["pilot_mass_scale"]),
     )
-    return dataclass_to_table(params), props
+    return params_to_table(params), props
 
 
 def sample_arena(ranges: RobustnessRanges, seed: int) -> tuple[dict[str, Any], dict[str, float]]:

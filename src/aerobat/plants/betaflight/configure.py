@@ -29,7 +29,7 @@ from .packets import SitlState
 from .settings import BetaflightSettings, load_settings
 from .sitl import SitlProcess
 
-__all__ = ["AT_REST_LEVEL", "ensure_eeprom", "step_at_rest"]
+__all__ = ["AT_REST_LEVEL", "AtRestStepper", "check_arms", "ensure_eeprom", "step_at_rest"]
 
 AT_REST_LEVEL = SitlState(
     time_s=0.0,
@@ -42,7 +42,7 @@ AT_REST_LEVEL = SitlState(
 Progress = Callable[[str], None]
 
 
-class _Stepper:
+class AtRestStepper:
     """Keeps a SITL stepping at rest from a background thread until stopped or the firmware exits."""
 
     def __init__(self, sitl: SitlProcess) -> None:
@@ -78,7 +78,7 @@ def step_at_rest(sitl: SitlProcess, stop: Callable[[], bool], steps: int | None 
 
 def _apply(sitl: SitlProcess, settings: BetaflightSettings, say: Progress) -> str:
     """Apply the settings over the CLI and save; returns the CLI transcript."""
-    stepper = _Stepper(sitl)
+    stepper = AtRestStepper(sitl)
     transcript = []
     try:
         with sitl.open_link() as link:
@@ -105,7 +105,7 @@ _GET_PATTERN = re.compile(r"^(\w+) = (.*?)\s*$", re.MULTILINE)
 
 def _verify(sitl: SitlProcess, settings: BetaflightSettings) -> None:
     """Read every configured value back through the CLI of a process started from the saved eeprom."""
-    stepper = _Stepper(sitl)
+    stepper = AtRestStepper(sitl)
     try:
         with sitl.open_link() as link:
             link.cli.enter()
@@ -122,6 +122,40 @@ def _verify(sitl: SitlProcess, settings: BetaflightSettings) -> None:
         stepper.stop()
 
 
+def check_arms(binary: Path, eeprom: Path, settings: BetaflightSettings, *, calibration_s: float = 1.6) -> None:
+    """Power a fresh process from ``eeprom`` on at rest, give ARM as the pilot does, and raise unless it arms.
+
+    Raises
+    ------
+    ConfigureFailed
+        The firmware refuses to arm; the message names the arming-disable flags it reports (MSP_STATUS_EX).
+    """
+    from .rc import AUX_CHANNEL_COUNT, RC_MID_US, RC_MIN_US
+
+    def channels(arm: bool) -> tuple[int, ...]:
+        aux = settings.aux_us(ARM=arm, ANGLE=True)
+        return (RC_MID_US, RC_MID_US, RC_MIN_US, RC_MID_US, *aux, *([RC_MIN_US] * (AUX_CHANNEL_COUNT - len(aux))))
+
+    with SitlProcess(binary, eeprom) as sitl:
+        period_s = sitl.gyro_period_us / 1e6
+        sitl.set_rc(channels(False))
+        step_at_rest(sitl, lambda: False, steps=int(calibration_s / period_s))
+        sitl.set_rc(channels(True))
+        for _ in range(int(1.0 / period_s)):
+            motors = sitl.step(AT_REST_LEVEL._replace(time_s=(sitl.steps + 1) * period_s))
+            if min(motors) > 0.0:
+                return
+        stepper = AtRestStepper(sitl)
+        try:
+            with sitl.open_link() as link:
+                flags = link.msp.status_ex().arming_disable_flags
+        finally:
+            stepper.stop()
+    why = (f"arming disabled by {', '.join(flags)}" if flags else
+           f"the ARM switch (AUX{settings.modes['ARM'].aux}) did not arm it and it reports no arming-disable flag")
+    raise ConfigureFailed(f"the firmware would not arm with these settings: {why}")
+
+
 def ensure_eeprom(
     binary: Path | None = None,
     settings_path: Path | None = None,
@@ -129,6 +163,7 @@ def ensure_eeprom(
     cache_dir: Path | None = None,
     verify: bool = True,
     progress: Progress | None = None,
+    settings: BetaflightSettings | None = None,
 ) -> Path:
     """Return a configured ``eeprom.bin`` for ``binary``, creating it on first use.
 
@@ -144,6 +179,9 @@ def ensure_eeprom(
         Read the values back from the saved eeprom in a second process.
     progress : callable, optional
         Called with one line of text per stage.
+    settings : BetaflightSettings, optional
+        Settings already loaded (e.g. with a tune, :meth:`.BetaflightSettings.with_tune`); overrides
+        ``settings_path``.
 
     Returns
     -------
@@ -159,7 +197,7 @@ def ensure_eeprom(
     """
     say = progress or (lambda _line: None)
     binary = Path(binary) if binary is not None else ensure_sitl(cache_dir, progress=progress)
-    settings = load_settings(settings_path)
+    settings = settings if settings is not None else load_settings(settings_path)
     eeprom = binary.parent / f"eeprom-{settings.sha256[:12]}.bin"
     if eeprom.is_file():
         return eeprom
@@ -184,6 +222,9 @@ def ensure_eeprom(
             try:
                 with SitlProcess(binary, staged) as check:
                     _verify(check, settings)
+                if settings.tune is not None:  # a tune may hold what keeps the firmware from arming
+                    say("checking that the firmware arms with the tune")
+                    check_arms(binary, staged, settings)
             except BaseException:
                 staged.unlink(missing_ok=True)
                 raise

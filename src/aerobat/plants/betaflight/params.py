@@ -31,6 +31,7 @@ from aerobat.config import (
 )
 from aerobat.errors import ConfigError
 from aerobat.plants.arena.params import Aerodynamics, Disturbances, Drift, MotionCapture, Volume
+from aerobat.plants.betaflight.tune import Tune
 
 __all__ = [
     "Airframe",
@@ -40,6 +41,7 @@ __all__ = [
     "Radio",
     "Sensors",
     "load_betaflight",
+    "params_to_table",
     "save_betaflight",
 ]
 
@@ -276,6 +278,8 @@ class BetaflightParams:
     volume: Volume = field(default_factory=Volume)
     pilot: Pilot = field(default_factory=Pilot)
     firmware: Firmware = field(default_factory=Firmware)
+    tune: Tune | None = None
+    """A real quad's configuration applied on top of ``settings.toml`` (:func:`.tune.load_tune`); None: none."""
 
     def replace(self, **sections: Any) -> BetaflightParams:
         """Copy with whole sections or ``section__field=value`` changes."""
@@ -289,6 +293,16 @@ def load_betaflight(path: str | Path) -> BetaflightParams:
     return dataclass_from_table(BetaflightParams, read_toml(path), source=str(path))
 
 
+def params_to_table(params: BetaflightParams) -> dict[str, Any]:
+    """The settings' stored form (the plant spec's ``settings``); the tune only when there is one."""
+    table = dataclass_to_table(params)
+    if params.tune is None:
+        del table["tune"]
+    else:
+        table["tune"]["lines"] = [list(entry) for entry in params.tune.lines]
+    return table
+
+
 def save_betaflight(params: BetaflightParams, path: str | Path) -> None:
     check_type("params", params, BetaflightParams, "BetaflightParams")
-    write_file(path, tomli_w.dumps(dataclass_to_table(params)))
+    write_file(path, tomli_w.dumps(params_to_table(params)))

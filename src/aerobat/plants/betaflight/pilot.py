@@ -59,7 +59,14 @@ L_CURVE_R = 7
 L_CURVE_K = 8
 L_IDLE = 9  # motor_idle as a motor command
 L_MIN_CHECK = 10  # throttle pulse where the throttle starts [us]
-N_LIMITS = 11
+L_RATE_TABLES = 11  # 1: the rate curves are the tables below (a tune's), 0: linear with L_RATE_MAX
+L_THROTTLE_TABLE = 12  # 1: the throttle curve is the table below, 0: linear with L_IDLE and L_MIN_CHECK
+N_TABLE = 129  # samples per table: stick |x| = i/(N-1), or throttle pulse 1000 + 1000 i/(N-1) us
+L_ROLL_TABLE = 13  # rate [rad/s] at stick i/(N-1), roll, pitch, yaw one after the other
+L_MOTOR_TABLE = L_ROLL_TABLE + 3 * N_TABLE  # motor command at pulse 1000 + 1000 i/(N-1) us
+N_LIMITS = L_MOTOR_TABLE + N_TABLE
+_HOVER_WINDOW_M = 0.5  # height error within which the hover-throttle integral acts [m]
+_HOVER_AUTHORITY = 0.35  # the largest collective the hover integral adds or takes away [fraction of g]
 
 
 @dataclass(frozen=True)
@@ -82,16 +89,30 @@ class StickMap:
     min_check_us: float
     mass_kg: float
     airframe: Airframe
+    rate_tables_rad_s: tuple[tuple[float, ...], ...] | None = None
+    motor_table: tuple[float, ...] | None = None
 
     @classmethod
     def from_settings(cls, settings: BetaflightSettings, airframe: Airframe, mass_kg: float) -> StickMap:
-        """The map for the firmware ``settings`` (linear rate curves required: same rate on every axis)."""
+        """The map for the firmware ``settings``.
+
+        aerobat's own settings have linear rate curves, the same on every axis (rate = stick × full rate);
+        a tune's curves of any ``rates_type`` (and a throttle curve that is not the identity) are sampled
+        into tables that the pilot inverts (:func:`stick_for_rate`).
+        """
         rates = {axis: settings.rate_deg_s(axis, 1.0 - 1e-9) for axis in ("roll", "pitch", "yaw")}
-        if len({round(r, 3) for r in rates.values()}) != 1:
-            raise ValueError(f"the rate curves differ between axes: {rates}")
-        full = float(settings.value("roll_rc_rate")) * 10.0
-        for axis in ("roll", "pitch", "yaw"):
-            settings.stick_for_rate(axis, 0.0)  # raises unless the curve is linear
+        tables = None
+        if not settings.linear_rates() or len({round(r, 3) for r in rates.values()}) != 1:
+            grid = np.linspace(0.0, 1.0, N_TABLE)
+            tables = tuple(tuple(math.radians(settings.rate_deg_s(axis, float(x))) for x in grid)
+                           for axis in ("roll", "pitch", "yaw"))
+            for axis, table in zip(("roll", "pitch", "yaw"), tables, strict=True):
+                if np.any(np.diff(table) < 0.0) or table[-1] <= 0.0:
+                    raise ValueError(f"the {axis} rate curve does not rise with the stick")
+        motor = None
+        if not settings.linear_throttle():
+            motor = tuple(settings.motor_for_throttle_us(1000.0 + 1000.0 * i / (N_TABLE - 1)) for i in range(N_TABLE))
+        full = float(settings.value("roll_rc_rate")) * 10.0 if tables is None else math.degrees(tables[0][-1])
         return cls(
             rate_max_rad_s=math.radians(full),
             rate_limit_rad_s=math.radians(float(settings.value("roll_rate_limit"))),
@@ -100,7 +121,16 @@ class StickMap:
             min_check_us=float(settings.value("min_check")),
             mass_kg=mass_kg,
             airframe=airframe,
+            rate_tables_rad_s=tables,
+            motor_table=motor,
         )
+
+    def full_rates_deg_s(self) -> tuple[float, float, float]:
+        """Body rate at full stick, roll, pitch, yaw [deg/s] (after the rate limit)."""
+        if self.rate_tables_rad_s is None:
+            top = math.degrees(min(self.rate_max_rad_s, self.rate_limit_rad_s))
+            return (top, top, top)
+        return tuple(math.degrees(t[-1]) for t in self.rate_tables_rad_s)  # type: ignore[return-value]
 
     def limits(self, *, max_tilt_rad: float, max_climb_m_s: float, gravity_m_s2: float) -> np.ndarray:
         """The compiled pilot's limits vector (indices ``L_*``)."""
@@ -116,7 +146,56 @@ class StickMap:
         out[L_CURVE_K] = self.airframe.curve_shape
         out[L_IDLE] = self.idle
         out[L_MIN_CHECK] = self.min_check_us
+        if self.rate_tables_rad_s is not None:
+            out[L_RATE_TABLES] = 1.0
+            for axis, table in enumerate(self.rate_tables_rad_s):
+                out[L_ROLL_TABLE + axis * N_TABLE:L_ROLL_TABLE + (axis + 1) * N_TABLE] = table
+        if self.motor_table is not None:
+            out[L_THROTTLE_TABLE] = 1.0
+            out[L_MOTOR_TABLE:L_MOTOR_TABLE + N_TABLE] = self.motor_table
         return out
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def stick_for_rate(rate, axis, limits):  # pragma: no cover - compiled
+    """Stick in [−1, 1] that commands ``rate`` [rad/s] on ``axis`` (0 roll, 1 pitch, 2 yaw; Betaflight's sense)."""
+    if limits[L_RATE_TABLES] == 0.0:
+        return min(max(rate / limits[L_RATE_MAX], -1.0), 1.0)
+    base = L_ROLL_TABLE + axis * N_TABLE
+    target = abs(rate)
+    if target >= limits[base + N_TABLE - 1]:
+        return 1.0 if rate > 0.0 else -1.0
+    low = 0
+    high = N_TABLE - 1
+    while high - low > 1:  # the last sample at or below the target (the curve rises)
+        middle = (low + high) // 2
+        if limits[base + middle] <= target:
+            low = middle
+        else:
+            high = middle
+    r0 = limits[base + low]
+    r1 = limits[base + high]
+    x = (low + (target - r0) / (r1 - r0)) / (N_TABLE - 1) if r1 > r0 else high / (N_TABLE - 1)
+    return x if rate >= 0.0 else -x
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def throttle_for_motor(u, limits):  # pragma: no cover - compiled
+    """Throttle pulse [us] for the motor command ``u`` (the firmware's throttle curve, inverted)."""
+    if limits[L_THROTTLE_TABLE] == 0.0:
+        idle = limits[L_IDLE]
+        fraction = min(max((u - idle) / (1.0 - idle), 0.0), 1.0)
+        return limits[L_MIN_CHECK] + fraction * (2000.0 - limits[L_MIN_CHECK])
+    base = L_MOTOR_TABLE
+    if u <= limits[base]:
+        return 1000.0
+    for i in range(1, N_TABLE):
+        m1 = limits[base + i]
+        if m1 >= u:
+            m0 = limits[base + i - 1]
+            f = (u - m0) / (m1 - m0) if m1 > m0 else 1.0
+            return 1000.0 + 1000.0 * (i - 1 + f) / (N_TABLE - 1)
+    return 2000.0
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
@@ -131,9 +210,7 @@ def throttle_for_collective(collective, limits):  # pragma: no cover - compiled
         u = ((k - 1.0) + math.sqrt((1.0 - k) ** 2 + 4.0 * k * s * s)) / (2.0 * k)
     else:
         u = s * s
-    idle = limits[L_IDLE]
-    fraction = min(max((u - idle) / (1.0 - idle), 0.0), 1.0)
-    return limits[L_MIN_CHECK] + fraction * (2000.0 - limits[L_MIN_CHECK])
+    return throttle_for_motor(u, limits)
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
@@ -142,10 +219,9 @@ def program_sticks(cmd, limits, out):  # pragma: no cover - compiled
 
     ``out`` = (roll, pitch, yaw) sticks in [−1, 1] and the throttle pulse [us].
     """
-    full = limits[L_RATE_MAX]
-    out[0] = min(max(cmd[1] / full, -1.0), 1.0)
-    out[1] = min(max(cmd[2] / full, -1.0), 1.0)
-    out[2] = min(max(-cmd[3] / full, -1.0), 1.0)
+    out[0] = stick_for_rate(cmd[1], 0, limits)
+    out[1] = stick_for_rate(cmd[2], 1, limits)
+    out[2] = stick_for_rate(-cmd[3], 2, limits)
     out[3] = throttle_for_collective(cmd[0], limits)
 
 
@@ -165,8 +241,13 @@ def angle_sticks(pos, vel, quat, target, integral, gains, limits, dt, out):  # p
     a = np.empty(3)
     for i in range(3):
         err = target[i] - pos[i]
-        if abs(err) < 0.15:
+        if i < 2 and abs(err) < 0.15:
             integral[i] = min(max(integral[i] + err * dt, -0.5), 0.5)
+        elif i == 2 and abs(err) < _HOVER_WINDOW_M and ki > 0.0:
+            # the hover throttle: the pilot's model of mass and thrust may be off by tens of percent
+            # (a battery, a worn prop); the integral may take up HOVER_AUTHORITY of g either way
+            most = _HOVER_AUTHORITY * g / ki
+            integral[i] = min(max(integral[i] + err * dt, -most), most)
         # a velocity loop around a limited position loop: the plain PD near the target
         v_des = kp / kd * err
         if i == 2:
@@ -200,5 +281,5 @@ def angle_sticks(pos, vel, quat, target, integral, gains, limits, dt, out):  # p
     out[0] = min(max(roll / angle_limit, -1.0), 1.0)
     out[1] = min(max(pitch / angle_limit, -1.0), 1.0)
     yaw_rate = -kyaw * yaw  # heading 0; FLU rate about z-up
-    out[2] = min(max(-yaw_rate / limits[L_RATE_MAX], -1.0), 1.0)
+    out[2] = stick_for_rate(-yaw_rate, 2, limits)
     out[3] = throttle_for_collective(collective, limits)

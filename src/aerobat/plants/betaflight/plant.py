@@ -113,8 +113,14 @@ class BetaflightPlant:
         self.trials_flown = 0
         self.capacity = 1.0
         self.settings = settings or load_settings()
+        self.tune_report = None
+        if self.params.tune is not None and self.settings.tune is None:
+            from aerobat.plants.betaflight.translate import translate
+
+            self.tune_report = translate(self.params.tune)
+            self.settings = self.settings.with_tune(self.tune_report)
         self.binary = Path(binary) if binary is not None else ensure_sitl()
-        self.eeprom = Path(eeprom) if eeprom is not None else ensure_eeprom(self.binary, self.settings.path)
+        self.eeprom = Path(eeprom) if eeprom is not None else ensure_eeprom(self.binary, settings=self.settings)
         self.start_m = np.zeros(3)
         self.gravity = config.vehicle.gravity_m_s2
         pilot = self.params.pilot
@@ -202,7 +208,8 @@ class BetaflightPlant:
         plant = self._trial_plant(rng)
         self.trials_flown += 1
         info: dict[str, Any] = {"firmware": f"Betaflight 4.6.0 SITL lockstep, settings revision "
-                                            f"{self.settings.revision} ({self.settings.sha256[:12]})"}
+                                            f"{self.settings.revision} ({self.settings.sha256[:12]})"
+                                            + (f", tune {self.params.tune.source}" if self.params.tune else "")}
         flight = None
         try:
             flight = self.open_flight(rng, plant)
@@ -401,7 +408,7 @@ class BetaflightPlant:
             flight.frame(self.channels(sticks, arm=True, angle=False))
             truth.append(np.concatenate([[flight.time_s], flight.x]))
             self._check_volume(flight)
-        self._integral = np.zeros(3)
+        self._integral[0:2] = 0.0  # the hover throttle's integral (the pilot's mass error) carries into the return
         return start_time
 
     def _pilot_feedback(self, compiled: CompiledProgram, start_time: float) -> Any:

@@ -1,0 +1,337 @@
+"""A real quad's Betaflight configuration (its *tune*), from a CLI ``diff``/``dump`` or a blackbox header.
+
+A :class:`Tune` is what the file says, in the vocabulary of the firmware that wrote it (4.2's
+``d_min_roll``, 4.3's ``dshot_idle_value``, ...), with the line each setting came from.
+:mod:`.translate` turns it into Betaflight 4.6 commands for the SITL and reports what was
+applied, translated, refused and pinned.
+
+* :func:`parse_cli` reads a ``diff`` or ``dump`` (``diff all``, ``dump all`` too): ``set``
+  lines by section (master, ``profile N``, ``rateprofile N``), the other commands (``feature``,
+  ``aux``, ``serial``, ...) as commands, and which profile and rate profile were active (the
+  last ``profile``/``rateprofile`` line, as Betaflight's "restore original profile selection").
+* :func:`tune_from_blackbox_header` maps a blackbox log's header (``H name:value`` lines) to the
+  CLI names of the firmware that wrote it (``rollPID`` → ``p_roll``, ``i_roll``, ``d_roll``; enum
+  indices to their names).
+* :func:`load_tune` picks one of the two by the file's content.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+from aerobat.errors import ConfigError
+
+__all__ = ["Tune", "TuneError", "load_tune", "parse_cli", "read_blackbox_headers", "tune_from_blackbox_header"]
+
+MAX_TUNE_BYTES = 64 * 1024 * 1024  # a blackbox file is read only up to its headers, but never more than this
+
+SECTIONS = ("master", "profile", "rateprofile", "command")
+_VERSION = re.compile(r"Betaflight\s*/?\s*(?:\S+\s+\(\S+\)\s+)?(\d+)\.(\d+)\.(\d+)")
+_ANY_VERSION = re.compile(r"\b(\d+)\.(\d+)\.(\d+)\b")
+_SET = re.compile(r"^set\s+(\w+)\s*=\s*(.*?)\s*$")
+_NAME = re.compile(r"^\w+$")
+# commands a diff/dump holds besides `set` (cli/cli.c cmdTable); their arguments are not checked here
+_COMMANDS = frozenset({
+    "adjrange", "aux", "beacon", "beeper", "board_name", "color", "dma", "feature", "gpspids", "led", "manufacturer_id",
+    "map", "mcu_id", "mixer", "mmix", "mode_color", "resource", "rxfail", "rxrange", "serial", "servo", "signature",
+    "smix", "timer", "vtx", "vtxtable", "vtx_info", "simplified_tuning", "osd_layout",
+})
+_STRUCTURE = frozenset({"batch", "save", "defaults", "exit", "diff", "dump", "version"})
+
+
+class TuneError(ConfigError):
+    """A tune file that cannot be read: the message names the file and the line."""
+
+
+@dataclass(frozen=True)
+class Tune:
+    """A Betaflight configuration as written by the firmware that wrote it.
+
+    Attributes
+    ----------
+    firmware : the writer's firmware line (``"Betaflight / STM32H743 (SH74) 4.3.1 MSP API: 1.44"``,
+        or a blackbox header's ``Firmware revision``); empty if the file does not say.
+    version : (major, minor, patch) parsed from ``firmware``; (0, 0, 0) if unknown.
+    source : where it came from (a path, ``path#log2``, ...).
+    kind : ``"cli"`` (diff or dump) or ``"blackbox"`` (a log header).
+    active_profile, active_rateprofile : the PID profile and rate profile the quad flew.
+    lines : ``(section, index, name, value, line)`` in file order. ``section`` is ``master``,
+        ``profile``, ``rateprofile`` (``index`` its number) or ``command`` (``name`` the command
+        word, ``value`` the rest); ``line`` counts from 1 (for a header, the header line).
+    """
+
+    firmware: str
+    version: tuple[int, int, int]
+    source: str
+    kind: str
+    active_profile: int
+    active_rateprofile: int
+    lines: tuple[tuple[str, int, str, str, int], ...]
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("cli", "blackbox"):
+            raise ConfigError(f"tune {self.source}: kind {self.kind!r}: expected 'cli' or 'blackbox'")
+        for entry in self.lines:
+            if len(entry) != 5 or entry[0] not in SECTIONS:
+                raise ConfigError(f"tune {self.source}: bad entry {entry!r}")
+
+    @property
+    def version_text(self) -> str:
+        return ".".join(map(str, self.version)) if self.version != (0, 0, 0) else "unknown"
+
+    def active_settings(self) -> list[tuple[str, str, str, int]]:
+        """``(section, name, value, line)`` of the settings the quad flew: master, active profiles; last wins."""
+        out: dict[tuple[str, str], tuple[str, str, str, int]] = {}
+        for section, index, name, value, line in self.lines:
+            if section == "master" or (section == "profile" and index == self.active_profile) or (
+                    section == "rateprofile" and index == self.active_rateprofile):
+                out[(section, name)] = (section, name, value, line)
+        return list(out.values())
+
+    def inactive_settings(self) -> list[tuple[str, int, str, str, int]]:
+        """Settings of profiles the quad did not fly (not applied)."""
+        return [entry for entry in self.lines if (entry[0] == "profile" and entry[1] != self.active_profile)
+                or (entry[0] == "rateprofile" and entry[1] != self.active_rateprofile)]
+
+    def commands(self) -> list[tuple[str, str, int]]:
+        """``(command, arguments, line)`` of the non-``set`` lines."""
+        return [(name, value, line) for section, _, name, value, line in self.lines if section == "command"]
+
+
+def _version(text: str) -> tuple[int, int, int]:
+    match = _VERSION.search(text) or _ANY_VERSION.search(text)
+    return (int(match.group(1)), int(match.group(2)), int(match.group(3))) if match else (0, 0, 0)
+
+
+def _read(path: Path, limit: int = MAX_TUNE_BYTES) -> bytes:
+    try:
+        if not path.is_file():
+            raise TuneError(f"{path}: not a regular file")
+        with open(path, "rb") as handle:
+            return handle.read(limit)
+    except OSError as error:
+        raise TuneError(f"{path}: cannot read the tune: {error.strerror or error}") from None
+
+
+def parse_cli(text: str, *, source: str) -> Tune:
+    """Parse a Betaflight CLI ``diff`` or ``dump``.
+
+    Raises
+    ------
+    TuneError
+        A line that is no CLI command a diff holds, or a malformed ``set``/``profile`` line
+        (the message names ``source`` and the line number).
+    """
+    firmware = ""
+    section, index = "master", 0
+    active = {"profile": 0, "rateprofile": 0}
+    lines: list[tuple[str, int, str, str, int]] = []
+    for number, raw in enumerate(text.splitlines(), start=1):
+        line = raw.strip()
+        where = f"{source}: line {number}"
+        if not line:
+            continue
+        if line.startswith("#"):
+            if not firmware and "Betaflight" in line and _ANY_VERSION.search(line):
+                firmware = line.lstrip("# ").strip()
+            continue
+        if not line.isascii() or not line.isprintable():
+            raise TuneError(f"{where}: not a Betaflight CLI line (non-printable or non-ASCII characters)")
+        word, _, rest = line.partition(" ")
+        word = word.lower()
+        if word == "set":
+            match = _SET.match(line)
+            if match is None or not match.group(2):
+                raise TuneError(f"{where}: malformed set line {line!r}: expected 'set NAME = VALUE'")
+            lines.append((section, index, match.group(1).lower(), match.group(2), number))
+        elif word in ("profile", "rateprofile"):
+            if not re.fullmatch(r"\d{1,2}", rest.strip()):
+                raise TuneError(f"{where}: malformed {word} line {line!r}: expected '{word} N'")
+            section, index = word, int(rest)
+            active[word] = index
+        elif word in _COMMANDS:
+            lines.append(("command", 0, word, rest.strip(), number))
+        elif word in _STRUCTURE:
+            continue
+        else:
+            raise TuneError(f"{where}: unknown CLI command {word!r} in {line!r} (a diff or dump holds set, "
+                            "profile, rateprofile, feature, aux, serial, ... lines)")
+    if not lines:
+        raise TuneError(f"{source}: no Betaflight settings found (expected a CLI diff or dump)")
+    return Tune(firmware, _version(firmware), source, "cli", active["profile"], active["rateprofile"], tuple(lines))
+
+
+def read_blackbox_headers(data: bytes) -> list[dict[str, str]]:
+    """The header of every log in a blackbox file: ``{name: raw value}`` of its ``H name:value`` lines.
+
+    A log starts at ``H Product:``; its header ends at the first line not starting with ``H ``.
+    """
+    headers = []
+    start = data.find(b"H Product:")
+    while start >= 0:
+        header: dict[str, str] = {}
+        position = start
+        while data.startswith(b"H ", position):
+            end = data.find(b"\n", position)
+            end = len(data) if end < 0 else end
+            name, sep, value = data[position + 2:end].decode("latin-1").partition(":")
+            if sep:
+                header.setdefault(name.strip(), value.strip())
+            position = end + 1
+        headers.append(header)
+        start = data.find(b"H Product:", position)
+    return headers
+
+
+# Header fields that are several CLI settings (blackbox/blackbox.c writes them as "a,b,c").
+_AXES3 = ("roll", "pitch", "yaw")
+_SPLIT: dict[str, tuple[str, ...]] = {
+    "rollPID": ("p_roll", "i_roll", "d_roll"),
+    "pitchPID": ("p_pitch", "i_pitch", "d_pitch"),
+    "yawPID": ("p_yaw", "i_yaw", "d_yaw"),
+    "levelPID": ("p_level", "i_level", "d_level"),
+    "magPID": ("p_mag",),
+    "d_min": ("d_min_roll", "d_min_pitch", "d_min_yaw"),
+    "d_max": ("d_max_roll", "d_max_pitch", "d_max_yaw"),
+    "rc_rates": tuple(f"{a}_rc_rate" for a in _AXES3),
+    "rates": tuple(f"{a}_srate" for a in _AXES3),
+    "rc_expo": tuple(f"{a}_expo" for a in _AXES3),
+    "rate_limits": tuple(f"{a}_rate_limit" for a in _AXES3),
+    "feedforward_weight": ("f_roll", "f_pitch", "f_yaw"),
+    "gyro_lowpass_dyn_hz": ("dyn_lpf_gyro_min_hz", "dyn_lpf_gyro_max_hz"),
+    "dterm_lowpass_dyn_hz": ("dyn_lpf_dterm_min_hz", "dyn_lpf_dterm_max_hz"),
+    "gyro_lpf1_dyn_hz": ("gyro_lpf1_dyn_min_hz", "gyro_lpf1_dyn_max_hz"),
+    "dterm_lpf1_dyn_hz": ("dterm_lpf1_dyn_min_hz", "dterm_lpf1_dyn_max_hz"),
+    "gyro_notch_hz": ("gyro_notch1_hz", "gyro_notch2_hz"),
+    "gyro_notch_cutoff": ("gyro_notch1_cutoff", "gyro_notch2_cutoff"),
+}
+# Header names that differ from the same firmware's CLI name.
+_RENAME = {
+    "dterm_filter_type": "dterm_lowpass_type",
+    "dterm_filter2_type": "dterm_lowpass2_type",
+    "pidAtMinThrottle": "pid_at_min_throttle",
+    "minthrottle": "min_throttle",
+    "maxthrottle": "max_throttle",
+}
+# Enum indices as the 4.2-4.6 lookup tables order them (cli/settings.c of each version).
+_FILTER_TYPES = ("PT1", "BIQUAD", "PT2", "PT3")
+_LOOKUPS: dict[str, tuple[str, ...]] = {
+    "rates_type": ("BETAFLIGHT", "RACEFLIGHT", "KISS", "ACTUAL", "QUICK"),
+    "dterm_lowpass_type": _FILTER_TYPES, "dterm_lowpass2_type": _FILTER_TYPES,
+    "gyro_lowpass_type": _FILTER_TYPES, "gyro_lowpass2_type": _FILTER_TYPES,
+    "dterm_lpf1_type": _FILTER_TYPES, "dterm_lpf2_type": _FILTER_TYPES,
+    "gyro_lpf1_type": _FILTER_TYPES, "gyro_lpf2_type": _FILTER_TYPES,
+    "iterm_relax": ("OFF", "RP", "RPY", "RP_INC", "RPY_INC"),
+    "iterm_relax_type": ("GYRO", "SETPOINT"),
+    "ff_interpolate_sp": ("OFF", "ON", "AVERAGED_2", "AVERAGED_3", "AVERAGED_4"),
+    "feedforward_averaging": ("OFF", "2_POINT", "3_POINT", "4_POINT"),
+    "anti_gravity_mode": ("SMOOTH", "STEP"),
+    "rc_smoothing_type": ("INTERPOLATION", "FILTER"),
+    "use_integrated_yaw": ("OFF", "ON"),
+    "pid_at_min_throttle": ("OFF", "ON"),
+    "iterm_rotation": ("OFF", "ON"),
+    "dshot_bidir": ("OFF", "ON"),
+    "gyro_cal_on_first_arm": ("OFF", "ON"),
+    "use_unsynced_pwm": ("OFF", "ON"),
+    "throttle_limit_type": ("OFF", "SCALE", "CLIP"),
+    "tpa_mode": ("PD", "D"),
+    "rc_smoothing_debug_axis": ("ROLL", "PITCH", "YAW", "THROTTLE"),
+}
+# Header lines that record the log or the hardware, not a setting.
+_NOT_SETTINGS = frozenset({
+    "Product", "Data version", "Firmware type", "Firmware revision", "Firmware date", "Board information",
+    "Log start datetime", "Craft name", "I interval", "P interval", "P ratio", "gyro_scale", "motorOutput",
+    "acc_1G", "vbatref", "vbatcellvoltage", "currentSensor", "looptime", "features", "rc_smoothing_active_cutoffs",
+    "rc_smoothing_rx_average", "rc_smoothing_cutoffs", "rc_smoothing_filter_type", "rc_interpolation",
+    "rc_interpolation_interval", "rc_interpolation_channels", "gyro_sync_denom",
+})
+
+
+def tune_from_blackbox_header(header: Mapping[str, str], *, source: str) -> Tune:
+    """The tune a blackbox log's header records.
+
+    Parameters
+    ----------
+    header : each header field's name and raw text exactly as written after ``"H "`` (``"rollPID"``
+        → ``"47,85,38"``).
+    source : names the log in messages (``"flight.bbl#log1"``).
+
+    Multi-value fields become the CLI settings of the firmware that wrote the log (``rollPID``
+    → ``p_roll``, ``i_roll``, ``d_roll``; ``d_min`` → ``d_min_roll``, ...; ``rates`` →
+    ``roll_srate``, ...); enum fields written as indices become their names. 4.2-4.6 write every
+    value in the unit of its CLI setting (the ×100 filter fields of 3.x headers, ``dterm_lpf_hz``
+    and ``yaw_lpf_hz``, are no longer written); fields that record the log or the hardware
+    (``motorOutput``, ``looptime``, ``features``, ...) are kept as commands and reported, not applied.
+    The log's profile is flown as profile 0 and rate profile 0.
+
+    Raises
+    ------
+    TuneError
+        The header has no ``Firmware revision`` or a multi-value field has the wrong count.
+    """
+    if not isinstance(header, Mapping):
+        raise TuneError(f"{source}: expected a mapping of header names to values, got {type(header).__name__}")
+    firmware = str(header.get("Firmware revision", "")).strip()
+    if not firmware:
+        raise TuneError(f"{source}: the header has no 'Firmware revision' (is it a Betaflight blackbox log?)")
+    if not firmware.lower().startswith("betaflight"):
+        raise TuneError(f"{source}: Firmware revision {firmware!r}: only Betaflight logs carry a Betaflight tune")
+    lines: list[tuple[str, int, str, str, int]] = []
+    for number, (name, raw) in enumerate(header.items(), start=1):
+        value = str(raw).strip()
+        if name in _NOT_SETTINGS or name.startswith("Field "):
+            lines.append(("command", 0, "header", f"{name}:{value}", number))
+            continue
+        names = _SPLIT.get(name)
+        if names is not None:
+            parts = [part.strip() for part in value.split(",")]
+            if len(parts) != len(names) or not all(re.fullmatch(r"-?\d+", p) for p in parts):
+                raise TuneError(f"{source}: header field {name}:{value!r}: expected {len(names)} comma-separated "
+                                f"integers ({', '.join(names)})")
+            lines.extend(("master", 0, cli, part, number) for cli, part in zip(names, parts, strict=True))
+            continue
+        cli = _RENAME.get(name, name)
+        if not _NAME.match(cli):
+            lines.append(("command", 0, "header", f"{name}:{value}", number))
+            continue
+        table = _LOOKUPS.get(cli)
+        if table is not None and re.fullmatch(r"\d+", value):
+            if int(value) >= len(table):
+                raise TuneError(f"{source}: header field {name}:{value}: index out of range, "
+                                f"allowed 0..{len(table) - 1}")
+            value = table[int(value)]
+        lines.append(("master", 0, cli.lower(), value, number))
+    return Tune(firmware, _version(firmware), source, "blackbox", 0, 0, tuple(lines))
+
+
+def load_tune(path: str | Path, *, log_index: int | None = None) -> Tune:
+    """A tune from a CLI ``diff``/``dump`` or from a blackbox log's header (``.bbl``, ``.bfl``, ``.txt``).
+
+    ``log_index`` picks the log of a file that holds several (counting from 1; default 1); a CLI file
+    takes none.
+
+    Raises
+    ------
+    TuneError
+        The file cannot be read, is neither form, has no log ``log_index``, or has a bad line.
+    """
+    path = Path(path)
+    data = _read(path)
+    if data.lstrip().startswith(b"H Product:") or b"\nH Product:" in data[:4096]:
+        headers = read_blackbox_headers(data)
+        log_index = 1 if log_index is None else log_index
+        if isinstance(log_index, bool) or not isinstance(log_index, int) or not 1 <= log_index <= len(headers):
+            raise TuneError(f"{path}: --tune-log-index {log_index!r}: the file holds {len(headers)} log(s), "
+                            f"allowed 1..{len(headers)}")
+        return tune_from_blackbox_header(headers[log_index - 1], source=f"{path}#log{log_index}")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise TuneError(f"{path}: neither a Betaflight CLI diff/dump (text) nor a blackbox log (no 'H Product:' "
+                        "header)") from None
+    if log_index is not None:
+        raise TuneError(f"{path}: --tune-log-index {log_index}: the file is a CLI diff/dump, not a blackbox log")
+    return parse_cli(text, source=str(path))

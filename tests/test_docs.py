@@ -36,6 +36,8 @@ NOT_RUN = {
     "make test": "the suite itself (CI runs it)",
     "make test-slow": "the slow suite (it contains this test's slow variant)",
     "make bench": "benchmarks rewrite docs/performance.md; run by hand",
+    "make test-release": "builds and installs the wheel in a new venv (minutes); CI runs it (.ci/run)",
+    "make docs": "tests/test_docs_site.py builds the site with mkdocs --strict; CI runs it too",
     "make lint": "ruff, mypy and the import contracts: tests/test_architecture.py runs the contracts",
     "pip install": "installs packages; `make setup` installs the same extras on every machine",
 }

@@ -25,7 +25,9 @@ def call(argv: list[str]) -> tuple[int, str, str]:
 
 def render(html: Path, tmp: Path, *, screenshot: Path | None = None) -> str:
     """The page's status after Chromium ran it headless (``ok``, or ``error: …``)."""
-    assert CHROMIUM, "Debian's chromium is needed (make setup installs it)"
+    if not CHROMIUM:
+        pytest.skip("no chromium on PATH: only the rendering is skipped (CI installs Debian's chromium; "
+                    "locally: apt-get install chromium as root)")
     command = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                "--disable-component-update", "--disable-sync", "--no-first-run", f"--user-data-dir={tmp / 'profile'}",
                "--virtual-time-budget=20000", "--window-size=1100,800"]

@@ -67,9 +67,9 @@ def exit_status(exc: BaseException) -> int:
 
 
 def _commands() -> list:
-    from aerobat.cli import benchmark, design, identify, learn, log, sessions, simulate, study, vehicles
+    from aerobat.cli import benchmark, design, identify, learn, log, sessions, setup, simulate, study, vehicles
 
-    return [simulate, design, learn, sessions, benchmark, study, identify, vehicles, log]
+    return [simulate, design, learn, sessions, benchmark, study, identify, vehicles, log, setup]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -244,7 +244,8 @@ def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | No
     if "betaflight" in choices:
         p.add_argument("--tune", metavar="FILE",
                        help="a real quad's Betaflight configuration flown by the SITL (only with --plant betaflight): "
-                            "a CLI diff/dump, or a blackbox log (.bbl/.bfl/.txt) whose header is used; default: aerobat's own settings")
+                            "a CLI diff/dump, or a blackbox log (.bbl/.bfl/.txt) whose header is used; "
+                            "default: aerobat's own settings")
         p.add_argument("--tune-log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
                        help="which log of a blackbox file holding several gives the tune (default 1)")
     p.add_argument("--seed", type=bounded_int(0, 2**63 - 1), default=0, help="seed of the plant's random generator")

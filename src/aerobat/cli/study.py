@@ -386,7 +386,8 @@ def register(sub: Any) -> None:
     rob.add_argument("--betaflight", metavar="FILE.toml",
                      help="Betaflight plant settings to sample around (default: the shipped ones)")
     rob.add_argument("--tune", metavar="FILE", help="a real quad's Betaflight diff/dump or blackbox log, flown by "
-                                                   "every sampled vehicle (only with --plant betaflight; default: aerobat's own settings)")
+                                                   "every sampled vehicle (only with --plant betaflight; "
+                                                   "default: aerobat's own settings)")
     rob.add_argument("--tune-log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
                      help="which log of a blackbox file gives the tune (default 1)")
     add_execution_options(rob)

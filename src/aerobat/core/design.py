@@ -38,6 +38,7 @@ class DesignStatus(StrEnum):
 
     @property
     def meaning(self) -> str:
+        """One sentence on what this status means for the design's user."""
         return {
             DesignStatus.CONVERGED: "p⁰ reaches the target on the model and J has full row rank",
             DesignStatus.NOT_CONVERGED: "no parameters within the bounds reach the target on the model",
@@ -130,6 +131,7 @@ class Design:
             raise ConfigError(f"design table: {type(exc).__name__}: {exc}") from None
 
     def to_json_dict(self) -> dict[str, Any]:
+        """The design as plain JSON types (arrays as lists), as the store and ``session.json`` keep it."""
         return {
             "maneuver": self.maneuver.spec(),
             "parameter_names": [p.name for p in self.maneuver.parameters],

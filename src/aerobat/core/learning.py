@@ -51,6 +51,7 @@ class IterationStatus(StrEnum):
 
     @property
     def meaning(self) -> str:
+        """One sentence on what this outcome means."""
         if self is IterationStatus.OK:
             return "measured and learned from"
         if self is IterationStatus.REJECTED:
@@ -74,6 +75,7 @@ class SessionStatus(StrEnum):
 
     @property
     def meaning(self) -> str:
+        """One sentence on what this status means for the session."""
         return {
             SessionStatus.RUNNING: "learning (or its process was killed: the store shows that as 'killed')",
             SessionStatus.COMPLETED: "every requested measured iteration is done",
@@ -124,12 +126,14 @@ class Iteration:
 
     @property
     def measured(self) -> bool:
+        """True when the trial of this iteration measured a final state (it was not lost)."""
         return self.status is IterationStatus.OK
 
     def __repr__(self) -> str:
         return f"Iteration({self.index}, {self.status.value!r}, correction={self.correction}, gamma={self.gamma:.3g})"
 
     def to_json_dict(self) -> dict[str, Any]:
+        """The iteration as plain JSON types (arrays as lists), as ``session.json`` keeps it."""
         return {
             "i": self.index,
             "correction": self.correction,
@@ -161,6 +165,7 @@ class Session:
 
     @property
     def measured(self) -> list[Iteration]:
+        """The iterations whose trial measured a final state, in order."""
         return [it for it in self.iterations if it.measured]
 
     def position_errors_m(self) -> np.ndarray:
@@ -182,6 +187,7 @@ class Session:
                                     title=f"{self.maneuver.name} on {self.plant_name}")
 
     def to_json_dict(self) -> dict[str, Any]:
+        """The session as plain JSON types: its status, parameters and every iteration."""
         return {
             "maneuver": self.maneuver.spec(),
             "plant": self.plant_name,
@@ -412,6 +418,8 @@ def learn(
     force : learn even from a design that did not converge (``aerobat learn --force``).
     options : :class:`Learner` options (``absurd_limit``, ``pinned_warning_after``, ``hold_pinned``).
 
+    Notes
+    -----
     A crashed or aborted trial ends the session with that status; lost triggers and lost
     contact are flown again; absurd measurements are rejected and flown again.
 

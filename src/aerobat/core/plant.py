@@ -28,6 +28,7 @@ class TrialStatus(StrEnum):
 
     @property
     def meaning(self) -> str:
+        """One sentence on what this trial status means."""
         return _TRIAL_MEANINGS[self]
 
     @property
@@ -78,6 +79,7 @@ class Trial:
 
     @property
     def ok(self) -> bool:
+        """True when the trial measured a final state."""
         return self.status is TrialStatus.OK
 
     def __repr__(self) -> str:

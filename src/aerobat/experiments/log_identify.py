@@ -108,10 +108,10 @@ def _load(refs: Sequence[LogRef]) -> tuple[list[FlightLog], list[FlightLog]]:
 def identify_from_logs(refs: Sequence[LogRef | str | os.PathLike[str]], geometry: Geometry, *,
                        options: LogFitOptions | None = None) -> LogIdentification:
     """Fit ``geometry``'s vehicle on the logs ``refs`` and validate on the other logs of the same files."""
-    refs = [r if isinstance(r, LogRef) else parse_log_ref(r) for r in refs]
-    if not refs:
+    parsed = [r if isinstance(r, LogRef) else parse_log_ref(r) for r in refs]
+    if not parsed:
         raise ConfigError("identify: no log given")
-    chosen, others = _load(refs)
+    chosen, others = _load(parsed)
     layouts = {log.motor_layout for log in chosen}
     prepared = [prepare_log(log) for log in chosen]
     if len(layouts) != 1 or None in layouts:
@@ -205,5 +205,6 @@ def airframe_from_log_fit(fit: LogFit, *, base: Any | None = None) -> dict[str, 
     for key, value in list(table.items()):
         if isinstance(value, tuple):
             table[key] = list(value)
-    Airframe(**{k: tuple(v) if isinstance(v, list) else v for k, v in table.items()})  # validates
+    checked: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in table.items()}
+    Airframe(**checked)  # validates
     return table

@@ -31,6 +31,7 @@ class NominalPlant:
         self.max_step_s = check_max_step(max_step_s)
 
     def fly(self, program: Program) -> Trial:
+        """Fly ``program`` on the nominal model: a noiseless trial whose final state is the model's."""
         check_type("program", program, Program, "a Program")
         traj = simulate(program, self.config, max_step_s=self.max_step_s)
         final = traj.final_state

@@ -106,6 +106,7 @@ class PlantChoice:
 
     @property
     def spec(self) -> PlantSpec:
+        """The registered plant kind this choice names (its factory, settings option and feedback)."""
         return PLANTS.get(self.kind, source="plant")
 
     @classmethod

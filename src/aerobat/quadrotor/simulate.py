@@ -153,10 +153,12 @@ class Trajectory:
 
     @property
     def final_state(self) -> np.ndarray:
+        """The state at the trajectory's last sample (13 entries)."""
         return self.states[-1]
 
     @property
     def duration_s(self) -> float:
+        """The trajectory's length [s]."""
         return float(self.times_s[-1] - self.times_s[0])
 
     @property
@@ -422,4 +424,5 @@ class NominalModel:
                              np.tile(self._ctrl, (B, 1)), np.tile(self._delay, (B, 1)), self.max_step_s)
 
     def trajectory(self, program: Program, initial_state: np.ndarray | None = None) -> Trajectory:
+        """The whole simulated trajectory of ``program`` from ``initial_state`` (default: hover at the origin)."""
         return simulate(program, self.config, initial_state=initial_state, max_step_s=self.max_step_s)

@@ -80,8 +80,8 @@ class Store(StudyTables):
     def create_session(self, **session: Any) -> int:
         """Store a new session (with its vehicle, plant, maneuver and design, deduplicated); its id.
 
-        Parameters
-        ----------
+        Other Parameters
+        ----------------
         vehicle : the plant's vehicle configuration table (``{"name", "vehicle", "controller"}``).
         plant_kind, plant_config : the plant (e.g. ``"arena"``, ``{"settings": {...}}``).
         maneuver : a :class:`~aerobat.core.maneuver.Maneuver` with ``spec()``.

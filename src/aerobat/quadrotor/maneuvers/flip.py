@@ -169,6 +169,7 @@ class MultiFlip:
     # ---------------------------------------------------------------- helpers
     @property
     def envelope(self) -> ReducedEnvelope:
+        """The reduced-envelope bounds (collective, rates) the flip's parameters must respect."""
         cached = self.__dict__.get("_envelope")
         if cached is None:  # built once: program() runs inside every design iteration
             cached = ReducedEnvelope.for_axis(self.vehicle, self.axis)
@@ -177,6 +178,7 @@ class MultiFlip:
 
     @property
     def target_flip_angle_rad(self) -> float:
+        """The total rotation the flip must make [rad]: 2π times the number of flips."""
         return 2.0 * math.pi * self.flips
 
     def stages(self, params: np.ndarray) -> FlipStages:
@@ -214,6 +216,7 @@ class MultiFlip:
         return np.array(guess)
 
     def is_valid(self, params: np.ndarray) -> bool:
+        """True when ``params`` give a program inside the vehicle's envelope (positive durations)."""
         return check_parameters(self.parameters, params) is None
 
     def duration_s(self, params: np.ndarray) -> float:
@@ -224,6 +227,7 @@ class MultiFlip:
         return self.stages(np.asarray(params, dtype=float)).total_s
 
     def program(self, params: np.ndarray) -> Program:
+        """The flip's switch program for the parameter vector ``params`` (Sect. 6)."""
         problem = check_parameters(self.parameters, params)
         if problem is not None:
             raise ConfigError(f"{self.name}: invalid parameters: {problem}")
@@ -274,6 +278,7 @@ class MultiFlip:
         put(channel, start + 0.5 * length, -level)
 
     def initial_state(self) -> np.ndarray:
+        """The hover state the flip starts from (13 entries: position, velocity, quaternion, rates)."""
         return hover_state(self.vehicle)
 
     def error(self, final_state: np.ndarray) -> np.ndarray:
@@ -307,6 +312,7 @@ class MultiFlip:
         return np.stack(columns, axis=1)
 
     def spec(self) -> dict[str, Any]:
+        """The flip as a plain mapping the store and ``from_spec`` rebuild it from."""
         return {
             "kind": "flip",
             "flips": self.flips,

@@ -52,7 +52,7 @@ class Translation:
     vehicle : the design model's constants (hover collective, gravity).
     target_yz : (Y, Z) target [m].
     final_angle_rad : final roll angle (multiples of 2π allowed) [rad].
-    switch_kinds : per interval between switch times, (collective [m/s²], roll-rate command [rad/s]).
+    interval_inputs : per interval between switch times, (collective [m/s²], roll-rate command [rad/s]).
     guess_times_s : the benchmark's interior switch times followed by its end time T* [s];
         the parameters are the durations between them.
     ramp_s : ramp-down duration for collective and rates [s].
@@ -107,6 +107,7 @@ class Translation:
         object.__setattr__(self, "errors", errors)
 
     def guess(self) -> np.ndarray:
+        """The initial parameter guess the design's solver starts from (the time-optimal solution where known)."""
         return np.diff(np.concatenate([[0.0], self.guess_times_s]))
 
     def switch_times(self, params: np.ndarray) -> np.ndarray:
@@ -114,6 +115,7 @@ class Translation:
         return np.cumsum(np.asarray(params, dtype=float))
 
     def is_valid(self, params: np.ndarray) -> bool:
+        """True when ``params`` give a program inside the vehicle's envelope (positive durations)."""
         return check_parameters(self.parameters, params) is None and float(np.sum(params)) > 0.05
 
     def duration_s(self, params: np.ndarray) -> float:
@@ -124,6 +126,7 @@ class Translation:
         return float(self.switch_times(params)[-1])
 
     def program(self, params: np.ndarray) -> Program:
+        """The translation's switch program for the parameter vector ``params``."""
         if not self.is_valid(params):
             problem = check_parameters(self.parameters, params) or "total duration must exceed 0.05 s"
             raise ConfigError(f"{self.name}: invalid parameters: {problem}")
@@ -146,9 +149,11 @@ class Translation:
         )
 
     def initial_state(self) -> np.ndarray:
+        """The hover state the translation starts from (13 entries: position, velocity, quaternion, rates)."""
         return hover_state(self.vehicle)
 
     def error(self, final_state: np.ndarray) -> np.ndarray:
+        """The translation's error vector e(final_state): deviations from hover at the target."""
         s = np.asarray(final_state, dtype=float)
         roll = rotation_angles(s)[0]
         return np.array([
@@ -168,6 +173,7 @@ class Translation:
                          roll - self.final_angle_rad], axis=1)
 
     def spec(self) -> dict[str, Any]:
+        """The translation as a plain mapping the store and ``from_spec`` rebuild it from."""
         return {
             "kind": "translation",
             "target_yz": list(self.target_yz),

@@ -141,3 +141,25 @@ def test_a_median_never_reached_reads_never_in_the_study_tables():
     from aerobat.cli.study import trials_text
 
     assert trials_text(float("inf")) == "never" and trials_text(3.0) == "3" and trials_text(2.5) == "2.5"
+
+
+@pytest.mark.parametrize("address", ["1:2:3", "inproc://x", "tls://127.0.0.1:1", "tcp://127.0.0.1:1"])
+def test_a_refused_scheduler_leaves_no_client_for_the_garbage_collector(address):
+    """A Client that failed to connect was left in a reference cycle; collected later inside the next
+    Client's loop thread, its __del__ took distributed's loop-runner lock and deadlocked that Client
+    (tests/test_cli_fuzz.py hung 20 min on a fresh clone). The executor collects it at once."""
+    import gc
+
+    distributed = pytest.importorskip("distributed")
+    from aerobat.errors import ConfigError
+    from aerobat.experiments.execution import DaskExecutor
+
+    gc.collect()
+    gc.disable()  # only what DaskExecutor itself collects may go
+    try:
+        with pytest.raises(ConfigError):
+            DaskExecutor(address)
+        alive = [o for o in gc.get_objects() if isinstance(o, distributed.Client)]
+    finally:
+        gc.enable()
+    assert not alive

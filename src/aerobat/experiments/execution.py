@@ -13,6 +13,7 @@ variable ``DASK_SCHEDULER_ADDRESS``).
 from __future__ import annotations
 
 import multiprocessing
+import gc
 import os
 import signal
 import threading
@@ -125,12 +126,20 @@ class DaskExecutor:
         self._own = client is None
         if client is None:
             where = f"Dask scheduler {address!r} (--scheduler or $DASK_SCHEDULER_ADDRESS)"
+            problem = None
             try:
                 client = Client(address, timeout="10s")
             except (ValueError, TypeError) as exc:  # not an address distributed can use
-                raise ConfigError(f"{where}: expected tcp://HOST:PORT: {exc}") from None
+                problem = f"{where}: expected tcp://HOST:PORT: {exc}"
             except Exception as exc:  # unreachable, or something else answers there (its replies can be anything)
-                raise ConfigError(f"{where}: cannot connect: {type(exc).__name__}: {exc}") from None
+                problem = f"{where}: cannot connect: {type(exc).__name__}: {exc}"
+            if problem is not None:
+                # The half-made Client is garbage in a reference cycle; its __del__ closes it under
+                # distributed's loop-runner lock. Collected later, in whatever thread the collector
+                # runs, that deadlocked the next Client: its loop thread collected the old one while
+                # the starting thread held the lock and waited for the loop thread. Collect it here.
+                gc.collect()
+                raise ConfigError(problem)
         self.client = client
         self.workers = max(1, sum(w.get("nthreads", 1) for w in self.client.scheduler_info()["workers"].values()))
 

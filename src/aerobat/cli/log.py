@@ -196,6 +196,9 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     say(f"{result.log} {lo:g}–{hi:g} s replayed through Betaflight 4.6 SITL with the log's own tune, in ACRO, in "
         f"the air; airframe: {source} ({result.wall_s:.1f} s wall, {result.lockstep_steps} lockstep steps)",
         highlight=False)
+    if result.excluded_s:
+        say(f"  {result.excluded_s:.1f} s left out: within 0.5 s of a logged gyro at its 2000 deg/s limit (a crash)",
+            highlight=False)
     say("  per axis [deg/s]: rms of (simulated - logged), correlation, rms of the logged series", highlight=False)
     for k, axis in enumerate(AXES):
         sp, g, e = result.setpoint[k], result.gyro[k], result.tracking[k]
@@ -264,7 +267,7 @@ def register(sub: Any) -> None:
                    help="replay from this log time [s] (default: 0, the log's start)")
     q.add_argument("--to", dest="end_s", type=finite_float(0.0, 1e6, "s"), default=None, metavar="S",
                    help="replay up to this log time [s] (default: the log's end)")
-    q.add_argument("--step-min-deg-s", type=finite_float(10.0, 2000.0, "deg/s"), default=150.0,
+    q.add_argument("--step-min-deg-s", type=finite_float(10.0, 2000.0, "deg/s"), default=100.0,
                    help="smallest set-point step the step-response metrics use")
     q.add_argument("--seed", type=bounded_int(0, 2**31 - 1), default=0, help="seeds the sensor noise")
     q.add_argument("--out", metavar="DIR", default=None, help="folder for the figure (default: out/replay-FILE)")

@@ -14,8 +14,11 @@ axis (body FLU, deg/s):
 * **motors**: the firmware's commands against the logged ``motor[0..3]`` (both as fractions of
   the DShot range);
 * **steps**: set-point steps found in the log (a change of at least ``step_min_deg_s``
-  within 40 ms, then held for 100 ms): rise time (10 → 90 % of the step) and overshoot of
+  within 100 ms, then held for 100 ms): rise time (10 → 90 % of the step) and overshoot of
   the logged and the simulated gyro on each.
+
+Samples within 0.5 s of a logged gyro at its 2000 °/s limit (a crash, a prop strike: nothing a
+pilot's sticks explain) are left out of every number, and the result says how many.
 
 PID terms are not compared: the lockstep SITL's motor packet carries the four motor commands
 only (the logged PID terms are in the result, the simulated ones are not).
@@ -40,8 +43,11 @@ from aerobat.quadrotor.flightlog import Channel, FlightLog, LogSource
 __all__ = ["AxisMatch", "LogReplay", "StepMatch", "find_steps", "replay_log"]
 
 AXES = ("roll", "pitch", "yaw")
-_STEP_RISE_S = 0.04
+_STEP_RISE_S = 0.10
 _STEP_HOLD_S = 0.10
+SATURATED_DEG_S = 1900.0
+"""A logged gyro this fast is at the sensor's 2000 °/s limit: a crash or a prop strike."""
+_CRASH_MARGIN_S = 0.5
 
 
 @dataclass(frozen=True)
@@ -108,6 +114,7 @@ class LogReplay:
     steps: tuple[StepMatch, ...]
     wall_s: float
     lockstep_steps: int
+    excluded_s: float = 0.0
 
     def step_summary(self) -> dict[str, dict[str, float]]:
         """Per axis: steps found, median rise time [s] and overshoot (fraction), logged and simulated."""
@@ -136,6 +143,7 @@ class LogReplay:
                 "tracking": axes(self.tracking, AXES), "motors": axes(self.motors, ("M1", "M2", "M3", "M4")),
                 "steps": self.step_summary(), "step_list": [dataclasses.asdict(s) for s in self.steps],
                 "pid_terms": "not compared: the lockstep SITL reports motor commands only",
+                "excluded_s": self.excluded_s,
                 "wall_s": self.wall_s, "lockstep_steps": self.lockstep_steps}
 
 
@@ -151,11 +159,11 @@ def _response(t: np.ndarray, y: np.ndarray, start: int, before: float, after: fl
     return rise, float(max(rel.max() - 1.0, 0.0))
 
 
-def find_steps(t: np.ndarray, setpoint: np.ndarray, *, min_deg_s: float = 150.0) -> list[tuple[int, int, int]]:
+def find_steps(t: np.ndarray, setpoint: np.ndarray, *, min_deg_s: float = 100.0) -> list[tuple[int, int, int]]:
     """(start, settled, end) sample indices of set-point steps of one axis (deg/s).
 
-    A step: the set point moves by at least ``min_deg_s`` within 40 ms and then stays within
-    15 % of the move for 100 ms. Steps do not overlap.
+    A step: the set point starts to move and has moved by at least ``min_deg_s`` within 100 ms,
+    then stays within 20 % of the move for 100 ms. Steps do not overlap.
     """
     dt = float(np.median(np.diff(t)))
     rise = max(1, round(_STEP_RISE_S / dt))
@@ -167,7 +175,7 @@ def find_steps(t: np.ndarray, setpoint: np.ndarray, *, min_deg_s: float = 150.0)
         move = setpoint[i + rise] - setpoint[i]
         if abs(move) >= min_deg_s and abs(setpoint[i + 1] - setpoint[i]) > 0.05 * abs(move):
             level = setpoint[i + rise: i + rise + hold]
-            if np.all(np.abs(level - level.mean()) <= 0.15 * abs(move)):
+            if np.all(np.abs(level - level.mean()) <= 0.2 * abs(move)):
                 out.append((i, i + rise, i + rise + hold))
                 i += rise + hold
                 continue
@@ -202,7 +210,7 @@ def _load(file: str | Path, index: int | None) -> FlightLog:
 
 def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[float, float] | None = None,
                params: Any = None, airframe_source: str = "the default 5-inch (params.airframe)",
-               step_min_deg_s: float = 150.0, seed: int = 0, lead_in_s: float = 0.5,
+               step_min_deg_s: float = 100.0, seed: int = 0, lead_in_s: float = 0.5,
                progress: Callable[[float, float], None] | None = None) -> LogReplay:
     """Replay ``file`` (``FILE`` or ``FILE:N``; ``index`` wins) through Betaflight and compare with the log.
 
@@ -263,16 +271,26 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
             pid[:, k, : values.shape[1]] = values
     t, sp_model, sp_log, gyro_log, gyro_sim, motors_log, motors_sim, pid = (
         a[keep] for a in (t, sp_model, sp_log, gyro_log, gyro_sim, motors_log, motors_sim, pid))
+    saturated = t[np.any(np.abs(gyro_log) >= SATURATED_DEG_S, axis=1)]
+    valid = np.ones(t.shape[0], dtype=bool)
+    for ts in saturated:
+        valid &= np.abs(t - ts) > _CRASH_MARGIN_S
+    dt = float(np.median(np.diff(t))) if t.shape[0] > 1 else 0.0
+    if valid.sum() < 10:
+        raise ConfigError(f"{where}: the window {start:g}..{end:g} s is all crash (the logged gyro at its "
+                          f"{SATURATED_DEG_S:g} °/s limit); nothing to compare")
     if not np.all(np.isfinite(gyro_sim)):
         raise ConfigError(f"{where}: the simulated flight went non-finite")
+    v = valid
     return LogReplay(
         log=log.name, window_s=(float(start), float(end)), airframe=airframe_source,
         tune_report=plant.tune_report, time_s=t, setpoint_log=sp_log, setpoint_model=sp_model,
         gyro_log=gyro_log, gyro_sim=gyro_sim, motors_log=motors_log, motors_sim=motors_sim, pid_log=pid,
-        setpoint=tuple(AxisMatch.of(sp_model[:, j], sp_log[:, j]) for j in range(3)),
-        gyro=tuple(AxisMatch.of(gyro_sim[:, j], gyro_log[:, j]) for j in range(3)),
-        tracking=tuple(AxisMatch.of(sp_model[:, j] - gyro_sim[:, j], sp_log[:, j] - gyro_log[:, j])
+        setpoint=tuple(AxisMatch.of(sp_model[v, j], sp_log[v, j]) for j in range(3)),
+        gyro=tuple(AxisMatch.of(gyro_sim[v, j], gyro_log[v, j]) for j in range(3)),
+        tracking=tuple(AxisMatch.of(sp_model[v, j] - gyro_sim[v, j], sp_log[v, j] - gyro_log[v, j])
                        for j in range(3)),
-        motors=tuple(AxisMatch.of(motors_sim[:, j], motors_log[:, j]) for j in range(4)),
-        steps=tuple(_steps(t, sp_log, gyro_log, gyro_sim, step_min_deg_s)),
-        wall_s=wall, lockstep_steps=trace.steps)
+        motors=tuple(AxisMatch.of(motors_sim[v, j], motors_log[v, j]) for j in range(4)),
+        steps=tuple(s for s in _steps(t, sp_log, gyro_log, gyro_sim, step_min_deg_s)
+                    if v[int(np.searchsorted(t, s.time_s))]),
+        wall_s=wall, lockstep_steps=trace.steps, excluded_s=float((~v).sum() * dt))

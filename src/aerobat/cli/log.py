@@ -201,10 +201,11 @@ def _cmd_replay(args: argparse.Namespace) -> int:
             highlight=False)
     say("  per axis [deg/s]: rms of (simulated - logged), correlation, rms of the logged series", highlight=False)
     for k, axis in enumerate(AXES):
-        sp, g, e = result.setpoint[k], result.gyro[k], result.tracking[k]
-        say(f"  {axis:5s} set point (tune's curve) {sp.rms:6.2f} r {sp.correlation:6.4f} of {sp.logged_rms:6.1f} | "
-            f"gyro {g.rms:6.1f} r {g.correlation:6.3f} of {g.logged_rms:6.1f} | "
-            f"tracking error {e.rms:6.1f} r {e.correlation:6.3f} of {e.logged_rms:5.1f}", highlight=False)
+        sp, curve, g, e = result.setpoint[k], result.setpoint_curve[k], result.gyro[k], result.tracking[k]
+        say(f"  {axis:5s} set point: firmware {sp.rms:5.2f} r {sp.correlation:6.4f}, tune's curve {curve.rms:5.2f} "
+            f"r {curve.correlation:6.4f} of {sp.logged_rms:5.1f} | gyro {g.rms:5.1f} r {g.correlation:5.3f} of "
+            f"{g.logged_rms:5.1f} | tracking error {e.rms:5.1f} r {e.correlation:6.3f} of {e.logged_rms:5.1f}",
+            highlight=False)
     say("  motors: " + "; ".join(f"M{j + 1} rms {m.rms:.3f} r {m.correlation:.3f}" for j, m in enumerate(result.motors)),
         highlight=False)
     for axis, s in summary["steps"].items():
@@ -214,7 +215,10 @@ def _cmd_replay(args: argparse.Namespace) -> int:
                 f"{100 * s['overshoot_sim']:.0f} % simulated (medians)", highlight=False)
         else:
             say(f"  {axis:5s} no set-point step of {args.step_min_deg_s:g} deg/s in the window", highlight=False)
-    say("  PID terms: not compared (the lockstep SITL reports motor commands only)", highlight=False)
+    say("  PID terms (firmware units; rms of the difference, correlation, logged rms): " + "; ".join(
+        f"{term} " + ", ".join(f"{axis} {m.rms:.1f} r {m.correlation:.2f} of {m.logged_rms:.1f}"
+                               for axis, m in zip(AXES, row, strict=True) if m is not None)
+        for term, row in zip("PIDF", result.pid, strict=True)), highlight=False)
     say(f"wrote {figure}", highlight=False)
     return 0
 

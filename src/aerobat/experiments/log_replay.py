@@ -6,9 +6,9 @@ pilot's recorded sticks on an airframe (the default 5-inch, or one identified fr
 ACRO, in the air (:func:`aerobat.plants.betaflight.replay.replay_sticks`), and compares per
 axis (body FLU, deg/s):
 
-* **set point**: the tune's rate curve applied to the logged sticks (aerobat's model of
-  Betaflight's ``applyRates``; the SITL does not report its set point) against the logged
-  ``setpoint``;
+* **set point**: the firmware's own set point (the lockstep SITL's motor packet carries it)
+  and the tune's rate curve applied to the logged sticks (aerobat's model of Betaflight's
+  ``applyRates``), each against the logged ``setpoint``;
 * **gyro**: the simulated body rates against the logged ``gyroADC``;
 * **tracking error**: set point − gyro, simulated against logged;
 * **motors**: the firmware's commands against the logged ``motor[0..3]`` (both as fractions of
@@ -20,8 +20,8 @@ axis (body FLU, deg/s):
 Samples within 0.5 s of a logged gyro at its 2000 °/s limit (a crash, a prop strike: nothing a
 pilot's sticks explain) are left out of every number, and the result says how many.
 
-PID terms are not compared: the lockstep SITL's motor packet carries the four motor commands
-only (the logged PID terms are in the result, the simulated ones are not).
+* **PID terms**: the firmware's P, I, D, F per axis against the logged ``axisP/I/D/F``
+  (firmware units; Betaflight logs no yaw D).
 """
 
 from __future__ import annotations
@@ -87,9 +87,11 @@ class LogReplay:
     log : ``file#N``; window_s the replayed window (log time).
     airframe : where the airframe came from.
     tune_report : what the tune became on the SITL (:class:`~aerobat.plants.betaflight.translate.TuneReport`).
-    time_s, setpoint_log, setpoint_model, gyro_log, gyro_sim, motors_log, motors_sim, pid_log :
-        the traces (pid_log: P, I, D, F terms per axis as logged, firmware units; NaN where not logged).
-    setpoint, gyro, tracking : per axis (:data:`AXES`).
+    time_s, setpoint_log, setpoint_model, setpoint_sim, gyro_log, gyro_sim, motors_log, motors_sim,
+        pid_log, pid_sim : the traces (pid: (n, 4, 3) P, I, D, F terms per axis, firmware units; NaN
+        where not logged or not reported).
+    setpoint, setpoint_curve, gyro, tracking : per axis (:data:`AXES`); setpoint is the firmware's.
+    pid : per term (P, I, D, F) per axis; None where a side has no such term.
     motors : per motor M1..M4.
     steps : every step found.
     wall_s : wall time of the flight; steps: lockstep steps.
@@ -102,12 +104,16 @@ class LogReplay:
     time_s: np.ndarray
     setpoint_log: np.ndarray
     setpoint_model: np.ndarray
+    setpoint_sim: np.ndarray
     gyro_log: np.ndarray
     gyro_sim: np.ndarray
     motors_log: np.ndarray
     motors_sim: np.ndarray
     pid_log: np.ndarray
+    pid_sim: np.ndarray
     setpoint: tuple[AxisMatch, ...]
+    setpoint_curve: tuple[AxisMatch, ...]
+    pid: tuple[tuple[AxisMatch | None, ...], ...]
     gyro: tuple[AxisMatch, ...]
     tracking: tuple[AxisMatch, ...]
     motors: tuple[AxisMatch, ...]
@@ -139,10 +145,12 @@ class LogReplay:
 
         return {"log": self.log, "window_s": list(self.window_s), "airframe": self.airframe,
                 "units": "deg/s (set point, gyro, tracking), fraction of the DShot range (motors)",
-                "setpoint": axes(self.setpoint, AXES), "gyro": axes(self.gyro, AXES),
+                "setpoint": axes(self.setpoint, AXES), "setpoint_curve": axes(self.setpoint_curve, AXES),
+                "gyro": axes(self.gyro, AXES),
+                "pid": {term: {a: (dataclasses.asdict(m) if m is not None else None) for a, m in zip(AXES, row, strict=True)}
+                        for term, row in zip("PIDF", self.pid, strict=True)},
                 "tracking": axes(self.tracking, AXES), "motors": axes(self.motors, ("M1", "M2", "M3", "M4")),
                 "steps": self.step_summary(), "step_list": [dataclasses.asdict(s) for s in self.steps],
-                "pid_terms": "not compared: the lockstep SITL reports motor commands only",
                 "excluded_s": self.excluded_s,
                 "wall_s": self.wall_s, "lockstep_steps": self.lockstep_steps}
 
@@ -264,13 +272,16 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
     gyro_sim = np.degrees(np.column_stack([np.interp(rel, trace.time_s, trace.rates_rad_s[:, j]) for j in range(3)]))
     motors_log = cut.signals[Channel.MOTOR_COMMAND].at(t)
     motors_sim = np.column_stack([np.interp(rel, trace.time_s, trace.motors[:, j]) for j in range(4)])
+    sp_sim = np.column_stack([np.interp(rel, trace.time_s, trace.setpoint_deg_s[:, j]) for j in range(3)])
+    pid_sim = np.stack([np.column_stack([np.interp(rel, trace.time_s, trace.pid[:, k, j]) for j in range(3)])
+                        for k in range(4)], axis=1)
     pid = np.full((t.shape[0], 4, 3), math.nan)
     for k, channel in enumerate((Channel.PID_P, Channel.PID_I, Channel.PID_D, Channel.PID_F)):
         if cut.has(channel):
             values = cut.signals[channel].at(t)
             pid[:, k, : values.shape[1]] = values
-    t, sp_model, sp_log, gyro_log, gyro_sim, motors_log, motors_sim, pid = (
-        a[keep] for a in (t, sp_model, sp_log, gyro_log, gyro_sim, motors_log, motors_sim, pid))
+    t, sp_model, sp_sim, sp_log, gyro_log, gyro_sim, motors_log, motors_sim, pid, pid_sim = (
+        a[keep] for a in (t, sp_model, sp_sim, sp_log, gyro_log, gyro_sim, motors_log, motors_sim, pid, pid_sim))
     saturated = t[np.any(np.abs(gyro_log) >= SATURATED_DEG_S, axis=1)]
     valid = np.ones(t.shape[0], dtype=bool)
     for ts in saturated:
@@ -284,9 +295,14 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
     v = valid
     return LogReplay(
         log=log.name, window_s=(float(start), float(end)), airframe=airframe_source,
-        tune_report=plant.tune_report, time_s=t, setpoint_log=sp_log, setpoint_model=sp_model,
+        tune_report=plant.tune_report, time_s=t, setpoint_log=sp_log, setpoint_model=sp_model, setpoint_sim=sp_sim,
+        pid_sim=pid_sim,
         gyro_log=gyro_log, gyro_sim=gyro_sim, motors_log=motors_log, motors_sim=motors_sim, pid_log=pid,
-        setpoint=tuple(AxisMatch.of(sp_model[v, j], sp_log[v, j]) for j in range(3)),
+        setpoint=tuple(AxisMatch.of(sp_sim[v, j], sp_log[v, j]) for j in range(3)),
+        setpoint_curve=tuple(AxisMatch.of(sp_model[v, j], sp_log[v, j]) for j in range(3)),
+        pid=tuple(tuple(AxisMatch.of(pid_sim[v, k, j], pid[v, k, j])
+                        if np.all(np.isfinite(pid[v, k, j])) and np.all(np.isfinite(pid_sim[v, k, j])) else None
+                        for j in range(3)) for k in range(4)),
         gyro=tuple(AxisMatch.of(gyro_sim[v, j], gyro_log[v, j]) for j in range(3)),
         tracking=tuple(AxisMatch.of(sp_model[v, j] - gyro_sim[v, j], sp_log[v, j] - gyro_log[v, j])
                        for j in range(3)),

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from aerobat.plotting.files import new_figure
 
 __all__ = ["plot_replay"]
@@ -16,13 +18,16 @@ def plot_replay(result: Any) -> Any:
 
     ``result`` is an :class:`aerobat.experiments.log_replay.LogReplay`.
     """
-    fig = new_figure(figsize=(11, 10))
-    axes = fig.subplots(5, 1, sharex=True)
+    fig = new_figure(figsize=(11, 12))
+    axes = fig.subplots(6, 1, sharex=True)
     t = result.time_s
     for k, name in enumerate(_AXES):
         ax = axes[k]
         ax.plot(t, result.setpoint_log[:, k], lw=0.9, color="tab:orange", label="set point (log)")
-        ax.plot(t, result.setpoint_model[:, k], lw=0.7, ls="--", color="k", label="set point (tune's curve)")
+        if np.all(np.isfinite(result.setpoint_sim[:, k])):
+            ax.plot(t, result.setpoint_sim[:, k], lw=0.7, ls="--", color="k", label="set point (SITL)")
+        else:
+            ax.plot(t, result.setpoint_model[:, k], lw=0.7, ls="--", color="k", label="set point (tune's curve)")
         ax.plot(t, result.gyro_log[:, k], lw=0.7, color="tab:blue", label="gyro (log)")
         ax.plot(t, result.gyro_sim[:, k], lw=0.7, color="tab:red", label="gyro (SITL)")
         g = result.gyro[k]
@@ -41,7 +46,13 @@ def plot_replay(result: Any) -> Any:
         axes[4].plot(t, result.setpoint_log[:, k] - result.gyro_log[:, k], lw=0.6, label=f"{name} log")
         axes[4].plot(t, result.setpoint_model[:, k] - result.gyro_sim[:, k], lw=0.6, ls="--", label=f"{name} SITL")
     axes[4].set_ylabel("tracking error [°/s]")
-    axes[4].set_xlabel("log time [s]")
+    for k, name in enumerate(_AXES):
+        axes[5].plot(t, result.pid_log[:, 0, k], lw=0.6, label=f"P {name} log")
+        axes[5].plot(t, result.pid_sim[:, 0, k], lw=0.6, ls="--", label=f"P {name} SITL")
+    axes[5].set_ylabel("P term [firmware]")
+    axes[5].legend(loc="upper right", fontsize=7, ncol=3)
+    axes[5].grid(alpha=0.3)
+    axes[5].set_xlabel("log time [s]")
     axes[4].legend(loc="upper right", fontsize=7, ncol=3)
     axes[4].grid(alpha=0.3)
     lo, hi = result.window_s

@@ -83,7 +83,8 @@ class Flight:
         self.pending = np.zeros((delay + 1, 4))
         self.scratch = np.zeros((6, N_STATE))
         self.packet = np.zeros(PACKET_DOUBLES)
-        self.motors = np.zeros(4, dtype=np.float32)
+        # the motor packet: 4 motor commands, then the rate loop's set point (3) and P, I, D, F per axis (12)
+        self.motors = np.zeros(4 + 15, dtype=np.float32)
         self.tick = 0
         self.log = np.empty((4096, MOCAP_COLUMNS))
         self.log_count = 0
@@ -143,10 +144,11 @@ class Flight:
         self.counters[C_CONTACT] = 0
 
     def sampled_frame(self, channels_us: Sequence[int], rows: np.ndarray) -> None:
-        """One lossless radio frame, sampled: ``rows`` (k, 8) gets k evenly spaced samples of the frame.
+        """One lossless radio frame, sampled: ``rows`` (k, 23) gets k evenly spaced samples of the frame.
 
         Row j is (time [s], true body rates p, q, r [rad/s] FLU, the firmware's four motor commands in
-        packet order) after the frame's (j + 1)-th k-th part; k must divide the frame's gyro periods.
+        packet order, its set point roll, pitch, yaw [deg/s] and P, I, D, F of roll, pitch, yaw) after
+        the frame's (j + 1)-th k-th part; k must divide the frame's gyro periods.
         """
         parts = rows.shape[0]
         if self.frame_steps % parts:
@@ -157,7 +159,7 @@ class Flight:
             self._advance(self.frame_steps // parts)
             rows[j, 0] = self.time_s
             rows[j, 1:4] = self.x[10:13]
-            rows[j, 4:8] = self.motors
+            rows[j, 4:23] = self.motors
 
     def _advance(self, n: int) -> None:
         noise = self._noise(n)

@@ -77,6 +77,10 @@ class ReplayTrace:
     rates_rad_s : (m, 3) true body rates, body FLU.
     motors : (m, 4) the firmware's motor commands in Betaflight's motor order M1..M4 (0 stopped,
         1 full; the armed idle is ``motor_idle``).
+    setpoint_deg_s : (m, 3) the firmware's rate set point (as blackbox logs it: firmware axes,
+        roll, pitch, yaw), NaN from a SITL whose motor packet does not carry it.
+    pid : (m, 4, 3) the firmware's P, I, D, F terms (rows) per axis (columns), blackbox units; NaN
+        likewise.
     armed_at_s : simulated time of arming since power-on.
     steps : lockstep steps taken.
     """
@@ -84,6 +88,8 @@ class ReplayTrace:
     time_s: np.ndarray
     rates_rad_s: np.ndarray
     motors: np.ndarray
+    setpoint_deg_s: np.ndarray
+    pid: np.ndarray
     armed_at_s: float
     steps: int
 
@@ -129,7 +135,7 @@ def replay_sticks(plant: object, track: StickTrack, *, samples_per_frame: int = 
         flight.release()
         period = 1.0 / params.radio.rate_hz
         frames = max(1, math.ceil(track.duration_s / period))
-        rows = np.empty((frames * samples_per_frame, 8))
+        rows = np.empty((frames * samples_per_frame, 23))
         aux = plant.settings.aux_us(ARM=True, ANGLE=False)
         tail = (*aux, *([RC_MIN_US] * (12 - len(aux))))
         t0 = flight.time_s
@@ -143,5 +149,9 @@ def replay_sticks(plant: object, track: StickTrack, *, samples_per_frame: int = 
                 next_report += 1.0
         steps = flight.tick
     motors = rows[:, 4:8][:, list(MOTOR_LOG_ORDER)]
+    terms = rows[:, 8:23].copy()
+    if not np.any(terms):  # a SITL whose motor packet carries the motors only
+        terms[:] = np.nan
+    pid = terms[:, 3:].reshape(-1, 3, 4).transpose(0, 2, 1)
     return ReplayTrace(time_s=rows[:, 0] - t0, rates_rad_s=rows[:, 1:4].copy(), motors=motors,
-                       armed_at_s=armed, steps=steps)
+                       setpoint_deg_s=terms[:, :3], pid=pid, armed_at_s=armed, steps=steps)

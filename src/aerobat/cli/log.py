@@ -170,9 +170,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
         params, source = load_betaflight(args.airframe), f"{args.airframe}"
     out = output_dir(Path(args.out) if args.out else Path("out") / f"replay-{Path(args.file).name.split(':')[0]}")
-    window = None
-    if args.start_s is not None or args.end_s is not None:
-        window = (args.start_s or 0.0, args.end_s if args.end_s is not None else float("inf"))
+    window = tuple(args.window_s) if args.window_s else None
     say = console(args.json).print
 
     def progress(done: float, total: float) -> None:
@@ -267,10 +265,8 @@ def register(sub: Any) -> None:
     q.add_argument("--airframe", metavar="FILE.toml", default=None,
                    help="a Betaflight plant file, e.g. the [airframe] that identify --log --airframe writes "
                         "(default: the packaged 5-inch)")
-    q.add_argument("--from", dest="start_s", type=finite_float(0.0, 1e6, "s"), default=None, metavar="S",
-                   help="replay from this log time [s] (default: 0, the log's start)")
-    q.add_argument("--to", dest="end_s", type=finite_float(0.0, 1e6, "s"), default=None, metavar="S",
-                   help="replay up to this log time [s] (default: the log's end)")
+    q.add_argument("--window-s", nargs=2, type=finite_float(0.0, 1e6, "s"), metavar=("START", "END"), default=None,
+                   help="only this window of the log [s], as log plot's (default: the whole log)")
     q.add_argument("--step-min-deg-s", type=finite_float(10.0, 2000.0, "deg/s"), default=100.0,
                    help="smallest set-point step the step-response metrics use")
     q.add_argument("--seed", type=bounded_int(0, 2**31 - 1), default=0, help="seeds the sensor noise")

@@ -241,11 +241,11 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
     duration = log.duration_s
     start, end = window_s if window_s is not None else (0.0, duration)
     if not (0.0 <= start < end) or start >= duration:
-        raise ConfigError(f"--from/--to {start:g}..{end:g} s: the window must lie in the log's 0..{duration:.3f} s "
+        raise ConfigError(f"--window-s {start:g} {end:g}: the window must lie in the log's 0..{duration:.3f} s "
                           "and end after it starts")
     end = min(end, duration)
     if end - start < 0.1:
-        raise ConfigError(f"--from/--to {start:g}..{end:g} s: at least 0.1 s of log is needed")
+        raise ConfigError(f"--window-s {start:g} {end:g}: at least 0.1 s of log is needed")
     cut = log.window(max(0.0, start - lead_in_s), end)
     for channel in (Channel.STICKS, Channel.THROTTLE_STICK, Channel.RATE_SETPOINT, Channel.GYRO,
                     Channel.MOTOR_COMMAND):

@@ -88,19 +88,19 @@ def test_a_real_flight_through_the_firmware_matches_the_log(firmware: tuple[Path
 @needs_data
 def test_log_replay_cli_prints_json_and_writes_the_figure(firmware: tuple[Path, Path], tmp_path: Path,
                                                            capsys: pytest.CaptureFixture[str]) -> None:
-    code = main(["log", "replay", f"{ROMA}:1", "--from", "20", "--to", "21", "--out", str(tmp_path), "--json"])
+    code = main(["log", "replay", f"{ROMA}:1", "--window-s", "22", "23", "--out", str(tmp_path), "--json"])
     out = json.loads(capsys.readouterr().out)
     assert code == 0
-    assert Path(out["figure"]).is_file() and out["window_s"] == [20.0, 21.0]
+    assert Path(out["figure"]).is_file() and out["window_s"] == [22.0, 23.0]
     assert out["gyro"]["roll"]["correlation"] > 0.95
     assert set(out["pid"]) == {"P", "I", "D", "F"}
 
 
 @needs_data
 @pytest.mark.parametrize(("args", "message"), [
-    (["--from", "70", "--to", "80"], "--from/--to 70..80 s: the window must lie in the log's 0..65.906 s"),
-    (["--from", "21", "--to", "20"], "--from/--to 21..20 s"),
-    (["--from", "20", "--to", "20.05"], "at least 0.1 s"),
+    (["--window-s", "70", "80"], "--window-s 70 80: the window must lie in the log's 0..65.906 s"),
+    (["--window-s", "21", "20"], "--window-s 21 20: the window"),
+    (["--window-s", "20", "20.05"], "at least 0.1 s"),
 ])
 def test_a_window_outside_the_log_is_refused_in_one_line(args: list[str], message: str, tmp_path: Path,
                                                          capsys: pytest.CaptureFixture[str]) -> None:

@@ -162,7 +162,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
     from aerobat.experiments.log_replay import AXES, replay_log
     from aerobat.plotting import save_figure
-    from aerobat.plotting.replay import plot_replay
+    from aerobat.plotting.log_replay import plot_replay
 
     params, source = None, "the default 5-inch (settings.toml's airframe)"
     if args.airframe is not None:
@@ -204,7 +204,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
             f"r {curve.correlation:6.4f} of {sp.logged_rms:5.1f} | gyro {g.rms:5.1f} r {g.correlation:5.3f} of "
             f"{g.logged_rms:5.1f} | tracking error {e.rms:5.1f} r {e.correlation:6.3f} of {e.logged_rms:5.1f}",
             highlight=False)
-    say("  motors: " + "; ".join(f"M{j + 1} rms {m.rms:.3f} r {m.correlation:.3f}" for j, m in enumerate(result.motors)),
+    say("  motors: " + "; ".join(f"M{j + 1} rms {m.rms:.3f} r {m.correlation:.3f}"
+                                 for j, m in enumerate(result.motors)),
         highlight=False)
     for axis, s in summary["steps"].items():
         if s["steps"]:

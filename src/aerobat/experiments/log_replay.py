@@ -133,7 +133,8 @@ class LogReplay:
                 return float(np.median(finite)) if finite else math.nan
 
             out[axis] = {"steps": float(len(mine)),
-                         "rise_log_s": med([s.rise_log_s for s in mine]), "rise_sim_s": med([s.rise_sim_s for s in mine]),
+                         "rise_log_s": med([s.rise_log_s for s in mine]),
+                         "rise_sim_s": med([s.rise_sim_s for s in mine]),
                          "overshoot_log": med([s.overshoot_log for s in mine]),
                          "overshoot_sim": med([s.overshoot_sim for s in mine])}
         return out
@@ -147,7 +148,8 @@ class LogReplay:
                 "units": "deg/s (set point, gyro, tracking), fraction of the DShot range (motors)",
                 "setpoint": axes(self.setpoint, AXES), "setpoint_curve": axes(self.setpoint_curve, AXES),
                 "gyro": axes(self.gyro, AXES),
-                "pid": {term: {a: (dataclasses.asdict(m) if m is not None else None) for a, m in zip(AXES, row, strict=True)}
+                "pid": {term: {a: (dataclasses.asdict(m) if m is not None else None)
+                               for a, m in zip(AXES, row, strict=True)}
                         for term, row in zip("PIDF", self.pid, strict=True)},
                 "tracking": axes(self.tracking, AXES), "motors": axes(self.motors, ("M1", "M2", "M3", "M4")),
                 "steps": self.step_summary(), "step_list": [dataclasses.asdict(s) for s in self.steps],

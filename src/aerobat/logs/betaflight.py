@@ -8,9 +8,8 @@ applied to the firmware as the pilot had it (:mod:`aerobat.plants.betaflight`).
 Units (Betaflight 4.x, data version 2): ``time`` µs; ``gyroADC`` and ``setpoint[0..2]``
 deg/s; ``accSmooth`` in units of the header's ``acc_1G``; ``motor`` in the header's
 ``motorOutput`` range (DShot 48..2047 is the full range, the low end of ``motorOutput`` is
-the idle); ``setpoint[3]`` throttle 0..1000; ``rcCommand[0..2]`` ±500 (after the deadband); ``rcCommand[3]`` 1000..2000 us
-(after the throttle curve); ``vbatLatest``
-0.01 V.
+the idle); ``setpoint[3]`` throttle 0..1000; ``rcCommand[0..2]`` ±500 (after the deadband);
+``rcCommand[3]`` 1000..2000 us (after the throttle curve); ``vbatLatest`` 0.01 V.
 
 Axes: Betaflight's gyro and accelerometer are body FLU (roll right, pitch nose down, yaw nose
 left positive; z up at rest), and so are its rate set points; sticks and PID terms keep the

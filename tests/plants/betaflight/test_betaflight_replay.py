@@ -47,7 +47,8 @@ def test_the_tunes_rate_curve_on_the_logged_sticks_gives_the_logged_set_point() 
     settings = _roma_settings()
     sticks = log.signal(Channel.STICKS)
     pulses = channels_from_commands(settings, sticks.values * 500.0, log.signal(Channel.THROTTLE_STICK).values[:, 0])
-    curve = np.array([[settings.rate_deg_s("roll", (p[0] - 1500) / 500), settings.rate_deg_s("pitch", (p[1] - 1500) / 500),
+    curve = np.array([[settings.rate_deg_s("roll", (p[0] - 1500) / 500),
+                       settings.rate_deg_s("pitch", (p[1] - 1500) / 500),
                        -settings.rate_deg_s("yaw", (p[3] - 1500) / 500)] for p in pulses])
     logged = np.degrees(log.signal(Channel.RATE_SETPOINT).values)
     rms = np.sqrt(np.mean((curve - logged) ** 2, axis=0))

@@ -122,3 +122,26 @@ def test_a_log_that_is_not_betaflight_is_refused(tmp_path: Path, capsys: pytest.
 def test_a_log_number_the_file_does_not_hold_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     code = main(["log", "replay", f"{ROMA}:4", "--out", str(tmp_path)])
     assert code == 2 and "log 4 does not exist; the file holds 3 log(s)" in capsys.readouterr().err
+
+
+def test_a_synthetic_stick_track_flies_in_the_air_and_the_firmware_reports_its_set_point(
+        firmware: tuple[Path, Path]) -> None:
+    """No log needed: half right roll stick at hover throttle, in ACRO, with the floor taken away."""
+    from aerobat.plants.betaflight.plant import BetaflightPlant
+    from aerobat.plants.betaflight.replay import replay_sticks
+    from aerobat.quadrotor.vehicle import fpv5
+
+    plant = BetaflightPlant(fpv5(), binary=firmware[0], eeprom=firmware[1])
+    t = np.arange(0.0, 1.0, 0.004)
+    throttle = round(plant.settings.throttle_us_for_motor(0.35))
+    roll = np.where((t >= 0.3) & (t < 0.5), 1750, 1500)
+    track = StickTrack(t, np.column_stack([roll, np.full_like(t, 1500), np.full_like(t, throttle),
+                                           np.full_like(t, 1500)]))
+    trace = replay_sticks(plant, track)
+    held = (trace.time_s > 0.4) & (trace.time_s < 0.5)
+    expected = plant.settings.rate_deg_s("roll", 0.5)
+    assert np.all(np.abs(trace.setpoint_deg_s[held, 0] - expected) < 1.0), (expected, trace.setpoint_deg_s[held, 0])
+    assert np.degrees(trace.rates_rad_s[held, 0]).mean() == pytest.approx(expected, rel=0.1)  # rolling right, +p
+    assert np.all(np.abs(trace.setpoint_deg_s[trace.time_s < 0.25]) < 0.5)
+    assert np.all(np.isfinite(trace.pid)) and np.abs(trace.pid[held, 0, 0]).max() > 0.0  # P roll is reported
+    assert trace.motors.min() > 0.0  # armed and flying all the way: no floor, no disarm

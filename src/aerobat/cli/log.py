@@ -9,7 +9,14 @@ import json
 from pathlib import Path
 from typing import Any
 
-from aerobat.cli.common import HelpFormatter, bounded_int, console, output_dir, refuse_overwrite
+from aerobat.cli.common import (
+    HelpFormatter,
+    bounded_int,
+    console,
+    finite_float,
+    output_dir,
+    refuse_overwrite,
+)
 from aerobat.errors import ConfigError
 
 __all__ = ["log_summary", "register"]
@@ -150,6 +157,71 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_replay(args: argparse.Namespace) -> int:
+    import sys
+
+    from aerobat.experiments.log_replay import AXES, replay_log
+    from aerobat.plotting import save_figure
+    from aerobat.plotting.log_replay import plot_replay
+
+    params, source = None, "the default 5-inch (settings.toml's airframe)"
+    if args.airframe is not None:
+        from aerobat.plants.betaflight.params import load_betaflight
+
+        params, source = load_betaflight(args.airframe), f"{args.airframe}"
+    out = output_dir(Path(args.out) if args.out else Path("out") / f"replay-{Path(args.file).name.split(':')[0]}")
+    window = tuple(args.window_s) if args.window_s else None
+    say = console(args.json).print
+
+    def progress(done: float, total: float) -> None:
+        print(f"\r  replayed {done:6.1f} / {total:.1f} s", end="", file=sys.stderr, flush=True)
+
+    result = replay_log(args.file, window_s=window, params=params, airframe_source=source,
+                        step_min_deg_s=args.step_min_deg_s, seed=args.seed, progress=progress)
+    print(file=sys.stderr)
+    stem = result.log.replace("#", "-log")
+    figure = out / f"{stem}_{result.window_s[0]:g}-{result.window_s[1]:g}s.png"
+    refuse_overwrite(figure, store_path=None, force=args.force, option="--out")
+    save_figure(plot_replay(result), figure)
+    summary = result.summary()
+    summary["figure"] = str(figure)
+    if result.tune_report is not None:
+        summary["tune"] = result.tune_report.text()
+    if args.json:
+        print(json.dumps(summary, default=float))
+        return 0
+    lo, hi = result.window_s
+    say(f"{result.log} {lo:g}–{hi:g} s replayed through Betaflight 4.6 SITL with the log's own tune, in ACRO, in "
+        f"the air; airframe: {source} ({result.wall_s:.1f} s wall, {result.lockstep_steps} lockstep steps)",
+        highlight=False)
+    if result.excluded_s:
+        say(f"  {result.excluded_s:.1f} s left out: within 0.5 s of a logged gyro at its 2000 deg/s limit (a crash)",
+            highlight=False)
+    say("  per axis [deg/s]: rms of (simulated - logged), correlation, rms of the logged series", highlight=False)
+    for k, axis in enumerate(AXES):
+        sp, curve, g, e = result.setpoint[k], result.setpoint_curve[k], result.gyro[k], result.tracking[k]
+        say(f"  {axis:5s} set point: firmware {sp.rms:5.2f} r {sp.correlation:6.4f}, tune's curve {curve.rms:5.2f} "
+            f"r {curve.correlation:6.4f} of {sp.logged_rms:5.1f} | gyro {g.rms:5.1f} r {g.correlation:5.3f} of "
+            f"{g.logged_rms:5.1f} | tracking error {e.rms:5.1f} r {e.correlation:6.3f} of {e.logged_rms:5.1f}",
+            highlight=False)
+    say("  motors: " + "; ".join(f"M{j + 1} rms {m.rms:.3f} r {m.correlation:.3f}"
+                                 for j, m in enumerate(result.motors)),
+        highlight=False)
+    for axis, s in summary["steps"].items():
+        if s["steps"]:
+            say(f"  {axis:5s} {int(s['steps'])} set-point steps: rise time {1e3 * s['rise_log_s']:.0f} ms logged, "
+                f"{1e3 * s['rise_sim_s']:.0f} ms simulated; overshoot {100 * s['overshoot_log']:.0f} % logged, "
+                f"{100 * s['overshoot_sim']:.0f} % simulated (medians)", highlight=False)
+        else:
+            say(f"  {axis:5s} no set-point step of {args.step_min_deg_s:g} deg/s in the window", highlight=False)
+    say("  PID terms (firmware units; rms of the difference, correlation, logged rms): " + "; ".join(
+        f"{term} " + ", ".join(f"{axis} {m.rms:.1f} r {m.correlation:.2f} of {m.logged_rms:.1f}"
+                               for axis, m in zip(AXES, row, strict=True) if m is not None)
+        for term, row in zip("PIDF", result.pid, strict=True)), highlight=False)
+    say(f"wrote {figure}", highlight=False)
+    return 0
+
+
 def register(sub: Any) -> None:
     p = sub.add_parser("log", help="read real flight logs: Betaflight blackbox, PX4 ULog, Crazyflie uSD",
                        formatter_class=HelpFormatter)
@@ -187,3 +259,19 @@ def register(sub: Any) -> None:
     q.add_argument("--force", action="store_true", help="replace files that exist")
     q.add_argument("--json", action="store_true", help="print the files written as one JSON object")
     q.set_defaults(func=_cmd_export)
+    q = cmds.add_parser("replay", help="fly a Betaflight log's sticks through the SITL with the log's tune and "
+                                       "compare per axis", formatter_class=HelpFormatter)
+    q.add_argument("file", metavar="FILE[:N]", help="a Betaflight blackbox log, :N its log N (default 1) (required)")
+    q.add_argument("--plant", choices=("betaflight",), default="betaflight", help="the plant that flies the sticks")
+    q.add_argument("--airframe", metavar="FILE.toml", default=None,
+                   help="a Betaflight plant file, e.g. the [airframe] that identify --log --airframe writes "
+                        "(default: the packaged 5-inch)")
+    q.add_argument("--window-s", nargs=2, type=finite_float(0.0, 1e6, "s"), metavar=("START", "END"), default=None,
+                   help="only this window of the log [s], as log plot's (default: the whole log)")
+    q.add_argument("--step-min-deg-s", type=finite_float(10.0, 2000.0, "deg/s"), default=100.0,
+                   help="smallest set-point step the step-response metrics use")
+    q.add_argument("--seed", type=bounded_int(0, 2**31 - 1), default=0, help="seeds the sensor noise")
+    q.add_argument("--out", metavar="DIR", default=None, help="folder for the figure (default: out/replay-FILE)")
+    q.add_argument("--force", action="store_true", help="replace a figure that exists")
+    q.add_argument("--json", action="store_true", help="print one JSON object")
+    q.set_defaults(func=_cmd_replay)

@@ -8,8 +8,8 @@ applied to the firmware as the pilot had it (:mod:`aerobat.plants.betaflight`).
 Units (Betaflight 4.x, data version 2): ``time`` µs; ``gyroADC`` and ``setpoint[0..2]``
 deg/s; ``accSmooth`` in units of the header's ``acc_1G``; ``motor`` in the header's
 ``motorOutput`` range (DShot 48..2047 is the full range, the low end of ``motorOutput`` is
-the idle); ``setpoint[3]`` throttle 0..1000; ``rcCommand[0..2]`` ±500; ``vbatLatest``
-0.01 V.
+the idle); ``setpoint[3]`` throttle 0..1000; ``rcCommand[0..2]`` ±500 (after the deadband);
+``rcCommand[3]`` 1000..2000 us (after the throttle curve); ``vbatLatest`` 0.01 V.
 
 Axes: Betaflight's gyro and accelerometer are body FLU (roll right, pitch nose down, yaw nose
 left positive; z up at rest), and so are its rate set points; sticks and PID terms keep the
@@ -206,6 +206,9 @@ def _read_one(path: Path, orangebox, reader, data: bytes, index: int, count: int
     if have("rcCommand[0]", "rcCommand[1]", "rcCommand[2]"):
         v, f = vector("rcCommand", 3)
         signals[Channel.STICKS] = Signal(Channel.STICKS, t, v / 500.0, ("roll", "pitch", "yaw"), "fraction", f)
+    if have("rcCommand[3]"):
+        signals[Channel.THROTTLE_STICK] = Signal(Channel.THROTTLE_STICK, t, (field("rcCommand[3]") - 1000.0) / 1000.0,
+                                                 ("throttle",), "fraction", ("rcCommand[3]",))
     motor_fields = [n for n in columns if n.startswith("motor[")]
     layout = None
     if motor_fields:

@@ -60,6 +60,7 @@ class Channel(enum.Enum):
     RATE_SETPOINT = "rate_setpoint"        # the firmware's body-rate set point [rad/s], body FLU
     THROTTLE = "throttle"                  # collective command, fraction [0, 1]
     STICKS = "sticks"                      # pilot's roll, pitch, yaw sticks [-1, 1] (right, forward, right)
+    THROTTLE_STICK = "throttle_stick"      # pilot's throttle after the firmware's throttle curve, fraction [0, 1]
     PID_P = "pid_p"                        # rate-loop terms per axis, firmware units (roll, pitch, yaw)
     PID_I = "pid_i"
     PID_D = "pid_d"
@@ -81,6 +82,7 @@ _DESCRIPTIONS = {
     Channel.RATE_SETPOINT: "rate set point, body FLU [rad/s]",
     Channel.THROTTLE: "throttle (collective command), fraction",
     Channel.STICKS: "pilot sticks roll/pitch/yaw, -1..1 (right, forward, right)",
+    Channel.THROTTLE_STICK: "pilot's throttle after the throttle curve, fraction",
     Channel.PID_P: "rate loop P term, firmware units",
     Channel.PID_I: "rate loop I term, firmware units",
     Channel.PID_D: "rate loop D term, firmware units",

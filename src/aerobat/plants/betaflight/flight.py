@@ -24,6 +24,7 @@ from aerobat.errors import ConfigError
 from aerobat.plants.arena.kernel import MOCAP_COLUMNS, estimate_pose, mocap_sample
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import (
+    A_GROUND,
     C_CONTACT,
     C_DELAY,
     C_TICK,
@@ -82,7 +83,8 @@ class Flight:
         self.pending = np.zeros((delay + 1, 4))
         self.scratch = np.zeros((6, N_STATE))
         self.packet = np.zeros(PACKET_DOUBLES)
-        self.motors = np.zeros(4, dtype=np.float32)
+        # the motor packet: 4 motor commands, then the rate loop's set point (3) and P, I, D, F per axis (12)
+        self.motors = np.zeros(4 + 15, dtype=np.float32)
         self.tick = 0
         self.log = np.empty((4096, MOCAP_COLUMNS))
         self.log_count = 0
@@ -132,6 +134,32 @@ class Flight:
         else:
             self._queue.append((self.tick + self.latency_steps, tuple(int(c) for c in channels_us)))
         self._advance(self.frame_steps)
+
+    def release(self) -> None:
+        """Take the floor away: from now on the vehicle flies free, as in the air (a replayed flight).
+
+        Arm on the floor first (the firmware calibrates its gyro standing still), then release.
+        """
+        self.aux[A_GROUND] = -math.inf
+        self.counters[C_CONTACT] = 0
+
+    def sampled_frame(self, channels_us: Sequence[int], rows: np.ndarray) -> None:
+        """One lossless radio frame, sampled: ``rows`` (k, 23) gets k evenly spaced samples of the frame.
+
+        Row j is (time [s], true body rates p, q, r [rad/s] FLU, the firmware's four motor commands in
+        packet order, its set point roll, pitch, yaw [deg/s] and P, I, D, F of roll, pitch, yaw) after
+        the frame's (j + 1)-th k-th part; k must divide the frame's gyro periods.
+        """
+        parts = rows.shape[0]
+        if self.frame_steps % parts:
+            raise ValueError(f"{parts} samples do not divide a frame of {self.frame_steps} gyro periods")
+        self.frames_sent += 1
+        self._queue.append((self.tick + self.latency_steps, tuple(int(c) for c in channels_us)))
+        for j in range(parts):
+            self._advance(self.frame_steps // parts)
+            rows[j, 0] = self.time_s
+            rows[j, 1:4] = self.x[10:13]
+            rows[j, 4:23] = self.motors
 
     def _advance(self, n: int) -> None:
         noise = self._noise(n)

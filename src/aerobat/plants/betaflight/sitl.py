@@ -271,7 +271,7 @@ class SitlProcess:
         self._resources = _Resources()
         self._finalizer = weakref.finalize(self, self._resources.release)
         self._finalizer.atexit = True
-        self._motor_buffer = bytearray(64)
+        self._motor_buffer = bytearray(128)
         try:
             self._start()
         except BaseException:
@@ -465,7 +465,8 @@ class SitlProcess:
         """Send a packed 144-byte state packet and receive the answering motor packet into ``motors``.
 
         The fast path of :meth:`step_packed` for a caller that keeps its own clock (no time
-        checks): ``motors`` is any writable 16-byte buffer (e.g. a float32 array of 4). Same
+        checks): ``motors`` is any writable buffer of 16 bytes or more (a float32 array of 4 gets the motor
+        commands; one of 19 also the set point and PID terms the lockstep packet carries after them). Same
         watchdog and errors as :meth:`step`.
         """
         try:
@@ -474,7 +475,7 @@ class SitlProcess:
             self._check_alive()
             raise FirmwareNotResponding(f"cannot send to the firmware: {error}", _tail(self.log_path)) from error
         try:
-            if self._motor_socket.recv_into(motors) == MOTOR_STRUCT.size:
+            if self._motor_socket.recv_into(motors) >= MOTOR_STRUCT.size:
                 self.steps += 1
                 return
         except (BlockingIOError, TimeoutError):
@@ -501,7 +502,7 @@ class SitlProcess:
                         str(self.log_path),
                     ) from None
                 continue
-            if size == MOTOR_STRUCT.size:
+            if size >= MOTOR_STRUCT.size:
                 m0, m1, m2, m3 = MOTOR_STRUCT.unpack_from(buffer)
                 return (m0, m1, m2, m3)
 

@@ -1,0 +1,157 @@
+"""A recorded flight through the firmware: the pilot's sticks, with their timing, into the SITL.
+
+:func:`replay_sticks` powers a fresh firmware on, lets it calibrate on the floor, arms it, takes
+the floor away (:meth:`.flight.Flight.release`) and streams the pilot's channels in ACRO, one
+radio frame per period, lossless and without link latency (the log recorded the sticks where
+the firmware received them). No position loop, no floor: the vehicle flies as the pilot flew
+it. What comes back is the true body rates and the firmware's motor commands, sampled within
+each frame.
+
+The sticks come as Betaflight logs them (:func:`channels_from_commands`): ``rcCommand`` roll,
+pitch and yaw are ±500 after the deadband (yaw negated: a right stick is a negative
+``rcCommand[2]``), so the pulse is 1500 ± (|rcCommand| + deadband); the throttle is the
+firmware's throttle after its curve, which :meth:`.settings.BetaflightSettings.throttle_us_for_motor`
+inverts to a pulse.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from aerobat.errors import ConfigError
+from aerobat.plants.betaflight.physics import airframe_plant
+from aerobat.plants.betaflight.rc import RC_MAX_US, RC_MID_US, RC_MIN_US
+from aerobat.plants.betaflight.settings import BetaflightSettings
+
+__all__ = ["MOTOR_LOG_ORDER", "ReplayTrace", "StickTrack", "channels_from_commands", "replay_sticks"]
+
+MOTOR_LOG_ORDER = (3, 0, 1, 2)
+"""Packet slot of Betaflight's motors M1..M4 (rear right, front right, rear left, front left):
+the SITL's packet is front right, rear left, front left, rear right (:mod:`.physics`)."""
+
+
+@dataclass(frozen=True)
+class StickTrack:
+    """The pilot's channels over time.
+
+    Attributes
+    ----------
+    time_s : (n,) increasing sample times [s] (the log's).
+    channels_us : (n, 4) roll, pitch, throttle, yaw pulses [us] (AETR).
+    """
+
+    time_s: np.ndarray
+    channels_us: np.ndarray
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.time_s, dtype=float)
+        c = np.asarray(self.channels_us, dtype=float)
+        if t.ndim != 1 or c.shape != (t.shape[0], 4) or t.shape[0] < 2:
+            raise ValueError(f"stick track: time {t.shape}, channels {c.shape}; need (n,) and (n, 4), n >= 2")
+        if np.any(np.diff(t) <= 0):
+            raise ValueError("stick track: times must increase")
+        object.__setattr__(self, "time_s", t)
+        object.__setattr__(self, "channels_us", c)
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.time_s[-1] - self.time_s[0])
+
+    def at(self, t_s: float) -> np.ndarray:
+        """The channels held from the last sample at or before ``t_s`` (a receiver holds its frame)."""
+        i = int(np.searchsorted(self.time_s, t_s, side="right")) - 1
+        return self.channels_us[max(i, 0)]
+
+
+@dataclass(frozen=True)
+class ReplayTrace:
+    """What the SITL flew.
+
+    Attributes
+    ----------
+    time_s : (m,) times from the track's first sample [s].
+    rates_rad_s : (m, 3) true body rates, body FLU.
+    motors : (m, 4) the firmware's motor commands in Betaflight's motor order M1..M4 (0 stopped,
+        1 full; the armed idle is ``motor_idle``).
+    setpoint_deg_s : (m, 3) the firmware's rate set point (as blackbox logs it: firmware axes,
+        roll, pitch, yaw), NaN from a SITL whose motor packet does not carry it.
+    pid : (m, 4, 3) the firmware's P, I, D, F terms (rows) per axis (columns), blackbox units; NaN
+        likewise.
+    armed_at_s : simulated time of arming since power-on.
+    steps : lockstep steps taken.
+    """
+
+    time_s: np.ndarray
+    rates_rad_s: np.ndarray
+    motors: np.ndarray
+    setpoint_deg_s: np.ndarray
+    pid: np.ndarray
+    armed_at_s: float
+    steps: int
+
+
+def channels_from_commands(settings: BetaflightSettings, roll_pitch_yaw: np.ndarray, throttle: np.ndarray
+                           ) -> np.ndarray:
+    """(n, 4) AETR pulses for Betaflight's logged ``rcCommand`` roll, pitch, yaw (±500) and throttle (0..1).
+
+    ``throttle`` is ``(rcCommand[3] − 1000) / 1000``: the throttle after the firmware's curve.
+    """
+    rpy = np.asarray(roll_pitch_yaw, dtype=float)
+    band = float(settings.value("deadband"))
+    yaw_band = float(settings.value("yaw_deadband"))
+    out = np.empty((rpy.shape[0], 4))
+    for col, axis, sign, dead in ((0, 0, 1.0, band), (1, 1, 1.0, band), (3, 2, -1.0, yaw_band)):
+        v = rpy[:, axis]
+        pulse = RC_MID_US + sign * np.sign(v) * (np.abs(v) + np.where(v != 0.0, dead, 0.0))
+        out[:, col] = np.clip(np.round(pulse), RC_MIN_US, RC_MAX_US)
+    idle = float(settings.value("motor_idle")) / 10000.0
+    thr = np.clip(np.asarray(throttle, dtype=float), 0.0, 1.0)
+    out[:, 2] = [round(settings.throttle_us_for_motor(idle + (1.0 - idle) * y)) for y in thr]
+    return out
+
+
+def replay_sticks(plant: object, track: StickTrack, *, samples_per_frame: int = 4,
+                  progress: Callable[[float, float], None] | None = None) -> ReplayTrace:
+    """Fly ``track`` through ``plant``'s firmware (a :class:`~.plant.BetaflightPlant`) in ACRO, in the air.
+
+    ``progress(done_s, total_s)`` is called about once per simulated second.
+    """
+    from aerobat.plants.betaflight.plant import BetaflightPlant, _Stop
+
+    if not isinstance(plant, BetaflightPlant):
+        raise TypeError("replay_sticks needs a BetaflightPlant")
+    params = plant.params
+    flight = plant.open_flight(rng=np.random.default_rng(plant.seed), plant=airframe_plant(params))
+    with flight:
+        flight.latency_steps = 0
+        try:
+            armed = plant.power_on_and_arm(flight)
+        except _Stop as stop:
+            raise ConfigError(f"the tune does not arm: {stop}") from None
+        flight.release()
+        period = 1.0 / params.radio.rate_hz
+        frames = max(1, math.ceil(track.duration_s / period))
+        rows = np.empty((frames * samples_per_frame, 23))
+        aux = plant.settings.aux_us(ARM=True, ANGLE=False)
+        tail = (*aux, *([RC_MIN_US] * (12 - len(aux))))
+        t0 = flight.time_s
+        next_report = 1.0
+        for k in range(frames):
+            c = track.at(track.time_s[0] + k * period)
+            channels = (int(c[0]), int(c[1]), int(c[2]), int(c[3]), *tail)
+            flight.sampled_frame(channels, rows[k * samples_per_frame:(k + 1) * samples_per_frame])
+            if progress is not None and (k + 1) * period >= next_report:
+                progress((k + 1) * period, frames * period)
+                next_report += 1.0
+        steps = flight.tick
+    motors = rows[:, 4:8][:, list(MOTOR_LOG_ORDER)]
+    terms = rows[:, 8:23].copy()
+    if not np.any(terms):  # a SITL whose motor packet carries the motors only
+        terms[:] = np.nan
+    pid = terms[:, 3:].reshape(-1, 3, 4).transpose(0, 2, 1)
+    return ReplayTrace(time_s=rows[:, 0] - t0, rates_rad_s=rows[:, 1:4].copy(), motors=motors,
+                       setpoint_deg_s=terms[:, :3], pid=pid, armed_at_s=armed, steps=steps)

@@ -1,0 +1,61 @@
+"""The figure of a replayed flight: real and simulated traces overlaid, as a blackbox viewer shows them."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from aerobat.plotting.files import new_figure
+
+__all__ = ["plot_replay"]
+
+_AXES = ("roll", "pitch", "yaw")
+
+
+def plot_replay(result: Any) -> Any:
+    """Per axis the logged set point, the tune's set point, the logged and the simulated gyro; then the motors.
+
+    ``result`` is an :class:`aerobat.experiments.log_replay.LogReplay`.
+    """
+    fig = new_figure(figsize=(11, 12))
+    axes = fig.subplots(6, 1, sharex=True)
+    t = result.time_s
+    for k, name in enumerate(_AXES):
+        ax = axes[k]
+        ax.plot(t, result.setpoint_log[:, k], lw=0.9, color="tab:orange", label="set point (log)")
+        if np.all(np.isfinite(result.setpoint_sim[:, k])):
+            ax.plot(t, result.setpoint_sim[:, k], lw=0.7, ls="--", color="k", label="set point (SITL)")
+        else:
+            ax.plot(t, result.setpoint_model[:, k], lw=0.7, ls="--", color="k", label="set point (tune's curve)")
+        ax.plot(t, result.gyro_log[:, k], lw=0.7, color="tab:blue", label="gyro (log)")
+        ax.plot(t, result.gyro_sim[:, k], lw=0.7, color="tab:red", label="gyro (SITL)")
+        g = result.gyro[k]
+        ax.set_title(f"{name}: gyro rms difference {g.rms:.1f} °/s, correlation {g.correlation:.3f}", fontsize=9,
+                     loc="left")
+        ax.set_ylabel(f"{name} [°/s]")
+        ax.legend(loc="upper right", fontsize=7, ncol=4)
+        ax.grid(alpha=0.3)
+    for j in range(4):
+        line = axes[3].plot(t, result.motors_log[:, j], lw=0.6, label=f"M{j + 1} log")[0]
+        axes[3].plot(t, result.motors_sim[:, j], lw=0.6, ls="--", color=line.get_color(), label=f"M{j + 1} SITL")
+    axes[3].set_ylabel("motors [fraction]")
+    axes[3].legend(loc="upper right", fontsize=7, ncol=4)
+    axes[3].grid(alpha=0.3)
+    for k, name in enumerate(_AXES):
+        axes[4].plot(t, result.setpoint_log[:, k] - result.gyro_log[:, k], lw=0.6, label=f"{name} log")
+        axes[4].plot(t, result.setpoint_model[:, k] - result.gyro_sim[:, k], lw=0.6, ls="--", label=f"{name} SITL")
+    axes[4].set_ylabel("tracking error [°/s]")
+    for k, name in enumerate(_AXES):
+        axes[5].plot(t, result.pid_log[:, 0, k], lw=0.6, label=f"P {name} log")
+        axes[5].plot(t, result.pid_sim[:, 0, k], lw=0.6, ls="--", label=f"P {name} SITL")
+    axes[5].set_ylabel("P term [firmware]")
+    axes[5].legend(loc="upper right", fontsize=7, ncol=3)
+    axes[5].grid(alpha=0.3)
+    axes[5].set_xlabel("log time [s]")
+    axes[4].legend(loc="upper right", fontsize=7, ncol=3)
+    axes[4].grid(alpha=0.3)
+    lo, hi = result.window_s
+    fig.suptitle(f"{result.log} {lo:g}–{hi:g} s through Betaflight 4.6 SITL with the log's tune; airframe: "
+                 f"{result.airframe}", fontsize=10)
+    return fig

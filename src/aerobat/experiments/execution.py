@@ -12,8 +12,8 @@ variable ``DASK_SCHEDULER_ADDRESS``).
 
 from __future__ import annotations
 
-import multiprocessing
 import gc
+import multiprocessing
 import os
 import signal
 import threading

@@ -19,6 +19,7 @@ Benchmarks, not tests: they measure and report, they never fail on a number.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -125,10 +126,14 @@ def bench_compiled_at_rest(seconds: float = 5.0) -> dict[str, Any]:
             "firmware_us_per_step": 1e6 * cpu / steps}
 
 
+@functools.cache
+def _triple_program() -> Any:
+    return TRIPLE.program(design(TRIPLE, NominalModel(CONFIG)).p_nominal)
+
+
 def _fly_trial(rate_hz: int, seed: int) -> dict[str, Any]:
     """One trial in this (worker) process: steps, wall time, digest."""
-    nominal = design(TRIPLE, NominalModel(CONFIG))
-    program = TRIPLE.program(nominal.p_nominal)
+    program = _triple_program()
     trial = BetaflightPlant(CONFIG, BetaflightParams().replace(firmware__gyro_rate_hz=rate_hz), seed=seed).fly(program)
     return {"status": trial.status.value, "steps": trial.info["steps"], "wall_s": trial.info["wall_s"],
             "digest": _trial_digest(trial)}

@@ -1,4 +1,4 @@
-"""The compiled lockstep loop (:mod:`aerobat.plants.betaflight.lockstep`): same flight as step by step, watchdog intact."""
+"""The compiled lockstep loop (:mod:`aerobat.plants.betaflight.lockstep`): the same flight as step by step."""
 
 from __future__ import annotations
 

@@ -8,6 +8,10 @@ after the link latency, right before the state packet of the step it arrives in.
 samples the true state at its rate with seeded noise into a log the supervisor reads with its
 latency. Nothing here decides what to fly: that is the plant's supervisor.
 
+The steps of a frame run in one compiled loop (:mod:`.lockstep`: motion capture, the exchange
+through the C library's ``send``/``recv`` on the process's sockets, the physics), split only where
+an RC frame is due; the process's watchdog takes over whenever an answer is late.
+
 Everything random comes from the generator passed in, so a seed repeats a flight bit for bit;
 the firmware is deterministic in lockstep.
 """
@@ -21,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from aerobat.errors import ConfigError
-from aerobat.plants.arena.kernel import MOCAP_COLUMNS, estimate_pose, mocap_sample
+from aerobat.plants.arena.kernel import MOCAP_COLUMNS, estimate_pose
 from aerobat.plants.betaflight.lockstep import (
     IO_EXCHANGES,
     IO_LOG,

@@ -246,11 +246,11 @@ def run() -> tuple[list[tuple[str, str, str]], dict[str, Any]]:
         ("one Betaflight trial (3D triple flip, 8 kHz), real-time factor", "≥ 8× quiet",
          f"{t8['factor_median']:.1f}× (median of 3; {t8['wall_median_s']:.2f} s wall per "
          f"{t8['trials'][0]['simulated_s']:.1f} s simulated)"),
+        ("the same at 4 kHz gyro", "—", f"{t4['factor_median']:.1f}× ({t4['wall_median_s']:.2f} s wall)"),
         ("2 trials side by side ÷ 1 alone, steps/s (spawned workers, 8 kHz)", "≥ 1.8×",
          f"{parallel['ratio_median']:.2f}× (median of {len(parallel['ratios'])} interleaved rounds: "
          + ", ".join(f"{r:.2f}" for r in parallel["ratios"])
          + f"); seed 1 bit-identical alone and in parallel: {parallel['seed_identical_in_parallel']}"),
-        ("the same at 4 kHz gyro", "—", f"{t4['factor_median']:.1f}× ({t4['wall_median_s']:.2f} s wall)"),
         ("same seed, same trial", "bit for bit", f"8 kHz: {t8['bit_identical']}, 4 kHz: {t4['bit_identical']}"),
         ("watchdog: firmware stopped (SIGSTOP) → trial lost", "≤ step timeout + 0.1 s",
          f"{dog['detected_after_s']:.2f} s with a 1 s step timeout ({dog['lost_status']}); next trial "

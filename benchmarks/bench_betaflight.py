@@ -8,14 +8,18 @@ Benchmarks, not tests: they measure and report, they never fail on a number.
   after 2 s of simulated flight), and the firmware's own task rates in simulated time (CLI
   ``tasks`` in a separate diagnostic process: the CLI must never be opened in a flying one);
 * determinism: the same seed flies the same trial bit for bit (two fresh plants);
-* speed: lockstep steps per second with the firmware alone, a whole trial's real-time factor at
-  8 kHz and at 4 kHz (the nominal 3D triple flip of fpv5);
+* speed: lockstep steps per second with the firmware alone; the compiled loop's wall time ÷ the
+  firmware's own CPU time (the driver's overhead, independent of the load as far as it can be)
+  on the floor and over whole trials; a whole trial's real-time factor at 8 kHz and at 4 kHz (the
+  nominal 3D triple flip of fpv5); steps/s of two trials in parallel worker processes ÷ one alone
+  (interleaved rounds) and that seed 1 flies bit for bit alike alone and in parallel;
 * watchdog: the time from a firmware that stops answering (SIGSTOP) to the lost trial, and the
   next trial on a fresh firmware.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -91,12 +95,76 @@ def bench_lockstep(binary: Path, eeprom: Path) -> dict[str, Any]:
 
 
 def bench_firmware_alone(binary: Path, eeprom: Path, steps: int = 40000) -> float:
-    """Lockstep steps per second with constant packets (firmware + exchange, no physics)."""
+    """Lockstep steps per second with constant packets, one Python call per step (firmware + exchange, no physics)."""
     with SitlProcess(binary, eeprom) as sitl:
         step_at_rest(sitl, lambda: False, 2000)
         started = time.perf_counter()
         step_at_rest(sitl, lambda: False, steps)
         return steps / (time.perf_counter() - started)
+
+
+def bench_compiled_at_rest(seconds: float = 5.0) -> dict[str, Any]:
+    """The compiled loop (exchange + physics, one Python call per radio frame) on the floor, disarmed.
+
+    Wall time of the stepping ÷ the firmware's CPU time over it is the driver's overhead
+    without boot and supervisor; both processes' CPU times are measured.
+    """
+    plant = BetaflightPlant(CONFIG, seed=1)
+    idle = plant.channels(np.array([0.0, 0.0, 0.0, 1000.0]), arm=False, angle=True)
+    with plant.open_flight() as flight:
+        for _ in range(flight.frames_for(0.5)):
+            flight.frame(idle)
+        cpu0, own0, tick0 = flight.firmware_cpu_time_s(), time.thread_time(), flight.tick
+        started = time.perf_counter()
+        for _ in range(flight.frames_for(seconds)):
+            flight.frame(idle)
+        wall = time.perf_counter() - started
+        cpu = (flight.firmware_cpu_time_s() or math.nan) - (cpu0 or math.nan)
+        steps = flight.tick - tick0
+    return {"steps": steps, "steps_s": steps / wall, "wall_s": wall, "firmware_cpu_s": cpu,
+            "driver_cpu_s": time.thread_time() - own0, "wall_per_firmware_cpu": wall / cpu,
+            "firmware_us_per_step": 1e6 * cpu / steps}
+
+
+@functools.cache
+def _triple_program() -> Any:
+    return TRIPLE.program(design(TRIPLE, NominalModel(CONFIG)).p_nominal)
+
+
+def _fly_trial(rate_hz: int, seed: int) -> dict[str, Any]:
+    """One trial in this (worker) process: steps, wall time, digest."""
+    program = _triple_program()
+    trial = BetaflightPlant(CONFIG, BetaflightParams().replace(firmware__gyro_rate_hz=rate_hz), seed=seed).fly(program)
+    return {"status": trial.status.value, "steps": trial.info["steps"], "wall_s": trial.info["wall_s"],
+            "digest": _trial_digest(trial)}
+
+
+def bench_parallel(rounds: int = 2, rate_hz: int = 8000) -> dict[str, Any]:
+    """Steps per second of 2 firmware instances side by side ÷ 1, in spawned worker processes.
+
+    Rounds alternate one trial alone and two trials at once (seeds 1 and 2), so both suffer the
+    same load; the ratio is the median over rounds. A first pair (not counted) loads the
+    compiled code in both workers. Seed 1 must fly bit for bit alike alone and beside another.
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    ratios, single_rates, pair_rates, identical = [], [], [], []
+    with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:
+        list(pool.map(_fly_trial, [rate_hz, rate_hz], [1, 2]))
+        for _ in range(rounds):
+            started = time.perf_counter()
+            alone = pool.submit(_fly_trial, rate_hz, 1).result()
+            single = alone["steps"] / (time.perf_counter() - started)
+            started = time.perf_counter()
+            pair = list(pool.map(_fly_trial, [rate_hz, rate_hz], [1, 2]))
+            both = sum(r["steps"] for r in pair) / (time.perf_counter() - started)
+            single_rates.append(single)
+            pair_rates.append(both)
+            ratios.append(both / single)
+            identical.append(pair[0]["digest"] == alone["digest"] and all(r["status"] == "ok" for r in pair))
+    return {"ratio_median": statistics.median(ratios), "ratios": ratios, "single_steps_s": single_rates,
+            "pair_steps_s": pair_rates, "seed_identical_in_parallel": all(identical)}
 
 
 def bench_trials(rate_hz: int, seeds: tuple[int, ...] = (1, 2, 3)) -> dict[str, Any]:
@@ -108,6 +176,7 @@ def bench_trials(rate_hz: int, seeds: tuple[int, ...] = (1, 2, 3)) -> dict[str, 
         trial = BetaflightPlant(CONFIG, params, seed=seed).fly(program)
         error = TRIPLE.error(trial.final_state)
         rows.append({"status": trial.status.value, "factor": trial.info["real_time_factor"],
+                     "wall_per_firmware_cpu": trial.info["wall_per_firmware_cpu"],
                      "wall_s": trial.info["wall_s"], "simulated_s": trial.info["simulated_s"],
                      "position_error_m": float(np.linalg.norm(error[[0, 2, 5]])),
                      "flip_angle_error_deg": math.degrees(error[4])})
@@ -115,6 +184,7 @@ def bench_trials(rate_hz: int, seeds: tuple[int, ...] = (1, 2, 3)) -> dict[str, 
     first = BetaflightPlant(CONFIG, params, seed=seeds[0]).fly(program)
     return {"trials": rows, "factor_median": statistics.median(r["factor"] for r in rows),
             "wall_median_s": statistics.median(r["wall_s"] for r in rows),
+            "overhead_median": statistics.median(r["wall_per_firmware_cpu"] for r in rows),
             "bit_identical": _trial_digest(first) == _trial_digest(again)}
 
 
@@ -151,8 +221,10 @@ def run() -> tuple[list[tuple[str, str, str]], dict[str, Any]]:
     info = json.loads((binary.parent / "build-info.json").read_text())
     lock = bench_lockstep(binary, eeprom)
     alone = bench_firmware_alone(binary, eeprom)
+    at_rest = bench_compiled_at_rest()
     t8 = bench_trials(8000)
     t4 = bench_trials(4000)
+    parallel = bench_parallel()
     dog = bench_watchdog()
     tasks = ", ".join(f"{k} {v} Hz" for k, v in lock["tasks_hz"].items())
     stages = ", ".join(f"{k} {v} s" for k, v in info["stage_wall_time_s"].items())
@@ -162,12 +234,23 @@ def run() -> tuple[list[tuple[str, str, str]], dict[str, Any]]:
         ("lockstep: motor packets per state packet", "exactly 1",
          f"{lock['motor_packets']}/{lock['state_packets']}, extra packet queued: {lock['extra_motor_packet']}"),
         ("lockstep: firmware task rates in simulated time (CLI `tasks`)", "gyro/PID 8 kHz", tasks),
-        ("lockstep steps/s, firmware alone at rest (8 kHz)", "—",
+        ("lockstep steps/s, firmware alone at rest, one Python call per step (8 kHz)", "—",
          f"{alone:,.0f} ({alone / 8000:.1f}× real time)"),
-        ("one Betaflight trial (3D triple flip, 8 kHz), real-time factor", "≥ 3×",
+        ("compiled loop on the floor (exchange + physics, one Python call per radio frame): "
+         "wall ÷ firmware CPU", "≤ 1.5×",
+         f"{at_rest['wall_per_firmware_cpu']:.2f}× ({at_rest['steps_s']:,.0f} steps/s, "
+         f"{at_rest['steps_s'] / 8000:.1f}× real time; firmware {at_rest['firmware_us_per_step']:.1f} µs CPU "
+         f"per step, driver {1e6 * at_rest['driver_cpu_s'] / at_rest['steps']:.1f} µs)"),
+        ("one Betaflight trial (3D triple flip, 8 kHz): wall ÷ firmware CPU", "≤ 1.5×",
+         f"{t8['overhead_median']:.2f}× (median of 3)"),
+        ("one Betaflight trial (3D triple flip, 8 kHz), real-time factor", "≥ 8× quiet",
          f"{t8['factor_median']:.1f}× (median of 3; {t8['wall_median_s']:.2f} s wall per "
          f"{t8['trials'][0]['simulated_s']:.1f} s simulated)"),
         ("the same at 4 kHz gyro", "—", f"{t4['factor_median']:.1f}× ({t4['wall_median_s']:.2f} s wall)"),
+        ("2 trials side by side ÷ 1 alone, steps/s (spawned workers, 8 kHz)", "≥ 1.8×",
+         f"{parallel['ratio_median']:.2f}× (median of {len(parallel['ratios'])} interleaved rounds: "
+         + ", ".join(f"{r:.2f}" for r in parallel["ratios"])
+         + f"); seed 1 bit-identical alone and in parallel: {parallel['seed_identical_in_parallel']}"),
         ("same seed, same trial", "bit for bit", f"8 kHz: {t8['bit_identical']}, 4 kHz: {t4['bit_identical']}"),
         ("watchdog: firmware stopped (SIGSTOP) → trial lost", "≤ step timeout + 0.1 s",
          f"{dog['detected_after_s']:.2f} s with a 1 s step timeout ({dog['lost_status']}); next trial "
@@ -177,6 +260,7 @@ def run() -> tuple[list[tuple[str, str, str]], dict[str, Any]]:
     rows.append(("1-minute load average before / after these rows (2 cores: above 2 means shared)", "—",
                  f"{load_before:.1f} / {load_after:.1f}"))
     return rows, {"load_average": (load_before, load_after), "lockstep": lock, "firmware_alone_steps_s": alone,
+                  "compiled_at_rest": at_rest, "parallel": parallel,
                   "trials_8khz": t8, "trials_4khz": t4,
                   "watchdog": dog, "build": info}
 

@@ -137,6 +137,15 @@ def _betaflight_kernels(x: np.ndarray, cmd: np.ndarray) -> None:
     scratch = np.zeros((6, x.shape[0]))
     prime(world, plant, aux, counters, noise[0], packet, scratch)
     step(world, np.zeros(4, dtype=np.float32), plant, aux, np.zeros((2, 4)), counters, noise[1], packet, scratch)
+    # the compiled lockstep loop (a run of no steps: nothing is sent)
+    from aerobat.plants.arena.kernel import MOCAP_COLUMNS
+    from aerobat.plants.betaflight.lockstep import N_IO, run_steps
+    from aerobat.plants.betaflight.packets import MOTOR_STRUCT
+
+    block = np.zeros(MOTOR_STRUCT.size, dtype=np.uint8)
+    run_steps(-1, -1, 0, 0, False, 0, 8, step_s, world, block, block[:16].view(np.float32), plant, aux,
+              np.zeros((2, 4)), counters, noise, np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)),
+              np.zeros(N_IO, dtype=np.int64), packet, scratch)
     limits = np.zeros(N_LIMITS)
     limits[:] = 1.0
     sticks = np.zeros(4)

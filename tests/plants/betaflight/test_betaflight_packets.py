@@ -13,7 +13,7 @@ from aerobat.plants.betaflight.packets import (
 
 
 def test_sizes_match_target_h() -> None:
-    assert (STATE_STRUCT.size, RC_STRUCT.size, MOTOR_STRUCT.size) == (144, 40, 16)
+    assert (STATE_STRUCT.size, RC_STRUCT.size, MOTOR_STRUCT.size) == (144, 40, 76)
 
 
 def test_state_layout() -> None:

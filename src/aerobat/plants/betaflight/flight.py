@@ -8,6 +8,10 @@ after the link latency, right before the state packet of the step it arrives in.
 samples the true state at its rate with seeded noise into a log the supervisor reads with its
 latency. Nothing here decides what to fly: that is the plant's supervisor.
 
+The steps of a frame run in one compiled loop (:mod:`.lockstep`: motion capture, the exchange
+through the C library's ``send``/``recv`` on the process's sockets, the physics), split only where
+an RC frame is due; the process's watchdog takes over whenever an answer is late.
+
 Everything random comes from the generator passed in, so a seed repeats a flight bit for bit;
 the firmware is deterministic in lockstep.
 """
@@ -21,7 +25,18 @@ from pathlib import Path
 import numpy as np
 
 from aerobat.errors import ConfigError
-from aerobat.plants.arena.kernel import MOCAP_COLUMNS, estimate_pose, mocap_sample
+from aerobat.plants.arena.kernel import MOCAP_COLUMNS, estimate_pose
+from aerobat.plants.betaflight.lockstep import (
+    IO_EXCHANGES,
+    IO_LOG,
+    IO_MOCAP_USED,
+    N_IO,
+    NO_ANSWER,
+    NON_FINITE,
+    SEND_FAILED,
+    run_steps,
+)
+from aerobat.plants.betaflight.packets import MOTOR_STRUCT
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import (
     A_GROUND,
@@ -33,7 +48,6 @@ from aerobat.plants.betaflight.physics import (
     aux_vector,
     ground_state,
     prime,
-    step,
 )
 from aerobat.plants.betaflight.sitl import SitlProcess
 from aerobat.quadrotor.dynamics import N_STATE
@@ -83,8 +97,11 @@ class Flight:
         self.pending = np.zeros((delay + 1, 4))
         self.scratch = np.zeros((6, N_STATE))
         self.packet = np.zeros(PACKET_DOUBLES)
-        # the motor packet: 4 motor commands, then the rate loop's set point (3) and P, I, D, F per axis (12)
-        self.motors = np.zeros(4 + 15, dtype=np.float32)
+        # the firmware's packet, whole (packets.MOTOR_STRUCT): 4 motor commands, then the rate loop's
+        # set point (3) and P, I, D, F per axis (12)
+        self.block = np.zeros(MOTOR_STRUCT.size, dtype=np.uint8)
+        self.motors = self.block.view(np.float32)
+        self._io = np.zeros(N_IO, dtype=np.int64)
         self.tick = 0
         self.log = np.empty((4096, MOCAP_COLUMNS))
         self.log_count = 0
@@ -92,12 +109,19 @@ class Flight:
         self.frames_sent = 0
         self.frames_dropped = 0
         prime(self.x, self.plant, self.aux, self.counters, self._noise(1)[0], self.packet, self.scratch)
+        self.firmware_cpu_s: float | None = None
         self.sitl = SitlProcess(binary, eeprom, gyro_rate_hz=fw.gyro_rate_hz, step_timeout_s=fw.step_timeout_s)
 
     # ------------------------------------------------------------------ lifetime
     def close(self) -> None:
         """Kill the firmware and release its ports and files (idempotent)."""
+        self.firmware_cpu_s = self.firmware_cpu_time_s()
         self.sitl.close()
+
+    def firmware_cpu_time_s(self) -> float | None:
+        """CPU time the firmware process has used so far [s] (after :meth:`close`: at its end; None if unknown)."""
+        now = self.sitl.cpu_time_s()
+        return now if now is not None else self.firmware_cpu_s
 
     def __enter__(self) -> Flight:
         return self
@@ -174,27 +198,39 @@ class Flight:
             mocap_noise[:, :3] = mc.position_noise_m * self.rng.standard_normal((rows, 3))
         if mc.attitude_noise_rad:
             mocap_noise[:, 3:] = mc.attitude_noise_rad * self.rng.standard_normal((rows, 3))
-        used = 0
-        exchange = self.sitl.exchange
+        io = self._io
+        io[IO_LOG] = self.log_count
+        io[IO_MOCAP_USED] = 0
+        io[IO_EXCHANGES] = 0
+        sitl = self.sitl
+        state_fd, motor_fd = sitl.socket_fds
         queue = self._queue
-        x, motors, plant, aux, pending = self.x, self.motors, self.plant, self.aux, self.pending
-        counters, packet, scratch = self.counters, self.packet, self.scratch
-        tick = self.tick
-        every = self.mocap_every
-        for i in range(n):
-            if tick % every == 0:
-                mocap_sample(x, tick * self.step_s, mocap_noise[used], self.log[self.log_count])
-                self.log_count += 1
-                used += 1
-            while queue and queue[0][0] <= tick:
-                self.sitl.send_rc(queue.pop(0)[1])
-            exchange(packet, motors)
-            if step(x, motors, plant, aux, pending, counters, noise[i], packet, scratch):
-                self.tick = tick + 1
-                raise NonFinite(f"non-finite vehicle state at t = {self.tick * self.step_s:.4f} s")
-            tick += 1
-        self.tick = tick
-        assert int(counters[C_TICK]) == tick
+        tick0 = self.tick
+        i, resume = 0, False
+        try:
+            while i < n:
+                if not resume:
+                    while queue and queue[0][0] <= tick0 + i:  # RC frames reach the receiver first
+                        sitl.send_rc(queue.pop(0)[1])
+                stop = min(n, queue[0][0] - tick0) if queue else n
+                status, i = run_steps(state_fd, motor_fd, i, stop, resume, tick0, self.mocap_every, self.step_s,
+                                      self.x, self.block, self.motors, self.plant, self.aux, self.pending,
+                                      self.counters, noise, mocap_noise, self.log, io, self.packet, self.scratch)
+                resume = False
+                if status == NO_ANSWER:  # the watchdog finishes the exchange (or raises)
+                    sitl.receive_into(self.block)
+                    resume = True
+                elif status == SEND_FAILED:
+                    sitl.exchange(self.packet, self.block)
+                    resume = True
+                elif status == NON_FINITE:
+                    self.tick = tick0 + i + 1
+                    raise NonFinite(f"non-finite vehicle state at t = {self.tick * self.step_s:.4f} s")
+        finally:
+            self.log_count = int(io[IO_LOG])
+            sitl.steps += int(io[IO_EXCHANGES])
+        self.tick = tick0 + n
+        assert int(self.counters[C_TICK]) == self.tick
 
     # ------------------------------------------------------------------ measurement
     def estimate(self, pos: np.ndarray, vel: np.ndarray, quat: np.ndarray) -> bool:

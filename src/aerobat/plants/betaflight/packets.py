@@ -37,6 +37,7 @@ __all__ = [
     "MOTOR_COUNT",
     "MOTOR_POSITIONS_FRD",
     "MOTOR_SPIN_CCW",
+    "MOTOR_PACKET_FLOATS",
     "MOTOR_STRUCT",
     "RC_STRUCT",
     "STATE_STRUCT",
@@ -47,7 +48,11 @@ __all__ = [
 
 STATE_STRUCT = struct.Struct("<18d")
 RC_STRUCT = struct.Struct("<d16H")
-MOTOR_STRUCT = struct.Struct("<4f")
+MOTOR_STRUCT = struct.Struct("<4f3f12f")
+"""The lockstep firmware's answer to a state packet (76 bytes; aerobat's lockstep patch, sitl.c):
+the 4 motor commands (0..1), then the rate loop's set point (3, deg/s, what blackbox logs) and
+the P, I, D, F terms per axis (roll, pitch, yaw: 12). Its layout is defined here only."""
+MOTOR_PACKET_FLOATS = 19
 MOTOR_COUNT = 4
 
 MOTOR_POSITIONS_FRD: tuple[tuple[float, float], ...] = ((1.0, 1.0), (-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0))

@@ -271,7 +271,7 @@ class SitlProcess:
         self._resources = _Resources()
         self._finalizer = weakref.finalize(self, self._resources.release)
         self._finalizer.atexit = True
-        self._motor_buffer = bytearray(128)
+        self._motor_buffer = bytearray(max(128, MOTOR_STRUCT.size))
         try:
             self._start()
         except BaseException:
@@ -462,34 +462,77 @@ class SitlProcess:
             raise FirmwareNotResponding(f"cannot send to the firmware: {error}", _tail(self.log_path)) from error
 
     def exchange(self, state_packet: Any, motors: Any) -> None:
-        """Send a packed 144-byte state packet and receive the answering motor packet into ``motors``.
+        """Send a packed 144-byte state packet and receive the answering firmware packet into ``motors``.
 
         The fast path of :meth:`step_packed` for a caller that keeps its own clock (no time
-        checks): ``motors`` is any writable buffer of 16 bytes or more (a float32 array of 4 gets the motor
-        commands; one of 19 also the set point and PID terms the lockstep packet carries after them). Same
-        watchdog and errors as :meth:`step`.
+        checks): ``motors`` is any writable buffer of the firmware packet's size
+        (:data:`~.packets.MOTOR_STRUCT`, 76 bytes: a float32 array of 19 gets the motor commands, then the
+        set point and the PID terms). Same watchdog and errors as :meth:`step`.
         """
         try:
             self._state_socket.send(state_packet)
         except OSError as error:
             self._check_alive()
             raise FirmwareNotResponding(f"cannot send to the firmware: {error}", _tail(self.log_path)) from error
+        self.receive_into(motors)
+
+    def receive_into(self, block: Any) -> None:
+        """Receive the firmware packet answering the state packet just sent into ``block`` (its size).
+
+        Waits in slices of the motor socket's receive timeout, checking the process in between;
+        packets of another size are skipped.
+
+        Raises
+        ------
+        FirmwareExited
+            The firmware process is gone.
+        FirmwareNotResponding
+            No packet within ``step_timeout_s``.
+        """
+        view = memoryview(block).cast("B")
         try:
-            if self._motor_socket.recv_into(motors) >= MOTOR_STRUCT.size:
+            if self._motor_socket.recv_into(view, view.nbytes, socket.MSG_TRUNC) == view.nbytes:
                 self.steps += 1
                 return
         except (BlockingIOError, TimeoutError):
             pass
         # slow path: the watchdog (and any stray datagram)
-        MOTOR_STRUCT.pack_into(motors, 0, *self._receive_motors())
+        size = self._wait_for_packet()
+        view[:] = self._motor_buffer[:size]
         self.steps += 1
 
+    @property
+    def socket_fds(self) -> tuple[int, int]:
+        """(state socket, motor socket) file descriptors, for a compiled exchange (:mod:`.lockstep`).
+
+        The state socket is connected to the firmware (``send``); the motor socket has a kernel
+        receive timeout (``recv`` returns within it). After a failed exchange, finish it with
+        :meth:`exchange` or :meth:`receive_into`, which apply the watchdog.
+        """
+        return self._state_socket.fileno(), self._motor_socket.fileno()
+
+    def cpu_time_s(self) -> float | None:
+        """CPU time the firmware process has used so far [s] (``/proc/<pid>/schedstat``); None if unknown."""
+        process = self._resources.process
+        if process is None:
+            return None
+        try:
+            return int(Path(f"/proc/{process.pid}/schedstat").read_text().split()[0]) * 1e-9
+        except (OSError, ValueError, IndexError):
+            return None
+
     def _receive_motors(self) -> tuple[float, float, float, float]:
+        self._wait_for_packet()
+        m0, m1, m2, m3 = struct.unpack_from("<4f", self._motor_buffer)  # the motors lead the packet
+        return (m0, m1, m2, m3)
+
+    def _wait_for_packet(self) -> int:
+        """Receive the next firmware packet into ``_motor_buffer`` (watchdog); returns its size."""
         buffer = self._motor_buffer
         deadline: float | None = None
         while True:
             try:
-                size = self._motor_socket.recv_into(buffer)
+                size = self._motor_socket.recv_into(buffer, len(buffer), socket.MSG_TRUNC)
             except (BlockingIOError, TimeoutError):
                 self._check_alive()
                 now = time.monotonic()
@@ -502,9 +545,8 @@ class SitlProcess:
                         str(self.log_path),
                     ) from None
                 continue
-            if size >= MOTOR_STRUCT.size:
-                m0, m1, m2, m3 = MOTOR_STRUCT.unpack_from(buffer)
-                return (m0, m1, m2, m3)
+            if size == MOTOR_STRUCT.size:
+                return size
 
     def _check_alive(self) -> None:
         process = self._resources.process

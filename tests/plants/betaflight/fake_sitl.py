@@ -2,7 +2,8 @@
 """A stand-in for the lockstep SITL binary, speaking its UDP protocol (for fast tests).
 
 Answers every state packet with one motor packet: (number of RC packets
-received so far, last RC throttle channel / 1000, state timestamp, 0).
+received so far, last RC throttle channel / 1000, state timestamp, 0, then
+zeros for the set point and PID terms: the 76-byte lockstep packet).
 FAKE_SITL_MODE=exit makes it exit before getting ready; =mute makes it
 never answer.
 """
@@ -36,6 +37,6 @@ while True:
         throttle = struct.unpack("<d16H", rc_packet)[3] / 1000.0
     if mode != "mute":
         motors.sendto(
-            struct.pack("<4f", rc_count, throttle, struct.unpack_from("<d", packet)[0], 0.0),
+            struct.pack("<4f3f12f", rc_count, throttle, struct.unpack_from("<d", packet)[0], 0.0, *([0.0] * 15)),
             ("127.0.0.1", udp_base + 2),
         )

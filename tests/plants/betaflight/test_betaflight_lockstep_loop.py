@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 import socket
-import struct
 import time
 from pathlib import Path
 
@@ -123,4 +122,5 @@ def test_the_firmware_packet_is_received_whole() -> None:
     with _fake_flight() as flight:
         assert flight.block.nbytes == MOTOR_STRUCT.size and flight.motors.base is not None
         flight.frame(tuple([1500] * 16))
-        assert struct.unpack_from("<4f", flight.block.tobytes()) == tuple(float(v) for v in flight.motors)
+        assert MOTOR_STRUCT.unpack_from(flight.block.tobytes()) == tuple(float(v) for v in flight.motors)
+        assert flight.motors.size == 19  # motors, then the set point and the P, I, D, F terms

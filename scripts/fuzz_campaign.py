@@ -314,6 +314,11 @@ class Option:
     def required(self) -> bool:
         return bool(self.action.required) if self.names else self.action.nargs not in ("?", "*")
 
+    @property
+    def arity(self) -> int:
+        """How many values the option takes after its name (``nargs=2`` options such as --window-s take two)."""
+        return self.action.nargs if isinstance(self.action.nargs, int) and self.action.nargs > 1 else 1
+
     def mentions(self) -> list[str]:
         """What an error message about this option may call it."""
         out = list(self.names) + [self.dest]
@@ -526,6 +531,17 @@ def draw_invocation(rng: random.Random, cmd: Command, fx: Fixtures, all_cmds: li
             tokens.append([opt.names[-1]])
             return
         name = rng.choice(opt.names)
+        if opt.arity > 1:  # `--window-s A B`: the same value n times; one value alone is refused, naming the option
+            if read_as_option(value) or rng.random() < 0.1:
+                tokens.append([f"{name}={value}"])
+                bad.extend(opt.mentions())
+                why.append(f"{name} {value!r} (one value of {opt.arity})")
+                return
+            tokens.append([name, *([value] * opt.arity)])
+            if opt.refuses(value):
+                bad.extend(opt.mentions())
+                why.append(f"{name} {value!r}")
+            return
         as_option = read_as_option(value) and not negative_rewritten(value)
         if as_option and rng.random() < 0.5:
             tokens.append([f"{name}={value}"])

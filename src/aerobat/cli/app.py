@@ -106,13 +106,13 @@ def _one_line(exc: BaseException) -> str:
 
 
 def _valued_options(parser: argparse.ArgumentParser) -> set[str]:
-    """Every option string that takes a value, in any command."""
+    """Every option string that takes one value, in any command."""
     out: set[str] = set()
     for action in parser._actions:  # noqa: SLF001 - argparse has no public list of its actions
         if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
             for sub in action.choices.values():
                 out |= _valued_options(sub)
-        elif action.option_strings and action.nargs != 0:
+        elif action.option_strings and action.nargs in (None, "?"):  # one value; `--window-s -1 5` is argparse's
             out.update(action.option_strings)
     return out
 

@@ -242,7 +242,7 @@ def register(sub: Any) -> None:
                         formatter_class=HelpFormatter)
     common(q)
     q.add_argument("--out", metavar="DIR", default=None, help="folder for the figures (default: out/log-FILE)")
-    q.add_argument("--window-s", nargs=2, type=float, metavar=("START", "END"), default=None,
+    q.add_argument("--window-s", nargs=2, type=finite_float(0.0, 1e6, "s"), metavar=("START", "END"), default=None,
                    help="only this time window of the traces [s] (default: the whole log)")
     q.add_argument("--force", action="store_true", help="replace figures that exist")
     q.add_argument("--json", action="store_true", help="print the figures written as one JSON object")

@@ -64,7 +64,7 @@ _MARGIN_S = 0.015  # program's hover command after its end (the estimate looks 1
 _LANDING_SPEED_M_S = 1.0
 
 
-class _Stop(Exception):
+class TrialStop(Exception):
     """A trial ends early with ``status`` (crash, abort); the message says why."""
 
     def __init__(self, status: TrialStatus, message: str) -> None:
@@ -272,7 +272,7 @@ class BetaflightPlant:
             info["maneuver_frames_dropped"] = flight.frames_dropped - dropped
             self.fly_to(flight, self.start_m, pilot.return_time_s, check=True)
             info["returned_error_m"] = float(np.linalg.norm(flight.x[0:3] - self.start_m))
-        except _Stop as stop:
+        except TrialStop as stop:
             info.update(self._timing(flight, wall))
             times, states = (measured_states(flight.mocap(), start_time, flight.time_s, self.start_m)
                              if start_time is not None else (None, None))
@@ -323,7 +323,7 @@ class BetaflightPlant:
             flight.frame(armed)
             if min(flight.motor_commands()) > 0.0:
                 return flight.time_s
-        raise _Stop(TrialStatus.ABORTED, "the firmware did not arm within 1 s of the ARM switch")
+        raise TrialStop(TrialStatus.ABORTED, "the firmware did not arm within 1 s of the ARM switch")
 
     def _estimate(self, flight: Flight) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         pos, vel, quat = np.zeros(3), np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
@@ -348,7 +348,7 @@ class BetaflightPlant:
 
     def _check_volume(self, flight: Flight) -> None:
         if flight.on_floor:
-            raise _Stop(TrialStatus.CRASHED, f"hit the floor at t = {flight.time_s:.3f} s")
+            raise TrialStop(TrialStatus.CRASHED, f"hit the floor at t = {flight.time_s:.3f} s")
         rows = flight.mocap()
         if rows.shape[0] == 0:
             return
@@ -357,7 +357,7 @@ class BetaflightPlant:
         for axis, (lo, hi), name in ((0, vol.x_m, "x"), (1, vol.y_m, "y"), (2, vol.z_m, "z")):
             rel = row[1 + axis] - self.start_m[axis]
             if rel < lo or rel > hi:
-                raise _Stop(TrialStatus.CRASHED, f"left the flight volume at t = {row[0]:.3f} s: {name} = "
+                raise TrialStop(TrialStatus.CRASHED, f"left the flight volume at t = {row[0]:.3f} s: {name} = "
                                                  f"{rel:+.3f} m beyond the {name} limits [{lo:g}, {hi:g}] m")
 
     def settle(self, flight: Flight) -> tuple[float | None, float]:
@@ -377,7 +377,7 @@ class BetaflightPlant:
             return calm[0] >= hold
 
         if not self.fly_to(flight, self.start_m, pilot.settle_timeout_s, check=False, until=settled):
-            raise _Stop(TrialStatus.ABORTED, f"did not settle at the start within {pilot.settle_timeout_s:g} s")
+            raise TrialStop(TrialStatus.ABORTED, f"did not settle at the start within {pilot.settle_timeout_s:g} s")
         return (airborne[0] if airborne else None), flight.time_s
 
     def hover(self, flight: Flight, seconds: float) -> dict[str, float]:

@@ -120,7 +120,7 @@ def replay_sticks(plant: object, track: StickTrack, *, samples_per_frame: int = 
 
     ``progress(done_s, total_s)`` is called about once per simulated second.
     """
-    from aerobat.plants.betaflight.plant import BetaflightPlant, _Stop
+    from aerobat.plants.betaflight.plant import BetaflightPlant, TrialStop
 
     if not isinstance(plant, BetaflightPlant):
         raise TypeError("replay_sticks needs a BetaflightPlant")
@@ -130,7 +130,7 @@ def replay_sticks(plant: object, track: StickTrack, *, samples_per_frame: int = 
         flight.latency_steps = 0
         try:
             armed = plant.power_on_and_arm(flight)
-        except _Stop as stop:
+        except TrialStop as stop:
             raise ConfigError(f"the tune does not arm: {stop}") from None
         flight.release()
         period = 1.0 / params.radio.rate_hz

@@ -152,3 +152,13 @@ def test_the_encodings_no_shared_log_uses():
     assert k._signed_vb(np.array([0x81, 0x01], dtype=np.uint8), 0, 2) == (-65, 2)
     # past the end of the data a read returns 0 and the position passes the end (the frame is dropped)
     assert k._unsigned_vb(np.array([0x80], dtype=np.uint8), 0, 1)[1] > 1
+
+
+def test_the_warm_up_log_decodes_to_its_two_frames():
+    from aerobat.logs.blackbox_decode import warm_up
+
+    frames = warm_up()
+    # I: iteration 7, time 10000 µs (0x90 0x4e); P: iteration 8 (increment), time 10000 (a straight line
+    # through the I frame twice, plus a delta of 0)
+    assert frames.main.tolist() == [[7, 10000], [8, 10000]]
+    assert frames.log_end and frames.notes() == []

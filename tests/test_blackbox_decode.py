@@ -29,13 +29,14 @@ def _ours(data: bytes, index: int):
 
 
 def _reference(path: Path, index: int, fields: int) -> np.ndarray:
-    orangebox = pytest.importorskip("orangebox")
-    import orangebox.reader
+    pytest.importorskip("orangebox")
+    from orangebox import Parser
+    from orangebox.reader import Reader
 
     with quiet_orangebox():
-        reader = orangebox.reader.Reader(str(path))
+        reader = Reader(str(path))
         reader.set_log_index(index)
-        rows = [frame.data[:fields] for frame in orangebox.Parser(reader).frames()]
+        rows = [frame.data[:fields] for frame in Parser(reader).frames()]
     return np.array(rows, dtype=np.int64)
 
 

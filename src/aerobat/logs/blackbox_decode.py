@@ -13,6 +13,7 @@ must give its main-frame tables bit for bit on every shared log.
 from __future__ import annotations
 
 import dataclasses
+
 import numpy as np
 
 from aerobat.errors import ConfigError

@@ -431,7 +431,8 @@ def decode_frames(data, start, end, defs, counts, cfg, main):
             continue
         if mark == I_FRAME or mark == P_FRAME:
             t32 = rows[cur, 1] & 0xFFFFFFFF
-            if last_time >= 0 and t32 < (last_time & 0xFFFFFFFF) and ((t32 - last_time) & 0xFFFFFFFF) < MAX_TIME_JUMP_US:
+            wrapped = last_time >= 0 and t32 < (last_time & 0xFFFFFFFF)
+            if wrapped and ((t32 - last_time) & 0xFFFFFFFF) < MAX_TIME_JUMP_US:
                 rollover += np.int64(1) << 32  # the 32-bit microsecond clock wrapped
             t = t32 + rollover
             rows[cur, 1] = t

@@ -66,13 +66,18 @@ def exit_status(exc: BaseException) -> int:
     return EXIT_INTERNAL
 
 
-def _commands() -> list:
+def _commands(only: str | None = None) -> list:
+    if only == "log":  # the other commands' options name the plants: importing them compiles nothing but
+        from aerobat.cli import log  # loads numba and the arena (~0.5 s of a `log info`), which log needs not
+
+        return [log]
     from aerobat.cli import benchmark, design, identify, learn, log, sessions, setup, simulate, study, vehicles
 
     return [simulate, design, learn, sessions, benchmark, study, identify, vehicles, log, setup]
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The whole command line, or (``only="log"``) just the ``log`` command's part of it."""
     from aerobat import __version__
 
     parser = Parser(prog="aerobat", description="Design and learn fast open-loop quadrocopter maneuvers "
@@ -80,7 +85,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true", help="show tracebacks for errors (accepted anywhere)")
     parser.add_argument("--version", action="version", version=f"aerobat {__version__}")
     sub = parser.add_subparsers(dest="command", parser_class=Parser, metavar="COMMAND")
-    for module in _commands():
+    for module in _commands(only):
         module.register(sub)
     return parser
 
@@ -167,13 +172,18 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _main(argv: Sequence[str] | None) -> int:
-    import matplotlib
+    import os
 
-    matplotlib.use("Agg")  # the command line draws into files; only here is a backend chosen
+    # the command line draws into files; only here is a backend chosen (by matplotlib when, and if,
+    # a command imports it, or now if something already has)
+    os.environ["MPLBACKEND"] = "Agg"
+    if "matplotlib" in sys.modules:
+        sys.modules["matplotlib"].use("Agg")
     standalone = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv
-    parser = build_parser()
+    words = [a for a in argv if not a.startswith("-")]
+    parser = build_parser("log" if words[:1] == ["log"] else None)
     argv = _negative_values([a for a in argv if a != "--debug"], _valued_options(parser))
     if not argv:  # bare `aerobat`: what it can do
         parser.print_help()

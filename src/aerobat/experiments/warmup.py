@@ -13,7 +13,8 @@ continuous playback (with and without rate-loop latency) and sampled playback, t
 batch, a complete arena trial with the onboard feedback (the arena's default, tracking) and
 one in the open loop, and the kernels the RotorPy and Betaflight plants call one by one from
 Python (the onboard feedback, the supervisor's estimate and PD controller, motion capture,
-the Betaflight world and pilot), with the argument types those plants pass.
+the Betaflight world and pilot), with the argument types those plants pass, and the Betaflight
+blackbox decoder (:mod:`aerobat.logs.blackbox_decode`).
 """
 
 from __future__ import annotations
@@ -69,6 +70,9 @@ def _warm_part(part: str) -> None:
     simulate_batch([program, program], config)
     NominalModel(config).final_states([program])
     _plant_kernels(simulate(program, config))
+    from aerobat.logs.blackbox_decode import warm_up as blackbox_decoder
+
+    blackbox_decoder()  # `log info` and `identify --log` on a Betaflight log
 
 
 def _plant_kernels(nominal: object) -> None:

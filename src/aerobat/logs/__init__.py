@@ -9,8 +9,9 @@ the file, in SI units and aerobat's frames (body FLU, world z up). This package 
 >>> logs = read_logs("diatone-roma-f5.bbl")          # doctest: +SKIP
 >>> logs[0].duration_s, logs[0].signal(Channel.GYRO).rate_hz   # doctest: +SKIP
 
-The libraries are the field's: orangebox 0.4.0 for blackbox files, pyulog for ULog (the
-``logs`` extra); the Crazyflie format is read here (:mod:`.crazyflie`).
+ULog is read with the field's library, pyulog (the ``logs`` extra); Betaflight blackbox files
+are decoded here (:mod:`.blackbox_decode`, compiled; orangebox 0.4.0 is the tests' reference)
+and so is the Crazyflie format (:mod:`.crazyflie`).
 """
 
 from __future__ import annotations

@@ -1,9 +1,10 @@
-"""Betaflight blackbox logs (``.bbl``, ``.bfl``, ``.txt``), read with orangebox 0.4.0.
+"""Betaflight blackbox logs (``.bbl``, ``.bfl``, ``.txt``), decoded by aerobat (:mod:`.blackbox_decode`).
 
 A file often holds several logs (one per arming); each is a header of ``H name:value`` lines
 (the firmware, the board, the craft and the whole tune) and delta-encoded frames.
-orangebox decodes the frames; the raw header text is kept as written, so the tune can be
-applied to the firmware as the pilot had it (:mod:`aerobat.plants.betaflight`).
+aerobat's compiled decoder reads the frames (orangebox 0.4.0, which read them before at
+~70 µs a frame, is the tests' reference); the raw header text is kept as written, so the tune
+can be applied to the firmware as the pilot had it (:mod:`aerobat.plants.betaflight`).
 
 Units (Betaflight 4.x, data version 2): ``time`` µs; ``gyroADC`` and ``setpoint[0..2]``
 deg/s; ``accSmooth`` in units of the header's ``acc_1G``; ``motor`` in the header's
@@ -37,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aerobat.errors import ConfigError, MissingDependency
+from aerobat.errors import ConfigError
 from aerobat.quadrotor.flightlog import Channel, FlightLog, LogMetadata, LogSource, MotorLayout, Signal
 
 __all__ = ["QUADX_LAYOUT", "quiet_orangebox", "raw_headers", "read_blackbox"]
@@ -58,7 +59,7 @@ _VERSION = re.compile(r"Betaflight\s+(\d+\.\d+(?:\.\d+)?)")
 
 @contextlib.contextmanager
 def quiet_orangebox() -> Iterator[list[str]]:
-    """orangebox logs warnings (unknown event types) through :mod:`logging`; keep them as notes."""
+    """orangebox (the tests' and benchmark's reference decoder) logs warnings and prints; keep them."""
     records: list[str] = []
 
     class Keep(logging.Handler):
@@ -79,16 +80,6 @@ def quiet_orangebox() -> Iterator[list[str]]:
         logger.removeHandler(handler)
         logger.setLevel(old_level)
         logger.propagate = old_propagate
-
-
-def _orangebox():
-    try:
-        import orangebox
-        import orangebox.reader  # noqa: F401
-    except ImportError as exc:
-        raise MissingDependency("orangebox", extra="logs", purpose="reading Betaflight blackbox logs",
-                                detail=str(exc)) from None
-    return orangebox
 
 
 def raw_headers(data: bytes, start: int) -> dict[str, str]:
@@ -130,45 +121,29 @@ def _layout(headers: dict[str, str], motors: np.ndarray, table: np.ndarray, colu
 
 
 def read_blackbox(path: Path) -> list[FlightLog]:
-    """Every log in a blackbox file, in order."""
-    orangebox = _orangebox()
+    """Every log in a blackbox file, in order (decoded by :mod:`aerobat.logs.blackbox_decode`)."""
+    from aerobat.logs.blackbox_decode import log_starts
+
     data = path.read_bytes()
-    with quiet_orangebox() as warnings:
-        try:
-            reader = orangebox.reader.Reader(str(path), allow_invalid_header=False)
-        except Exception as exc:  # noqa: BLE001 - orangebox raises bare exceptions on damaged files
-            raise ConfigError(f"{path}: not a readable blackbox log ({type(exc).__name__}: {exc})") from None
-        pointers = list(reader.log_pointers)
-        if not pointers:
-            raise ConfigError(f"{path}: no blackbox log in the file")
-        logs = [_read_one(path, orangebox, reader, data, i, len(pointers), pointers, warnings)
-                for i in range(1, len(pointers) + 1)]
-    return logs
+    starts = log_starts(data)
+    if not starts:
+        raise ConfigError(f"{path}: no blackbox log in the file (no 'H Product:Blackbox flight data recorder' line)")
+    ends = [*starts[1:], len(data)]
+    return [_read_one(path, data, i + 1, len(starts), starts[i], ends[i]) for i in range(len(starts))]
 
 
-def _read_one(path: Path, orangebox, reader, data: bytes, index: int, count: int, pointers: list[int],
-              warnings: list[str]) -> FlightLog:
-    headers = raw_headers(data, pointers[index - 1])
+def _read_one(path: Path, data: bytes, index: int, count: int, start: int, end: int) -> FlightLog:
+    from aerobat.logs.blackbox_decode import decode_blackbox
+
+    headers = raw_headers(data, start)
     where = f"{path}: log {index}"
-    if "Field I name" not in headers:
-        raise ConfigError(f"{where}: the header has no field definitions (a damaged or truncated header)")
-    warnings.clear()
-    try:
-        reader.set_log_index(index)
-        parser = orangebox.Parser(reader)
-        names = list(parser.field_names)
-        rows = [frame.data for frame in parser.frames()]
-    except Exception as exc:  # noqa: BLE001
-        raise ConfigError(f"{where}: not a readable blackbox log ({type(exc).__name__}: {exc})") from None
-    notes = [f"orangebox: {w}" for w in dict.fromkeys(warnings)]
-    if not rows:
-        raise ConfigError(f"{where}: the log holds no frames")
-    main = len(headers["Field I name"].split(","))  # the main frame's fields: integers, always present
-    try:
-        table = np.array([r[:main] for r in rows], dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{where}: frames that do not decode to numbers ({exc})") from None
-    columns = {name: i for i, name in enumerate(names[:main])}
+    frames = decode_blackbox(data, start, end, headers, where)
+    notes = frames.notes()
+    if not len(frames.main):
+        raise ConfigError(f"{where}: the log holds no frames" + (f" ({'; '.join(notes)})" if notes else ""))
+    names = list(frames.names)
+    table = frames.main.astype(np.float64)
+    columns = {name: i for i, name in enumerate(names)}
 
     def field(name: str) -> np.ndarray:
         return table[:, columns[name]]

@@ -228,3 +228,42 @@ def test_an_abandoned_local_run_ends_its_workers_at_once():
         for pid, _ in alive(descendants(os.getpid())):
             if "spawn_main" in _cmdline(pid):
                 os.kill(pid, signal.SIGKILL)
+
+
+def test_sigkill_of_a_betaflight_study_leaves_no_firmware(tmp_path, commands):
+    """Each worker's SITL firmware dies with its worker, which dies with the study (PR_SET_PDEATHSIG chain)."""
+    from aerobat.plants.betaflight.build import BINARY_NAME, ensure_sitl
+    from aerobat.plants.betaflight.errors import FirmwareUnavailable
+
+    try:
+        ensure_sitl()
+    except FirmwareUnavailable as error:
+        pytest.skip(f"Betaflight SITL unavailable: {error}")
+
+    def firmware(processes: set[tuple[int, str]]) -> set[tuple[int, str]]:
+        found = set()
+        for pid, start in processes:
+            try:
+                if Path(os.readlink(f"/proc/{pid}/exe")).name == BINARY_NAME:
+                    found.add((pid, start))
+            except OSError:
+                continue
+        return found
+
+    run = start(commands, ["study", "rules", "flip", "--flips", "1", "--max-rate-deg-s", "800", "--dims", "2",
+                           "--vehicle", "fpv5", "--plant", "betaflight", "--methods", "paper", "--seeds", "4",
+                           "--trials", "30", "--workers", "2", "--db", str(tmp_path / "s.sqlite"),
+                           "--out", str(tmp_path / "o")], tmp_path)
+    assert run.wait_for(lambda: any("jobs to run" in line for line in run.out), 120), "".join(run.err)
+
+    def flying() -> bool:
+        run.seen |= descendants(run.proc.pid)
+        return len(firmware(alive(run.seen))) >= 2
+
+    assert wait_until(flying, 120), f"no two firmware processes: {[_cmdline(p) for p, _ in run.seen]}"
+    assert run.proc.poll() is None
+    children = alive(run.seen)
+    run.proc.send_signal(signal.SIGKILL)
+    assert run.proc.wait(10) == -signal.SIGKILL
+    assert wait_until(lambda: not alive(children), 20), [_cmdline(p) for p, _ in alive(children)]
+    assert run.streams_closed(10)

@@ -267,3 +267,28 @@ def test_sigkill_of_a_betaflight_study_leaves_no_firmware(tmp_path, commands):
     assert run.proc.wait(10) == -signal.SIGKILL
     assert wait_until(lambda: not alive(children), 20), [_cmdline(p) for p, _ in alive(children)]
     assert run.streams_closed(10)
+
+
+def test_a_firmware_build_tool_stops_when_its_owner_is_killed(tmp_path):
+    """``make`` (pip, patch) of a Betaflight build whose owner got SIGKILL used to run on, unowned."""
+    marker = tmp_path / "tool-started"
+    owner = (f"from pathlib import Path\n"
+             f"from aerobat.plants.betaflight.build import _run_logged\n"
+             f"_run_logged(['sh', '-c', 'touch {marker}; exec sleep 300'], Path({str(tmp_path)!r}), "
+             f"Path({str(tmp_path / 'build.log')!r}), 'a build step')\n")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(SRC), *filter(None, [os.environ.get("PYTHONPATH")])])}
+    proc = subprocess.Popen([sys.executable, "-c", owner], env=env)
+    seen: set[tuple[int, str]] = set()
+    try:
+        assert wait_until(marker.exists, 60)
+        seen = descendants(proc.pid)
+        assert any("sleep" in _cmdline(pid) for pid, _ in seen)
+        proc.kill()
+        assert proc.wait(10) == -signal.SIGKILL
+        assert wait_until(lambda: not alive(seen), 10), [_cmdline(p) for p, _ in alive(seen)]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        for pid, _ in alive(seen):
+            os.kill(pid, signal.SIGKILL)

@@ -292,3 +292,23 @@ def test_a_firmware_build_tool_stops_when_its_owner_is_killed(tmp_path):
             proc.wait()
         for pid, _ in alive(seen):
             os.kill(pid, signal.SIGKILL)
+
+
+def test_sigterm_inside_an_ipopt_solve_stops_after_it():
+    """CasADi swallows the KeyboardInterrupt a signal handler raises inside IPOPT; SIGTERM's Stopped comes back out."""
+    from aerobat.cli.stopping import Stopped, sigterm_stops
+    from aerobat.quadrotor.timeoptimal.transcription import run_solver
+
+    def solver(**inputs):
+        try:  # what CasADi does with the exception of a signal handler
+            signal.raise_signal(signal.SIGTERM)
+        except KeyboardInterrupt:
+            pass
+        return "solved"
+
+    before = signal.getsignal(signal.SIGTERM)
+    with sigterm_stops():
+        with pytest.raises(Stopped) as info:
+            run_solver(solver)
+    assert info.value.signum == signal.SIGTERM
+    assert signal.getsignal(signal.SIGTERM) is before

@@ -53,14 +53,13 @@ def _completed(futures: Iterable[Future]) -> Iterator[Future]:
     previous: dict[int, Any] = {}
     if threading.current_thread() is threading.main_thread():
         for signum in _DEFERRED_SIGNALS:
-            handler = signal.getsignal(signum)
-            if callable(handler):
-                previous[signum] = signal.signal(signum, lambda signum, frame: caught.append(signum))
+            if callable(signal.getsignal(signum)):
+                previous[signum] = signal.signal(signum, lambda number, frame: caught.append(number))
 
     def deliver() -> None:
         while caught:
-            signum = caught.pop(0)
-            previous[signum](signum, None)
+            number = caught.pop(0)
+            previous[number](number, None)
 
     try:
         while pending:
@@ -70,8 +69,8 @@ def _completed(futures: Iterable[Future]) -> Iterator[Future]:
                 yield future
                 deliver()
     finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
+        for number, handler in previous.items():
+            signal.signal(number, handler)
 
 
 class Executor(Protocol):

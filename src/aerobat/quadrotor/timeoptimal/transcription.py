@@ -25,8 +25,11 @@ def run_solver(solver: Any, **kwargs: Any) -> Any:
     """
     if threading.current_thread() is not threading.main_thread():
         return solver(**kwargs)
-    previous = {signum: signal.getsignal(signum) for signum in (signal.SIGINT, signal.SIGTERM)}
-    previous = {signum: handler for signum, handler in previous.items() if callable(handler)}
+    previous: dict[int, Any] = {}
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        current = signal.getsignal(signum)
+        if callable(current):
+            previous[signum] = current
     if not previous:
         return solver(**kwargs)
     interrupted: list[BaseException] = []
@@ -38,13 +41,13 @@ def run_solver(solver: Any, **kwargs: Any) -> Any:
             interrupted.append(exc)
             raise
 
-    for signum in previous:
-        signal.signal(signum, handler)
+    for number in previous:
+        signal.signal(number, handler)
     try:
         result = solver(**kwargs)
     finally:
-        for signum, old in previous.items():
-            signal.signal(signum, old)
+        for number, old in previous.items():
+            signal.signal(number, old)
     if interrupted:
         raise interrupted[0]
     return result

@@ -312,3 +312,23 @@ def test_sigterm_inside_an_ipopt_solve_stops_after_it():
             run_solver(solver)
     assert info.value.signum == signal.SIGTERM
     assert signal.getsignal(signal.SIGTERM) is before
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_while_a_dask_run_waits_is_raised_between_waits(signum):
+    """As for the local pool: SIGINT and SIGTERM inside distributed's waiting could land inside its locks."""
+    distributed = pytest.importorskip("distributed")
+    from aerobat.cli.stopping import sigterm_stops
+    from aerobat.experiments.execution import DaskExecutor
+    from aerobat.experiments.job import Job
+
+    seen = []
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) \
+            as cluster, distributed.Client(cluster) as client, sigterm_stops():
+        before = signal.getsignal(signum)
+        with pytest.raises(KeyboardInterrupt):
+            for _job, _result in DaskExecutor(client=client).run([Job(f"k{i}", "no-such-kind", {}) for i in range(4)]):
+                seen.append(signal.getsignal(signum))
+                signal.raise_signal(signum)
+        assert signal.getsignal(signum) is before
+    assert len(seen) == 1 and seen[0] is not before

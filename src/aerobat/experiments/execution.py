@@ -12,10 +12,12 @@ variable ``DASK_SCHEDULER_ADDRESS``).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import threading
-from collections.abc import Iterable, Iterator
+import time
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from typing import Any, Protocol
 
@@ -38,17 +40,17 @@ def _collect(future: Any) -> JobResult:
 _DEFERRED_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
-def _completed(futures: Iterable[Future]) -> Iterator[Future]:
-    """Futures as they complete, like ``as_completed``, with SIGINT and SIGTERM handled only between waits.
+@contextlib.contextmanager
+def _signals_deferred() -> Iterator[Callable[[], None]]:
+    """SIGINT and SIGTERM only noted while inside; the function yielded runs their handlers now.
 
-    A KeyboardInterrupt raised asynchronously inside the pool's locks (``as_completed`` holds
+    A KeyboardInterrupt raised asynchronously inside a pool's locks (``as_completed`` holds
     them while it waits) can leave a lock released twice: the interrupted command then dies of
-    ``RuntimeError: release unlocked lock`` instead of stopping. Here a signal whose handler is a
+    ``RuntimeError: release unlocked lock`` instead of stopping. Inside, a signal whose handler is a
     Python function (SIGINT's default raises KeyboardInterrupt; the command line's SIGTERM handler
-    raises too) only sets a flag, on the main thread; the flag is checked every 0.2 s and between
-    results, and the handler is called from there (whatever it raises comes out of this loop).
+    raises too) only sets a flag, on the main thread; the waiting loop calls the function yielded
+    between waits, which calls the handlers (whatever they raise comes out of the loop).
     """
-    pending = set(futures)
     caught: list[int] = []
     previous: dict[int, Any] = {}
     if threading.current_thread() is threading.main_thread():
@@ -62,15 +64,23 @@ def _completed(futures: Iterable[Future]) -> Iterator[Future]:
             previous[number](number, None)
 
     try:
+        yield deliver
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+
+
+def _completed(futures: Iterable[Future]) -> Iterator[Future]:
+    """Futures as they complete, like ``as_completed``, with SIGINT and SIGTERM handled only between waits
+    (every 0.2 s and between results; see :func:`_signals_deferred`)."""
+    pending = set(futures)
+    with _signals_deferred() as deliver:
         while pending:
             deliver()
             done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
             for future in done:
                 yield future
                 deliver()
-    finally:
-        for number, handler in previous.items():
-            signal.signal(number, handler)
 
 
 class Executor(Protocol):
@@ -179,8 +189,16 @@ class DaskExecutor:
                                   pure=False)
         index = {f.key: job for f, job in zip(futures, jobs, strict=True)}
         try:
-            for future in dask_completed(futures):
-                yield index[future.key], _collect(future)
+            with _signals_deferred() as deliver:  # as for the local pool: signals only between waits
+                completed = dask_completed(futures)
+                while not completed.is_empty():
+                    deliver()
+                    batch = completed.next_batch(block=False)
+                    if not batch:
+                        time.sleep(0.1)
+                    for future in batch:
+                        yield index[future.key], _collect(future)
+                        deliver()
         finally:
             self.client.cancel(futures)
 

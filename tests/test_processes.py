@@ -28,7 +28,7 @@ PROGRESS = re.compile(r"^\s+\[(\d+)/(\d+)\] ")
 # 2 × 20 envelope designs (a few tenths of a second each): the study runs for seconds after its first result
 ENVELOPE = ["study", "envelope", "--flips", "1,2", "--rates-deg-s", "600:2000:20", "--workers", "2"]
 ROBUSTNESS = ["study", "robustness", "flip", "--dims", "2", "--flips", "1", "--max-rate-deg-s", "800",
-              "--vehicles", "30", "--trials", "3", "--workers", "2"]
+              "--vehicles", "16", "--trials", "3", "--workers", "2"]
 
 
 def identity(pid: int) -> tuple[int, str] | None:

@@ -202,9 +202,12 @@ def _main(argv: Sequence[str] | None) -> int:
         return EXIT_USAGE
     try:
         return int(args.func(args))
-    except KeyboardInterrupt:
-        print("aerobat: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM where a command turns it into Stopped
+        from aerobat.cli.stopping import Stopped
+
+        stopped = exc if isinstance(exc, Stopped) else None
+        print(f"aerobat: {stopped.message if stopped else 'interrupted'}", file=sys.stderr)
+        return 128 + (stopped.signum if stopped else 2)
     except BrokenPipeError:  # `aerobat … | head`: the reader left; nothing more to say
         return EXIT_FAILED
     except Exception as exc:

@@ -10,8 +10,11 @@ included) and writes where the study wrote.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
+import shlex
+import signal
 import time
 from pathlib import Path
 from typing import Any
@@ -36,6 +39,7 @@ from aerobat.cli.common import (
     text_path,
     with_tune_from_args,
 )
+from aerobat.cli.stopping import Stopped, sigterm_stops
 from aerobat.errors import ConfigError, DesignFailed
 
 __all__ = ["add_execution_options", "register", "report_failures", "run_cli_study"]
@@ -58,6 +62,7 @@ def run_cli_study(args: argparse.Namespace, kind: str, spec: dict[str, Any], job
 
     def on_start(study_id: int, todo: int, done: int) -> None:
         state["first"] = done
+        state["study"] = study_id
         out_console.print(f"study {study_id} ({kind}): {todo} jobs to run, {done} already done "
                           f"(resume with --resume {study_id})", soft_wrap=True)
         out_console.file.flush()
@@ -71,13 +76,51 @@ def run_cli_study(args: argparse.Namespace, kind: str, spec: dict[str, Any], job
                           f"(elapsed {elapsed:.0f} s, about {eta:.0f} s left)", soft_wrap=True)
         out_console.file.flush()
 
-    with open_store(args) as store:
-        outcome = run_study(store, kind, spec, jobs, resume=args.resume, workers=args.workers,
-                            scheduler=args.scheduler, progress=progress, on_start=on_start, command=args.argv)
+    with open_store(args) as store, sigterm_stops(standalone=getattr(args, "standalone", False)):
+        try:
+            outcome = run_study(store, kind, spec, jobs, resume=args.resume, workers=args.workers,
+                                scheduler=args.scheduler, progress=progress, on_start=on_start,
+                                command=args.argv)
+        except KeyboardInterrupt as exc:  # SIGINT or SIGTERM: every finished job is stored, the workers ended
+            if "study" not in state:
+                raise
+            signum = getattr(exc, "signum", signal.SIGINT)
+            study_id, total = state["study"], len(jobs)
+            done = len(store.finished_study_jobs(study_id))
+            raise Stopped(signum, f"interrupted by {signal.Signals(signum).name}: study {study_id} stopped with "
+                                  f"{done} of {total} jobs stored; resume with: "
+                                  f"{_resume_command(getattr(args, 'argv', None), study_id)}") from None
         stored = store.study(outcome.study_id).out_dir
         out = output_dir(args.out or stored or f"out/study-{outcome.study_id}")
         store.set_study_out_dir(outcome.study_id, str(out))
     return outcome, out
+
+
+def _resume_command(argv: list[str] | None, study_id: int) -> str:
+    """The command line that resumes the study: the one given, its ``--resume`` replaced."""
+    if not argv:
+        return f"the same command with --resume {study_id}"
+    words: list[str] = []
+    skip = False
+    for word in argv:
+        if skip:
+            skip = False
+        elif word == "--resume":
+            skip = True
+        elif not word.startswith("--resume="):
+            words.append(word)
+    return shlex.join(["aerobat", *words, "--resume", str(study_id)])
+
+
+def _stoppable(command: Any) -> Any:
+    """The study command, with SIGTERM ending it like Ctrl-C (:mod:`aerobat.cli.stopping`)."""
+
+    @functools.wraps(command)
+    def run(args: argparse.Namespace) -> int:
+        with sigterm_stops(standalone=getattr(args, "standalone", False)):
+            return int(command(args))
+
+    return run
 
 
 def report_failures(outcome: Any) -> None:
@@ -391,7 +434,7 @@ def register(sub: Any) -> None:
     rob.add_argument("--tune-log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
                      help="which log of a blackbox file gives the tune (default 1)")
     add_execution_options(rob)
-    rob.set_defaults(func=_cmd_robustness)
+    rob.set_defaults(func=_stoppable(_cmd_robustness))
 
     rules = ssub.add_parser("rules", help="every update rule and two model-free baselines, side by side",
                             formatter_class=fmt)
@@ -404,7 +447,7 @@ def register(sub: Any) -> None:
     add_plant_options(rules, kinds=("arena", "rotorpy", "betaflight"))
     rules.set_defaults(seed=1)
     add_execution_options(rules)
-    rules.set_defaults(func=_cmd_rules)
+    rules.set_defaults(func=_stoppable(_cmd_rules))
 
     fb = ssub.add_parser("feedback", help="open loop and each onboard feedback scheme side by side, across "
                          "scenarios", formatter_class=fmt)
@@ -420,7 +463,7 @@ def register(sub: Any) -> None:
     add_plant_options(fb, kinds=("arena", "rotorpy", "betaflight"))
     fb.set_defaults(seed=0)
     add_execution_options(fb)
-    fb.set_defaults(func=_cmd_feedback)
+    fb.set_defaults(func=_stoppable(_cmd_feedback))
 
     env = ssub.add_parser("envelope", help="design a grid of flips and map feasibility, duration, height, "
                           "conditioning", formatter_class=fmt)
@@ -431,7 +474,7 @@ def register(sub: Any) -> None:
     env.add_argument("--vehicle", default="hummingbird", help="design vehicle: preset or TOML file")
     env.add_argument("--json", action="store_true", help="print one JSON object")
     add_execution_options(env)
-    env.set_defaults(func=_cmd_envelope)
+    env.set_defaults(func=_stoppable(_cmd_envelope))
 
 
 def _default_methods() -> tuple[str, ...]:

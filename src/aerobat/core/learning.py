@@ -29,6 +29,8 @@ from aerobat.core.rules.registry import RuleChoice, make_rule
 from aerobat.errors import ConfigError, DesignFailed
 
 __all__ = [
+    "MAX_ATTEMPTS",
+    "MAX_ITERATIONS",
     "Iteration",
     "IterationStatus",
     "Learner",
@@ -386,6 +388,14 @@ class Learner:
             raise ConfigError(f"learner state: {type(exc).__name__}: {exc}") from None
 
 
+MAX_ITERATIONS = 10_000
+"""The most measured trials one :func:`learn` call takes: every record (with its trial) is kept in
+memory for the returned :class:`Session`, tens of kilobytes each (a durable session has the same cap)."""
+MAX_ATTEMPTS = 3 * MAX_ITERATIONS + 10
+"""The most trials one :func:`learn` call flies, lost and rejected ones included (its default cap at
+:data:`MAX_ITERATIONS`)."""
+
+
 def learn(
     maneuver: Maneuver,
     design: Design,
@@ -407,12 +417,13 @@ def learn(
     ----------
     maneuver, design : what to learn and its nominal design (p⁰, C).
     plant : anything implementing :class:`~aerobat.core.plant.Plant`.
-    iterations : number of measured trials (``ok``) to learn from.
+    iterations : number of measured trials (``ok``) to learn from, 0 … :data:`MAX_ITERATIONS`.
     rule : update rule; default the paper's, with ``design.correction`` and γ = max(1/i, 0.1).
     learner : continue this learner instead of starting a new one (``rule`` and ``start_params``
         must then be None).
     start_params : start from these parameters instead of p⁰.
-    max_attempts : cap on trials including lost and rejected ones (default 3 × iterations + 10).
+    max_attempts : cap on trials including lost and rejected ones (default 3 × iterations + 10; at most
+        :data:`MAX_ATTEMPTS`).
     on_iteration : called with every record as soon as it exists (stores, progress output).
     should_stop : polled between trials; True ends the session as ``interrupted``.
     force : learn even from a design that did not converge (``aerobat learn --force``).
@@ -433,13 +444,14 @@ def learn(
     if not force and getattr(design, "converged", True) is False:
         raise DesignFailed(f"design failed, nothing to learn: {design.message} (learn(..., force=True) learns from "
                            f"it anyway)", design)
-    if isinstance(iterations, bool) or not isinstance(iterations, int | np.integer) or iterations < 0:
-        raise ConfigError(f"iterations = {short_repr(iterations)}: expected an integer >= 0")
+    if isinstance(iterations, bool) or not isinstance(iterations, int | np.integer) or \
+            not 0 <= iterations <= MAX_ITERATIONS:
+        raise ConfigError(f"iterations = {short_repr(iterations)}: allowed integers 0 … {MAX_ITERATIONS}")
     if not callable(getattr(plant, "fly", None)):
         raise ConfigError(f"plant: expected a plant (with fly(program), e.g. Arena(config)), got "
                           f"{type(plant).__name__} {short_repr(plant)}")
     if max_attempts is not None:
-        check_int("max_attempts", max_attempts, low=1)
+        check_int("max_attempts", max_attempts, low=1, high=MAX_ATTEMPTS)
     if learner is None:
         learner = Learner(maneuver, design, rule=rule, params=start_params, **options)
     elif rule is not None or start_params is not None or options:

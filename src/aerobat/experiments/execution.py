@@ -12,17 +12,19 @@ variable ``DASK_SCHEDULER_ADDRESS``).
 
 from __future__ import annotations
 
+import contextlib
 import gc
-import multiprocessing
 import os
 import signal
 import threading
-from collections.abc import Iterable, Iterator
+import time
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from typing import Any, Protocol
 
 from aerobat.errors import ConfigError
 from aerobat.experiments.job import Job, JobResult, JobStatus, run_job
+from aerobat.experiments.lifetime import process_pool
 
 __all__ = ["DaskExecutor", "Executor", "LocalExecutor", "make_executor"]
 
@@ -36,33 +38,50 @@ def _collect(future: Any) -> JobResult:
     return result if isinstance(result, JobResult) else JobResult(JobStatus.FAILED, {}, f"bad job result {result!r}")
 
 
-def _completed(futures: Iterable[Future]) -> Iterator[Future]:
-    """Futures as they complete, like ``as_completed``, with Ctrl-C raised only between waits.
+_DEFERRED_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
-    A KeyboardInterrupt raised asynchronously inside the pool's locks (``as_completed`` holds
+
+@contextlib.contextmanager
+def _signals_deferred() -> Iterator[Callable[[], None]]:
+    """SIGINT and SIGTERM only noted while inside; the function yielded runs their handlers now.
+
+    A KeyboardInterrupt raised asynchronously inside a pool's locks (``as_completed`` holds
     them while it waits) can leave a lock released twice: the interrupted command then dies of
-    ``RuntimeError: release unlocked lock`` instead of stopping. Here a Ctrl-C only sets a flag
-    (when the default handler is in place, on the main thread), checked every 0.2 s and between
-    results, and is raised from there.
+    ``RuntimeError: release unlocked lock`` instead of stopping. Inside, a signal whose handler is a
+    Python function (SIGINT's default raises KeyboardInterrupt; the command line's SIGTERM handler
+    raises too) only sets a flag, on the main thread; the waiting loop calls the function yielded
+    between waits, which calls the handlers (whatever they raise comes out of the loop).
     """
-    pending = set(futures)
-    interrupted: list[int] = []
-    previous = None
-    if threading.current_thread() is threading.main_thread() and \
-            signal.getsignal(signal.SIGINT) is signal.default_int_handler:
-        previous = signal.signal(signal.SIGINT, lambda signum, frame: interrupted.append(signum))
+    caught: list[int] = []
+    previous: dict[int, Any] = {}
+    if threading.current_thread() is threading.main_thread():
+        for signum in _DEFERRED_SIGNALS:
+            if callable(signal.getsignal(signum)):
+                previous[signum] = signal.signal(signum, lambda number, frame: caught.append(number))
+
+    def deliver() -> None:
+        while caught:
+            number = caught.pop(0)
+            previous[number](number, None)
+
     try:
+        yield deliver
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+
+
+def _completed(futures: Iterable[Future]) -> Iterator[Future]:
+    """Futures as they complete, like ``as_completed``, with SIGINT and SIGTERM handled only between waits
+    (every 0.2 s and between results; see :func:`_signals_deferred`)."""
+    pending = set(futures)
+    with _signals_deferred() as deliver:
         while pending:
-            if interrupted:
-                raise KeyboardInterrupt
+            deliver()
             done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
             for future in done:
                 yield future
-                if interrupted:
-                    raise KeyboardInterrupt
-    finally:
-        if previous is not None:
-            signal.signal(signal.SIGINT, previous)
+                deliver()
 
 
 class Executor(Protocol):
@@ -83,13 +102,19 @@ def _worker_init() -> None:
 
 
 class LocalExecutor:
-    """A process pool on this machine (spawned workers, one simulation thread each)."""
+    """A process pool on this machine (spawned workers, one simulation thread each).
+
+    The workers never outlive this process (:mod:`aerobat.experiments.lifetime`), and a run that
+    is abandoned (an interrupt, an error while recording a result, a consumer that stops
+    iterating) ends them at once: the jobs they were running are not waited for.
+    """
 
     def __init__(self, workers: int | None = None) -> None:
         self.workers = workers or os.cpu_count() or 1
         if isinstance(self.workers, bool) or not isinstance(self.workers, int) or not 1 <= self.workers <= 1024:
             raise ConfigError(f"workers = {self.workers!r}: allowed integers 1 … 1024")
         self._pool: ProcessPoolExecutor | None = None
+        self._owner: threading.Thread | None = None  # the thread that started the pool's workers
 
     def run(self, jobs: Iterable[Job]) -> Iterator[tuple[Job, JobResult]]:
         jobs = list(jobs)
@@ -99,16 +124,36 @@ class LocalExecutor:
             for job in jobs:
                 yield job, run_job(job)
             return
+        if self._pool is not None and self._owner is not threading.current_thread():
+            self.close()  # its workers die with the thread that started them (PR_SET_PDEATHSIG)
         if self._pool is None:
-            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
-                                             initializer=_worker_init)
+            self._pool = process_pool(self.workers, _worker_init)
+            self._owner = threading.current_thread()
         futures = {self._pool.submit(run_job, job): job for job in jobs}
+        finished = False
         try:
             for future in _completed(futures):
                 yield futures[future], _collect(future)
+            finished = True
         finally:
-            for future in futures:
-                future.cancel()
+            if not finished:
+                self._stop()
+
+    def _stop(self) -> None:
+        """End the workers now (SIGTERM, then SIGKILL after 5 s) and forget the pool."""
+        pool, self._pool = self._pool, None
+        if pool is None:
+            return
+        # the pool has no public list of its processes before Python 3.14 (terminate_workers)
+        processes = list((getattr(pool, "_processes", None) or {}).values())
+        for process in processes:
+            process.terminate()
+        for process in processes:
+            process.join(timeout=5.0)
+            if process.is_alive():
+                process.kill()
+                process.join(timeout=5.0)
+        pool.shutdown(wait=True, cancel_futures=True)
 
     def close(self) -> None:
         if self._pool is not None:
@@ -153,8 +198,16 @@ class DaskExecutor:
                                   pure=False)
         index = {f.key: job for f, job in zip(futures, jobs, strict=True)}
         try:
-            for future in dask_completed(futures):
-                yield index[future.key], _collect(future)
+            with _signals_deferred() as deliver:  # as for the local pool: signals only between waits
+                completed = dask_completed(futures)
+                while not completed.is_empty():
+                    deliver()
+                    batch = completed.next_batch(block=False)
+                    if not batch:
+                        time.sleep(0.1)
+                    for future in batch:
+                        yield index[future.key], _collect(future)
+                        deliver()
         finally:
             self.client.cancel(futures)
 

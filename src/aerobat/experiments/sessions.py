@@ -31,7 +31,7 @@ import numpy as np
 
 from aerobat.config import as_float_array, check_int, check_type, short_repr
 from aerobat.core.design import Design, design
-from aerobat.core.learning import Iteration, Learner, SessionStatus, learn
+from aerobat.core.learning import MAX_ITERATIONS, Iteration, Learner, SessionStatus, learn
 from aerobat.core.maneuver import Maneuver, check_maneuver, position_indices
 from aerobat.core.plant import Plant, StatefulPlant
 from aerobat.core.registry import from_spec
@@ -186,8 +186,9 @@ def _warnings(message: str) -> list[str]:
 
 
 def _check_target(iterations: Any) -> int:
-    if isinstance(iterations, bool) or not isinstance(iterations, int | np.integer) or not 1 <= iterations <= 10000:
-        raise ConfigError(f"iterations = {iterations!r}: allowed integers 1 … 10000")
+    if isinstance(iterations, bool) or not isinstance(iterations, int | np.integer) or \
+            not 1 <= iterations <= MAX_ITERATIONS:
+        raise ConfigError(f"iterations = {short_repr(iterations)}: allowed integers 1 … {MAX_ITERATIONS}")
     return int(iterations)
 
 

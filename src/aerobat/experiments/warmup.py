@@ -36,10 +36,9 @@ def warm_up(workers: int = 2) -> float:
     """
     start = time.perf_counter()
     if workers > 1:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
+        from aerobat.experiments.lifetime import process_pool
 
-        with ProcessPoolExecutor(min(workers, len(PARTS)), mp_context=multiprocessing.get_context("spawn")) as pool:
+        with process_pool(min(workers, len(PARTS))) as pool:  # its workers die with this process
             list(pool.map(_warm_part, PARTS))
     else:
         for part in PARTS:

@@ -392,6 +392,9 @@ def preset(name: str) -> VehicleConfig:
 
     ``preset("hummingbird")`` equals :func:`hummingbird` (Table 1), which builds it in code.
     """
+    if not isinstance(name, str):  # an array would compare element by element
+        raise ConfigError(f"vehicle preset: expected a name, one of {', '.join(preset_names())}; got "
+                          f"{type(name).__name__} {short_repr(name)}")
     if name not in preset_names():
         raise ConfigError(f"unknown vehicle preset {name!r}: use one of {', '.join(preset_names())}")
     resource = resources.files("aerobat.quadrotor") / "vehicles" / f"{name}.toml"

@@ -9,12 +9,15 @@ filtered: a report built from it shows what ran, what was skipped and what faile
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+import json
+import re
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from aerobat.config import short_repr
 from aerobat.core.design import Design
 from aerobat.core.registry import from_spec
 from aerobat.core.rules import RuleChoice
@@ -129,6 +132,7 @@ def run_study(
     on_start : ``on_start(study_id, to_run, already_done)`` before the first job is submitted.
     command : the command line, kept with the study.
     """
+    jobs = _check_study(kind, spec, jobs, resume=resume, progress=progress, on_start=on_start, command=command)
     keys = [job.key for job in jobs]
     if len(set(keys)) != len(keys):
         raise ConfigError(f"study {kind}: job keys repeat")
@@ -166,7 +170,45 @@ def run_study(
                         store.study_results(study_id))
 
 
-def _canonical(value: Any) -> str:
-    import json
+def _plain(value: Any) -> Any:
+    if isinstance(value, np.ndarray | np.generic):
+        return value.tolist()
+    raise TypeError(f"{type(value).__name__} {short_repr(value)} is not a JSON value")
 
+
+_KIND = re.compile(r"[A-Za-z][A-Za-z0-9_.-]{0,63}")
+
+
+def _check_study(kind: Any, spec: Any, jobs: Any, *, resume: Any, progress: Any, on_start: Any,
+                 command: Any) -> list[Job]:
+    """The jobs as a list, once every argument of :func:`run_study` is what it must be (ConfigError if not)."""
+    if not isinstance(kind, str) or not _KIND.fullmatch(kind):
+        raise ConfigError(f"study kind = {short_repr(kind)}: expected a name of 1 … 64 letters, digits, '_', '-' "
+                          f"or '.' that starts with a letter (e.g. 'robustness')")
+    if not isinstance(spec, Mapping):
+        raise ConfigError(f"study {kind} spec: expected a mapping of the study's options (a dict), got "
+                          f"{type(spec).__name__} {short_repr(spec)}")
+    try:  # stored as JSON and compared on resume: an object would be stored as its repr
+        json.dumps(spec, default=_plain)
+    except (TypeError, ValueError, RecursionError) as exc:
+        raise ConfigError(f"study {kind} spec: not JSON-ready (numbers, strings, lists and dicts): {exc}") from None
+    if isinstance(jobs, str | bytes | Mapping) or not isinstance(jobs, Iterable):
+        raise ConfigError(f"study {kind} jobs: expected a sequence of Job, got {type(jobs).__name__} "
+                          f"{short_repr(jobs)}")
+    jobs = list(jobs)
+    for job in jobs:
+        if not isinstance(job, Job):
+            raise ConfigError(f"study {kind} jobs: expected Job items, got {type(job).__name__} {short_repr(job)}")
+    if resume is not None and (isinstance(resume, bool) or not isinstance(resume, int | str)):
+        raise ConfigError(f"resume = {short_repr(resume)}: expected a study id or 'last'")
+    for name, value in (("progress", progress), ("on_start", on_start)):
+        if value is not None and not callable(value):
+            raise ConfigError(f"{name} = {short_repr(value)}: expected a function or None")
+    if isinstance(command, str | bytes) or not isinstance(command, Sequence) or \
+            not all(isinstance(word, str) for word in command):
+        raise ConfigError(f"command = {short_repr(command)}: expected a sequence of strings (the command line)")
+    return jobs
+
+
+def _canonical(value: Any) -> str:
     return json.dumps(json.loads(json.dumps(value, default=str)), sort_keys=True)

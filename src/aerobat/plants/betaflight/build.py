@@ -6,6 +6,9 @@ SHA-256, applies ``lockstep.patch`` (shipped with this package), builds
 ``make TARGET=SITL OPTIONS=SIMULATOR_LOCKSTEP`` with the host C compiler and
 installs the binary into ``<cache>/<version>-<patch sha256[:12]>/``. Later
 calls return the cached binary. A lock file serialises concurrent builds.
+Every tool it runs (pip, patch, make) gets SIGTERM when the thread that runs the build dies
+(Linux ``PR_SET_PDEATHSIG``; make passes it on to its compilers): a build whose owner is
+killed stops instead of compiling on, unowned, while the next owner builds again.
 
 Run ``python -m aerobat.plants.betaflight.build [--cache-dir DIR]`` to build
 with progress output.
@@ -14,11 +17,13 @@ with progress output.
 from __future__ import annotations
 
 import argparse
+import ctypes
 import fcntl
 import hashlib
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tarfile
@@ -107,11 +112,37 @@ def _check_tools() -> dict[str, str]:
     return tools
 
 
+def _load_prctl() -> Callable[..., int] | None:
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        return ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+
+
+_PRCTL = _load_prctl()  # resolved before any fork: the child only calls it
+_PR_SET_PDEATHSIG = 1
+
+
+def _stop_with(owner_pid: int) -> Callable[[], None]:
+    """preexec_fn: SIGTERM the tool when the thread that started it (and waits for it) dies."""
+
+    def setup() -> None:
+        if _PRCTL is not None:
+            _PRCTL(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+        if os.getppid() != owner_pid:  # the owner died before prctl took effect
+            os._exit(1)
+
+    return setup
+
+
 def _run_logged(command: list[str], cwd: Path, log: Path, what: str) -> None:
     with open(log, "ab") as handle:
         handle.write(f"\n$ {' '.join(command)}  (in {cwd})\n".encode())
         handle.flush()
-        result = subprocess.run(command, cwd=cwd, stdout=handle, stderr=subprocess.STDOUT, check=False)
+        result = subprocess.run(command, cwd=cwd, stdout=handle, stderr=subprocess.STDOUT, check=False,
+                                preexec_fn=_stop_with(os.getpid()))
     if result.returncode != 0:
         raise FirmwareUnavailable(
             f"{what} failed (exit status {result.returncode}); log: {log}\n"

@@ -17,7 +17,7 @@ _COARSE_INTERVALS = 30
 
 
 def run_solver(solver: Any, **kwargs: Any) -> Any:
-    """``solver(**kwargs)``, where Ctrl-C stops the program.
+    """``solver(**kwargs)``, where Ctrl-C (and SIGTERM, when its handler raises) stops the program.
 
     CasADi checks for signals during an IPOPT solve, but turns the resulting KeyboardInterrupt
     into a failed solve (``NonIpopt_Exception_Thrown``): the benchmark would go on and report a
@@ -25,25 +25,31 @@ def run_solver(solver: Any, **kwargs: Any) -> Any:
     """
     if threading.current_thread() is not threading.main_thread():
         return solver(**kwargs)
-    previous = signal.getsignal(signal.SIGINT)
-    if not callable(previous):
+    previous: dict[int, Any] = {}
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        current = signal.getsignal(signum)
+        if callable(current):
+            previous[signum] = current
+    if not previous:
         return solver(**kwargs)
-    interrupted: list[int] = []
+    interrupted: list[BaseException] = []
 
     def handler(signum: int, frame: Any) -> None:
         try:
-            previous(signum, frame)
-        except KeyboardInterrupt:
-            interrupted.append(signum)
+            previous[signum](signum, frame)
+        except KeyboardInterrupt as exc:
+            interrupted.append(exc)
             raise
 
-    signal.signal(signal.SIGINT, handler)
+    for number in previous:
+        signal.signal(number, handler)
     try:
         result = solver(**kwargs)
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for number, old in previous.items():
+            signal.signal(number, old)
     if interrupted:
-        raise KeyboardInterrupt
+        raise interrupted[0]
     return result
 
 

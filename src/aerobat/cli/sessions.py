@@ -110,6 +110,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
     args.format = args.format or "csv"
     with open_store(args, create=False) as store:
         session_id = store.resolve_session(args.session)
+        store.verify_session(session_id)  # nothing is exported from a session with a damaged record
         if args.program is not None:
             return _export_program(store, session_id, args)
         output = Path(args.output) if args.output else None

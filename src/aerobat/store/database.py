@@ -117,6 +117,9 @@ class Database:
                                          check_same_thread=False)
         except sqlite3.Error as exc:
             raise self._translate(exc, "opening the database") from None
+        # text that is not UTF-8 (a flipped bit can turn a blob into text) is read as it is and then
+        # fails its record's checksum, instead of failing the query
+        self._conn.text_factory = lambda data: data.decode("utf-8", "surrogateescape")
         try:
             with self._guard("opening the database"):
                 self._conn.execute("PRAGMA foreign_keys = ON")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Sequence
 from typing import Any
 
 from aerobat.cli.common import HelpFormatter, add_db_option, open_store, session_ref
@@ -13,7 +14,7 @@ from aerobat.errors import ConfigError
 __all__ = ["register", "table"]
 
 
-def table(rows: list[tuple[str, ...]], right: set[int]) -> str:
+def table(rows: Sequence[tuple[str, ...]], right: set[int]) -> str:
     """Rows of text as aligned columns, a rule under the first (the header)."""
     widths = [max(len(row[k]) for row in rows) for k in range(len(rows[0]))]
     lines = ["  ".join(cell.rjust(w) if k in right else cell.ljust(w)

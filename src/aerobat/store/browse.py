@@ -184,8 +184,8 @@ class Browsing(Reading):
         mans = [self.maneuver(r.maneuver_id) for r in recs]
         firsts, bests = [], []
         for rec in recs:
-            errors = [self._position_error(rec.id, it.error) for it in self.iterations(rec.id) if it.status == "ok"]
-            errors = [e for e in errors if e is not None]
+            found = [self._position_error(rec.id, it.error) for it in self.iterations(rec.id) if it.status == "ok"]
+            errors = [e for e in found if e is not None]
             firsts.append(_metres(errors[0] if errors else None))
             bests.append(_metres(min(errors) if errors else None))
 

@@ -16,7 +16,7 @@ from aerobat.plants import PlantChoice
 from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel
 from aerobat.quadrotor.vehicle import VehicleParams, hummingbird
-from aerobat.store import Store
+from aerobat.store import Store, checksums
 
 CONFIG = hummingbird()
 FLIP = MultiFlip(vehicle=CONFIG.vehicle, flips=1, max_rate_rad_s=math.radians(800), dims=2)
@@ -152,7 +152,7 @@ def test_a_session_recorded_before_the_reciprocal_kernels_resumes_and_says_it_is
         current = resume_session(store, run.id)
         assert current.exact and current.inexact_because == ""  # recorded by this aerobat
     with sqlite3.connect(path) as conn:  # as aerobat 0.2.0 (divisions in the kernels) wrote it
-        conn.execute("UPDATE sessions SET aerobat_version = '0.2.0' WHERE id = ?", (run.id,))
+        checksums.update(conn, path, "sessions", {"id": run.id}, {"aerobat_version": "0.2.0"})
     with Store(path) as store:
         old = resume_session(store, run.id, take_over=True)
         assert not old.exact and "aerobat 0.2.0" in old.inexact_because and "not bit for bit" in old.inexact_because

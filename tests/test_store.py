@@ -36,6 +36,7 @@ from aerobat.store import (
     StoreFormatError,
     StoreVersionError,
     StoreWriteError,
+    checksums,
     decode_trajectory,
     encode_trajectory,
 )
@@ -96,7 +97,7 @@ def assert_one_line(err: str, code: int, expected: int = 2, *fragments: str) -> 
 def test_new_store_has_current_schema_wal_and_foreign_keys(tmp_path):
     path = tmp_path / "a.sqlite"
     with Store(path) as store:
-        assert store.schema_version == SCHEMA_VERSION == 4
+        assert store.schema_version == SCHEMA_VERSION == 5
         assert store.integrity_check() == []
         conn = store._db
         assert conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
@@ -162,7 +163,7 @@ def test_gaps_duplicates_and_other_writers_are_refused(tmp_path):
             append(store, sid, 1)  # duplicate
         with pytest.raises(StoreError, match="does not follow"):
             append(store, sid, 3)  # gap
-        store._db.execute("UPDATE sessions SET owner = 'elsewhere:1:1' WHERE id = ?", (sid,))
+        checksums.update(store._db, store.path, "sessions", {"id": sid}, {"owner": "elsewhere:1:1"})
         with pytest.raises(StoreError, match="another process"):
             append(store, sid, 2)
         assert [it.index for it in store.iterations(sid)] == [1]
@@ -180,8 +181,8 @@ def test_resuming_a_session_of_a_live_process_is_refused_and_a_dead_one_shows_ki
             sid = new_session(store)
             stat = Path(f"/proc/{sleeper.pid}/stat").read_text()
             start = stat[stat.rfind(")") + 2:].split()[19]
-            store._db.execute("UPDATE sessions SET owner = ?, pid = ? WHERE id = ?",
-                              (f"{socket.gethostname()}:{sleeper.pid}:{start}", sleeper.pid, sid))
+            checksums.update(store._db, store.path, "sessions", {"id": sid},
+                             {"owner": f"{socket.gethostname()}:{sleeper.pid}:{start}", "pid": sleeper.pid})
             assert store.session(sid).display_state == "running"
             with pytest.raises(SessionInUse, match=f"process {sleeper.pid}"):
                 store.claim_session(sid)
@@ -359,7 +360,7 @@ def test_a_version_1_store_is_migrated_in_place_with_its_data_intact(tmp_path, c
     path = tmp_path / "old.sqlite"
     expected = _v1_fixture(path)
     with Store(path) as store:
-        assert store.migrated_from == [1, 2, 3]  # version 1 → 2 → 3 → 4
+        assert store.migrated_from == [1, 2, 3, 4]  # version 1 → 2 → 3 → 4 → 5
         assert store.schema_version == SCHEMA_VERSION
         assert store.integrity_check() == []
         for (sid, idx), (params, nxt, error, status) in expected.items():
@@ -626,8 +627,8 @@ def test_resuming_a_session_killed_after_its_last_iteration_just_closes_it(tmp_p
     gone = subprocess.Popen([sys.executable, "-c", "pass"])
     gone.wait()
     conn = sqlite3.connect(db)  # as if killed between its last commit and closing the session
-    conn.execute("UPDATE sessions SET state = 'running', owner = ?, pid = ?, ended_at = NULL",
-                 (f"{socket.gethostname()}:{gone.pid}:1", gone.pid))
+    checksums.update(conn, db, "sessions", {"id": 1}, {"state": "running", "ended_at": None, "pid": gone.pid,
+                                                       "owner": f"{socket.gethostname()}:{gone.pid}:1"})
     conn.commit()
     conn.close()
     capsys.readouterr()

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from aerobat.cli import main
-from aerobat.store import Store
+from aerobat.store import Store, checksums
 
 SMALL = ["flip", "--dims", "2", "--flips", "1", "--max-rate-deg-s", "800"]
 
@@ -258,8 +258,8 @@ def test_a_store_in_a_read_only_folder_can_be_read(store_with_a_session, monkeyp
 def test_a_session_of_another_machine_needs_take_over(store_with_a_session):
     db = store_with_a_session
     with sqlite3.connect(db) as conn:
-        conn.execute("UPDATE sessions SET state = 'running', owner = 'elsewhere:4242:1', host = 'elsewhere', "
-                     "pid = 4242")
+        checksums.update(conn, db, "sessions", {"id": 1}, {"state": "running", "owner": "elsewhere:4242:1",
+                                                           "host": "elsewhere", "pid": 4242})
     code, _, err = call(["learn", "--resume", "1", "--iterations", "3", "--db", str(db)])
     assert code == 2
     one_error_line(err, "another machine", "--take-over")

@@ -10,6 +10,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from aerobat.cli import browse
+from aerobat.cli.browse import table
 from aerobat.cli.common import (
     HelpFormatter,
     add_db_option,
@@ -22,44 +24,45 @@ from aerobat.cli.common import (
 )
 from aerobat.cli.show import print_stored_session
 from aerobat.errors import ConfigError, OutputError
+from aerobat.store.browse import SHOWN_STATES
 
 __all__ = ["register"]
 
 
-def _table(rows: list[tuple[str, ...]], right: set[int]) -> str:
-    widths = [max(len(row[k]) for row in rows) for k in range(len(rows[0]))]
-    lines = ["  ".join(cell.rjust(w) if k in right else cell.ljust(w)
-                       for k, (cell, w) in enumerate(zip(row, widths, strict=True))).rstrip() for row in rows]
-    lines.insert(1, "  ".join("-" * w for w in widths))
-    return "\n".join(lines) + "\n"
-
-
 def _cmd_sessions(args: argparse.Namespace) -> int:
     with open_store(args, create=False) as store:
-        rows = store.list_sessions(limit=args.limit, newest_first=args.limit is not None)
-        if args.limit is not None:
-            rows.reverse()
-        if args.study is not None:
-            study_id = store.resolve_study(args.study)
-            rows = [r for r in rows if r.study_id == study_id]
+        filters = {"plant": args.plant, "maneuver": args.maneuver, "vehicle": args.vehicle,
+                   "feedback": args.feedback, "status": args.status, "study": args.study, "tag": args.tag}
+        rows = store.find_sessions(**filters, include_studies=args.all, limit=args.limit)
+        hidden = 0
+        if not args.all and args.study is None:
+            hidden = len(store.find_sessions(**{**filters, "study": None}, include_studies=True)) - len(
+                store.find_sessions(**filters))
         if args.json:
             print(json.dumps([{
-                "id": r.id, "maneuver": r.maneuver_name, "plant": r.plant_kind, "seed": r.seed,
+                "id": r.id, "maneuver": r.maneuver_name, "plant": r.plant_kind, "vehicle": r.vehicle,
+                "plant_vehicle": r.plant_vehicle, "feedback": r.feedback, "seed": r.seed,
                 "iterations": r.n_measured, "trials": r.n_records, "target": r.target_iterations,
                 "last_position_error_m": r.last_position_error_m, "state": r.display_state, "study": r.study_id,
-                "started_at": r.started_at, "updated_at": r.updated_at} for r in rows]))
+                "tags": list(r.tags), "started_at": r.started_at, "updated_at": r.updated_at} for r in rows]))
             return 0
+        more = f" ({hidden} study sessions hidden: --all shows them)" if hidden else ""
         if not rows:
-            print(f"no sessions in {store.path}")
+            print(f"no sessions in {store.path}{' match' if any(v is not None for v in filters.values()) else ''}"
+                  f"{more}")
             return 0
-        header = ("id", "maneuver", "plant", "seed", "iter.", "last err [m]", "state", "started (UTC)")
-        table = [header] + [(
-            str(r.id), r.maneuver_name, r.plant_kind, "—" if r.seed is None else str(r.seed),
-            f"{r.n_measured}/{r.target_iterations}",
+        header = ("id", "maneuver", "plant", "vehicle", "feedback", "seed", "iter.", "last err [m]", "state",
+                  "started (UTC)", "tags")
+        rows_text = [header] + [(
+            str(r.id), r.maneuver_name, r.plant_kind,
+            r.vehicle if r.plant_vehicle in ("", r.vehicle) else f"{r.vehicle} (flown: {r.plant_vehicle})",
+            r.feedback, "—" if r.seed is None else str(r.seed), f"{r.n_measured}/{r.target_iterations}",
             "—" if r.last_position_error_m is None else f"{r.last_position_error_m:.4f}",
             r.display_state if r.study_id is None else f"{r.display_state} (study {r.study_id})",
-            r.started_at[:16].replace("T", " ")) for r in rows]
-        sys.stdout.write(_table(table, {0, 3, 4, 5}))
+            r.started_at[:16].replace("T", " "), ",".join(r.tags)) for r in rows]
+        sys.stdout.write(table(rows_text, {0, 5, 6, 7}))
+        if more:
+            print(more.strip(" ()"))
     return 0
 
 
@@ -107,6 +110,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
     args.format = args.format or "csv"
     with open_store(args, create=False) as store:
         session_id = store.resolve_session(args.session)
+        store.verify_session(session_id)  # nothing is exported from a session with a damaged record
         if args.program is not None:
             return _export_program(store, session_id, args)
         output = Path(args.output) if args.output else None
@@ -194,7 +198,7 @@ def _cmd_studies(args: argparse.Namespace) -> int:
         rows = [("id", "kind", "jobs done", "failed", "created (UTC)", "output")] + [
             (str(s.id), s.kind, str(s.jobs_done), str(s.jobs_failed), s.created_at[:16].replace("T", " "),
              s.out_dir or "—") for s in studies]
-        sys.stdout.write(_table(rows, {0, 2, 3}))
+        sys.stdout.write(table(rows, {0, 2, 3}))
     return 0
 
 
@@ -226,7 +230,7 @@ def _show_study(store: Any, args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from aerobat.experiments.reports import session_replay
+    from aerobat.experiments.reports import replay_notes, session_replay
 
     iterations = None
     if args.iterations is not None:
@@ -238,9 +242,15 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         session_id = store.resolve_session(args.session)
         out = output_dir(args.out if args.out is not None else f"out/session-{session_id}")
         path = session_replay(store, session_id, out / "replay.html", iterations=iterations)
+        notes = replay_notes(store, session_id, iterations)
+        if str(args.session) == "last" and store.session(session_id).study_id is not None:
+            notes.insert(0, f"last is session {session_id}, the newest session, which a study learned in "
+                            f"(`aerobat sessions` lists the others)")
     if args.json:
-        print(json.dumps({"session": session_id, "replay": str(path)}))
+        print(json.dumps({"session": session_id, "replay": str(path), "notes": notes}))
     else:
+        for note in notes:
+            print(f"note: {note}")
         print(f"3D replay of session {session_id} in {path} (open it in a browser; no server needed)")
     return 0
 
@@ -276,7 +286,17 @@ def register(sub: Any) -> None:
     ses.add_argument("--limit", type=bounded_int(1, 10**9), default=None,
                      help="only the newest N sessions (default: all)")
     ses.add_argument("--study", type=session_ref, default=None,
-                     help="only the sessions of this study (default: all)")
+                     help="only the sessions of this study, an id or 'last' (default: no study's)")
+    ses.add_argument("--plant", default=None, help="only this plant: nominal, arena, rotorpy, … (default: any)")
+    ses.add_argument("--maneuver", default=None, help="only this maneuver, by name (default: any)")
+    ses.add_argument("--vehicle", default=None,
+                     help="only this vehicle, the design model's or the flown one's name (default: any)")
+    ses.add_argument("--feedback", default=None,
+                     help="only this feedback scheme; none is the paper's open loop (default: any)")
+    ses.add_argument("--status", choices=SHOWN_STATES, default=None, help="only sessions in this state (default: any)")
+    ses.add_argument("--tag", default=None, help="only sessions with this tag (`aerobat tag`) (default: any)")
+    ses.add_argument("--all", action="store_true",
+                     help="also list the sessions studies learned in (default: hidden, a study stores hundreds)")
     ses.add_argument("--json", action="store_true", help="print one JSON array")
     add_db_option(ses)
     ses.set_defaults(func=_cmd_sessions)
@@ -330,6 +350,8 @@ def register(sub: Any) -> None:
     examples.add_argument("--force", action="store_true", help="replace files that exist")
     examples.add_argument("--json", action="store_true", help="print one JSON object: the files copied")
     examples.set_defaults(func=_cmd_examples)
+
+    browse.register(sub)
 
     studies = sub.add_parser("studies", help="list the stored studies, or show one", formatter_class=fmt)
     studies.add_argument("study", nargs="?", type=session_ref, default=None,

@@ -33,6 +33,8 @@ def print_stored_session(store: Any, session_id: int, *, iterations: bool, heade
             f"  design:     {drec.status}, residual {drec.residual_norm:.3g}, correction {drec.correction_kind}, "
             f"condition number {drec.condition_number:.3g}",
         ]
+        lines.append(f"  vehicle:    {rec.vehicle}" + ("" if rec.plant_vehicle in ("", rec.vehicle) else
+                                                       f" (the plant flew {rec.plant_vehicle})"))
         if rec.study_id is not None:
             lines.append(f"  study:      {rec.study_id}")
         if rec.warm_start_from is not None:
@@ -41,6 +43,9 @@ def print_stored_session(store: Any, session_id: int, *, iterations: bool, heade
             lines.append(f"  last position error: {rec.last_position_error_m:.4f} m")
         if rec.command:
             lines.append(f"  command:    aerobat {' '.join(rec.command)}")
+        if rec.tags:
+            lines.append(f"  tags:       {', '.join(rec.tags)}")
+        lines += [f"  note:       {text} ({at[:16].replace('T', ' ')} UTC)" for at, text in rec.notes]
         for line in lines:
             out.print(line)
     if iterations:

@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     from aerobat.core.learning import Session
 
 __all__ = ["finite_or_none", "load_session", "session_figures", "session_from_json", "session_json",
-           "session_replay"]
+           "replay_notes", "session_replay"]
 
 
 def finite_or_none(values: Any) -> list[float | None]:
@@ -69,6 +69,8 @@ def session_json(store: Store, session_id: int, *, trajectories: bool = False, f
         data["plant_config"] = prec.config
         data["vehicle"] = store.vehicle(prec.vehicle_id).config
         data["command"] = list(rec.command)
+        data["tags"] = list(rec.tags)
+        data["notes"] = [{"at": at, "text": text} for at, text in rec.notes]
         data["design"] = {
             "p_guess": drec.p_guess.tolist(), "p_nominal": drec.p_nominal.tolist(),
             "residual": finite_or_none(drec.residual), "residual_norm": drec.residual_norm,
@@ -125,35 +127,70 @@ def session_figures(store: Store, session_id: int, out: Path) -> list[str]:
     return notes
 
 
+IDENTIFICATION_KIND = "identification"
+"""The maneuver kind of a stored identification (``aerobat identify --db``): fixed programs, no design."""
+
+
+def _measured_with_trajectories(store: Store, session_id: int) -> list[int]:
+    return [it.index for it in store.iterations(session_id) if it.status == "ok" and it.trajectory_rows > 0]
+
+
+def replay_notes(store: Store, session_id: int, iterations: list[int] | None = None) -> list[str]:
+    """What :func:`session_replay` draws of a session and what it cannot (``aerobat replay`` prints them)."""
+    rec = store.session(session_id)
+    kind = store.maneuver(rec.maneuver_id).kind
+    measured = _measured_with_trajectories(store, session_id)
+    notes = []
+    if rec.study_id is not None:
+        notes.append(f"session {session_id} is one of study {rec.study_id}'s sessions")
+    if kind == IDENTIFICATION_KIND:
+        shown = len(iterations) if iterations is not None else len(measured)
+        notes.append(f"session {session_id} is an identification: the replay shows {shown} of its "
+                     f"{len(measured)} measured flights (fixed programs: there is no designed flight to show)")
+    elif not measured:
+        why = " (a study keeps no trajectories of its sessions)" if rec.study_id is not None else ""
+        notes.append(f"session {session_id} has no measured trajectories{why}: the replay shows the model's "
+                     f"flight only, no measured trial")
+    return notes
+
+
 def session_replay(store: Store, session_id: int, path: Path, *, iterations: list[int] | None = None) -> Path:
     """Write the 3D replay of a stored session: the nominal model's flight and measured iterations.
 
-    ``iterations`` are the iterations to show (default: the first and the last measured one).
+    ``iterations`` are the iterations to show (default: the first and the last measured one;
+    for an identification, every measured flight — it has no model flight). :func:`replay_notes`
+    says what the replay leaves out.
     """
     from aerobat.plotting.replay import replay_figure, write_replay_html
 
     rec = store.session(session_id)
     mrec = store.maneuver(rec.maneuver_id)
     drec = store.design(rec.design_id)
-    maneuver = from_spec(mrec.spec, source=f"session {session_id} maneuver")
+    identification = mrec.kind == IDENTIFICATION_KIND
     config = vehicle_from_table(store.vehicle(drec.vehicle_id).config, source=f"session {session_id} vehicle")
-    nominal = simulate(maneuver.program(drec.p_nominal), config)
-    flights = [("nominal (model)", nominal.times_s, nominal.states)]
-    measured = [it.index for it in store.iterations(session_id) if it.status == "ok" and it.trajectory_rows > 0]
+    flights = []
+    measured = _measured_with_trajectories(store, session_id)
     if iterations is None:
-        iterations = sorted({measured[0], measured[-1]}) if measured else []
+        iterations = measured if identification else sorted({measured[0], measured[-1]}) if measured else []
     missing = [i for i in iterations if i not in measured]
     if missing:
         raise ConfigError(f"session {session_id}: iteration(s) {', '.join(map(str, missing))} have no measured "
                           f"trajectory; measured: {', '.join(map(str, measured)) or 'none'}")
+    target_m = None
+    if not identification:
+        maneuver = from_spec(mrec.spec, source=f"session {session_id} maneuver")
+        nominal = simulate(maneuver.program(drec.p_nominal), config)
+        flights.append(("nominal (model)", nominal.times_s, nominal.states))
+        start = np.asarray(maneuver.initial_state())[:3]
+        target = getattr(maneuver, "target_yz", None)
+        target_m = (start[0], float(target[0]), float(target[1])) if target is not None else None
+    elif not iterations:
+        raise ConfigError(f"session {session_id} is an identification without measured flights: nothing to replay")
     for it in store.iterations(session_id, trajectories=True, indices=iterations):
         if it.times_s is not None and it.states is not None:
-            label = "first attempt" if measured and it.index == measured[0] else "learned" if (
-                measured and it.index == measured[-1]) else "iteration"
+            label = ("flight" if identification else "first attempt" if it.index == measured[0] else
+                     "learned" if it.index == measured[-1] else "iteration")
             flights.append((f"{label} (iteration {it.index})", it.times_s, it.states))
-    start = np.asarray(maneuver.initial_state())[:3]
-    target = getattr(maneuver, "target_yz", None)
-    target_m = (start[0], float(target[0]), float(target[1])) if target is not None else None
     fig = replay_figure(flights, title=f"session {session_id}: {mrec.name} on {rec.plant_kind}",
                         arm_m=config.vehicle.arm_length_m, target_m=target_m)
     return write_replay_html(fig, path)

@@ -291,6 +291,7 @@ def resume_session(store: Store, ref: int | str, *, iterations: int | None = Non
     """
     check_type("store", store, Store, "a Store")
     session_id = store.resolve_session(ref)
+    store.verify_session(session_id)  # every record it continues from, against its checksum
     rec = store.session(session_id)
     where = f"{store.path}: session {session_id}"
     mrec = store.maneuver(rec.maneuver_id)

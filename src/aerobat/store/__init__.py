@@ -15,6 +15,7 @@ from aerobat.errors import (
     StoreVersionError,
     StoreWriteError,
 )
+from aerobat.store.browse import SHOWN_STATES, SessionComparison
 from aerobat.store.codec import decode_trajectory, encode_trajectory
 from aerobat.store.database import DEFAULT_PATH, default_path
 from aerobat.store.owners import owner_alive
@@ -34,6 +35,8 @@ from aerobat.store.store import SESSION_STATES, Store
 __all__ = [
     "DEFAULT_PATH",
     "SESSION_STATES",
+    "SHOWN_STATES",
+    "SessionComparison",
     "DesignRecord",
     "IterationRecord",
     "ManeuverRecord",

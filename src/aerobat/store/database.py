@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import secrets
 import sqlite3
 import time
 from collections.abc import Iterator
@@ -30,11 +31,12 @@ from aerobat.errors import (
     StoreVersionError,
     StoreWriteError,
 )
+from aerobat.store import checksums
 from aerobat.store.codec import utc_now
 from aerobat.store.migrations import APPLICATION_ID, SCHEMA, SCHEMA_VERSION, TABLES, TABLES_SINCE, migrate
 from aerobat.store.owners import owner_token
 
-__all__ = ["DEFAULT_PATH", "Database", "default_path", "rollback", "sql_statements"]
+__all__ = ["DEFAULT_PATH", "Database", "default_path", "next_id", "rollback", "sql_statements"]
 
 DEFAULT_PATH = "aerobat.sqlite"
 """Default database file, relative to the working directory (``AEROBAT_DB`` overrides it)."""
@@ -101,6 +103,8 @@ class Database:
         self._identity: tuple[int, int] | None = None
         try:
             fresh = self._check_file(create)
+            if fresh and create and not self.path.exists() and self._create_file():
+                fresh = self._check_file(create)  # now a complete store (ours, or another process's)
             read_only = not create and not os.access(self.path.parent if str(self.path.parent) else ".", os.W_OK)
             uri = f"file:{quote(os.fsencode(self.path.resolve()))}" + ("?mode=ro&immutable=1" if read_only else
                                                                "" if create else "?mode=ro")
@@ -113,6 +117,9 @@ class Database:
                                          check_same_thread=False)
         except sqlite3.Error as exc:
             raise self._translate(exc, "opening the database") from None
+        # text that is not UTF-8 (a flipped bit can turn a blob into text) is read as it is and then
+        # fails its record's checksum, instead of failing the query
+        self._conn.text_factory = lambda data: data.decode("utf-8", "surrogateescape")
         try:
             with self._guard("opening the database"):
                 self._conn.execute("PRAGMA foreign_keys = ON")
@@ -175,29 +182,25 @@ class Database:
             # nobody has it open and its WAL is empty: read the file alone, so that refusing
             # it leaves no -wal/-shm files behind
             uri += "&immutable=1"
-        try:
-            probe = sqlite3.connect(uri, uri=True, timeout=self.busy_timeout_s, isolation_level=None)
-        except sqlite3.Error as exc:
-            raise StoreAccessError(f"{path}: cannot open the database for reading: {exc}") from None
-        try:
-            app_id = probe.execute("PRAGMA application_id").fetchone()[0]
-            version = probe.execute("PRAGMA user_version").fetchone()[0]
-            tables = [r[0] for r in probe.execute(
-                "SELECT name FROM sqlite_master WHERE type = 'table' AND name NOT LIKE 'sqlite_%' ORDER BY name")]
-            tagged = False
-            if "meta" in tables:
-                with contextlib.suppress(sqlite3.Error):
-                    row = probe.execute("SELECT value FROM meta WHERE key = 'application'").fetchone()
-                    tagged = bool(row and row[0] == "aerobat")
-            damage = [r[0] for r in probe.execute("PRAGMA quick_check(20)")] if tables else ["ok"]
-        except sqlite3.DatabaseError as exc:
-            kind = getattr(exc, "sqlite_errorname", "")
-            if kind.startswith(("SQLITE_BUSY", "SQLITE_LOCKED")):
-                raise StoreBusyError(f"{path}: the database stayed locked by another process") from None
-            raise StoreFormatError(f"{path}: not a usable aerobat database ({exc}); the file was not modified — "
-                                   f"restore it from a backup or choose another --db path") from None
-        finally:
-            probe.close()
+        deadline = time.monotonic() + self.busy_timeout_s
+        told = False
+        while True:
+            try:
+                app_id, version, tables, tagged, damage = self._probe_read(uri)
+                break
+            except StoreBusyError:
+                # In WAL mode nothing but an exclusive lock keeps a reader out (another program's
+                # PRAGMA locking_mode = EXCLUSIVE, or an aerobat recovering a crashed WAL): say so at once
+                if time.monotonic() >= deadline:
+                    raise StoreBusyError(
+                        f"{path}: another process kept the database locked for {self.busy_timeout_s:g} s (an "
+                        f"exclusive lock, e.g. a program holding it with PRAGMA locking_mode = EXCLUSIVE); "
+                        f"nothing was read or written — close that program and try again") from None
+                if not told and self.on_wait is not None:
+                    self.on_wait(f"{path}: another process holds the database with an exclusive lock (e.g. PRAGMA "
+                                 f"locking_mode = EXCLUSIVE); waiting up to {self.busy_timeout_s:g} s for it")
+                    told = True
+                time.sleep(0.05)
         ours = app_id == APPLICATION_ID or tagged
         if ours and damage != ["ok"]:
             lines = [line.strip() for entry in damage for line in str(entry).splitlines()
@@ -217,6 +220,13 @@ class Database:
             self.problems.append(f"{path}: {changed} was changed: it no longer identifies as an aerobat store")
         if not ours:
             if not tables and app_id == 0:
+                if not self.writing:
+                    # An SQLite file without tables: nothing to read. It is also what a store looks like
+                    # for an instant while another process creates it (its header written, its schema
+                    # not yet committed); a reader must not try to create the schema through its
+                    # read-only connection ("attempt to write a readonly database").
+                    raise StoreAccessError(f"{path}: an empty SQLite file, no aerobat database yet; "
+                                           f"`aerobat learn` creates one")
                 return True  # an empty SQLite database
             listed = ", ".join(tables[:6]) + (", …" if len(tables) > 6 else "")
             what = f"application_id {app_id:#x}" if app_id else f"tables {listed}"
@@ -235,8 +245,67 @@ class Database:
                                    f"the file was not modified")
         return False
 
-    def _initialize(self) -> None:
-        conn = self._db
+    def _create_file(self) -> bool:
+        """Create a missing store atomically; False where the file system cannot (then it is created in place).
+
+        The schema is written into a private file next to it, which is then hard-linked to the
+        store's name: other processes see no file or a complete store, never one half created
+        (a reader that found the bare SQLite header of a store being created used to take it for
+        an empty database). If another process links its file first, that one is used.
+        """
+        path = self.path
+        tmp = path.with_name(f".{path.name}.creating-{os.getpid()}-{secrets.token_hex(4)}")
+        try:
+            conn = sqlite3.connect(f"file:{quote(os.fsencode(tmp.resolve()))}", uri=True, isolation_level=None)
+            try:
+                self._initialize(conn)
+            finally:
+                conn.close()
+            try:
+                os.link(tmp, path)
+            except FileExistsError:
+                pass  # another process created it meanwhile: use that one
+            except OSError:
+                return False  # no hard links here (some network or FAT file systems)
+            return True
+        except sqlite3.Error as exc:
+            raise self._translate(exc, "creating the database") from None
+        finally:
+            for suffix in ("", "-wal", "-shm", "-journal"):
+                with contextlib.suppress(OSError):
+                    os.unlink(f"{tmp}{suffix}")
+
+    def _probe_read(self, uri: str) -> tuple[int, int, list[str], bool, list[str]]:
+        """application_id, user_version, tables, meta tag and quick_check, in one read transaction."""
+        try:
+            probe = sqlite3.connect(uri, uri=True, timeout=0.25, isolation_level=None)
+        except sqlite3.Error as exc:
+            raise StoreAccessError(f"{self.path}: cannot open the database for reading: {exc}") from None
+        try:
+            probe.execute("BEGIN")  # one read transaction: every answer below describes the same moment
+            app_id = probe.execute("PRAGMA application_id").fetchone()[0]
+            version = probe.execute("PRAGMA user_version").fetchone()[0]
+            tables = [r[0] for r in probe.execute(
+                "SELECT name FROM sqlite_master WHERE type = 'table' AND name NOT LIKE 'sqlite_%' ORDER BY name")]
+            tagged = False
+            if "meta" in tables:
+                with contextlib.suppress(sqlite3.Error):
+                    row = probe.execute("SELECT value FROM meta WHERE key = 'application'").fetchone()
+                    tagged = bool(row and row[0] == "aerobat")
+            damage = [r[0] for r in probe.execute("PRAGMA quick_check(20)")] if tables else ["ok"]
+        except sqlite3.DatabaseError as exc:
+            kind = getattr(exc, "sqlite_errorname", "")
+            if kind.startswith(("SQLITE_BUSY", "SQLITE_LOCKED")):
+                raise StoreBusyError(f"{self.path}: the database is locked by another process") from None
+            raise StoreFormatError(f"{self.path}: not a usable aerobat database ({exc}); the file was not modified "
+                                   f"— restore it from a backup or choose another --db path") from None
+        finally:
+            probe.close()
+        return app_id, version, tables, tagged, damage
+
+    def _initialize(self, conn: sqlite3.Connection | None = None) -> None:
+        own = conn is None
+        conn = self._db if conn is None else conn
         conn.execute("PRAGMA journal_mode = WAL")
         conn.execute("BEGIN IMMEDIATE")
         try:
@@ -248,14 +317,14 @@ class Database:
                 conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
                 from aerobat import __version__
 
-                conn.executemany("INSERT INTO meta (key, value) VALUES (?, ?)", [
-                    ("application", "aerobat"), ("created_by", __version__), ("created_at", utc_now()),
-                ])
+                for key, value in (("application", "aerobat"), ("created_by", __version__),
+                                   ("created_at", utc_now())):
+                    checksums.insert(conn, "meta", {"key": key, "value": value})
             conn.execute("COMMIT")
         except BaseException:
             rollback(conn)
             raise
-        if existing:
+        if existing and own:
             self._upgrade_if_needed()
 
     def _upgrade_if_needed(self) -> None:
@@ -270,8 +339,8 @@ class Database:
                 version = conn.execute("PRAGMA user_version").fetchone()[0]  # another process may have migrated
                 self.migrated_from = migrate(conn, version)
                 if self.migrated_from:
-                    conn.execute("INSERT OR REPLACE INTO meta (key, value) VALUES (?, ?)",
-                                 (f"migrated_from_{version}", utc_now()))
+                    checksums.insert(conn, "meta", {"key": f"migrated_from_{version}", "value": utc_now()},
+                                     verb="INSERT OR REPLACE")
                 conn.execute("COMMIT")
             except BaseException:
                 rollback(conn)
@@ -388,6 +457,11 @@ class Database:
             problems += [f"foreign key: {r}" for r in self._db.execute("PRAGMA foreign_key_check")]
         return problems
 
+
+
+def next_id(conn: sqlite3.Connection, table: str) -> int:
+    """The id a new row of ``table`` gets (inside the caller's write transaction; its checksum covers it)."""
+    return int(conn.execute(f"SELECT coalesce(max(id), 0) + 1 FROM {table}").fetchone()[0])
 
 
 def rollback(conn: sqlite3.Connection) -> None:

@@ -28,6 +28,10 @@ History
    ``sessions.study_id``), and a study's command and output folder.
    Older maneuvers get their kinds from their units once, in the migration
    (m → position, m/s → velocity, rad → angle), the only information they have.
+5. A checksum of every row (``checksum`` in every table, ``iterations.traj_checksum``
+   for the trajectory; :mod:`aerobat.store.checksums`), verified on every read, and
+   the user's tags and notes on sessions (``sessions.tags``, ``notes``). The migration
+   computes the checksums of what the file holds.
 """
 
 from __future__ import annotations
@@ -39,11 +43,12 @@ from collections.abc import Callable
 import numpy as np
 
 from aerobat.errors import StoreFormatError
+from aerobat.store.checksums import backfill
 
 __all__ = ["APPLICATION_ID", "MIGRATIONS", "SCHEMA", "SCHEMA_V1", "SCHEMA_VERSION", "TABLES", "TABLES_SINCE", "migrate"]
 
-SCHEMA_VERSION = 4
-"""The version this aerobat writes; it reads 1 to 3 (migrating them) and 4."""
+SCHEMA_VERSION = 5
+"""The version this aerobat writes; it reads 1 to 4 (migrating them) and 5."""
 
 APPLICATION_ID = 0x41455242
 """``PRAGMA application_id`` of aerobat stores ("AERB")."""
@@ -245,6 +250,14 @@ CREATE TABLE study_jobs (
 """
 """The current schema (version :data:`SCHEMA_VERSION`)."""
 
+_V5_COLUMNS = (
+    *(f"{table} ADD COLUMN checksum INTEGER" for table in TABLES),  # CRC-32 of the row (aerobat.store.checksums)
+    "iterations ADD COLUMN traj_checksum INTEGER",  # CRC-32 of the trajectory blob
+    "sessions ADD COLUMN tags TEXT",                # JSON list of the user's tags
+    "sessions ADD COLUMN notes TEXT",               # JSON list of {"at", "text"}: the user's notes
+)
+SCHEMA += "".join(f"\nALTER TABLE {column};" for column in _V5_COLUMNS) + "\n"
+
 _STUDY_TABLES_V3 = """
 CREATE TABLE studies (
     id         INTEGER PRIMARY KEY,
@@ -323,8 +336,15 @@ def _migrate_3_to_4(conn: sqlite3.Connection) -> None:
                     WHERE json_valid(result) AND json_extract(result, '$.status') = 'error'""")
 
 
+def _migrate_4_to_5(conn: sqlite3.Connection) -> None:
+    for column in _V5_COLUMNS:
+        conn.execute(f"ALTER TABLE {column}")
+    for table in TABLES:
+        backfill(conn, table)
+
+
 MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {1: _migrate_1_to_2, 2: _migrate_2_to_3,
-                                                               3: _migrate_3_to_4}
+                                                               3: _migrate_3_to_4, 4: _migrate_4_to_5}
 """``MIGRATIONS[n]`` takes a database from version n to n + 1 (inside the caller's transaction)."""
 
 

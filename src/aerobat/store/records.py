@@ -131,6 +131,9 @@ class SessionRecord:
     last_position_error_m : 2-norm of its position components [m].
     current_params : (n_par,) parameters the next trial flies.
     study_id : the study this session belongs to, if any.
+    vehicle, plant_vehicle : names of the design model and of the vehicle the plant flew.
+    feedback : the plant's onboard feedback scheme (``none``: the paper's open loop).
+    tags, notes : the user's tags, and notes as ``(recorded_at, text)`` (``aerobat tag`` / ``note``).
     """
 
     id: int
@@ -163,6 +166,11 @@ class SessionRecord:
     maneuver_name: str
     plant_kind: str
     study_id: int | None = None
+    vehicle: str = ""
+    plant_vehicle: str = ""
+    feedback: str = "none"
+    tags: tuple[str, ...] = ()
+    notes: tuple[tuple[str, str], ...] = ()
 
     def __repr__(self) -> str:
         return (f"SessionRecord({self.id}, {self.maneuver_name!r} on {self.plant_kind!r}, {self.display_state}, "
@@ -171,7 +179,12 @@ class SessionRecord:
 
 @dataclass(frozen=True)
 class SessionSummary:
-    """One row of ``aerobat sessions`` (read from the summary columns only)."""
+    """One row of ``aerobat sessions`` (read from the summary columns only).
+
+    ``vehicle`` is the design model's name, ``plant_vehicle`` the name of the vehicle the plant
+    flew, ``feedback`` the plant's onboard feedback scheme (``none``: the paper's open loop),
+    ``tags`` the user's tags (``aerobat tag``).
+    """
 
     id: int
     maneuver_name: str
@@ -186,6 +199,10 @@ class SessionSummary:
     started_at: str
     updated_at: str
     study_id: int | None = None
+    vehicle: str = ""
+    plant_vehicle: str = ""
+    feedback: str = "none"
+    tags: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

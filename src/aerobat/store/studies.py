@@ -8,9 +8,10 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from aerobat.config import short_repr
-from aerobat.errors import ConfigError, SessionNotFound
+from aerobat.errors import ConfigError, SessionNotFound, StoreFormatError
+from aerobat.store import checksums
 from aerobat.store.codec import canonical_json, json_ready, utc_now
-from aerobat.store.database import Database
+from aerobat.store.database import Database, next_id
 from aerobat.store.records import StudyJobRecord, StudyRecord
 
 __all__ = ["StudyTables"]
@@ -25,17 +26,18 @@ class StudyTables(Database):
         spec_json = canonical_json(json_ready(dict(spec)))
 
         def write(conn: sqlite3.Connection) -> int:
-            cursor = conn.execute(
-                "INSERT INTO studies (kind, spec, created_at, command, out_dir) VALUES (?, ?, ?, ?, ?)",
-                (str(kind), spec_json, utc_now(), json.dumps(list(command)), out_dir))
-            return int(cursor.lastrowid or 0)
+            study_id = next_id(conn, "studies")
+            checksums.insert(conn, "studies", {"id": study_id, "kind": str(kind), "spec": spec_json,
+                                               "created_at": utc_now(), "command": json.dumps(list(command)),
+                                               "out_dir": out_dir})
+            return study_id
 
         return int(self._write("creating a study", write))
 
     def set_study_out_dir(self, study_id: int, out_dir: str) -> None:
         """Where the study's report and figures go."""
-        self._write(f"updating study {study_id}", lambda conn: conn.execute(
-            "UPDATE studies SET out_dir = ? WHERE id = ?", (out_dir, study_id)))
+        self._write(f"updating study {study_id}", lambda conn: checksums.update(
+            conn, self.path, "studies", {"id": study_id}, {"out_dir": out_dir}))
 
     def resolve_study(self, ref: int | str) -> int:
         """A study id from ``ref`` (an id or ``last``); :class:`SessionNotFound` if there is none."""
@@ -56,36 +58,49 @@ class StudyTables(Database):
                 raise SessionNotFound(f"{self.path}: no study {study_id} (see `aerobat studies`)")
             return study_id
 
-    _STUDY_COLUMNS = ("s.id, s.kind, s.spec, s.created_at, s.command, s.out_dir, "
-                      "(SELECT count(*) FROM study_jobs j WHERE j.study_id = s.id AND j.status = 'done'), "
-                      "(SELECT count(*) FROM study_jobs j WHERE j.study_id = s.id AND j.status = 'failed')")
+    def _json(self, text: Any, what: str) -> Any:
+        try:
+            return json.loads(text)
+        except (TypeError, ValueError) as exc:
+            raise StoreFormatError(f"{self.path}: {what}: damaged JSON ({exc}); restore the store from a "
+                                   f"backup") from None
 
-    @staticmethod
-    def _study(r: Sequence[Any]) -> StudyRecord:
-        return StudyRecord(id=int(r[0]), kind=str(r[1]), spec=json.loads(r[2]), created_at=str(r[3]),
-                           command=tuple(json.loads(r[4] or "[]")), out_dir=r[5], jobs_done=int(r[6]),
-                           jobs_failed=int(r[7]))
+    def _jobs(self, study_id: int | None) -> list[dict[str, Any]]:
+        """Job rows (of one study, or all), verified."""
+        sql = f"SELECT {checksums.select_list('study_jobs')} FROM study_jobs"
+        with self._guard("reading study jobs"):
+            rows = (self._db.execute(sql + " ORDER BY study_id, key").fetchall() if study_id is None else
+                    self._db.execute(sql + " WHERE study_id = ? ORDER BY key", (study_id,)).fetchall())
+        return [checksums.verify(self.path, "study_jobs", r) for r in rows]
+
+    def _study(self, r: dict[str, Any], jobs: Sequence[dict[str, Any]]) -> StudyRecord:
+        what = f"study {r['id']}"
+        return StudyRecord(id=int(r["id"]), kind=str(r["kind"]), spec=self._json(r["spec"], what),
+                           created_at=str(r["created_at"]),
+                           command=tuple(self._json(r["command"] or "[]", what)), out_dir=r["out_dir"],
+                           jobs_done=sum(j["study_id"] == r["id"] and j["status"] == "done" for j in jobs),
+                           jobs_failed=sum(j["study_id"] == r["id"] and j["status"] == "failed" for j in jobs))
 
     def list_studies(self) -> list[StudyRecord]:
-        """Every study, oldest first, with its job counts."""
+        """Every study, oldest first, with its job counts (every row verified against its checksum)."""
         with self._guard("reading studies"):
-            rows = self._db.execute(f"SELECT {self._STUDY_COLUMNS} FROM studies s ORDER BY s.id").fetchall()
-        return [self._study(r) for r in rows]
+            rows = self._db.execute(f"SELECT {checksums.select_list('studies')} FROM studies ORDER BY id").fetchall()
+        studies = [checksums.verify(self.path, "studies", r) for r in rows]
+        jobs = self._jobs(None)
+        return [self._study(r, jobs) for r in studies]
 
     def study(self, study_id: int) -> StudyRecord:
         """One study with its job counts."""
+        study_id = self.resolve_study(study_id)
         with self._guard("reading studies"):
-            r = self._db.execute(f"SELECT {self._STUDY_COLUMNS} FROM studies s WHERE s.id = ?",
-                                 (study_id,)).fetchone()
+            r = checksums.fetch(self._db, self.path, "studies", {"id": study_id})
         if r is None:
             raise SessionNotFound(f"{self.path}: no study {study_id} (see `aerobat studies`)")
-        return self._study(r)
+        return self._study(r, self._jobs(study_id))
 
     def finished_study_jobs(self, study_id: int) -> set[str]:
         """Keys of the jobs that are done (failed jobs are not: they run again on resume)."""
-        with self._guard("reading study jobs"):
-            return {r[0] for r in self._db.execute(
-                "SELECT key FROM study_jobs WHERE study_id = ? AND status = 'done'", (study_id,))}
+        return {j["key"] for j in self._jobs(study_id) if j["status"] == "done"}
 
     def record_study_job(self, study_id: int, key: str, spec: Mapping[str, Any], result: Mapping[str, Any], *,
                          status: str = "done", error: str | None = None, session_id: int | None = None) -> None:
@@ -106,18 +121,18 @@ class StudyTables(Database):
         row = conn.execute("SELECT attempts FROM study_jobs WHERE study_id = ? AND key = ?",
                            (study_id, key)).fetchone()
         attempts = 1 + (int(row[0]) if row else 0)
-        conn.execute("INSERT OR REPLACE INTO study_jobs (study_id, key, spec, result, recorded_at, status, error, "
-                     "attempts, session_id) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                     (study_id, key, spec_json, result_json, utc_now(), status, error, attempts, session_id))
+        checksums.insert(conn, "study_jobs", {
+            "study_id": study_id, "key": str(key), "spec": spec_json, "result": result_json,
+            "recorded_at": utc_now(), "status": status, "error": error, "attempts": attempts,
+            "session_id": session_id}, verb="INSERT OR REPLACE")
 
     def study_jobs(self, study_id: int) -> list[StudyJobRecord]:
         """Every recorded job of the study (done and failed), by key."""
-        with self._guard("reading study jobs"):
-            rows = self._db.execute(
-                "SELECT study_id, key, status, spec, result, error, attempts, session_id, recorded_at FROM study_jobs "
-                "WHERE study_id = ? ORDER BY key", (study_id,)).fetchall()
-        return [StudyJobRecord(study_id=r[0], key=r[1], status=r[2], spec=json.loads(r[3]), result=json.loads(r[4]),
-                               error=r[5], attempts=int(r[6]), session_id=r[7], recorded_at=r[8]) for r in rows]
+        return [StudyJobRecord(study_id=r["study_id"], key=r["key"], status=r["status"],
+                               spec=self._json(r["spec"], f"study {study_id} job {r['key']}"),
+                               result=self._json(r["result"], f"study {study_id} job {r['key']}"),
+                               error=r["error"], attempts=int(r["attempts"]), session_id=r["session_id"],
+                               recorded_at=r["recorded_at"]) for r in self._jobs(study_id)]
 
     def study_results(self, study_id: int) -> dict[str, dict[str, Any]]:
         """Results of the jobs that are done, by key."""

@@ -14,14 +14,17 @@ from aerobat.cli.common import (
     HelpFormatter,
     add_db_option,
     bounded_int,
+    check_outputs,
     console,
     open_store,
     output_dir,
     refuse_overwrite,
+    session_folder,
     session_ref,
 )
 from aerobat.cli.show import print_stored_session
 from aerobat.errors import ConfigError, OutputError
+from aerobat.fileio import check_output, write_output
 
 __all__ = ["register"]
 
@@ -80,8 +83,9 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
     with open_store(args, create=False) as store:
         session_id = store.resolve_session(args.session)
-        out = output_dir(args.out if args.out is not None else f"out/session-{session_id}")
-        before = {p: p.stat().st_mtime_ns for p in out.glob("*.png")}
+        out = session_folder(args, store, session_id)
+        check_outputs({out / name: "--out" for name in ("learning.png", "side_views.png")}, stores=(store.path,))
+        before = {p: p.stat().st_mtime_ns for p in out.glob("*.png") if p.is_file()}
         notes = session_figures(store, session_id, out)
     written = sorted(str(p) for p in out.glob("*.png") if before.get(p) != p.stat().st_mtime_ns)
     if args.json:
@@ -109,7 +113,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
         session_id = store.resolve_session(args.session)
         if args.program is not None:
             return _export_program(store, session_id, args)
-        output = Path(args.output) if args.output else None
+        output = Path(args.output) if args.output is not None else None
         if output is not None:
             refuse_overwrite(output, store_path=store.path, force=args.force, option="--output")
         if args.format == "json":
@@ -132,10 +136,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
                                  it.message, it.recorded_at])
             text = buffer.getvalue()
     if output is not None:
-        try:
-            output.write_text(text)
-        except OSError as exc:
-            raise OutputError(f"--output {output}: cannot write: {exc.strerror or exc}") from None
+        write_output(output, text, option="--output", stores=(store.path,))
         if args.json:
             print(json.dumps({"session": session_id, "written": str(output), "format": args.format}))
         else:
@@ -236,7 +237,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
             raise ConfigError(f"--iterations {args.iterations!r}: expected a comma list of iteration numbers") from None
     with open_store(args, create=False) as store:
         session_id = store.resolve_session(args.session)
-        out = output_dir(args.out if args.out is not None else f"out/session-{session_id}")
+        out = session_folder(args, store, session_id)
+        check_outputs({out / "replay.html": "--out"}, stores=(store.path,))
         path = session_replay(store, session_id, out / "replay.html", iterations=iterations)
     if args.json:
         print(json.dumps({"session": session_id, "replay": str(path)}))
@@ -245,23 +247,29 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _stores_of(args: argparse.Namespace) -> tuple[Any, ...]:
+    """The store ``--db`` names (if the command has it); the default store is always protected."""
+    db = getattr(args, "db", None)
+    return (db,) if db is not None else ()
+
+
 def _cmd_examples(args: argparse.Namespace) -> int:
     """Copy the shipped examples (programs, maneuver files, a Python maneuver) into a folder."""
-    import shutil
     from importlib.resources import files
 
     source = files("aerobat") / "examples"
     target = output_dir(args.folder)
+    entries = [entry for entry in sorted(Path(str(source)).rglob("*")) if not entry.is_dir()
+               and entry.suffix in (".toml", ".py") and "__pycache__" not in entry.parts]
+    # every destination is checked before the first copy: never the store (whatever the links), never an
+    # existing file without --force; each copy then replaces its name (a link there is replaced, not followed)
+    for entry in entries:
+        check_output(target / entry.relative_to(Path(str(source))), option=None, force=args.force,
+                     stores=_stores_of(args))
     copied = []
-    for entry in sorted(Path(str(source)).rglob("*")):
-        if entry.is_dir() or entry.suffix not in (".toml", ".py") or "__pycache__" in entry.parts:
-            continue
+    for entry in entries:
         relative = entry.relative_to(Path(str(source)))
-        destination = target / relative
-        if destination.exists() and not args.force:
-            raise ConfigError(f"{destination}: exists; choose another folder or pass --force to replace it")
-        destination.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(entry, destination)
+        write_output(target / relative, entry.read_bytes(), stores=_stores_of(args))
         copied.append(str(relative))
     if args.json:
         print(json.dumps({"folder": str(target), "files": copied}))

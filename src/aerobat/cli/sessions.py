@@ -264,6 +264,7 @@ def _cmd_examples(args: argparse.Namespace) -> int:
     # every destination is checked before the first copy: never the store (whatever the links), never an
     # existing file without --force; each copy then replaces its name (a link there is replaced, not followed)
     for entry in entries:
+        output_dir(target / entry.relative_to(Path(str(source))).parent)
         check_output(target / entry.relative_to(Path(str(source))), option=None, force=args.force,
                      stores=_stores_of(args))
     copied = []

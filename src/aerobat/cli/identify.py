@@ -62,6 +62,8 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         raise ConfigError(f"--output {out}: not a file name; expected FILE.toml")
     if args.log:
         return _cmd_identify_log(args, out, figure)
+    if args.airframe is not None:  # it was ignored, unchecked, while the flights ran
+        raise ConfigError("--airframe applies only with --log (it writes the [airframe] a log's fit gives)")
     options = _options(args)
     say = console(args.json).print
     with open_store(args) as store:

@@ -264,7 +264,8 @@ def register(sub: Any) -> None:
     p.add_argument("--gamma", default="paper", help="'paper' (max(1/i, 0.1)) or a constant in (0, 1]")
     p.add_argument("--rule", default="paper",
                    help="update rule: paper, tsvd, damped, kalman, broyden, or <rule>+isc (docs/method.md)")
-    p.add_argument("--out", default=None, help="folder for figures and session.json (default: out/session-ID)")
+    p.add_argument("--out", default=None, help="folder for figures and session.json "
+                                               "(default: out/STORE-HASH/session-ID, one per store and session)")
     p.add_argument("--resume", metavar="SESSION", type=session_ref,
                    help="continue a stored session (id or 'last') with its parameters, counters and plant state "
                         "(default: start a new one)")

@@ -301,7 +301,8 @@ def register(sub: Any) -> None:
                           formatter_class=fmt)
     plot.add_argument("session", type=session_ref, help="session id or 'last' (required)")
     plot.add_argument("--out", default=None, metavar="DIR",
-                      help="folder for learning.png, side_views.png (default: out/session-ID)")
+                      help="folder for learning.png, side_views.png "
+                           "(default: out/STORE-HASH/session-ID, one per store and session)")
     plot.add_argument("--json", action="store_true", help="print one JSON object: the figures written")
     add_db_option(plot)
     plot.set_defaults(func=_cmd_plot)
@@ -328,7 +329,8 @@ def register(sub: Any) -> None:
     replay.add_argument("session", type=session_ref, help="session id or 'last' (required)")
     replay.add_argument("--iterations", default=None,
                         help="comma list of iterations to show (default: the first and last measured)")
-    replay.add_argument("--out", default=None, metavar="DIR", help="folder for replay.html (default: out/session-ID)")
+    replay.add_argument("--out", default=None, metavar="DIR", help="folder for replay.html "
+                        "(default: out/STORE-HASH/session-ID, one per store and session)")
     replay.add_argument("--json", action="store_true", help="print one JSON object")
     add_db_option(replay)
     replay.set_defaults(func=_cmd_replay)

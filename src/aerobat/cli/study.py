@@ -388,7 +388,8 @@ def add_execution_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--resume", default=None, metavar="STUDY", type=session_ref,
                    help="continue a study (id or 'last'): run only the jobs not done, failed ones included "
                         "(default: a new study)")
-    p.add_argument("--out", default=None, help="folder for figures and the report (default: out/study-ID)")
+    p.add_argument("--out", default=None, help="folder for figures and the report "
+                                               "(default: out/STORE-HASH/study-ID, one per store and study)")
     add_db_option(p)
 
 

@@ -238,16 +238,19 @@ def store_counts(path: Path) -> tuple[int, int] | str:
         return f"{type(exc).__name__}: {exc}"
 
 
-def silently_dropped(argv: list[str], dest: str, value: str) -> bool:
-    """Does the parser accept ``argv`` and leave ``dest`` without ``value`` (argparse dropping ``--``)?"""
+def silently_dropped(argv: list[str], dest: str, value: str, parser: Any = None) -> bool:
+    """Does the parser (default: aerobat's) accept ``argv`` and leave ``dest`` without ``value`` (as argparse
+    does with ``--opt=--``, which it reads as an empty list)?"""
     import io
     from contextlib import redirect_stderr, redirect_stdout
 
-    from aerobat.cli.app import build_parser
+    if parser is None:
+        from aerobat.cli.app import build_parser
 
+        parser = build_parser()
     try:
         with redirect_stderr(io.StringIO()), redirect_stdout(io.StringIO()):
-            namespace = build_parser().parse_args(argv)
+            namespace = parser.parse_args(argv)
     except SystemExit:
         return False  # refused: not dropped
     got = getattr(namespace, dest, None)

@@ -340,3 +340,17 @@ def test_an_input_larger_than_the_cap_is_refused(tmp_path):
         handle.truncate(MAX_INPUT_BYTES + 1)  # sparse: no disk used
     with pytest.raises(ConfigError, match="larger than"):
         load_program(big)
+
+
+@pytest.mark.parametrize("argv", [["plot", "1", "--db", "s.sqlite", "--out", ""],
+                                  ["replay", "1", "--db", "s.sqlite", "--out="],
+                                  ["export", "1", "--db", "s.sqlite", "--output", ""],
+                                  ["simulate", str(PROGRAM), "--out", " "], ["examples", ""]])
+def test_an_empty_output_name_is_refused_not_taken_for_the_working_folder(here, argv):
+    """`Path("")` is ".": an empty --out wrote into the working folder, an empty --output printed to stdout."""
+    def listing() -> list[str]:  # the store's -wal/-shm files come and go with any reader
+        return sorted(p.name for p in here.iterdir() if not p.name.endswith(("-wal", "-shm")))
+
+    before = listing()
+    refused(call(argv), "empty")
+    assert listing() == before

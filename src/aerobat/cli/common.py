@@ -369,15 +369,17 @@ def open_store(args: argparse.Namespace, *, create: bool = True, **options: Any)
     return store
 
 
-def output_dir(path: str | Path) -> Path:
+def output_dir(path: str | Path, option: str = "--out") -> Path:
     """Create (if needed) and return an output folder; :class:`OutputError` naming it if that is impossible."""
+    if not str(path).strip():  # Path("") is ".": an empty --out would silently write into the working folder
+        raise ConfigError(f"{option}: empty folder name")
     out = Path(path)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except FileExistsError:
-        raise OutputError(f"--out {out}: exists and is not a folder") from None
+        raise OutputError(f"{option} {out}: exists and is not a folder") from None
     except OSError as exc:
-        raise OutputError(f"--out {out}: cannot create the folder: {exc.strerror or exc}") from None
+        raise OutputError(f"{option} {out}: cannot create the folder: {exc.strerror or exc}") from None
     return out
 
 

@@ -113,6 +113,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
         session_id = store.resolve_session(args.session)
         if args.program is not None:
             return _export_program(store, session_id, args)
+        if args.output is not None and not args.output.strip():  # Path("") is "."
+            raise ConfigError("--output: empty file name")
         output = Path(args.output) if args.output is not None else None
         if output is not None:
             refuse_overwrite(output, store_path=store.path, force=args.force, option="--output")
@@ -258,7 +260,7 @@ def _cmd_examples(args: argparse.Namespace) -> int:
     from importlib.resources import files
 
     source = files("aerobat") / "examples"
-    target = output_dir(args.folder)
+    target = output_dir(args.folder, "FOLDER")
     entries = [entry for entry in sorted(Path(str(source)).rglob("*")) if not entry.is_dir()
                and entry.suffix in (".toml", ".py") and "__pycache__" not in entry.parts]
     # every destination is checked before the first copy: never the store (whatever the links), never an

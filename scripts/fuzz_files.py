@@ -90,7 +90,7 @@ BASES: dict[str, tuple[dict[str, str], list[str]]] = {
                                               "--workers", "1"]),
     "study envelope": ({}, ["--flips", "1", "--rates-deg-s", "800", "--workers", "1"]),
     "identify": ({}, ["--plant", "nominal", "--output", "{new}.toml", "--max-flights", "2"]),
-    "vehicles": ({}, ["--flips", "1", "--rates-deg-s", "800"]),
+    "vehicles": ({}, ["--flip-counts", "1", "--rates-deg-s", "800"]),
 }
 
 

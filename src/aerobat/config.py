@@ -165,6 +165,8 @@ def read_toml(path: str | Path, option: str | None = None) -> dict[str, Any]:
     """Read a TOML file (a regular file, at most 16 MiB), turning I/O and syntax problems into :class:`ConfigError`."""
     from aerobat.fileio import read_input_text
 
+    if isinstance(path, str) and not path.strip():  # Path("") is the working folder
+        raise ConfigError(f"{option or 'TOML file'}: empty file name")
     path = as_path(path, option or "path")
     text = read_input_text(path, option, what="TOML file")
     try:

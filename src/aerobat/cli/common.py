@@ -301,6 +301,8 @@ def plant_choice_from_args(args: argparse.Namespace) -> Any:
         given = getattr(args, spec.option.lstrip("-").replace("-", "_"), None)
         if given is None:
             continue
+        if not str(given).strip():  # Path("") is the working folder
+            raise ConfigError(f"{spec.option}: empty file name")
         if name != args.plant:
             raise ConfigError(f"{spec.option} applies only with --plant {name} (got --plant {args.plant})")
         path = given

@@ -141,7 +141,9 @@ def _cmd_robustness(args: argparse.Namespace) -> int:
     from aerobat.plotting.studies import plot_success_by_property, plot_trials_to_tolerance
 
     rule = RuleChoice.parse(args.rule, source="--rule")
-    ranges = load_ranges(args.ranges) if args.ranges else RobustnessRanges()
+    if args.ranges is not None and not args.ranges.strip():  # it was ignored: the default ranges ran
+        raise ConfigError("--ranges: empty file name")
+    ranges = load_ranges(args.ranges) if args.ranges is not None else RobustnessRanges()
     if args.betaflight is not None and args.plant != "betaflight":
         raise ConfigError(f"--betaflight applies only with --plant betaflight (got --plant {args.plant})")
     base = (with_tune_from_args(args, PlantChoice.from_file(args.plant, args.betaflight)).settings

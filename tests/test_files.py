@@ -354,3 +354,15 @@ def test_an_empty_output_name_is_refused_not_taken_for_the_working_folder(here, 
     before = listing()
     refused(call(argv), "empty")
     assert listing() == before
+
+
+@pytest.mark.parametrize(("argv", "named"), [
+    (["simulate", str(PROGRAM), "--vehicle="], "vehicle"),
+    (["fly", str(PROGRAM), "--plant", "arena", "--arena="], "--arena"),
+    (["learn", *SMALL, "--plant", "nominal", "--plant-vehicle=", "--db", "s.sqlite"], "--plant-vehicle"),
+    (["study", "robustness", *SMALL, "--ranges=", "--db", "s.sqlite"], "--ranges"),
+])
+def test_an_empty_input_name_is_refused_naming_the_option(here, argv, named):
+    """Found by the campaign's files phase: an empty name read the working folder (".: is a directory"),
+    and an empty --ranges was ignored (the default ranges ran)."""
+    refused(call(argv), named, "empty")

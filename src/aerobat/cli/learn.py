@@ -102,6 +102,8 @@ def _cmd_learn(args: argparse.Namespace) -> int:
     if args.resume is None:
         # everything cheap is checked before the store is touched and before the (long) design
         config = vehicle_from_name_or_file(args.vehicle)
+        if args.plant_vehicle is not None and not args.plant_vehicle.strip():
+            raise ConfigError("--plant-vehicle '': empty; name a preset or a vehicle .toml file")
         plant_config = vehicle_from_name_or_file(args.plant_vehicle) if args.plant_vehicle is not None else None
         maneuver = maneuver_from_args(args, config)
         plant = plant_choice_from_args(args)

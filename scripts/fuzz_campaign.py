@@ -1080,9 +1080,26 @@ def api_targets(ctx: ApiContext) -> list[ApiTarget]:
 # ====================================================================== main
 
 
+def files_module() -> Any:
+    """``scripts/fuzz_files.py`` (the files phase), loaded from next to this file however this one was loaded."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("fuzz_files", Path(__file__).with_name("fuzz_files.py"))
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["fuzz_files"] = module
+    spec.loader.exec_module(module)
+    return module
+
+
 def run_campaign(*, cli: int, api: int, seed: int, budget_s: float, report: Path | None,
-                 progress: Callable[[str], None], keep: bool = False) -> dict[str, Any]:
-    """Run the campaign in a scratch folder; returns the report (also written to ``report``)."""
+                 progress: Callable[[str], None], keep: bool = False, files: int = 0,
+                 files_kinds: tuple[str, ...] | None = None) -> dict[str, Any]:
+    """Run the campaign in a scratch folder; returns the report (also written to ``report``).
+
+    ``files``: the files phase (``scripts/fuzz_files.py``): -1 every case, N a seeded sample, 0 none;
+    ``files_kinds`` limits it to some kinds of case.
+    """
     root = Path(tempfile.mkdtemp(prefix="aerobat-fuzz-"))
     saved_cwd, saved_env = os.getcwd(), dict(os.environ)
     campaign = Campaign(seed=seed, budget_s=budget_s, root=root, progress=progress)
@@ -1101,6 +1118,10 @@ def run_campaign(*, cli: int, api: int, seed: int, budget_s: float, report: Path
             campaign.run_cli_phase(cli, fx)
         if api:
             campaign.run_api_phase(api, fx)
+        if files:
+            files_module().run_files_phase(sys.modules[__name__], campaign, fx, files, kinds=files_kinds)
+        # Bit flips inside store records (issue 31 S1) are another change's: its phase is called here, as
+        # `bitflip_campaign(campaign, fx, n)`, with the same report conventions (findings with `reproduce`).
     finally:
         os.chdir(saved_cwd)
         os.environ.clear()
@@ -1113,8 +1134,12 @@ def run_campaign(*, cli: int, api: int, seed: int, budget_s: float, report: Path
                         path.chmod(0o755)
             shutil.rmtree(root, ignore_errors=True)
     campaign.report["wall_s"] = round(time.perf_counter() - campaign.started, 1)
+    found = campaign.report.get("files", {})
     campaign.report["internal"] = (campaign.report["cli"]["counts"]["INTERNAL"]
-                                   + campaign.report["api"]["counts"]["INTERNAL"])
+                                   + campaign.report["api"]["counts"]["INTERNAL"]
+                                   + len(found.get("internal", [])))
+    campaign.report["hangs"] = len(found.get("hangs", []))
+    campaign.report["data_loss"] = len(found.get("data_loss", []))
     campaign.write_report()
     return campaign.report
 
@@ -1129,7 +1154,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--report", type=Path, default=None, help="write the JSON report here")
     parser.add_argument("--memory-gb", type=float, default=12.0,
                         help="address-space limit, so an absurd allocation fails instead of swapping")
-    parser.add_argument("--keep", action="store_true", help="keep the scratch folder")
+    parser.add_argument("--files", type=int, default=-1,
+                        help="cases of the files phase (scripts/fuzz_files.py): -1 all, N a seeded sample, 0 none")
+    parser.add_argument("--files-kinds", default=None,
+                        help="only these kinds of file case, comma-separated (empty, dashdash, special-input, "
+                             "special-output, store-link); default all")
+    parser.add_argument("--keep", action="store_true", help="keep the scratch folder (the reproductions use it)")
     parser.add_argument("--list", action="store_true", help="list the commands and options found, and stop")
     args = parser.parse_args(argv)
     if args.list:
@@ -1154,15 +1184,19 @@ def main(argv: list[str] | None = None) -> int:
 
     with open(os.devnull) as devnull:
         os.dup2(devnull.fileno(), 0)
+    kinds = tuple(k.strip() for k in args.files_kinds.split(",") if k.strip()) if args.files_kinds else None
     report = run_campaign(cli=args.cli, api=args.api, seed=args.seed, budget_s=args.budget_s, report=args.report,
-                          progress=say, keep=args.keep)
+                          progress=say, keep=args.keep, files=args.files, files_kinds=kinds)
     cli, api = report["cli"], report["api"]
     say(f"fuzz: done in {report['wall_s']:.0f} s: cli {sum(cli['counts'].values())} invocations "
         + " ".join(f"{c}={cli['counts'].get(c, 0)}" for c in CLASSES)
         + f"; api {sum(api['counts'].values())} calls "
         + " ".join(f"{c}={api['counts'].get(c, 0)}" for c in API_CLASSES)
+        + (f"; files {sum(report['files']['counts'].values())} cases " + " ".join(
+            f"{c}={v}" for c, v in sorted(report["files"]["counts"].items())) if "files" in report else "")
+        + f"; internal errors {report['internal']}, hangs {report['hangs']}, data loss {report['data_loss']}"
         + (f"; report {args.report}" if args.report else ""))
-    return 1 if report["internal"] else 0
+    return 1 if report["internal"] or report["hangs"] or report["data_loss"] else 0
 
 
 if __name__ == "__main__":

@@ -97,4 +97,4 @@ def test_earlier_spellings_still_work(tmp_path, monkeypatch):
 
     with Store(tmp_path / "a.sqlite") as store:
         assert store.session(1).n_measured == 3
-    assert (tmp_path / "out" / "session-1" / "session.json").exists()
+    assert next((tmp_path / "out").glob("a-*/session-1")).joinpath("session.json").exists()

@@ -45,7 +45,7 @@ def test_replay_is_one_offline_file_that_renders_without_errors(tmp_path, monkey
     assert code == 0, err
     code, out, err = call(["replay", "last"])
     assert code == 0, err
-    html = tmp_path / "out" / "session-1" / "replay.html"
+    html = next((tmp_path / "out").glob("aerobat-*/session-1")) / "replay.html"
     text = html.read_text()
     assert "plotly" in text and not re.search(r'<script[^>]+src="https?://', text)  # nothing fetched
     assert render(html, tmp_path) == "ok"
@@ -69,5 +69,5 @@ def test_replay_screenshot_for_the_docs(tmp_path, monkeypatch):
                  "--iterations", "30"])[0] == 0
     assert call(["replay", "1"])[0] == 0
     target = Path(__file__).resolve().parents[1] / "docs" / "figures" / "replay.png"
-    render(tmp_path / "out" / "session-1" / "replay.html", tmp_path, screenshot=target)
+    render(next((tmp_path / "out").glob("aerobat-*/session-1")) / "replay.html", tmp_path, screenshot=target)
     assert target.stat().st_size > 10_000

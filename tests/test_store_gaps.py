@@ -203,7 +203,7 @@ def test_a_benchmark_map_with_one_point_per_axis_draws(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     code, _, err = call(["benchmark", "map", "--y=2:2:1", "--z=1:1:1", "--workers", "1"])
     assert code == 0, err
-    assert (tmp_path / "out" / "study-1" / "benchmark_map.png").stat().st_size > 1000
+    assert next((tmp_path / "out").glob("aerobat-*/study-1")).joinpath("benchmark_map.png").stat().st_size > 1000
 
 
 def test_closing_stdout_interrupts_the_session_cleanly(tmp_path):

@@ -161,44 +161,29 @@ def as_path(value: Any, name: str = "path") -> Path:
     return path
 
 
-def read_toml(path: str | Path) -> dict[str, Any]:
-    """Read a TOML file, turning I/O and syntax problems into :class:`ConfigError`."""
-    path = as_path(path)
+def read_toml(path: str | Path, option: str | None = None) -> dict[str, Any]:
+    """Read a TOML file (a regular file, at most 16 MiB), turning I/O and syntax problems into :class:`ConfigError`."""
+    from aerobat.fileio import read_input_text
+
+    if isinstance(path, str) and not path.strip():  # Path("") is the working folder
+        raise ConfigError(f"{option or 'TOML file'}: empty file name")
+    path = as_path(path, option or "path")
+    text = read_input_text(path, option, what="TOML file")
     try:
-        with path.open("rb") as handle:
-            return tomllib.load(handle)
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: file not found") from None
-    except IsADirectoryError:
-        raise ConfigError(f"{path}: is a directory, expected a TOML file") from None
-    except PermissionError:
-        raise ConfigError(f"{path}: permission denied") from None
-    except UnicodeDecodeError as exc:
-        raise ConfigError(f"{path}: not a UTF-8 text file ({exc.reason})") from None
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: invalid TOML: {exc}") from None
     except RecursionError:
         raise ConfigError(f"{path}: invalid TOML: nested too deeply") from None
-    except OSError as exc:  # a name too long for the file system, a path through a file, an I/O error…
-        raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
 
 
 def write_file(path: Any, text: str, name: str = "path") -> Path:
-    """Write ``text`` to ``path``: :class:`ConfigError` for a path that is not one, :class:`OutputError` if it fails."""
-    import errno
-
-    from aerobat.errors import DiskFull, OutputError
+    """Write ``text`` to ``path`` atomically, never over a store: :class:`ConfigError` for a path that is not one
+    or must not be written, :class:`OutputError` if writing fails."""
+    from aerobat.fileio import write_output
 
     path = as_path(path, name)
-    try:
-        path.write_text(text)
-    except OSError as exc:
-        reason = exc.strerror or str(exc)
-        if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
-            raise DiskFull(f"{path}: cannot write: the disk is full or a file size limit was reached ({reason})") \
-                from None
-        raise OutputError(f"{path}: cannot write: {reason}") from None
-    return path
+    return write_output(path, text)
 
 
 def check_type(name: str, value: Any, expected: type | tuple[type, ...], what: str) -> Any:

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.cli.common import HelpFormatter, console, finite_float, old_spelling, output_dir, parse_pair
+from aerobat.cli.common import HelpFormatter, check_plot_files, console, finite_float, old_spelling, parse_pair
 from aerobat.cli.study import add_execution_options, report_failures, run_cli_study
 from aerobat.errors import ConfigError, SolveFailed
 
@@ -38,7 +38,7 @@ def _require(args: argparse.Namespace, *options: tuple[str, str]) -> None:
 def _cmd_translation(args: argparse.Namespace) -> int:
     from rich.table import Table
 
-    from aerobat.plotting import save_figure
+    from aerobat.plotting import save_figure, write_text
     from aerobat.plotting.benchmarks import plot_solution
     from aerobat.quadrotor.timeoptimal import solve_translation
 
@@ -47,13 +47,13 @@ def _cmd_translation(args: argparse.Namespace) -> int:
     final_angle_rad = math.radians(args.final_angle_deg)
     if abs(y) < 1e-9 and abs(z) < 1e-9 and abs(final_angle_rad) < 1e-9:
         raise ConfigError(f"--to-m {args.to!r}: the target is the start (hover to the same hover takes no time)")
-    folder = output_dir(args.out) if args.out is not None else None  # an unusable --out fails before the solve
+    folder = check_plot_files(args, ("translation.png", "translation.json"))  # refused before the solve
     solution = solve_translation(y, z, final_angle_rad=final_angle_rad, limits=_limits(args))
     figure = None
     if solution.ok and (folder is not None or args.plot):
         figure = save_figure(plot_solution(solution), folder / "translation.png" if folder is not None else args.plot)
     if folder is not None:
-        (folder / "translation.json").write_text(json.dumps(solution.to_json_dict(), indent=1))
+        write_text(folder / "translation.json", json.dumps(solution.to_json_dict(), indent=1))
     if args.json:
         print(json.dumps(solution.to_json_dict()))
     else:
@@ -104,7 +104,7 @@ def _cmd_map(args: argparse.Namespace) -> int:
     limits = dataclasses.asdict(_limits(args))
     jobs = map_jobs(ys, zs, limits)
     spec = {"ys_m": ys.tolist(), "zs_m": zs.tolist(), "limits": limits}
-    outcome, out = run_cli_study(args, "map", spec, jobs)
+    outcome, out = run_cli_study(args, "map", spec, jobs, written=("benchmark_map.csv", "benchmark_map.png"))
     grid = map_grid(outcome.results, ys, zs)
     csv_path = out / "benchmark_map.csv"
     write_text(csv_path, map_csv(ys, zs, grid))

@@ -33,6 +33,9 @@ __all__ = [
     "plant_choice_from_args",
     "with_tune_from_args",
     "refuse_overwrite",
+    "check_outputs",
+    "check_plot_files",
+    "session_folder",
     "rule_choice_from_args",
     "session_ref",
     "text_path",
@@ -83,7 +86,6 @@ class Parser(argparse.ArgumentParser):
 
 def _quiet_stdout() -> None:
     """The reader of standard output left: send the rest to /dev/null so later writes cannot fail."""
-    import os
 
     devnull = os.open(os.devnull, os.O_WRONLY)
     try:
@@ -300,6 +302,8 @@ def plant_choice_from_args(args: argparse.Namespace) -> Any:
         given = getattr(args, spec.option.lstrip("-").replace("-", "_"), None)
         if given is None:
             continue
+        if not str(given).strip():  # Path("") is the working folder
+            raise ConfigError(f"{spec.option}: empty file name")
         if name != args.plant:
             raise ConfigError(f"{spec.option} applies only with --plant {name} (got --plant {args.plant})")
         path = given
@@ -368,15 +372,17 @@ def open_store(args: argparse.Namespace, *, create: bool = True, **options: Any)
     return store
 
 
-def output_dir(path: str | Path) -> Path:
+def output_dir(path: str | Path, option: str = "--out") -> Path:
     """Create (if needed) and return an output folder; :class:`OutputError` naming it if that is impossible."""
+    if not str(path).strip():  # Path("") is ".": an empty --out would silently write into the working folder
+        raise ConfigError(f"{option}: empty folder name")
     out = Path(path)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except FileExistsError:
-        raise OutputError(f"--out {out}: exists and is not a folder") from None
+        raise OutputError(f"{option} {out}: exists and is not a folder") from None
     except OSError as exc:
-        raise OutputError(f"--out {out}: cannot create the folder: {exc.strerror or exc}") from None
+        raise OutputError(f"{option} {out}: cannot create the folder: {exc.strerror or exc}") from None
     return out
 
 
@@ -393,19 +399,52 @@ def text_path(path: str | Path, option: str) -> str:
 
 
 def refuse_overwrite(path: Path, *, store_path: Path | None, force: bool, option: str) -> None:
-    """Refuse to write over the store itself (ever) or over an existing file (unless ``force``)."""
-    try:
-        _refuse_overwrite(path, store_path=store_path, force=force, option=option)
-    except OSError as exc:  # a name too long for the file system, a path through a file…
-        raise ConfigError(f"{option} {path}: {exc.strerror or exc}") from None
+    """Refuse to write over a store (ever: ``store_path``, the default store, their journals, through any link)
+    or over an existing file (unless ``force``); see :func:`aerobat.fileio.check_output`."""
+    from aerobat.fileio import check_output
+
+    check_output(path, option=option, force=force, stores=(store_path,) if store_path is not None else ())
 
 
-def _refuse_overwrite(path: Path, *, store_path: Path | None, force: bool, option: str) -> None:
-    if store_path is not None and path.exists() and store_path.exists():
-        for candidate in (store_path, Path(f"{store_path}-wal"), Path(f"{store_path}-shm")):
-            if candidate.exists() and os.path.samefile(path, candidate):
-                raise ConfigError(f"{option} {path}: that is the experiment store; choose another file")
-    if path.exists() and not force:
-        raise ConfigError(f"{option} {path}: the file exists; choose another name or pass --force to replace it")
-    if path.is_dir():
-        raise ConfigError(f"{option} {path}: is a folder, expected a file")
+def check_outputs(paths: Any, *, stores: Any = (), force: bool = True) -> None:
+    """Check every file a command will write into its folder(s), before any work (issue 31 D4/E2).
+
+    ``paths`` maps each file to the option that names it. Existing files are replaced only with
+    ``force`` (a folder the command owns); the store is never written, whatever the links.
+    """
+    from aerobat.fileio import check_output
+
+    for path, option in dict(paths).items():
+        check_output(path, option=option, force=force, stores=stores)
+
+
+def check_plot_files(args: Any, names: tuple[str, ...]) -> Path | None:
+    """``--out``'s folder (created) with every file the command writes there checked, and ``--plot FILE``
+    checked (never the store whatever the links, never an existing file: issue 31 D2), before any work."""
+    from aerobat.fileio import check_output
+
+    folder = output_dir(text_path(args.out, "--out")) if getattr(args, "out", None) is not None else None
+    if folder is not None:
+        check_outputs({folder / name: "--out" for name in names})
+    if getattr(args, "plot", None) is not None:
+        check_output(text_path(args.plot, "--plot"), option="--plot", can_force=False)
+    return folder
+
+
+def session_folder(args: Any, store: Any, session_id: int, *, option: str = "--out", explicit: Any = None) -> Path:
+    """The folder a session's files go to, created and marked as the session's (:func:`aerobat.fileio.claim_folder`).
+
+    ``explicit`` (or ``--out``) when given, else ``out/<store>-<hash>/session-ID`` (unique per store
+    and session; a default folder holding another session's or store's output is never reused).
+    A folder the user names is the user's: the files written there replace what is there (never
+    the store, never through a link).
+    """
+    from aerobat.fileio import claim_folder, default_folder, folder_owner
+
+    started = store.session(session_id).started_at
+    owner = folder_owner(store.path, "session", session_id, started)
+    chosen = explicit if explicit is not None else getattr(args, "out", None)
+    named = chosen is not None
+    if chosen is None:
+        chosen = default_folder(store.path, "session", session_id, started)
+    return claim_folder(text_path(chosen, option), owner, option=option, force=named)

@@ -21,6 +21,12 @@ def _cmd_design(args: argparse.Namespace) -> int:
 
     config = vehicle_from_name_or_file(args.vehicle)
     maneuver = maneuver_from_args(args, config)
+    if args.program is not None:  # refused before the design: the store (D1), an existing file without --force
+        from pathlib import Path
+
+        from aerobat.cli.common import refuse_overwrite
+
+        refuse_overwrite(Path(args.program), store_path=None, force=args.force, option="--program")
     result = design(maneuver, NominalModel(config), correction=args.correction)
     if args.json:
         print(json.dumps(result.to_json_dict()))
@@ -44,7 +50,7 @@ def _write_program(maneuver: Any, result: Any, args: argparse.Namespace) -> None
     from aerobat.quadrotor.program import save_program
 
     path = Path(args.program)
-    refuse_overwrite(path, store_path=None, force=args.force, option="--program")
+    refuse_overwrite(path, store_path=None, force=args.force, option="--program")  # never the default store (D1)
     program = dataclasses.replace(maneuver.program(result.p_nominal), provenance=(
         f"aerobat {__version__}: aerobat {' '.join(args.argv)} (the nominal design p⁰ of {maneuver.name} on "
         f"{args.vehicle})"))

@@ -22,9 +22,10 @@ from aerobat.cli.common import (
     old_spelling,
     open_store,
     plant_choice_from_args,
+    refuse_overwrite,
     session_ref,
+    text_path,
 )
-from aerobat.cli.sessions import refuse_overwrite
 from aerobat.errors import ConfigError, IdentificationFailed
 
 __all__ = ["register"]
@@ -45,12 +46,24 @@ def _cmd_identify(args: argparse.Namespace) -> int:
 
     if args.out is None:
         raise ConfigError("the following arguments are required: --output")
-    out = Path(args.out)
-    figure = Path(args.figure) if args.figure else out.with_suffix(".png")
+    # every file identify writes is checked before anything flies or is stored (issue 31 D3, E2, I4): never a
+    # store (whatever the links), never an existing file without --force, never a place nothing can be created
+    store_path = Path(args.db) if getattr(args, "db", None) else None
+    out = Path(text_path(args.out, "--output"))
+    refuse_overwrite(out, store_path=store_path, force=args.force, option="--output")
+    try:
+        figure = Path(text_path(args.figure, "--figure")) if args.figure is not None else out.with_suffix(".png")
+    except ValueError:
+        raise ConfigError(f"--output {out}: not a file name; expected FILE.toml") from None
     if figure == out:
         raise ConfigError(f"--figure {figure}: the same file as --output")
+    refuse_overwrite(figure, store_path=store_path, force=args.force, option="--figure")
+    if not out.stem:
+        raise ConfigError(f"--output {out}: not a file name; expected FILE.toml")
     if args.log:
         return _cmd_identify_log(args, out, figure)
+    if args.airframe is not None:  # it was ignored, unchecked, while the flights ran
+        raise ConfigError("--airframe applies only with --log (it writes the [airframe] a log's fit gives)")
     options = _options(args)
     say = console(args.json).print
     with open_store(args) as store:
@@ -127,9 +140,9 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
     from aerobat.quadrotor.vehicle import save_vehicle, vehicle_from_name_or_file
 
     refs = [parse_log_ref(text) for text in args.log]
-    for path, option in ((out, "--output"), (figure, "--figure"),
-                         *([(Path(args.airframe), "--airframe")] if args.airframe else [])):
-        refuse_overwrite(path, store_path=None, force=args.force, option=option)
+    if args.airframe is not None:
+        refuse_overwrite(Path(text_path(args.airframe, "--airframe")), store_path=None, force=args.force,
+                         option="--airframe")
     prior = vehicle_from_name_or_file(args.vehicle)
     geometry = _geometry(args, prior)
     say = console(args.json).print

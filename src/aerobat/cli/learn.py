@@ -24,6 +24,7 @@ from aerobat.cli.common import (
     add_maneuver_options,
     add_plant_options,
     bounded_int,
+    check_outputs,
     console,
     maneuver_from_args,
     old_spelling,
@@ -31,7 +32,9 @@ from aerobat.cli.common import (
     output_dir,
     plant_choice_from_args,
     rule_choice_from_args,
+    session_folder,
     session_ref,
+    text_path,
 )
 from aerobat.cli.show import print_stored_session
 from aerobat.errors import ConfigError
@@ -99,14 +102,17 @@ def _cmd_learn(args: argparse.Namespace) -> int:
     if args.resume is None:
         # everything cheap is checked before the store is touched and before the (long) design
         config = vehicle_from_name_or_file(args.vehicle)
+        if args.plant_vehicle is not None and not args.plant_vehicle.strip():
+            raise ConfigError("--plant-vehicle '': empty; name a preset or a vehicle .toml file")
         plant_config = vehicle_from_name_or_file(args.plant_vehicle) if args.plant_vehicle is not None else None
         maneuver = maneuver_from_args(args, config)
         plant = plant_choice_from_args(args)
         rule = rule_choice_from_args(args)
         plant.spec.check_available()
     with open_store(args, synchronous="full" if args.fsync else "normal") as store:
-        if args.out is not None:
-            output_dir(args.out)  # an unusable --out fails now, not after learning
+        if args.out is not None:  # an unusable --out (or a file in it linked to the store) fails now, not later
+            folder = output_dir(text_path(args.out, "--out"))
+            check_outputs({folder / name: "--out" for name in _WRITTEN}, stores=(store.path,))
         if args.resume is None:
             start, source = None, None
             if args.from_session is not None:
@@ -190,6 +196,9 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
             if part.strip().startswith("warning:"):
                 say(f"  {part.strip()}")
 
+    # the folder and every file written at the end are checked before the first flight (issue 31 D4)
+    out = session_folder(args, store, sid, explicit=args.out if args.out is not None else _stored_out(store, sid))
+    check_outputs({out / name: "--out" for name in _WRITTEN}, stores=(store.path,))
     interrupts = Interrupts()
     interrupts.install()
     try:
@@ -213,7 +222,6 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
               f"({outcome.measured} of {outcome.target} measured iterations stored); resume with: {hint}",
               file=sys.stderr, flush=True)
         return 128 + int(signum)
-    out = output_dir(args.out if args.out is not None else (_stored_out(store, sid) or f"out/session-{sid}"))
     data = session_json(store, sid)
     data["wall_s"] = outcome.wall_s
     write_text(out / "session.json", json.dumps(data, indent=1))
@@ -231,6 +239,9 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
     if not outcome.completed:
         raise CommandFailed(f"{outcome.message}; session {sid} is stored: resume with `{hint}`")
     return 0
+
+
+_WRITTEN = ("session.json", "learning.png", "side_views.png")
 
 
 def _stored_out(store: Any, sid: int) -> str | None:
@@ -255,7 +266,8 @@ def register(sub: Any) -> None:
     p.add_argument("--gamma", default="paper", help="'paper' (max(1/i, 0.1)) or a constant in (0, 1]")
     p.add_argument("--rule", default="paper",
                    help="update rule: paper, tsvd, damped, kalman, broyden, or <rule>+isc (docs/method.md)")
-    p.add_argument("--out", default=None, help="folder for figures and session.json (default: out/session-ID)")
+    p.add_argument("--out", default=None, help="folder for figures and session.json "
+                                               "(default: out/STORE-HASH/session-ID, one per store and session)")
     p.add_argument("--resume", metavar="SESSION", type=session_ref,
                    help="continue a stored session (id or 'last') with its parameters, counters and plant state "
                         "(default: start a new one)")

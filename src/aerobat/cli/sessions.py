@@ -16,14 +16,17 @@ from aerobat.cli.common import (
     HelpFormatter,
     add_db_option,
     bounded_int,
+    check_outputs,
     console,
     open_store,
     output_dir,
     refuse_overwrite,
+    session_folder,
     session_ref,
 )
 from aerobat.cli.show import print_stored_session
 from aerobat.errors import ConfigError, OutputError
+from aerobat.fileio import check_output, write_output
 from aerobat.store.browse import SHOWN_STATES
 
 __all__ = ["register"]
@@ -83,8 +86,9 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
     with open_store(args, create=False) as store:
         session_id = store.resolve_session(args.session)
-        out = output_dir(args.out if args.out is not None else f"out/session-{session_id}")
-        before = {p: p.stat().st_mtime_ns for p in out.glob("*.png")}
+        out = session_folder(args, store, session_id)
+        check_outputs({out / name: "--out" for name in ("learning.png", "side_views.png")}, stores=(store.path,))
+        before = {p: p.stat().st_mtime_ns for p in out.glob("*.png") if p.is_file()}
         notes = session_figures(store, session_id, out)
     written = sorted(str(p) for p in out.glob("*.png") if before.get(p) != p.stat().st_mtime_ns)
     if args.json:
@@ -113,7 +117,9 @@ def _cmd_export(args: argparse.Namespace) -> int:
         store.verify_session(session_id)  # nothing is exported from a session with a damaged record
         if args.program is not None:
             return _export_program(store, session_id, args)
-        output = Path(args.output) if args.output else None
+        if args.output is not None and not args.output.strip():  # Path("") is "."
+            raise ConfigError("--output: empty file name")
+        output = Path(args.output) if args.output is not None else None
         if output is not None:
             refuse_overwrite(output, store_path=store.path, force=args.force, option="--output")
         if args.format == "json":
@@ -136,10 +142,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
                                  it.message, it.recorded_at])
             text = buffer.getvalue()
     if output is not None:
-        try:
-            output.write_text(text)
-        except OSError as exc:
-            raise OutputError(f"--output {output}: cannot write: {exc.strerror or exc}") from None
+        write_output(output, text, option="--output", stores=(store.path,))
         if args.json:
             print(json.dumps({"session": session_id, "written": str(output), "format": args.format}))
         else:
@@ -240,7 +243,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
             raise ConfigError(f"--iterations {args.iterations!r}: expected a comma list of iteration numbers") from None
     with open_store(args, create=False) as store:
         session_id = store.resolve_session(args.session)
-        out = output_dir(args.out if args.out is not None else f"out/session-{session_id}")
+        out = session_folder(args, store, session_id)
+        check_outputs({out / "replay.html": "--out"}, stores=(store.path,))
         path = session_replay(store, session_id, out / "replay.html", iterations=iterations)
         notes = replay_notes(store, session_id, iterations)
         if str(args.session) == "last" and store.session(session_id).study_id is not None:
@@ -255,23 +259,30 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _stores_of(args: argparse.Namespace) -> tuple[Any, ...]:
+    """The store ``--db`` names (if the command has it); the default store is always protected."""
+    db = getattr(args, "db", None)
+    return (db,) if db is not None else ()
+
+
 def _cmd_examples(args: argparse.Namespace) -> int:
     """Copy the shipped examples (programs, maneuver files, a Python maneuver) into a folder."""
-    import shutil
     from importlib.resources import files
 
     source = files("aerobat") / "examples"
-    target = output_dir(args.folder)
+    target = output_dir(args.folder, "FOLDER")
+    entries = [entry for entry in sorted(Path(str(source)).rglob("*")) if not entry.is_dir()
+               and entry.suffix in (".toml", ".py") and "__pycache__" not in entry.parts]
+    # every destination is checked before the first copy: never the store (whatever the links), never an
+    # existing file without --force; each copy then replaces its name (a link there is replaced, not followed)
+    for entry in entries:
+        output_dir(target / entry.relative_to(Path(str(source))).parent)
+        check_output(target / entry.relative_to(Path(str(source))), option=None, force=args.force,
+                     stores=_stores_of(args))
     copied = []
-    for entry in sorted(Path(str(source)).rglob("*")):
-        if entry.is_dir() or entry.suffix not in (".toml", ".py") or "__pycache__" in entry.parts:
-            continue
+    for entry in entries:
         relative = entry.relative_to(Path(str(source)))
-        destination = target / relative
-        if destination.exists() and not args.force:
-            raise ConfigError(f"{destination}: exists; choose another folder or pass --force to replace it")
-        destination.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(entry, destination)
+        write_output(target / relative, entry.read_bytes(), stores=_stores_of(args))
         copied.append(str(relative))
     if args.json:
         print(json.dumps({"folder": str(target), "files": copied}))
@@ -312,7 +323,8 @@ def register(sub: Any) -> None:
                           formatter_class=fmt)
     plot.add_argument("session", type=session_ref, help="session id or 'last' (required)")
     plot.add_argument("--out", default=None, metavar="DIR",
-                      help="folder for learning.png, side_views.png (default: out/session-ID)")
+                      help="folder for learning.png, side_views.png "
+                           "(default: out/STORE-HASH/session-ID, one per store and session)")
     plot.add_argument("--json", action="store_true", help="print one JSON object: the figures written")
     add_db_option(plot)
     plot.set_defaults(func=_cmd_plot)
@@ -339,7 +351,8 @@ def register(sub: Any) -> None:
     replay.add_argument("session", type=session_ref, help="session id or 'last' (required)")
     replay.add_argument("--iterations", default=None,
                         help="comma list of iterations to show (default: the first and last measured)")
-    replay.add_argument("--out", default=None, metavar="DIR", help="folder for replay.html (default: out/session-ID)")
+    replay.add_argument("--out", default=None, metavar="DIR", help="folder for replay.html "
+                        "(default: out/STORE-HASH/session-ID, one per store and session)")
     replay.add_argument("--json", action="store_true", help="print one JSON object")
     add_db_option(replay)
     replay.set_defaults(func=_cmd_replay)

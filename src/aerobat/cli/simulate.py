@@ -15,8 +15,8 @@ from aerobat.cli.common import (
     HelpFormatter,
     add_plant_options,
     bounded_int,
+    check_plot_files,
     console,
-    output_dir,
     plant_choice_from_args,
 )
 from aerobat.errors import ConfigError, DesignFailed
@@ -25,7 +25,7 @@ __all__ = ["register"]
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
-    from aerobat.plotting import save_figure
+    from aerobat.plotting import save_figure, write_text
     from aerobat.plotting.vehicle import plot_trajectory
     from aerobat.quadrotor.program import load_program
     from aerobat.quadrotor.simulate import final_state_summary, simulate
@@ -33,7 +33,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
     program = load_program(args.program)
     config = vehicle_from_name_or_file(args.vehicle)
-    folder = output_dir(args.out) if args.out is not None else None
+    folder = check_plot_files(args, ("trajectory.png", "simulation.json"))
     traj = simulate(program, config, mode=args.mode)
     if not np.all(np.isfinite(traj.final_state)):
         raise CommandFailed("simulation produced non-finite states")
@@ -44,7 +44,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
                                              title=f"{program.name or Path(args.program).stem} on {config.name}"),
                              folder / "trajectory.png" if folder is not None else args.plot)
     if folder is not None:
-        (folder / "simulation.json").write_text(json.dumps(summary, indent=1))
+        write_text(folder / "simulation.json", json.dumps(summary, indent=1))
     if args.json:
         print(json.dumps(summary))
     else:
@@ -71,7 +71,7 @@ def _print_state_table(summary: dict[str, Any], *, title: str) -> None:
 
 
 def _cmd_fly(args: argparse.Namespace) -> int:
-    from aerobat.plotting import save_figure
+    from aerobat.plotting import save_figure, write_text
     from aerobat.plotting.vehicle import plot_side_views
     from aerobat.quadrotor.program import load_program
     from aerobat.quadrotor.simulate import final_state_summary
@@ -94,7 +94,7 @@ def _cmd_fly(args: argparse.Namespace) -> int:
         if not nominal.converged:
             raise DesignFailed(f"design failed, nothing to fly: {nominal.message}", nominal)
         program = maneuver.program(nominal.p_nominal)
-    folder = output_dir(args.out) if args.out is not None else None
+    folder = check_plot_files(args, ("trials.png", "trials.json"))
     plant = plant_choice_from_args(args).build(config)
     trials = []
     panels: list[tuple[str, np.ndarray, np.ndarray]] = []
@@ -115,7 +115,7 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     ok = [t for t in trials if t["final_state"] is not None]
     stats = _statistics(ok)
     if folder is not None:
-        (folder / "trials.json").write_text(json.dumps({"trials": trials, "statistics": stats}, indent=1))
+        write_text(folder / "trials.json", json.dumps({"trials": trials, "statistics": stats}, indent=1))
     if args.json:
         print(json.dumps({"trials": trials, "statistics": stats}))
     elif stats:

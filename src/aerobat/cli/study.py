@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import io
 import json
 import math
 import shlex
@@ -28,6 +29,7 @@ from aerobat.cli.common import (
     add_maneuver_options,
     add_plant_options,
     bounded_int,
+    check_outputs,
     console,
     finite_float,
     maneuver_from_args,
@@ -50,12 +52,39 @@ def trials_text(trials: float) -> str:
     return f"{trials:g}" if math.isfinite(trials) else "never"
 
 
-def run_cli_study(args: argparse.Namespace, kind: str, spec: dict[str, Any], jobs: list[Any]) -> tuple[Any, Path]:
-    """Run a study with progress lines; returns (outcome, output folder). Failed jobs are the caller's to report."""
+def _study_folder(args: argparse.Namespace, store: Any, study_id: int, written: tuple[str, ...]) -> Path:
+    """The study's folder, claimed and recorded in the store as soon as the study starts (issue 31 D8).
+
+    ``--out``, else the folder recorded when the study started (so ``--resume`` after a kill
+    writes where it began), else ``out/<store>-<hash>/study-ID``. Every file the study writes at
+    the end is checked now, before any job runs.
+    """
+    from aerobat.fileio import claim_folder, default_folder, folder_owner
+
+    record = store.study(study_id)
+    owner = folder_owner(store.path, "study", study_id, record.created_at)
+    chosen = args.out if args.out is not None else record.out_dir
+    named = chosen is not None
+    if chosen is None:
+        chosen = default_folder(store.path, "study", study_id, record.created_at)
+    out = claim_folder(text_path(chosen, "--out"), owner, option="--out", force=named)
+    check_outputs({out / name: "--out" for name in written}, stores=(store.path,))
+    if record.out_dir != str(out):
+        store.set_study_out_dir(study_id, str(out))
+    return out
+
+
+def run_cli_study(args: argparse.Namespace, kind: str, spec: dict[str, Any], jobs: list[Any],
+                  written: tuple[str, ...] = ()) -> tuple[Any, Path]:
+    """Run a study with progress lines; returns (outcome, output folder). Failed jobs are the caller's to report.
+
+    ``written``: the files the caller writes into the folder afterwards (checked before any job runs).
+    """
     from aerobat.experiments.studies import run_study
 
     if args.out is not None:  # an unusable --out (the store itself, a file, no text) is refused before anything runs
-        output_dir(text_path(args.out, "--out"))
+        folder = output_dir(text_path(args.out, "--out"))
+        check_outputs({folder / name: "--out" for name in written}, stores=(getattr(args, "db", None),))
     out_console = console(getattr(args, "json", False))
     started = time.perf_counter()
     state: dict[str, Any] = {"first": 0}
@@ -63,6 +92,7 @@ def run_cli_study(args: argparse.Namespace, kind: str, spec: dict[str, Any], job
     def on_start(study_id: int, todo: int, done: int) -> None:
         state["first"] = done
         state["study"] = study_id
+        state["out"] = _study_folder(args, store, study_id, written)
         out_console.print(f"study {study_id} ({kind}): {todo} jobs to run, {done} already done "
                           f"(resume with --resume {study_id})", soft_wrap=True)
         out_console.file.flush()
@@ -90,9 +120,7 @@ def run_cli_study(args: argparse.Namespace, kind: str, spec: dict[str, Any], job
             raise Stopped(signum, f"interrupted by {signal.Signals(signum).name}: study {study_id} stopped with "
                                   f"{done} of {total} jobs stored; resume with: "
                                   f"{_resume_command(getattr(args, 'argv', None), study_id)}") from None
-        stored = store.study(outcome.study_id).out_dir
-        out = output_dir(args.out or stored or f"out/study-{outcome.study_id}")
-        store.set_study_out_dir(outcome.study_id, str(out))
+        out = state.get("out") or _study_folder(args, store, outcome.study_id, written)
     return outcome, out
 
 
@@ -156,7 +184,9 @@ def _cmd_robustness(args: argparse.Namespace) -> int:
     from aerobat.plotting.studies import plot_success_by_property, plot_trials_to_tolerance
 
     rule = RuleChoice.parse(args.rule, source="--rule")
-    ranges = load_ranges(args.ranges) if args.ranges else RobustnessRanges()
+    if args.ranges is not None and not args.ranges.strip():  # it was ignored: the default ranges ran
+        raise ConfigError("--ranges: empty file name")
+    ranges = load_ranges(args.ranges) if args.ranges is not None else RobustnessRanges()
     if args.betaflight is not None and args.plant != "betaflight":
         raise ConfigError(f"--betaflight applies only with --plant betaflight (got --plant {args.plant})")
     base = (with_tune_from_args(args, PlantChoice.from_file(args.plant, args.betaflight)).settings
@@ -174,7 +204,8 @@ def _cmd_robustness(args: argparse.Namespace) -> int:
     scheme = jobs[0].spec["plant"].get("feedback", {}).get("scheme", "none") if jobs else "none"
     if scheme != "none":
         spec["feedback"] = scheme
-    outcome, out = run_cli_study(args, "robustness", spec, jobs)
+    outcome, out = run_cli_study(args, "robustness", spec, jobs,
+                                 written=("trials_to_tolerance.png", "success_vs_property.png", "robustness.json"))
     results = [r for _, r in sorted(outcome.results.items())]
     summary = summarize_robustness(results, properties)
     save_figure(plot_trials_to_tolerance(summary.trials_to_tolerance, args.tolerance_m),
@@ -246,7 +277,7 @@ def _cmd_envelope(args: argparse.Namespace) -> int:
     base = MultiFlip(vehicle=config.vehicle, dims=args.dims, axis=args.axis).spec()
     jobs = envelope_jobs(base, config, flips, rates)
     spec = {"base": base, "flips": flips, "rates_deg_s": rates}
-    outcome, out = run_cli_study(args, "envelope", spec, jobs)
+    outcome, out = run_cli_study(args, "envelope", spec, jobs, written=("envelope.json", "envelope_feasible.png"))
     feasible, grid, rows = envelope_grid(outcome.results, flips, rates)
     write_text(out / "envelope.json", json.dumps(rows, indent=1))
     for name, values in (("feasible", feasible), *grid.items()):
@@ -271,7 +302,7 @@ def _cmd_rules(args: argparse.Namespace) -> int:
 
     from aerobat.experiments.baselines import check_methods
     from aerobat.experiments.studies import parse_methods, rules_study_jobs, summarize_rules
-    from aerobat.plotting import save_figure
+    from aerobat.plotting import save_figure, write_text
     from aerobat.plotting.studies import plot_rules
 
     methods = parse_methods(args.methods)
@@ -283,7 +314,7 @@ def _cmd_rules(args: argparse.Namespace) -> int:
                             plant=plant, tolerance_m=args.tolerance_m)
     spec = {"maneuver": maneuver.spec(), "methods": methods, "seeds": args.seeds, "trials": args.trials,
             "plant": plant.to_table(), "tolerance_m": args.tolerance_m}
-    outcome, out = run_cli_study(args, "rules", spec, jobs)
+    outcome, out = run_cli_study(args, "rules", spec, jobs, written=("rules.csv", "rules.png"))
     results = [r for _, r in sorted(outcome.results.items()) if "method" in r]
     failed: dict[str, list[str]] = {}
     by_key = {job.key: job for job in jobs}
@@ -291,10 +322,11 @@ def _cmd_rules(args: argparse.Namespace) -> int:
         method = by_key[f.key].spec["method"] if f.key in by_key else f.label
         failed.setdefault(method, []).append(f.error)
     rows = summarize_rules(results, methods, failed)
-    with (out / "rules.csv").open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows({**r, "job_errors": " | ".join(r["job_errors"])} for r in rows)
+    handle = io.StringIO(newline="")
+    writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+    writer.writeheader()
+    writer.writerows({**r, "job_errors": " | ".join(r["job_errors"])} for r in rows)
+    write_text(out / "rules.csv", handle.getvalue())
     curves = {m: [r["position_errors_m"] for r in results if r["method"] == m] for m in methods}
     save_figure(plot_rules(curves, args.trials, args.tolerance_m), out / "rules.png")
     if args.json:
@@ -328,7 +360,7 @@ def _cmd_feedback(args: argparse.Namespace) -> int:
     import csv
 
     from aerobat.experiments.studies import feedback_study_jobs, parse_scenarios, parse_schemes, summarize_feedback
-    from aerobat.plotting import save_figure
+    from aerobat.plotting import save_figure, write_text
     from aerobat.plotting.studies import plot_feedback
     from aerobat.quadrotor.feedback import Feedback
 
@@ -346,7 +378,7 @@ def _cmd_feedback(args: argparse.Namespace) -> int:
     spec = {"maneuver": maneuver.spec(), "schemes": [s.value for s in schemes], "scenarios": scenarios,
             "seeds": args.seeds, "trials": args.trials, "plant": plant.to_table(), "rule": args.rule,
             "tolerance_m": args.tolerance_m}
-    outcome, out = run_cli_study(args, "feedback", spec, jobs)
+    outcome, out = run_cli_study(args, "feedback", spec, jobs, written=("feedback.csv", "feedback.png"))
     results = [r for _, r in sorted(outcome.results.items()) if "scheme" in r]
     by_key = {job.key: job for job in jobs}
     failed: dict[tuple[str, str], list[str]] = {}
@@ -355,11 +387,12 @@ def _cmd_feedback(args: argparse.Namespace) -> int:
         pair = (job.spec["scenario"], job.spec["scheme"]) if job else ("?", f.label)
         failed.setdefault(pair, []).append(f.error)
     rows = summarize_feedback(results, schemes, scenarios, args.trials, failed)
-    with (out / "feedback.csv").open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows({**r, "job_errors": " | ".join(r["job_errors"]),
-                          "last10_angle_deg": " ".join(f"{a:.3f}" for a in r["last10_angle_deg"])} for r in rows)
+    handle = io.StringIO(newline="")
+    writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+    writer.writeheader()
+    writer.writerows({**r, "job_errors": " | ".join(r["job_errors"]),
+                      "last10_angle_deg": " ".join(f"{a:.3f}" for a in r["last10_angle_deg"])} for r in rows)
+    write_text(out / "feedback.csv", handle.getvalue())
     curves = {sc: {s.value: [r["position_errors_m"] for r in results
                              if r["scenario"] == sc and r["scheme"] == s.value] for s in schemes}
               for sc in scenarios}
@@ -400,7 +433,8 @@ def add_execution_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--resume", default=None, metavar="STUDY", type=session_ref,
                    help="continue a study (id or 'last'): run only the jobs not done, failed ones included "
                         "(default: a new study)")
-    p.add_argument("--out", default=None, help="folder for figures and the report (default: out/study-ID)")
+    p.add_argument("--out", default=None, help="folder for figures and the report "
+                                               "(default: out/STORE-HASH/study-ID, one per store and study)")
     add_db_option(p)
 
 

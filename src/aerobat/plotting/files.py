@@ -7,13 +7,10 @@ writes one to a file (the format from the extension).
 
 from __future__ import annotations
 
-import errno
 from pathlib import Path
 from typing import Any
 
 __all__ = ["new_figure", "save_figure", "write_text"]
-
-_FULL = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
 
 
 def new_figure(*, figsize: tuple[float, float] = (8.0, 5.0)) -> Any:
@@ -23,18 +20,11 @@ def new_figure(*, figsize: tuple[float, float] = (8.0, 5.0)) -> Any:
     return Figure(figsize=figsize, constrained_layout=True)
 
 
-def _output_error(path: Path, exc: OSError) -> Exception:
-    from aerobat.errors import DiskFull, OutputError
-
-    reason = exc.strerror or str(exc)
-    if exc.errno in _FULL:
-        return DiskFull(f"{path}: cannot write: the disk is full or a file size limit was reached ({reason})")
-    return OutputError(f"{path}: cannot write: {reason}")
-
-
 def save_figure(fig: Any, path: str | Path, *, dpi: int = 120) -> Path:
-    """Write ``fig`` to ``path``; :class:`~aerobat.errors.OutputError` (or ``DiskFull``) if that fails."""
+    """Write ``fig`` to ``path`` atomically, never over a store or through a link
+    (:func:`aerobat.fileio.atomic_output`); :class:`~aerobat.errors.OutputError` (or ``DiskFull``) if that fails."""
     from aerobat.errors import OutputError
+    from aerobat.fileio import atomic_output
 
     path = Path(path)
     kind = path.suffix.lower().lstrip(".")
@@ -42,18 +32,14 @@ def save_figure(fig: Any, path: str | Path, *, dpi: int = 120) -> Path:
     if kind and kind not in supported:  # matplotlib would raise a ValueError after the work is done
         raise OutputError(f"{path}: cannot write a figure as .{kind}; use one of "
                           f"{', '.join('.' + k for k in sorted(supported))}")
-    try:
-        fig.savefig(path, dpi=dpi)
-    except OSError as exc:
-        raise _output_error(path, exc) from None
+    with atomic_output(path) as handle:
+        fig.savefig(handle, dpi=dpi, format=kind or "png")
     return path
 
 
 def write_text(path: str | Path, text: str) -> Path:
-    """Write ``text`` to ``path``; :class:`~aerobat.errors.OutputError` (or ``DiskFull``) if that fails."""
-    path = Path(path)
-    try:
-        path.write_text(text)
-    except OSError as exc:
-        raise _output_error(path, exc) from None
-    return path
+    """Write ``text`` to ``path`` atomically, never over a store or through a link; :class:`~aerobat.errors.OutputError`
+    (or ``DiskFull``) if that fails."""
+    from aerobat.fileio import write_output
+
+    return write_output(path, text)

@@ -491,6 +491,8 @@ def vehicle_from_name_or_file(spec: str) -> VehicleConfig:
     check_type("vehicle", spec, str, "a preset name or a vehicle TOML file")
     if spec in PRESETS:
         return PRESETS[spec]()
+    if not spec.strip():  # Path("") is the working folder
+        raise ConfigError(f"vehicle '': empty; use one of {', '.join(PRESETS)} or a .toml file")
     if not spec.endswith(".toml") and not _exists(spec):
         raise ConfigError(f"unknown vehicle {spec!r}: use one of {', '.join(PRESETS)} or a .toml file")
     return load_vehicle(spec)

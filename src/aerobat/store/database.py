@@ -31,6 +31,7 @@ from aerobat.errors import (
     StoreVersionError,
     StoreWriteError,
 )
+from aerobat.fileio import default_store_path, store_sibling_suffix
 from aerobat.store import checksums
 from aerobat.store.codec import utc_now
 from aerobat.store.migrations import APPLICATION_ID, SCHEMA, SCHEMA_VERSION, TABLES, TABLES_SINCE, migrate
@@ -46,7 +47,7 @@ _SQLITE_MAGIC = b"SQLite format 3\x00"
 
 def default_path() -> str:
     """The database used when ``--db`` is not given: ``$AEROBAT_DB`` or ``./aerobat.sqlite``."""
-    return os.environ.get("AEROBAT_DB") or DEFAULT_PATH
+    return default_store_path()
 
 
 class Database:
@@ -91,6 +92,11 @@ class Database:
                                    f"{short_repr(path)}")
         if not str(path).strip():
             raise StoreAccessError("--db: empty database path")
+        suffix = store_sibling_suffix(path)
+        if suffix is not None:  # issue 31 D6: the next `--db X` would take this file for X's own and delete it
+            raise StoreAccessError(f"--db {os.fspath(path)}: named like the {suffix} file SQLite keeps next to a "
+                                   f"store {os.fspath(path)[:-len(suffix)]}; choose a name that does not end in "
+                                   f"-wal, -shm or -journal")
         check_range("busy_timeout_s", busy_timeout_s, low=0.0, unit="s")
         self.path = as_path(path, "--db")
         self.busy_timeout_s = float(busy_timeout_s)

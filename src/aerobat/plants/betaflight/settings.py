@@ -291,10 +291,12 @@ def load_settings(path: Path | None = None) -> BetaflightSettings:
         names the file and the field).
     """
     path = Path(path) if path is not None else DEFAULT_SETTINGS_PATH
+    from aerobat.fileio import read_input
+
+    raw = read_input(path, what="Betaflight settings file")  # a regular file only, size-capped (issue 31 H1/H2)
     try:
-        raw = path.read_bytes()
         data = tomllib.loads(raw.decode())
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as error:
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as error:
         raise ConfigError(f"{path}: cannot read Betaflight settings: {error}") from None
     if data.get("schema") != 1:
         raise ConfigError(f"{path}: schema = {data.get('schema')!r}: this aerobat reads schema 1")

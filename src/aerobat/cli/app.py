@@ -198,9 +198,11 @@ def _main(argv: Sequence[str] | None) -> int:
     except BrokenPipeError:  # `aerobat … | head`: the reader left; nothing more to say
         return EXIT_FAILED
     except Exception as exc:
-        if debug:
-            raise
         status = exit_status(exc)
+        if debug:  # the traceback, then the same line and the same status as without --debug
+            import traceback
+
+            traceback.print_exc()
         if isinstance(exc, MissingDependency):
             print(f"aerobat: failed: {_one_line(exc)}", file=sys.stderr)
         elif status == EXIT_USAGE:

@@ -74,11 +74,45 @@ def old_spelling(p: argparse.ArgumentParser, old: str, dest: str, *, type: Any =
     p.add_argument(old, dest=dest, action=_OldSpelling, type=type, convert=convert)
 
 
+_NO_VALUE = ("--", "")
+
+
 class Parser(argparse.ArgumentParser):
-    """argparse with one-line errors and the documented exit status for bad usage."""
+    """argparse with one-line errors and the documented exit status for bad usage.
+
+    Options are never matched by a prefix (``--flip`` is not ``--flips``): an unknown option is
+    refused with the nearest known one as a suggestion. An option's value is never ``--`` or empty
+    (argparse would pass an empty list on, or nothing at all).
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
         self.exit(EXIT_USAGE, f"aerobat: error: {message}\n")
+
+    def _get_values(self, action: argparse.Action, arg_strings: list[str]) -> Any:
+        if action.option_strings and action.nargs != 0 and any(a in _NO_VALUE for a in arg_strings):
+            given = next(a for a in arg_strings if a in _NO_VALUE)
+            self.error(f"{action.option_strings[0]}: expected a value, got {given!r}")
+        return super()._get_values(action, arg_strings)
+
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        namespace, extras = super().parse_known_args(args, namespace)
+        leaf = not any(isinstance(a, argparse._SubParsersAction) for a in self._actions)  # noqa: SLF001
+        unknown = [e for e in extras if e.startswith("-") and e not in _NO_VALUE]
+        if leaf and unknown:
+            self.error(f"unrecognized arguments: {' '.join(extras)}{self._did_you_mean(unknown[0])}")
+        return namespace, extras
+
+    def _did_you_mean(self, token: str) -> str:
+        import difflib
+
+        name = token.split("=", 1)[0]
+        known = [s for a in self._actions if a.help != argparse.SUPPRESS for s in a.option_strings]  # noqa: SLF001
+        close = difflib.get_close_matches(name, known, n=1, cutoff=0.75)
+        return f" (did you mean {close[0]}?)" if close else ""
 
 
 def _quiet_stdout() -> None:

@@ -48,6 +48,12 @@ class CommandFailed(AerobatError):
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
     """Shows each option's default — unless its help already says what it defaults to, or there is none."""
 
+    def _split_lines(self, text: str, width: int) -> list[str]:
+        """Wrapped between words only: never inside a path (``out/session-ID``) or a hyphenated word."""
+        import textwrap
+
+        return textwrap.wrap(" ".join(text.split()), width, break_on_hyphens=False, break_long_words=False)
+
     def _get_help_string(self, action: argparse.Action) -> str:
         text = action.help or ""
         if "default" in text or "required" in text or action.default in (None, argparse.SUPPRESS):
@@ -75,6 +81,19 @@ def old_spelling(p: argparse.ArgumentParser, old: str, dest: str, *, type: Any =
 
 
 _NO_VALUE = ("--", "")
+_UNIT_METAVARS = (("-rad-s", "RAD/S"), ("-deg-s", "DEG/S"), ("-m-s2", "M/S²"), ("-mm", "MM"), ("-deg", "DEG"),
+                  ("-rad", "RAD"), ("-kg", "KG"), ("-m", "M"), ("-s", "S"))
+
+
+def _metavar(option: str, kind: Any) -> str | None:
+    if option == "--out":
+        return "DIR"
+    if kind is int or getattr(kind, "metavar", None) == "N":
+        return "N"
+    for suffix, unit in _UNIT_METAVARS:
+        if option.endswith(suffix):
+            return unit
+    return None
 
 
 class Parser(argparse.ArgumentParser):
@@ -88,6 +107,16 @@ class Parser(argparse.ArgumentParser):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)
+
+    def add_argument(self, *args: Any, **kwargs: Any) -> argparse.Action:
+        """An option's metavar says what it takes: N for a count, DIR for ``--out``, the unit for a quantity."""
+        options = [a for a in args if isinstance(a, str) and a.startswith("-")]
+        takes_value = kwargs.get("action") in (None, "store", "append") and "choices" not in kwargs
+        if options and takes_value and "metavar" not in kwargs:
+            metavar = _metavar(options[0], kwargs.get("type"))
+            if metavar is not None:
+                kwargs["metavar"] = metavar
+        return super().add_argument(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
         self.exit(EXIT_USAGE, f"aerobat: error: {message}\n")
@@ -185,6 +214,7 @@ def bounded_int(low: int, high: int) -> Any:
             raise argparse.ArgumentTypeError(f"{value}: allowed {low} … {high}")
         return value
 
+    parse.metavar = "N"  # type: ignore[attr-defined]
     return parse
 
 
@@ -223,24 +253,24 @@ def add_maneuver_options(p: argparse.ArgumentParser, *, optional: bool = False, 
                    help="maneuver family (required unless --maneuver" + (" or --resume" if optional else "") + ")")
     p.add_argument("--maneuver", dest="maneuver_source", metavar="FILE.toml|package.module:Name", default=None,
                    help="a maneuver file (docs/maneuvers.md) or a Python maneuver, instead of a family (default: none)")
-    p.add_argument("--flips", type=bounded_int(1, 10), default=None, help="number of flips c_N (flip; default 3)")
+    p.add_argument("--flips", type=bounded_int(1, 10), default=None, help="number of flips c_N, flip only (default: 3)")
     p.add_argument("--max-rate-deg-s", type=finite_float(30.0, 5700.0, "deg/s"), default=None,
-                   help="coast rate c_pmax [deg/s] (flip; default 1800)")
+                   help="coast rate c_pmax [deg/s], flip only (default: 1800)")
     p.add_argument("--dims", type=int, choices=(2, 3), default=None,
-                   help="2D (5 parameters) or 3D (9) (flip; default 3)")
-    p.add_argument("--axis", choices=("roll", "pitch"), default=None, help="flip axis (flip; default roll)")
-    p.add_argument("--coast", choices=("min", "max"), default=None, help="coast collective β̲ or β̄ (flip; default min)")
+                   help="2D with 5 parameters or 3D with 9, flip only (default: 3)")
+    p.add_argument("--axis", choices=("roll", "pitch"), default=None, help="flip axis, flip only (default: roll)")
+    p.add_argument("--coast", choices=("min", "max"), default=None, help="coast collective β̲ or β̄, flip only (default: min)")
     p.add_argument("--ramp-s", type=finite_float(0.0, 1.0, "s"), default=None,
-                   help="thrust ramp-down duration [s] (flip; default 0.1)")
-    p.add_argument("--to-m", dest="to", metavar="Y,Z", default=None, help="target Y,Z [m] (translation; default 5,5)")
+                   help="thrust ramp-down duration [s], flip only (default: 0.1)")
+    p.add_argument("--to-m", dest="to", metavar="Y,Z", default=None, help="target Y,Z [m], translation only (default: 5,5)")
     old_spelling(p, "--to", "to")
     p.add_argument("--final-angle-deg", type=finite_float(-2300.0, 2300.0, "deg"), default=None,
-                   help="final roll angle [deg] (translation; default 0)")
+                   help="final roll angle [deg], translation only (default: 0)")
     old_spelling(p, "--final-angle-rad", "final_angle_deg", type=finite_float(-40.0, 40.0, "rad"),
                  convert=math.degrees)
     p.add_argument("--vehicle", default="hummingbird", help="design vehicle: a preset name or a vehicle TOML file")
     p.add_argument("--correction", choices=("tsvd", "inverse", "damped"), default="tsvd",
-                   help="right inverse used for C (see docs/results.md)")
+                   help="right inverse used for C, see docs/results.md")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -265,8 +295,8 @@ def _apply_family_defaults(args: argparse.Namespace) -> None:
 
 
 def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | None = None,
-                      default: str = "arena") -> None:
-    """``--plant`` and each plant's settings file, and ``--seed``."""
+                      default: str = "arena", feedback: bool = True) -> None:
+    """``--plant`` and each plant's settings file, ``--seed``, and ``--feedback`` unless the command fixes it."""
     from aerobat.plants import PLANTS
 
     choices = kinds or PLANTS.names()
@@ -274,17 +304,20 @@ def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | No
     for name, spec in PLANTS.items():
         if spec.option is not None and name in choices:
             p.add_argument(spec.option, metavar="FILE.toml",
-                          help=f"{name} settings (only with --plant {name}; default: the {name}'s defaults)")
+                          help=f"{name} settings, only with --plant {name} (default: the {name}'s defaults)")
     if "betaflight" in choices:
         p.add_argument("--tune", metavar="FILE",
-                       help="a real quad's Betaflight configuration flown by the SITL (only with --plant betaflight): "
-                            "a CLI diff/dump, or a blackbox log (.bbl/.bfl/.txt) whose header is used; default: aerobat's own settings")
+                       help="a real quad's Betaflight configuration flown by the SITL, only with --plant betaflight: "
+                            "a CLI diff or dump, or a blackbox log .bbl, .bfl or .txt whose header is used "
+                            "(default: aerobat's own settings)")
         p.add_argument("--tune-log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
-                       help="which log of a blackbox file holding several gives the tune (default 1)")
+                       help="which log of a blackbox file holding several gives the tune (default: 1)")
     p.add_argument("--seed", type=bounded_int(0, 2**63 - 1), default=0, help="seed of the plant's random generator")
+    if not feedback:
+        return
     p.add_argument("--feedback", choices=("none", "attitude", "tracking"), default=None,
-                   help="what the vehicle's onboard loop mixes into the program: none (the paper's open "
-                        "loop), attitude, tracking (docs/feedback.md; default: the plant's best measured, "
+                   help="what the vehicle's onboard loop mixes into the program: none is the paper's open "
+                        "loop, attitude, tracking; see docs/feedback.md (default: the plant's best measured, "
                         "tracking on the arena and Betaflight, none on RotorPy)")
 
 

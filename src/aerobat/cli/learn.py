@@ -250,9 +250,9 @@ def register(sub: Any) -> None:
     add_maneuver_options(p, optional=True)
     add_plant_options(p)
     p.add_argument("--trials", dest="iterations", type=bounded_int(1, 10000), default=None,
-                   help="measured trials, one learning iteration each (default 30; with --resume the stored target)")
+                   help="measured trials, one learning iteration each (default: 30; with --resume the stored target)")
     old_spelling(p, "--iterations", "iterations", type=bounded_int(1, 10000))
-    p.add_argument("--gamma", default="paper", help="'paper' (max(1/i, 0.1)) or a constant in (0, 1]")
+    p.add_argument("--gamma", default="paper", help="'paper', that is max(1/i, 0.1), or a constant in (0, 1]")
     p.add_argument("--rule", default="paper",
                    help="update rule: paper, tsvd, damped, kalman, broyden, or <rule>+isc (docs/method.md)")
     p.add_argument("--out", default=None, help="folder for figures and session.json (default: out/session-ID)")
@@ -260,7 +260,7 @@ def register(sub: Any) -> None:
                    help="continue a stored session (id or 'last') with its parameters, counters and plant state "
                         "(default: start a new one)")
     p.add_argument("--from-session", metavar="SESSION", type=session_ref,
-                   help="start a new session from another session's learned parameters (same maneuver; default: p⁰)")
+                   help="start a new session from another session's learned parameters, same maneuver (default: p⁰)")
     p.add_argument("--plant-vehicle", default=None, metavar="NAME|FILE",
                    help="the vehicle the plant is built around, if not --vehicle (a simulated plant makes its true "
                         "vehicle and its onboard controller from it): with a vehicle identified on the arena as "

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import re
 import subprocess
 import sys
 
@@ -82,3 +83,72 @@ def test_debug_keeps_bad_input_at_exit_2(tmp_path):
     assert run.returncode == 2, run.stderr
     assert "Traceback" in run.stderr
     assert run.stderr.strip().splitlines()[-1] == f"aerobat: error: {missing}: file not found"
+
+
+# ------------------------------------------------------------------ wording (issue 25, item 7)
+
+
+def _nested_parentheses(text: str) -> list[str]:
+    out, depth = [], 0
+    for line in text.splitlines():
+        depth = 0
+        for c in line:
+            depth += (c == "(") - (c == ")")
+            if depth > 1:
+                out.append(line)
+                break
+    return out
+
+
+def test_design_and_benchmark_say_their_status_once_in_plain_words():
+    code, out, err = call(["design", "flip", "--flips", "1", "--dims", "2", "--max-rate-deg-s", "800"])
+    assert code == 0, err
+    first = out.splitlines()[0]
+    assert "converged — converged" not in first and "converged — residual norm" in first, first
+    assert "1 iterations" not in out and not _nested_parentheses(first), first
+    code, out, err = call(["benchmark", "translation", "--to-m", "1,1"])
+    assert code == 0, err
+    assert "optimal — optimal" not in out and "status: optimal — T*=" in out, out
+    assert not _nested_parentheses(out), _nested_parentheses(out)
+    assert "[rad/s]" not in out and "value [deg/s]" in out  # the option is --body-rate-deg-s
+    assert "+572.9578" in out  # a rate arc at the 10 rad/s limit, in degrees
+
+
+def test_vehicles_speak_degrees_like_their_grid():
+    from aerobat.cli.vehicles import _in_degrees
+
+    code, out, _ = call(["vehicles"])
+    assert code == 0 and "[rad/s²]" not in out and "[°/s²]" in out
+    assert "8750 / 8750" in out  # the Hummingbird's 152.7 rad/s² in °/s²
+    assert _in_degrees("largest error flip_angle = -18.8 rad") == "largest error flip_angle = -1077°"
+    assert _in_degrees("a rate of 2 rad/s, 3 rad/s² left") == "a rate of 115°/s, 3 rad/s² left"
+
+
+def test_learn_prints_each_trial_once_with_its_progress(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, out, err = call(["learn", "flip", "--flips", "1", "--dims", "2", "--max-rate-deg-s", "800",
+                           "--plant", "nominal", "--trials", "1", "--db", "a.sqlite"])
+    assert code == 0, err
+    rows = [line for line in out.splitlines() if re.match(r"\s*(│\s*)?1\s+(│\s*)?ok", line)]
+    assert len(rows) == 1, out  # the trial, not the trial and then a table of the same rows
+    assert "[1/1, " in rows[0] and rows[0].rstrip().endswith("done]"), rows[0]
+    assert "1 measured iteration\n" in out and "1 measured iterations" not in out and "of 1 measured iterations" \
+        not in out, out
+    assert "aerobat show 1 --db a.sqlite" in out
+    code, out, err = call(["learn", "--resume", "1", "--trials", "3", "--db", "a.sqlite"])
+    assert code == 0, err
+    progress = [line[line.index("["):] for line in out.splitlines() if "position error" in line and "[" in line]
+    assert progress[0].startswith("[2/3, ") and "left]" in progress[0], progress
+    assert progress[1].startswith("[3/3, ") and progress[1].endswith("done]"), progress
+
+
+def test_a_closed_pipe_ends_quietly(tmp_path):
+    """`aerobat vehicles | head -0`: no broken-pipe error and no 'Exception ignored'; the status is 141 (SIGPIPE)."""
+    for argv in (["vehicles"], ["design", "flip", "--flips", "1", "--dims", "2", "--max-rate-deg-s", "800", "--json"]):
+        proc = subprocess.Popen([sys.executable, "-m", "aerobat.cli", *argv], stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, cwd=tmp_path)
+        assert proc.stdout is not None and proc.stderr is not None
+        proc.stdout.close()  # the reader left before the first line
+        err = proc.stderr.read().decode()
+        assert proc.wait(timeout=300) == 141, err
+        assert err == "", err

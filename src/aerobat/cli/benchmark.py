@@ -58,16 +58,17 @@ def _cmd_translation(args: argparse.Namespace) -> int:
     else:
         out = console()
         out.print(f"time-optimal hover-to-hover (0, 0) → ({y:g}, {z:g}) m, final angle {args.final_angle_deg:g}°")
-        out.print(f"status: {solution.status.value} — {solution.message}")
+        status = solution.status.value
+        out.print(f"status: {status} — {solution.message.removeprefix(status + ': ')}")
         if solution.ok:
-            out.print(f"T* = {solution.duration_s:.4f} s (transcription {solution.transcription_duration_s:.4f} s), "
-                      f"boundary error {solution.boundary_error:.1e}")
-            for title, arcs, unit in (("thrust", solution.thrust_arcs, "m/s²"), ("rate", solution.rate_arcs, "rad/s")):
+            # the command line speaks degrees (--body-rate-deg-s): so does the rate table
+            for title, arcs, unit, scale in (("thrust", solution.thrust_arcs, "m/s²", 1.0),
+                                             ("rate", solution.rate_arcs, "deg/s", math.degrees(1.0))):
                 table = Table(title=f"{title} arcs")
                 for col in ("kind", "start [s]", "end [s]", f"value [{unit}]"):
                     table.add_column(col)
                 for arc in arcs:
-                    table.add_row(arc.kind, f"{arc.start_s:.4f}", f"{arc.end_s:.4f}", f"{arc.value:+.4f}")
+                    table.add_row(arc.kind, f"{arc.start_s:.4f}", f"{arc.end_s:.4f}", f"{arc.value * scale:+.4f}")
                 out.print(table)
         if figure is not None:
             where = f", solution to {folder / 'translation.json'}" if folder is not None else ""

@@ -29,7 +29,9 @@ __all__ = [
     "maneuver_from_args",
     "open_store",
     "output_dir",
+    "quiet_stdout",
     "parse_pair",
+    "plural",
     "plant_choice_from_args",
     "with_tune_from_args",
     "refuse_overwrite",
@@ -144,7 +146,7 @@ class Parser(argparse.ArgumentParser):
         return f" (did you mean {close[0]}?)" if close else ""
 
 
-def _quiet_stdout() -> None:
+def quiet_stdout() -> None:
     """The reader of standard output left: send the rest to /dev/null so later writes cannot fail."""
     import os
 
@@ -168,7 +170,7 @@ def console(json_mode: bool = False) -> Any:
 
     class _Console(Console):
         def on_broken_pipe(self) -> None:
-            _quiet_stdout()
+            quiet_stdout()
             raise BrokenPipeError("standard output was closed")
 
     stream = sys.stderr if json_mode else sys.stdout
@@ -180,6 +182,11 @@ def console(json_mode: bool = False) -> Any:
 
 
 # ------------------------------------------------------------------ parsing
+
+
+def plural(n: int, word: str, words: str | None = None) -> str:
+    """``1 iteration``, ``2 iterations``: a count with its noun."""
+    return f"{n} {word if n == 1 else (words or word + 's')}"
 
 
 def parse_pair(text: str, option: str) -> tuple[float, float]:

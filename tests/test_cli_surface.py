@@ -152,3 +152,21 @@ def test_a_closed_pipe_ends_quietly(tmp_path):
         err = proc.stderr.read().decode()
         assert proc.wait(timeout=300) == 141, err
         assert err == "", err
+
+
+# ------------------------------------------------------------------ estimates (issue 25, item 8)
+
+
+def test_a_study_estimate_comes_from_its_measured_jobs_not_from_the_pool_start():
+    """The first job of 100 ends 60 s in, 55 s of which were the pool starting; each job takes 5 s on 2 workers.
+
+    The time since the start says 60 × 99 = 5940 s left; the jobs' own times say 5 s × 50 rounds = 250 s,
+    which is what the rest takes."""
+    from aerobat.cli.study import study_eta
+
+    assert study_eta(60.0, 1, 99, [5.0], workers=2) == pytest.approx(250.0)
+    assert study_eta(70.0, 5, 95, [5.0, 4.0, 6.0, 5.0, 5.0], workers=2) == pytest.approx(5.0 * 48)
+    assert study_eta(70.0, 5, 0, [5.0], workers=2) == 0.0
+    # no job times (design jobs) or an unknown pool (Dask): the rate since the start
+    assert study_eta(60.0, 3, 6, [], workers=2) == pytest.approx(120.0)
+    assert study_eta(60.0, 3, 6, [5.0], workers=None) == pytest.approx(120.0)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import time
 from pathlib import Path
 from typing import Any
@@ -46,6 +47,23 @@ def trials_text(trials: float) -> str:
     return f"{trials:g}" if math.isfinite(trials) else "never"
 
 
+def study_eta(elapsed_s: float, ran: int, remaining: int, job_walls_s: list[float], workers: int | None) -> float:
+    """Seconds left, from the jobs measured so far.
+
+    A job's own wall time (``wall_s``, measured in its worker) excludes starting the pool and
+    loading the compiled kernels, which the time since the start includes and which the first
+    job would otherwise spread over all the others (an estimate 14 times too long). With
+    ``workers`` running side by side, the rest takes their mean time per round of ``workers``
+    jobs. Without measured job times or a known pool size, the rate since the start is used.
+    """
+    if remaining <= 0:
+        return 0.0
+    if job_walls_s and workers:
+        mean = sum(job_walls_s) / len(job_walls_s)
+        return mean * math.ceil(remaining / workers)
+    return elapsed_s / ran * remaining if ran else math.nan
+
+
 def run_cli_study(args: argparse.Namespace, kind: str, spec: dict[str, Any], jobs: list[Any]) -> tuple[Any, Path]:
     """Run a study with progress lines; returns (outcome, output folder). Failed jobs are the caller's to report."""
     from aerobat.experiments.studies import run_study
@@ -54,7 +72,8 @@ def run_cli_study(args: argparse.Namespace, kind: str, spec: dict[str, Any], job
         output_dir(text_path(args.out, "--out"))
     out_console = console(getattr(args, "json", False))
     started = time.perf_counter()
-    state: dict[str, Any] = {"first": 0}
+    state: dict[str, Any] = {"first": 0, "walls": []}
+    workers = None if args.scheduler is not None else (args.workers or os.cpu_count() or 1)
 
     def on_start(study_id: int, todo: int, done: int) -> None:
         state["first"] = done
@@ -65,7 +84,10 @@ def run_cli_study(args: argparse.Namespace, kind: str, spec: dict[str, Any], job
     def progress(done: int, total: int, job: Any, outcome: Any) -> None:
         ran = done - state["first"]
         elapsed = time.perf_counter() - started
-        eta = elapsed / ran * (total - done) if ran else math.nan
+        wall = (outcome.result or {}).get("wall_s") if outcome.done else None
+        if isinstance(wall, int | float) and math.isfinite(wall) and wall >= 0:
+            state["walls"].append(float(wall))
+        eta = study_eta(elapsed, ran, total - done, state["walls"], workers)
         note = "" if outcome.done else f" FAILED: {outcome.error}"
         out_console.print(f"  [{done}/{total}] {job.key} {outcome.status.value}{note} "
                           f"(elapsed {elapsed:.0f} s, about {eta:.0f} s left)", soft_wrap=True)

@@ -109,6 +109,8 @@ def test_benchmark_figure_labels_z_outside_and_rates_in_degrees():
     assert path.yaxis.get_label_position() == "right"
     assert fig.axes[1].get_ylabel() == "rate ω [°/s]"
     fig.canvas.draw()
+    inputs = fig.axes[0].get_window_extent()
+    assert path.get_window_extent().x0 > inputs.x1  # the path panel no longer grows over the input panels
     lo, hi = path.get_ylim()
     assert lo < float(solution.states[:, 1].min()) and hi > float(solution.states[:, 1].max())
 

@@ -30,9 +30,10 @@ def plot_solution(solution: TimeOptimalSolution) -> Any:
     tt = np.linspace(0.0, t_final, 2001)
     f, w = solution.inputs(tt)
     fig = new_figure(figsize=(11, 6))
-    ax_f = fig.add_subplot(2, 2, 1)
-    ax_w = fig.add_subplot(2, 2, 3, sharex=ax_f)
-    ax_p = fig.add_subplot(1, 2, 2)
+    grid = fig.add_gridspec(2, 2)  # one grid: the layout keeps the path panel off the input panels
+    ax_f = fig.add_subplot(grid[0, 0])
+    ax_w = fig.add_subplot(grid[1, 0], sharex=ax_f)
+    ax_p = fig.add_subplot(grid[:, 1])
     ax_f.plot(tt, f, drawstyle="steps-post")
     ax_f.axhline(lim.f_max_m_s2, ls=":", c="gray")
     ax_f.axhline(lim.f_min_m_s2, ls=":", c="gray")
@@ -58,7 +59,7 @@ def plot_solution(solution: TimeOptimalSolution) -> Any:
         ax_p.plot([y, y + 0.6 * arm * math.sin(th)], [z, z + 0.6 * arm * math.cos(th)], c="C3", lw=1)
     ax_p.plot([0.0], [0.0], "go")
     ax_p.plot([solution.target_m[0]], [solution.target_m[1]], "r*", ms=10)
-    ax_p.set_aspect("equal", adjustable="datalim")
+    ax_p.set_aspect("equal", adjustable="box")  # "datalim" let the panel grow over the left column
     ax_p.margins(0.08)  # the vehicle glyphs at the ends stay inside, and no tick label is clipped
     ax_p.set_xlabel("y [m]")
     # the path's labels on its outer side: between the columns, "z [m]" ran into the tick labels

@@ -266,10 +266,12 @@ def add_maneuver_options(p: argparse.ArgumentParser, *, optional: bool = False, 
     p.add_argument("--dims", type=int, choices=(2, 3), default=None,
                    help="2D with 5 parameters or 3D with 9, flip only (default: 3)")
     p.add_argument("--axis", choices=("roll", "pitch"), default=None, help="flip axis, flip only (default: roll)")
-    p.add_argument("--coast", choices=("min", "max"), default=None, help="coast collective β̲ or β̄, flip only (default: min)")
+    p.add_argument("--coast", choices=("min", "max"), default=None,
+                   help="coast collective β̲ or β̄, flip only (default: min)")
     p.add_argument("--ramp-s", type=finite_float(0.0, 1.0, "s"), default=None,
                    help="thrust ramp-down duration [s], flip only (default: 0.1)")
-    p.add_argument("--to-m", dest="to", metavar="Y,Z", default=None, help="target Y,Z [m], translation only (default: 5,5)")
+    p.add_argument("--to-m", dest="to", metavar="Y,Z", default=None,
+                   help="target Y,Z [m], translation only (default: 5,5)")
     old_spelling(p, "--to", "to")
     p.add_argument("--final-angle-deg", type=finite_float(-2300.0, 2300.0, "deg"), default=None,
                    help="final roll angle [deg], translation only (default: 0)")

@@ -240,7 +240,8 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
 
 
 class _Progress:
-    """``3/30, 4 s, about 36 s left``: measured trials of the target, time so far, and the estimate from this run's trials."""
+    """``[3/30, 4 s, about 36 s left]``: measured trials of the target, the time so far, and the estimate
+    from this run's trials."""
 
     def __init__(self, measured: int, target: int) -> None:
         self.measured, self.target = measured, target

@@ -404,11 +404,13 @@ def register(sub: Any) -> None:
     rob.add_argument("--plant", choices=("arena", "betaflight"), default="arena",
                      help="whose true vehicle is sampled (docs/plants.md says what varies)")
     rob.add_argument("--feedback", choices=("none", "attitude", "tracking"), default=None,
-                     help="onboard feedback of every vehicle, see docs/feedback.md (default: the plant's best measured)")
+                     help="onboard feedback of every vehicle, see docs/feedback.md "
+                          "(default: the plant's best measured)")
     rob.add_argument("--betaflight", metavar="FILE.toml",
                      help="Betaflight plant settings to sample around (default: the shipped ones)")
     rob.add_argument("--tune", metavar="FILE", help="a real quad's Betaflight diff/dump or blackbox log, flown by "
-                                                   "every sampled vehicle, only with --plant betaflight (default: aerobat's own settings)")
+                                                   "every sampled vehicle, only with --plant betaflight "
+                                                   "(default: aerobat's own settings)")
     rob.add_argument("--tune-log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
                      help="which log of a blackbox file gives the tune (default: 1)")
     add_execution_options(rob)
@@ -417,7 +419,8 @@ def register(sub: Any) -> None:
     rules = ssub.add_parser("rules", help="every update rule and two model-free baselines, side by side",
                             formatter_class=fmt)
     add_maneuver_options(rules)
-    rules.add_argument("--methods", metavar="LIST", default=",".join(_default_methods()), help="comma list of rules and baselines")
+    rules.add_argument("--methods", metavar="LIST", default=",".join(_default_methods()),
+                       help="comma list of rules and baselines")
     rules.add_argument("--seeds", type=bounded_int(1, 1000), default=20, help="plant seeds per method")
     rules.add_argument("--trials", type=bounded_int(2, 1000), default=30, help="measured trials per run")
     rules.add_argument("--tolerance-m", type=finite_float(1e-6, 100.0, "m"), default=0.12,
@@ -430,7 +433,8 @@ def register(sub: Any) -> None:
     fb = ssub.add_parser("feedback", help="open loop and each onboard feedback scheme side by side, across "
                          "scenarios", formatter_class=fmt)
     add_maneuver_options(fb)
-    fb.add_argument("--schemes", metavar="LIST", default="none,attitude,tracking", help="comma list of feedback schemes")
+    fb.add_argument("--schemes", metavar="LIST", default="none,attitude,tracking",
+                    help="comma list of feedback schemes")
     fb.add_argument("--scenarios", metavar="LIST", default="default,gyro-x5,lossy-link,slow-link",
                     help="comma list of arena scenarios (docs/feedback.md)")
     fb.add_argument("--seeds", type=bounded_int(1, 1000), default=20, help="plant seeds per scheme and scenario")
@@ -446,7 +450,8 @@ def register(sub: Any) -> None:
     env = ssub.add_parser("envelope", help="design a grid of flips and map feasibility, duration, height, "
                           "conditioning", formatter_class=fmt)
     env.add_argument("--flips", default="1,2,3,4", metavar="LIST", help="flip counts, e.g. 1,2,3,4")
-    env.add_argument("--rates-deg-s", default="600:2000:8", metavar="A:B:N|LIST", help="max rates A:B:N or a comma list [deg/s]")
+    env.add_argument("--rates-deg-s", default="600:2000:8", metavar="A:B:N|LIST",
+                     help="max rates A:B:N or a comma list [deg/s]")
     env.add_argument("--dims", type=int, choices=(2, 3), default=2, help="2D or 3D flips")
     env.add_argument("--axis", choices=("roll", "pitch"), default="roll", help="flip axis")
     env.add_argument("--vehicle", default="hummingbird", help="design vehicle: preset or TOML file")

@@ -112,7 +112,8 @@ def register(sub: Any) -> None:
                        formatter_class=HelpFormatter)
     p.add_argument("--flips", action="store_true", help="design a grid of 2D flips on each vehicle (feasibility)")
     p.add_argument("--flip-counts", metavar="LIST", default="1,2,3", help="flip counts of the grid")
-    p.add_argument("--rates-deg-s", metavar="LIST", default="720,1080,1440,1800", help="coast rates of the grid [deg/s]")
+    p.add_argument("--rates-deg-s", metavar="LIST", default="720,1080,1440,1800",
+                   help="coast rates of the grid [deg/s]")
     p.add_argument("--axis", choices=("roll", "pitch"), default="roll", help="flip axis of the grid")
     p.add_argument("--vehicle", action="append", metavar="FILE.toml",
                    help="also list this vehicle file (repeatable), e.g. an identified one (default: the presets only)")

@@ -170,6 +170,7 @@ def plot_side_views(panels: Sequence[tuple[str, np.ndarray, np.ndarray]], *,
             if k:
                 ax.set_ylabel("")
     axes[0, 0].legend(loc="best", fontsize=7)
-    marks = "× desired final position, ● start" if target is not None else "● start; the maneuver names no final position"
+    marks = ("× desired final position, ● start" if target is not None
+             else "● start; the maneuver names no final position")
     fig.suptitle(title + ("\n" if title else "") + f"vehicle every 50 ms, triangle apex = thrust; {marks}", fontsize=9)
     return fig

@@ -121,7 +121,17 @@ class Parser(argparse.ArgumentParser):
         return super().add_argument(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
+        unknown = self._unknown_options() if "arguments are required" in message else []
+        if unknown:  # an unknown option explains a missing argument better than the other way round
+            message = f"unrecognized arguments: {' '.join(unknown)}{self._did_you_mean(unknown[0])}"
         self.exit(EXIT_USAGE, f"aerobat: error: {message}\n")
+
+    def _unknown_options(self) -> list[str]:
+        known = {s for a in self._actions for s in a.option_strings}  # noqa: SLF001
+        words = getattr(self, "_words", [])
+        cut = words.index("--") if "--" in words else len(words)
+        return [w for w in words[:cut] if w.startswith("-") and len(w) > 1 and w.split("=", 1)[0] not in known
+                and not self._negative_number_matcher.match(w)]
 
     def _get_values(self, action: argparse.Action, arg_strings: list[str]) -> Any:
         if action.option_strings and action.nargs != 0 and any(a in _NO_VALUE for a in arg_strings):
@@ -130,6 +140,7 @@ class Parser(argparse.ArgumentParser):
         return super()._get_values(action, arg_strings)
 
     def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        self._words = [str(a) for a in (args if args is not None else sys.argv[1:])]
         namespace, extras = super().parse_known_args(args, namespace)
         leaf = not any(isinstance(a, argparse._SubParsersAction) for a in self._actions)  # noqa: SLF001
         unknown = [e for e in extras if e.startswith("-") and e not in _NO_VALUE]

@@ -60,9 +60,6 @@ def _cmd_identify(args: argparse.Namespace) -> int:
             say(f"fitting session {run.session_id} of {store.path} again ({len(run.flights)} stored flights)")
         else:
             prior = vehicle_from_name_or_file(args.vehicle)
-            if args.feedback not in (None, "none"):
-                raise ConfigError(f"--feedback {args.feedback}: identification flies the open loop (feedback "
-                                  "would hide the dynamics it measures)")
             plant = plant_choice_from_args(args)
             plant.spec.check_available()
 

@@ -311,8 +311,6 @@ def _cmd_feedback(args: argparse.Namespace) -> int:
     from aerobat.plotting.studies import plot_feedback
     from aerobat.quadrotor.feedback import Feedback
 
-    if args.feedback is not None:
-        raise ConfigError("--feedback: the feedback study compares schemes; name them with --schemes")
     schemes = parse_schemes(args.schemes)
     scenarios = parse_scenarios(args.scenarios, plant=args.plant)
     plant = plant_choice_from_args(args)

@@ -75,11 +75,11 @@ CAPS = {"--workers": 2}
 EXAMPLES = {"--to": ["1,1", "2,-1", "0.5,0"], "--y": ["1:1:1", "0:1:2"], "--z": ["1:1:1", "-1:0:2"]}
 
 NUMERIC_EXTREMES = ["0", "-1", "nan", "inf", "-inf", "1e308", str(2**63), "1e23", "abc", "", "1.5", " 3 ", "+2",
-                    "0x1f", "1_0", "\u0663", "1e-320", "-0", "-1e308", str(-(2**63)), "١٢", "NaN", "Infinity"]
+                    "0x1f", "1_0", "\u0663", "1e-320", "-0", "-1e308", str(-(2**63)), "١٢", "NaN", "Infinity", "--"]
 REFS = ["0", "-1", "last", str(10**12), "abc", "1", "2", "LAST", " 1 ", str(2**63), "99999", "", "1.0", "+1"]
 GENERIC_TEXT = ["", " ", "abc", "nan", "inf", "-1", "0", "1e308", str(2**63), "é" * 300, "a,b", ",", ":", "1:2",
                 "1:2:3", "1,2", "\t", "x" * 5000, "1,2,3", "::", "0:0:0", "1e308,1e308", "nan,nan", "-0,-0",
-                "\udcff\udcfe", "paper", "last", "+", "tsvd+isc", "1:1e9:3", "1,,2"]
+                "\udcff\udcfe", "paper", "last", "+", "tsvd+isc", "1:1e9:3", "1,,2", "--", "--", ""]
 
 
 # ====================================================================== environment
@@ -327,7 +327,10 @@ class Option:
         return out
 
     def refuses(self, text: str) -> bool:
-        """Would argparse refuse this value (its type raises, or it is not among the choices)?"""
+        """Would the parser refuse this value (``--`` or empty for an option, its type raises, or it is not
+        among the choices)?"""
+        if text in ("--", "") and not self.positional and not self.flag:
+            return True  # issue 31 S4/I5: `--output=--`, `--output ''` are bad input, never stdout or ignored
         value: Any = text
         if self.action.type is not None:
             try:

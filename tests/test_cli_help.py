@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import re
 
 import pytest
 
@@ -98,3 +99,81 @@ def test_earlier_spellings_still_work(tmp_path, monkeypatch):
     with Store(tmp_path / "a.sqlite") as store:
         assert store.session(1).n_measured == 3
     assert next((tmp_path / "out").glob("a-*/session-1")).joinpath("session.json").exists()
+    assert (tmp_path / "out" / "session-1" / "session.json").exists()
+
+
+# ------------------------------------------------------------------ what a reader sees (issue 25, item 4)
+
+_ONE_DEFAULT = re.compile(r"\((?:default: |required)[^()]*(?:\([^()]*\)[^()]*)*\)$")
+
+
+def _shown(parser: argparse.ArgumentParser, action: argparse.Action) -> str:
+    return parser._get_formatter()._get_help_string(action) % {"default": action.default}  # noqa: SLF001
+
+
+@pytest.mark.parametrize("name, parser", PARSERS, ids=[name or "aerobat" for name, _ in PARSERS])
+def test_help_as_printed_names_each_default_once_and_one_way(name, parser, monkeypatch):
+    for columns in ("60", "80", "132"):
+        monkeypatch.setenv("COLUMNS", columns)
+        text = parser.format_help()
+        for bad in ("(default: None)", "(default: False)", "(default: True)", "(default: [])", "(default: ==SUPPRESS"):
+            assert bad not in text, f"aerobat {name} --help shows {bad}"
+        flat = " ".join(text.split())
+        for action in _visible(parser) + [a for a in parser._actions if not a.option_strings  # noqa: SLF001
+                                          and not isinstance(a, argparse._SubParsersAction)]:  # noqa: SLF001
+            shown = " ".join(_shown(parser, action).split())
+            label = action.option_strings[0] if action.option_strings else action.dest
+            # wrapped only between words: never inside a path such as out/session-ID or a word with a hyphen
+            assert shown in flat, f"aerobat {name}: {label}'s help is broken inside a word at {columns} columns"
+    for action in _visible(parser):
+        if isinstance(action, argparse._HelpAction | argparse._VersionAction):  # noqa: SLF001
+            continue
+        shown = _shown(parser, action)
+        label = action.option_strings[0]
+        assert len(re.findall(r"\bdefault\b(?![,-])", shown)) + len(re.findall(r"\brequired\b", shown)) == 1, \
+            f"aerobat {name}: {label} names its default more than once or not at all: {shown!r}"
+        assert _ONE_DEFAULT.search(shown), f"aerobat {name}: {label}: the default is not '(default: X)' last: {shown!r}"
+
+
+@pytest.mark.parametrize("name, parser", LEAVES, ids=[name for name, _ in LEAVES])
+def test_metavars_say_what_the_value_is(name, parser):
+    """`--trials N`, `--out DIR`, a count is N, a quantity its unit — never argparse's upper-cased dest."""
+    for action in _visible(parser):
+        if action.nargs == 0 or action.choices is not None:
+            continue
+        option = action.option_strings[0]
+        shown = action.metavar or action.dest.upper()
+        assert "_" not in shown, f"aerobat {name}: {option} {shown}: argparse's upper-cased name, not what it takes"
+        if option in ("--trials", "--seeds", "--seed", "--workers", "--vehicles", "--limit"):
+            assert shown == "N", f"aerobat {name}: {option} {shown}, expected N"
+        if option == "--out":
+            assert shown == "DIR", f"aerobat {name}: --out {shown}, expected DIR"
+
+
+def test_one_meaning_per_option_across_commands():
+    """--max-rate-deg-s is the flip's coast rate everywhere; --to-m has the same default in design and benchmark."""
+    helps: dict[str, set[str]] = {}
+    defaults: dict[str, set[str]] = {}
+    for _, parser in LEAVES:
+        for action in _visible(parser):
+            for option in action.option_strings:
+                helps.setdefault(option, set()).add((action.help or "").split("[")[0].split("(")[0].strip())
+                defaults.setdefault(option, set()).add(re.sub(r".*\((default: |required)", r"\1",
+                                                               _shown(parser, action)))
+    assert len(helps["--max-rate-deg-s"]) == 1, helps["--max-rate-deg-s"]
+    assert len(defaults["--to-m"]) == 1, defaults["--to-m"]
+
+
+def test_study_help_lists_every_study_and_identify_flies_open_loop():
+    text = build_parser().format_help()
+    line = next(x for x in text.splitlines() if x.strip().startswith("study "))
+    for study in ("robustness", "rules", "feedback", "envelope"):
+        assert study in line or study[:4] in line, line
+    identify = dict(PARSERS)["identify"]
+    assert "--feedback" not in identify.format_help()
+
+
+def test_study_seeds_start_at_zero_in_every_study():
+    for name in ("study robustness", "study rules", "study feedback"):
+        args = build_parser().parse_args([*name.split(), "flip"])
+        assert args.seed == 0, name

@@ -167,11 +167,11 @@ def test_unwritable_plot_path_exits_2(capsys, tmp_path):
     _assert_one_line_error(capsys, main(["simulate", SINGLE, "--plot", str(target)]), str(target))
 
 
-def test_debug_flag_shows_the_exception(tmp_path):
-    from aerobat.config import ConfigError
-
-    with pytest.raises(ConfigError, match="file not found"):
-        main(["--debug", "simulate", str(tmp_path / "missing.toml")])
+def test_debug_flag_shows_the_exception(tmp_path, capsys):
+    """--debug prints the traceback and keeps the status of bad input, 2 (issue 31 E1)."""
+    assert main(["--debug", "simulate", str(tmp_path / "missing.toml")]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" in err and "ConfigError" in err and err.rstrip().endswith("file not found")
 
 
 @pytest.mark.parametrize(

@@ -11,7 +11,8 @@ status   meaning
 2        bad input: an option, a file, a field or a value out of range; a
          store that is not an aerobat store, a session that does not exist
 70       an internal error (a bug): one line, ``--debug`` shows the traceback
-128+n    stopped by signal n (130 for Ctrl-C) after storing what was done
+128+n    stopped by signal n (130 for Ctrl-C) after storing what was done; 141
+         (SIGPIPE), silently, when the reader of standard output left (``| head``)
 =======  ==================================================================
 
 Every error is one line on stderr: ``aerobat: error: …`` (status 2) or
@@ -49,6 +50,7 @@ EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_USAGE = 2
 EXIT_INTERNAL = 70
+EXIT_STOPPED_BY_PIPE = 128 + 13  # SIGPIPE: what `yes | head -1` reports for `yes`
 
 _USAGE = (ConfigError, StoreAccessError, StoreFormatError, StoreVersionError, SessionNotFound, SessionInUse)
 _FAILED = (DesignFailed, IdentificationFailed, SolveFailed, PlantError, MissingDependency, DiskFull, StoreError,
@@ -208,12 +210,17 @@ def _main(argv: Sequence[str] | None) -> int:
         stopped = exc if isinstance(exc, Stopped) else None
         print(f"aerobat: {stopped.message if stopped else 'interrupted'}", file=sys.stderr)
         return 128 + (stopped.signum if stopped else 2)
-    except BrokenPipeError:  # `aerobat … | head`: the reader left; nothing more to say
-        return EXIT_FAILED
+    except BrokenPipeError:  # `aerobat … | head`: the reader left; nothing more to say, as a shell tool would
+        from aerobat.cli.common import quiet_stdout
+
+        quiet_stdout()  # the interpreter's last flush must not fail either ("Exception ignored … BrokenPipeError")
+        return EXIT_STOPPED_BY_PIPE
     except Exception as exc:
-        if debug:
-            raise
         status = exit_status(exc)
+        if debug:  # the traceback, then the same line and the same status as without --debug
+            import traceback
+
+            traceback.print_exc()
         if isinstance(exc, MissingDependency):
             print(f"aerobat: failed: {_one_line(exc)}", file=sys.stderr)
         elif status == EXIT_USAGE:

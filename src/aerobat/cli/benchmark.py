@@ -42,7 +42,6 @@ def _cmd_translation(args: argparse.Namespace) -> int:
     from aerobat.plotting.benchmarks import plot_solution
     from aerobat.quadrotor.timeoptimal import solve_translation
 
-    _require(args, ("to", "--to-m"))
     y, z = parse_pair(args.to, "--to-m")
     final_angle_rad = math.radians(args.final_angle_deg)
     if abs(y) < 1e-9 and abs(z) < 1e-9 and abs(final_angle_rad) < 1e-9:
@@ -59,16 +58,17 @@ def _cmd_translation(args: argparse.Namespace) -> int:
     else:
         out = console()
         out.print(f"time-optimal hover-to-hover (0, 0) → ({y:g}, {z:g}) m, final angle {args.final_angle_deg:g}°")
-        out.print(f"status: {solution.status.value} — {solution.message}")
+        status = solution.status.value
+        out.print(f"status: {status} — {solution.message.removeprefix(status + ': ')}")
         if solution.ok:
-            out.print(f"T* = {solution.duration_s:.4f} s (transcription {solution.transcription_duration_s:.4f} s), "
-                      f"boundary error {solution.boundary_error:.1e}")
-            for title, arcs, unit in (("thrust", solution.thrust_arcs, "m/s²"), ("rate", solution.rate_arcs, "rad/s")):
+            # the command line speaks degrees (--body-rate-deg-s): so does the rate table
+            for title, arcs, unit, scale in (("thrust", solution.thrust_arcs, "m/s²", 1.0),
+                                             ("rate", solution.rate_arcs, "deg/s", math.degrees(1.0))):
                 table = Table(title=f"{title} arcs")
                 for col in ("kind", "start [s]", "end [s]", f"value [{unit}]"):
                     table.add_column(col)
                 for arc in arcs:
-                    table.add_row(arc.kind, f"{arc.start_s:.4f}", f"{arc.end_s:.4f}", f"{arc.value:+.4f}")
+                    table.add_row(arc.kind, f"{arc.start_s:.4f}", f"{arc.end_s:.4f}", f"{arc.value * scale:+.4f}")
                 out.print(table)
         if figure is not None:
             where = f", solution to {folder / 'translation.json'}" if folder is not None else ""
@@ -128,21 +128,22 @@ def register(sub: Any) -> None:
 
     def limits(p: argparse.ArgumentParser) -> None:
         p.add_argument("--collective-min-m-s2", dest="f_min", type=finite_float(0.0, 1000.0, "m/s²"), default=None,
-                       help="minimum collective [m/s²] (default eq 47: 4.80)")
+                       help="minimum collective [m/s²] (default: 4.80, eq 47)")
         old_spelling(p, "--f-min", "f_min", type=finite_float(0.0, 1000.0, "m/s²"))
         p.add_argument("--collective-max-m-s2", dest="f_max", type=finite_float(0.0, 1000.0, "m/s²"), default=None,
-                       help="maximum collective [m/s²] (default eq 47: 20.70)")
+                       help="maximum collective [m/s²] (default: 20.70, eq 47)")
         old_spelling(p, "--f-max", "f_max", type=finite_float(0.0, 1000.0, "m/s²"))
-        p.add_argument("--max-rate-deg-s", type=finite_float(0.5, 5700.0, "deg/s"), default=None,
-                       help="body-rate limit [deg/s] (default 573, the paper's 10 rad/s)")
+        p.add_argument("--body-rate-deg-s", dest="max_rate_deg_s", type=finite_float(0.5, 5700.0, "deg/s"),
+                       default=None, help="body-rate limit [deg/s] (default: 573, the paper's 10 rad/s)")
+        old_spelling(p, "--max-rate-deg-s", "max_rate_deg_s", type=finite_float(0.5, 5700.0, "deg/s"))
         old_spelling(p, "--max-rate-rad-s", "max_rate_deg_s", type=finite_float(0.01, 100.0, "rad/s"),
                      convert=math.degrees)
 
     tr = bsub.add_parser("translation", help="minimum-time hover-to-hover motion to one target", formatter_class=fmt)
-    tr.add_argument("--to-m", dest="to", metavar="Y,Z", default=None, help="target Y,Z [m] (required)")
+    tr.add_argument("--to-m", dest="to", metavar="Y,Z", default="5,5", help="target Y,Z [m]")
     old_spelling(tr, "--to", "to")
     tr.add_argument("--final-angle-deg", type=finite_float(-2300.0, 2300.0, "deg"), default=0.0,
-                    help="final roll angle [deg] (360: translate with a flip)")
+                    help="final roll angle [deg], 360 to translate with a flip")
     old_spelling(tr, "--final-angle-rad", "final_angle_deg", type=finite_float(-40.0, 40.0, "rad"),
                  convert=math.degrees)
     limits(tr)

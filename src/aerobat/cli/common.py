@@ -29,7 +29,9 @@ __all__ = [
     "maneuver_from_args",
     "open_store",
     "output_dir",
+    "quiet_stdout",
     "parse_pair",
+    "plural",
     "plant_choice_from_args",
     "with_tune_from_args",
     "refuse_overwrite",
@@ -50,6 +52,12 @@ class CommandFailed(AerobatError):
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
     """Shows each option's default — unless its help already says what it defaults to, or there is none."""
+
+    def _split_lines(self, text: str, width: int) -> list[str]:
+        """Wrapped between words only: never inside a path (``out/session-ID``) or a hyphenated word."""
+        import textwrap
+
+        return textwrap.wrap(" ".join(text.split()), width, break_on_hyphens=False, break_long_words=False)
 
     def _get_help_string(self, action: argparse.Action) -> str:
         text = action.help or ""
@@ -77,14 +85,82 @@ def old_spelling(p: argparse.ArgumentParser, old: str, dest: str, *, type: Any =
     p.add_argument(old, dest=dest, action=_OldSpelling, type=type, convert=convert)
 
 
+_NO_VALUE = ("--", "")
+_UNIT_METAVARS = (("-rad-s", "RAD/S"), ("-deg-s", "DEG/S"), ("-m-s2", "M/S²"), ("-mm", "MM"), ("-deg", "DEG"),
+                  ("-rad", "RAD"), ("-kg", "KG"), ("-m", "M"), ("-s", "S"))
+
+
+def _metavar(option: str, kind: Any) -> str | None:
+    if option == "--out":
+        return "DIR"
+    if kind is int or getattr(kind, "metavar", None) == "N":
+        return "N"
+    for suffix, unit in _UNIT_METAVARS:
+        if option.endswith(suffix):
+            return unit
+    return None
+
+
 class Parser(argparse.ArgumentParser):
-    """argparse with one-line errors and the documented exit status for bad usage."""
+    """argparse with one-line errors and the documented exit status for bad usage.
+
+    Options are never matched by a prefix (``--flip`` is not ``--flips``): an unknown option is
+    refused with the nearest known one as a suggestion. An option's value is never ``--`` or empty
+    (argparse would pass an empty list on, or nothing at all).
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
+
+    def add_argument(self, *args: Any, **kwargs: Any) -> argparse.Action:
+        """An option's metavar says what it takes: N for a count, DIR for ``--out``, the unit for a quantity."""
+        options = [a for a in args if isinstance(a, str) and a.startswith("-")]
+        takes_value = kwargs.get("action") in (None, "store", "append") and "choices" not in kwargs
+        if options and takes_value and "metavar" not in kwargs:
+            metavar = _metavar(options[0], kwargs.get("type"))
+            if metavar is not None:
+                kwargs["metavar"] = metavar
+        return super().add_argument(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
+        unknown = self._unknown_options() if "arguments are required" in message else []
+        if unknown:  # an unknown option explains a missing argument better than the other way round
+            message = f"unrecognized arguments: {' '.join(unknown)}{self._did_you_mean(unknown[0])}"
         self.exit(EXIT_USAGE, f"aerobat: error: {message}\n")
 
+    def _unknown_options(self) -> list[str]:
+        known = {s for a in self._actions for s in a.option_strings}  # noqa: SLF001
+        words = getattr(self, "_words", [])
+        cut = words.index("--") if "--" in words else len(words)
+        return [w for w in words[:cut] if w.startswith("-") and len(w) > 1 and w.split("=", 1)[0] not in known
+                and not self._negative_number_matcher.match(w)]
 
-def _quiet_stdout() -> None:
+    def _get_values(self, action: argparse.Action, arg_strings: list[str]) -> Any:
+        if action.option_strings and action.nargs != 0 and any(a in _NO_VALUE for a in arg_strings):
+            given = next(a for a in arg_strings if a in _NO_VALUE)
+            self.error(f"{action.option_strings[0]}: expected a value, got {given!r}")
+        return super()._get_values(action, arg_strings)
+
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        self._words = [str(a) for a in (args if args is not None else sys.argv[1:])]
+        namespace, extras = super().parse_known_args(args, namespace)
+        leaf = not any(isinstance(a, argparse._SubParsersAction) for a in self._actions)  # noqa: SLF001
+        unknown = [e for e in extras if e.startswith("-") and e not in _NO_VALUE]
+        if leaf and unknown:
+            self.error(f"unrecognized arguments: {' '.join(extras)}{self._did_you_mean(unknown[0])}")
+        return namespace, extras
+
+    def _did_you_mean(self, token: str) -> str:
+        import difflib
+
+        name = token.split("=", 1)[0]
+        known = [s for a in self._actions if a.help != argparse.SUPPRESS for s in a.option_strings]  # noqa: SLF001
+        close = difflib.get_close_matches(name, known, n=1, cutoff=0.75)
+        return f" (did you mean {close[0]}?)" if close else ""
+
+
+def quiet_stdout() -> None:
     """The reader of standard output left: send the rest to /dev/null so later writes cannot fail."""
 
     devnull = os.open(os.devnull, os.O_WRONLY)
@@ -107,7 +183,7 @@ def console(json_mode: bool = False) -> Any:
 
     class _Console(Console):
         def on_broken_pipe(self) -> None:
-            _quiet_stdout()
+            quiet_stdout()
             raise BrokenPipeError("standard output was closed")
 
     stream = sys.stderr if json_mode else sys.stdout
@@ -119,6 +195,11 @@ def console(json_mode: bool = False) -> Any:
 
 
 # ------------------------------------------------------------------ parsing
+
+
+def plural(n: int, word: str, words: str | None = None) -> str:
+    """``1 iteration``, ``2 iterations``: a count with its noun."""
+    return f"{n} {word if n == 1 else (words or word + 's')}"
 
 
 def parse_pair(text: str, option: str) -> tuple[float, float]:
@@ -153,6 +234,7 @@ def bounded_int(low: int, high: int) -> Any:
             raise argparse.ArgumentTypeError(f"{value}: allowed {low} … {high}")
         return value
 
+    parse.metavar = "N"  # type: ignore[attr-defined]
     return parse
 
 
@@ -191,24 +273,26 @@ def add_maneuver_options(p: argparse.ArgumentParser, *, optional: bool = False, 
                    help="maneuver family (required unless --maneuver" + (" or --resume" if optional else "") + ")")
     p.add_argument("--maneuver", dest="maneuver_source", metavar="FILE.toml|package.module:Name", default=None,
                    help="a maneuver file (docs/maneuvers.md) or a Python maneuver, instead of a family (default: none)")
-    p.add_argument("--flips", type=bounded_int(1, 10), default=None, help="number of flips c_N (flip; default 3)")
+    p.add_argument("--flips", type=bounded_int(1, 10), default=None, help="number of flips c_N, flip only (default: 3)")
     p.add_argument("--max-rate-deg-s", type=finite_float(30.0, 5700.0, "deg/s"), default=None,
-                   help="coast rate c_pmax [deg/s] (flip; default 1800)")
+                   help="coast rate c_pmax [deg/s], flip only (default: 1800)")
     p.add_argument("--dims", type=int, choices=(2, 3), default=None,
-                   help="2D (5 parameters) or 3D (9) (flip; default 3)")
-    p.add_argument("--axis", choices=("roll", "pitch"), default=None, help="flip axis (flip; default roll)")
-    p.add_argument("--coast", choices=("min", "max"), default=None, help="coast collective β̲ or β̄ (flip; default min)")
+                   help="2D with 5 parameters or 3D with 9, flip only (default: 3)")
+    p.add_argument("--axis", choices=("roll", "pitch"), default=None, help="flip axis, flip only (default: roll)")
+    p.add_argument("--coast", choices=("min", "max"), default=None,
+                   help="coast collective β̲ or β̄, flip only (default: min)")
     p.add_argument("--ramp-s", type=finite_float(0.0, 1.0, "s"), default=None,
-                   help="thrust ramp-down duration [s] (flip; default 0.1)")
-    p.add_argument("--to-m", dest="to", metavar="Y,Z", default=None, help="target Y,Z [m] (translation; default 5,5)")
+                   help="thrust ramp-down duration [s], flip only (default: 0.1)")
+    p.add_argument("--to-m", dest="to", metavar="Y,Z", default=None,
+                   help="target Y,Z [m], translation only (default: 5,5)")
     old_spelling(p, "--to", "to")
     p.add_argument("--final-angle-deg", type=finite_float(-2300.0, 2300.0, "deg"), default=None,
-                   help="final roll angle [deg] (translation; default 0)")
+                   help="final roll angle [deg], translation only (default: 0)")
     old_spelling(p, "--final-angle-rad", "final_angle_deg", type=finite_float(-40.0, 40.0, "rad"),
                  convert=math.degrees)
     p.add_argument("--vehicle", default="hummingbird", help="design vehicle: a preset name or a vehicle TOML file")
     p.add_argument("--correction", choices=("tsvd", "inverse", "damped"), default="tsvd",
-                   help="right inverse used for C (see docs/results.md)")
+                   help="right inverse used for C, see docs/results.md")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -233,8 +317,8 @@ def _apply_family_defaults(args: argparse.Namespace) -> None:
 
 
 def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | None = None,
-                      default: str = "arena") -> None:
-    """``--plant`` and each plant's settings file, and ``--seed``."""
+                      default: str = "arena", feedback: bool = True) -> None:
+    """``--plant`` and each plant's settings file, ``--seed``, and ``--feedback`` unless the command fixes it."""
     from aerobat.plants import PLANTS
 
     choices = kinds or PLANTS.names()
@@ -242,18 +326,20 @@ def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | No
     for name, spec in PLANTS.items():
         if spec.option is not None and name in choices:
             p.add_argument(spec.option, metavar="FILE.toml",
-                          help=f"{name} settings (only with --plant {name}; default: the {name}'s defaults)")
+                          help=f"{name} settings, only with --plant {name} (default: the {name}'s defaults)")
     if "betaflight" in choices:
         p.add_argument("--tune", metavar="FILE",
-                       help="a real quad's Betaflight configuration flown by the SITL (only with --plant betaflight): "
-                            "a CLI diff/dump, or a blackbox log (.bbl/.bfl/.txt) whose header is used; "
-                            "default: aerobat's own settings")
+                       help="a real quad's Betaflight configuration flown by the SITL, only with --plant betaflight: "
+                            "a CLI diff or dump, or a blackbox log .bbl, .bfl or .txt whose header is used "
+                            "(default: aerobat's own settings)")
         p.add_argument("--tune-log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
-                       help="which log of a blackbox file holding several gives the tune (default 1)")
+                       help="which log of a blackbox file holding several gives the tune (default: 1)")
     p.add_argument("--seed", type=bounded_int(0, 2**63 - 1), default=0, help="seed of the plant's random generator")
+    if not feedback:
+        return
     p.add_argument("--feedback", choices=("none", "attitude", "tracking"), default=None,
-                   help="what the vehicle's onboard loop mixes into the program: none (the paper's open "
-                        "loop), attitude, tracking (docs/feedback.md; default: the plant's best measured, "
+                   help="what the vehicle's onboard loop mixes into the program: none is the paper's open "
+                        "loop, attitude, tracking; see docs/feedback.md (default: the plant's best measured, "
                         "tracking on the arena and Betaflight, none on RotorPy)")
 
 

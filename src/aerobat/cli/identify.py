@@ -73,9 +73,6 @@ def _cmd_identify(args: argparse.Namespace) -> int:
             say(f"fitting session {run.session_id} of {store.path} again ({len(run.flights)} stored flights)")
         else:
             prior = vehicle_from_name_or_file(args.vehicle)
-            if args.feedback not in (None, "none"):
-                raise ConfigError(f"--feedback {args.feedback}: identification flies the open loop (feedback "
-                                  "would hide the dynamics it measures)")
             plant = plant_choice_from_args(args)
             plant.spec.check_available()
 
@@ -236,7 +233,7 @@ def _print_fit(run: Any, fit: Any) -> None:
 def register(sub: Any) -> None:
     p = sub.add_parser("identify", help="identify the nominal model of the vehicle a plant flies, write a vehicle "
                                         "file", formatter_class=HelpFormatter)
-    add_plant_options(p)
+    add_plant_options(p, feedback=False)  # identification always flies the open loop
     p.add_argument("--output", dest="out", default=None, metavar="FILE.toml",
                    help="the identified vehicle file to write (required)")
     old_spelling(p, "--out", "out")
@@ -258,8 +255,8 @@ def register(sub: Any) -> None:
                    help="refuse a fit whose attitude residual is larger (RMS)")
     p.add_argument("--log", metavar="FILE[:N]", action="append", default=None,
                    help="identify from real flight logs instead of flying: a blackbox, ULog or Crazyflie file, or "
-                        "log N of it; repeat to fit several together (the file's other logs validate); "
-                        "default: fly the sequence")
+                        "log N of it; repeat to fit several together, the file's other logs validate "
+                        "(default: fly the sequence)")
     p.add_argument("--mass-kg", type=finite_float(0.005, 50.0, "kg"), default=None, metavar="KG",
                    help="with --log: take-off mass (default: the prior's)")
     p.add_argument("--motor-x-m", type=finite_float(0.005, 2.0, "m"), default=None, metavar="M",

@@ -14,6 +14,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -31,6 +32,7 @@ from aerobat.cli.common import (
     open_store,
     output_dir,
     plant_choice_from_args,
+    plural,
     rule_choice_from_args,
     session_folder,
     session_ref,
@@ -182,16 +184,19 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
     verb = "resumed" if run.resumed else "started"
     say(f"session {sid} {verb} in {store.path}: {run.maneuver.name} on {run.plant_choice.kind} "
         f"(seed {run.plant_choice.seed}, feedback {run.plant_choice.feedback.scheme.value}, rule "
-        f"{run.rule_choice.label}), {run.measured} of {run.target} measured iterations done")
+        f"{run.rule_choice.label}), {run.measured} of {plural(run.target, 'measured iteration')} done")
     if not run.exact:
         say(f"  note: resumed trials will not repeat an uninterrupted run exactly: {run.inexact_because}")
 
+    progress = _Progress(run.measured, run.target)
+
     def on_iteration(it: Any) -> None:  # printed only once committed: every line is a stored iteration
+        when = progress.tick(it.measured)
         if it.measured:
             say(f"  {it.index:3d}  ok          position error {position_error_m(run.maneuver, it.error):7.3f} m  "
-                f"γ={it.gamma:.2f}  scale={it.scale:.2f}")
+                f"γ={it.gamma:.2f}  scale={it.scale:.2f}  {when}")
         else:
-            say(f"  {it.index:3d}  {it.status.value:10s}  {it.message}")
+            say(f"  {it.index:3d}  {it.status.value:10s}  {it.message}  {when}")
         for part in it.message.split(";"):
             if part.strip().startswith("warning:"):
                 say(f"  {part.strip()}")
@@ -219,7 +224,7 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
         signum = interrupts.signum or (signal.SIGPIPE if closed["stdout"] else signal.SIGINT)
         why = "standard output was closed: " if closed["stdout"] and not interrupts.signum else ""
         print(f"aerobat: interrupted: {why}session {sid} stopped after iteration {outcome.last_index} "
-              f"({outcome.measured} of {outcome.target} measured iterations stored); resume with: {hint}",
+              f"with {outcome.measured} of {plural(outcome.target, 'measured iteration')} stored; resume with: {hint}",
               file=sys.stderr, flush=True)
         return 128 + int(signum)
     data = session_json(store, sid)
@@ -230,7 +235,8 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
         print(json.dumps({k: data[k] for k in ("error_names", "parameter_names", "iterations", "final_params",
                                                 "status", "message", "plant", "session_id", "db")}))
     else:
-        print_stored_session(store, sid, iterations=True)
+        print_stored_session(store, sid, iterations=True, table=False)  # each row was printed as it was stored
+        out_console.print(f"per-iteration table: aerobat show {sid} --db {store.path}")
         for warning in outcome.warnings:
             out_console.print(f"warning: {warning}")
         for note in notes:
@@ -242,6 +248,31 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
 
 
 _WRITTEN = ("session.json", "learning.png", "side_views.png")
+class _Progress:
+    """``[3/30, 4 s, about 36 s left]``: measured trials of the target, the time so far, and the estimate
+    from this run's trials."""
+
+    def __init__(self, measured: int, target: int) -> None:
+        self.measured, self.target = measured, target
+        self.started = time.perf_counter()
+        self.trials = 0
+
+    def tick(self, measured: bool) -> str:
+        self.trials += 1
+        self.measured += int(measured)
+        elapsed = time.perf_counter() - self.started
+        left = max(self.target - self.measured, 0)
+        # every trial of this run, failed ones included, took time: the estimate is per trial flown
+        estimate = f", about {_duration(elapsed / self.trials * left)} left" if left else ", done"
+        return f"[{self.measured}/{self.target}, {_duration(elapsed)}{estimate}]"
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
 
 
 def _stored_out(store: Any, sid: int) -> str | None:
@@ -261,9 +292,9 @@ def register(sub: Any) -> None:
     add_maneuver_options(p, optional=True)
     add_plant_options(p)
     p.add_argument("--trials", dest="iterations", type=bounded_int(1, 10000), default=None,
-                   help="measured trials, one learning iteration each (default 30; with --resume the stored target)")
+                   help="measured trials, one learning iteration each (default: 30; with --resume the stored target)")
     old_spelling(p, "--iterations", "iterations", type=bounded_int(1, 10000))
-    p.add_argument("--gamma", default="paper", help="'paper' (max(1/i, 0.1)) or a constant in (0, 1]")
+    p.add_argument("--gamma", default="paper", help="'paper', that is max(1/i, 0.1), or a constant in (0, 1]")
     p.add_argument("--rule", default="paper",
                    help="update rule: paper, tsvd, damped, kalman, broyden, or <rule>+isc (docs/method.md)")
     p.add_argument("--out", default=None, help="folder for figures and session.json "
@@ -272,7 +303,7 @@ def register(sub: Any) -> None:
                    help="continue a stored session (id or 'last') with its parameters, counters and plant state "
                         "(default: start a new one)")
     p.add_argument("--from-session", metavar="SESSION", type=session_ref,
-                   help="start a new session from another session's learned parameters (same maneuver; default: p⁰)")
+                   help="start a new session from another session's learned parameters, same maneuver (default: p⁰)")
     p.add_argument("--plant-vehicle", default=None, metavar="NAME|FILE",
                    help="the vehicle the plant is built around, if not --vehicle (a simulated plant makes its true "
                         "vehicle and its onboard controller from it): with a vehicle identified on the arena as "

@@ -231,7 +231,7 @@ def register(sub: Any) -> None:
         q.add_argument("file", metavar="FILE",
                        help="a .bbl/.bfl/.txt blackbox log, a .ulg ULog or a Crazyflie log (required)")
         q.add_argument("--index", type=bounded_int(1, 10_000), default=None, metavar="N",
-                       help="only log N of the file (from 1; default: every log)")
+                       help="only log N of the file, from 1 (default: every log)")
 
     q = cmds.add_parser("info", help="what a log file holds: logs, durations, rates, fields, firmware, tune",
                         formatter_class=HelpFormatter)

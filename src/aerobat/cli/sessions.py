@@ -338,7 +338,7 @@ def register(sub: Any) -> None:
     export.add_argument("--force", action="store_true", help="replace --output if it exists (never the store)")
     export.add_argument("--trajectories", action="store_true", help="include measured trajectories (json)")
     export.add_argument("--program", metavar="FILE.toml", default=None,
-                        help="write the session's program instead (the learned one; default: no program)")
+                        help="write the session's learned program instead (default: no program)")
     export.add_argument("--iteration", type=bounded_int(1, 10**9), default=None,
                         help="with --program: the program flown at this iteration (default: the learned one)")
     export.add_argument("--json", action="store_true",

@@ -12,8 +12,9 @@ __all__ = ["print_stored_session"]
 
 
 def print_stored_session(store: Any, session_id: int, *, iterations: bool, header: bool = False,
-                         full: bool = False) -> None:
-    """Print a stored session; ``full`` adds one column per error component (wide)."""
+                         full: bool = False, table: bool = True) -> None:
+    """Print a stored session; ``full`` adds one column per error component (wide); ``table=False``
+    leaves out the per-iteration rows and keeps their summary."""
     from rich.table import Table
 
     rec = store.session(session_id)
@@ -50,19 +51,19 @@ def print_stored_session(store: Any, session_id: int, *, iterations: bool, heade
             out.print(line)
     if iterations:
         records = store.iterations(session_id)
-        table = Table(title=f"{mrec.name} on {rec.plant_kind}: {rec.display_state}")
-        table.add_column("i", justify="right")
-        table.add_column("status")
-        table.add_column("γ", justify="right")
-        table.add_column("scale", justify="right")
+        rows = Table(title=f"{mrec.name} on {rec.plant_kind}: {rec.display_state}")
+        rows.add_column("i", justify="right")
+        rows.add_column("status")
+        rows.add_column("γ", justify="right")
+        rows.add_column("scale", justify="right")
         position = np.array(mrec.position_mask, dtype=bool)
         angles = np.array([k == "angle" for k in mrec.error_kinds], dtype=bool)
         if full:
             for name, unit in zip(mrec.error_names, mrec.error_units, strict=True):
-                table.add_column(f"{name} [{'°' if unit == 'rad' else unit}]", justify="right")
+                rows.add_column(f"{name} [{'°' if unit == 'rad' else unit}]", justify="right")
         else:
-            table.add_column("position error [m]", justify="right")
-            table.add_column("largest angle error [°]", justify="right")
+            rows.add_column("position error [m]", justify="right")
+            rows.add_column("largest angle error [°]", justify="right")
         for it in records:
             if it.status != "ok":
                 cells = ["—"] * (len(mrec.error_names) if full else 2)
@@ -73,8 +74,9 @@ def print_stored_session(store: Any, session_id: int, *, iterations: bool, heade
                 pos = float(np.linalg.norm(it.error[position])) if position.any() else float("nan")
                 ang = float(np.degrees(np.max(np.abs(it.error[angles])))) if angles.any() else float("nan")
                 cells = [f"{pos:.3f}", f"{ang:.2f}"]
-            table.add_row(str(it.index), it.status, f"{it.gamma:.2f}", f"{it.scale:.2f}", *cells)
-        out.print(table)
+            rows.add_row(str(it.index), it.status, f"{it.gamma:.2f}", f"{it.scale:.2f}", *cells)
+        if table:
+            out.print(rows)
         measured = [it for it in records if it.status == "ok"]
         if measured and position.any():
             errors = np.array([np.linalg.norm(it.error[position]) for it in measured])

@@ -95,7 +95,8 @@ def _cmd_fly(args: argparse.Namespace) -> int:
             raise DesignFailed(f"design failed, nothing to fly: {nominal.message}", nominal)
         program = maneuver.program(nominal.p_nominal)
     folder = check_plot_files(args, ("trials.png", "trials.json"))
-    plant = plant_choice_from_args(args).build(config)
+    choice = plant_choice_from_args(args)
+    plant = choice.build(config)
     trials = []
     panels: list[tuple[str, np.ndarray, np.ndarray]] = []
     for k in range(args.trials):
@@ -110,7 +111,9 @@ def _cmd_fly(args: argparse.Namespace) -> int:
             panels.append((f"trial {k + 1}", trial.times_s, trial.states))
     figure = None
     if panels:
-        figure = save_figure(plot_side_views(panels, title=program.name or str(args.program)),
+        # a program names no desired final position: none is drawn (the origin would be wrong for a translation)
+        figure = save_figure(plot_side_views(panels, title=f"{program.name or args.program}, "
+                                             f"{_loop_words(choice)}", target=None),
                              folder / "trials.png" if folder is not None else args.plot, dpi=130)
     ok = [t for t in trials if t["final_state"] is not None]
     stats = _statistics(ok)
@@ -137,6 +140,12 @@ def _statistics(entries: list[dict[str, Any]]) -> dict[str, Any]:
         values = np.array([e["final_state"][key] for e in entries], dtype=float)
         out[key] = {"mean": values.mean(axis=0).tolist(), "std": values.std(axis=0).tolist()}
     return out
+
+
+def _loop_words(choice: Any) -> str:
+    """``open loop`` or ``tracking feedback``, for a figure's title."""
+    scheme = choice.feedback.scheme.value
+    return "open loop" if scheme == "none" else f"{scheme} feedback"
 
 
 def _print_trial(k: int, entry: dict[str, Any]) -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 from typing import Any
 
 from aerobat.cli.common import HelpFormatter, console
@@ -54,14 +55,15 @@ def _print_envelopes(rows: list[dict[str, Any]]) -> None:
 
     table = Table(title="vehicles (--vehicle NAME); envelope of the nominal model")
     for name, justify in (("name", "left"), ("mass [kg]", "right"), ("T/W", "right"), ("β̲ / β̄ [m/s²]", "right"),
-                          ("β̲ / β̄ [g]", "right"), ("max roll / pitch acc. [rad/s²]", "right"),
+                          ("β̲ / β̄ [g]", "right"), ("max roll / pitch acc. [°/s²]", "right"),
                           ("motor rates [1/s]", "right")):
         table.add_column(name, justify=justify)  # type: ignore[arg-type]
     for r in rows:
         table.add_row(r["name"], f"{r['mass_kg']:.3g}", f"{r['thrust_to_weight']:.2f}",
                       f"{r['collective_reduced_min_m_s2']:.2f} / {r['collective_reduced_max_m_s2']:.2f}",
                       f"{r['collective_reduced_min_g']:.2f} / {r['collective_reduced_max_g']:.2f}",
-                      f"{r['max_roll_acceleration_rad_s2']:.0f} / {r['max_pitch_acceleration_rad_s2']:.0f}",
+                      f"{math.degrees(r['max_roll_acceleration_rad_s2']):.0f} / "
+                      f"{math.degrees(r['max_pitch_acceleration_rad_s2']):.0f}",
                       f"{r['motor_rate_up_per_s']:.3g} / {r['motor_rate_down_per_s']:.3g}")
     out = console()
     out.print(table)
@@ -88,7 +90,7 @@ def _print_flips(row: dict[str, Any], rates: list[float]) -> None:
             if f["feasible"]:
                 texts.append(f"✓ {f['duration_s']:.2f} s")
             else:
-                reasons.append(f"{count} × {f['max_rate_deg_s']:g}°/s: {f['reason']}")
+                reasons.append(f"{count} × {f['max_rate_deg_s']:g}°/s: {_in_degrees(f['reason'])}")
                 texts.append(f"✗ ({len(reasons)})")
         table.add_row(str(count), *texts)
     out.print(table)
@@ -96,12 +98,22 @@ def _print_flips(row: dict[str, Any], rates: list[float]) -> None:
         out.print(f"  ({k}) {reason}")
 
 
+def _in_degrees(text: str) -> str:
+    """A design's words with its angles in degrees, as the grid's rates: ``flip_angle = -18.8 rad`` → ``-1077°``."""
+    def convert(match: re.Match[str]) -> str:
+        value = math.degrees(float(match.group(1)))
+        return f"{value:.0f}°/s" if match.group(2) else f"{value:.0f}°"
+
+    return re.sub(r"([-+−]?\d+(?:\.\d+)?(?:e[-+]?\d+)?) rad(/s)?(?![/\w²])", convert, text.replace("−", "-"))
+
+
 def register(sub: Any) -> None:
     p = sub.add_parser("vehicles", help="the vehicle library: presets, their envelopes and the flips they allow",
                        formatter_class=HelpFormatter)
     p.add_argument("--flips", action="store_true", help="design a grid of 2D flips on each vehicle (feasibility)")
-    p.add_argument("--flip-counts", default="1,2,3", help="flip counts of the grid")
-    p.add_argument("--rates-deg-s", default="720,1080,1440,1800", help="coast rates of the grid [deg/s]")
+    p.add_argument("--flip-counts", metavar="LIST", default="1,2,3", help="flip counts of the grid")
+    p.add_argument("--rates-deg-s", metavar="LIST", default="720,1080,1440,1800",
+                   help="coast rates of the grid [deg/s]")
     p.add_argument("--axis", choices=("roll", "pitch"), default="roll", help="flip axis of the grid")
     p.add_argument("--vehicle", action="append", metavar="FILE.toml",
                    help="also list this vehicle file (repeatable), e.g. an identified one (default: the presets only)")

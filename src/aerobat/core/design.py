@@ -94,7 +94,7 @@ class Design:
         """A few lines a person reads: parameters with meaning and unit, outcome, conditioning."""
         m = self.maneuver
         width = max(len(p.description) for p in m.parameters) if m.parameters else 0
-        lines = [f"design of {m.name}: {self.status.value} — {self.message}"]
+        lines = [f"design of {m.name}: {self.status.value} — {self.message.removeprefix(self.status.value + ': ')}"]
         lines.append(f"  {'':4s} {'meaning':{width}s}  {'guess p^g':>11s}  {'nominal p⁰':>11s}  unit")
         for spec, g, p in zip(m.parameters, self.p_guess, self.p_nominal, strict=True):
             lines.append(f"  {spec.name:4s} {spec.description:{width}s}  {g:11.5g}  {p:11.5g}  {spec.unit}")
@@ -335,7 +335,7 @@ def design(
             f"with these parameters (scaled singular values {np.array2string(info.singular_values, precision=3)})"
         )
     else:
-        message = f"converged: residual norm {residual_norm:.3g} ({solver_message})"
+        message = f"residual norm {residual_norm:.3g}; {solver_message}"
     usable = status is not DesignStatus.RANK_DEFICIENT and np.all(np.isfinite(J))
     C = (
         correction_matrix(J, p_scales, e_scales, kind=correction, tsvd_rtol=tsvd_rtol, damping=damping)
@@ -413,7 +413,7 @@ def _newton(
     for iteration in range(max_iterations):
         norm = float(np.linalg.norm(e))
         if norm < 0.01 * tolerance:
-            return x, f"Newton converged in {iteration} iterations", True
+            return x, f"Newton converged in {iteration} iteration{'' if iteration == 1 else 's'}", True
         Js = (J / e_scales[:, None]) * p_scales[None, :]
         scaled_step = np.linalg.lstsq(Js, e / e_scales, rcond=rcond)[0]
         # active bounds: parameters at a bound that the step pushes further out are held fixed
@@ -428,7 +428,8 @@ def _newton(
         step = -p_scales * scaled_step
         accepted = _line_search(evaluate, x, step, e, lower, upper, e_scales, line_batch)
         if accepted is None:
-            return x, f"no descent after {iteration} Newton iterations (residual {norm:.3g})", norm < tolerance
+            return x, (f"no descent after {iteration} Newton iteration{'' if iteration == 1 else 's'}, residual "
+                        f"{norm:.3g}"), norm < tolerance
         t, candidate, e_new = accepted
         slow = np.linalg.norm(e_new) > 0.1 * norm
         x, e = candidate, e_new
@@ -438,7 +439,8 @@ def _newton(
             except ValueError as exc:
                 return x, f"Jacobian not computable near the iterate: {exc}", False
     norm = float(np.linalg.norm(e))
-    return x, f"Newton stopped after {max_iterations} iterations (residual {norm:.3g})", norm < tolerance
+    return x, (f"Newton stopped after {max_iterations} iteration{'' if max_iterations == 1 else 's'}, "
+               f"residual {norm:.3g}"), norm < tolerance
 
 
 def _line_search(evaluate: _Evaluations, x: np.ndarray, step: np.ndarray, e: np.ndarray, lower: np.ndarray,

@@ -460,11 +460,12 @@ def learn(
     max_attempts = max_attempts if max_attempts is not None else 3 * int(iterations) + 10
     measured = 0
     attempts = 0
-    status, message = SessionStatus.COMPLETED, f"{iterations} measured iterations"
+    status, message = SessionStatus.COMPLETED, f"{iterations} measured iteration{'' if iterations == 1 else 's'}"
     started = time.perf_counter()
     while measured < iterations:
         if should_stop is not None and should_stop():
-            status, message = SessionStatus.INTERRUPTED, f"interrupted after {measured} measured iterations"
+            status, message = SessionStatus.INTERRUPTED, (f"interrupted after {measured} measured "
+                                                           f"iteration{'' if measured == 1 else 's'}")
             break
         if attempts >= max_attempts:
             status = SessionStatus.FAILED

@@ -111,9 +111,9 @@ def session_figures(store: Store, session_id: int, out: Path) -> list[str]:
                           (f"learned (iteration {last.index})", last)):
             if it.times_s is not None and it.states is not None:
                 panels.append((label, it.times_s, it.states))
-    plane = "xz" if mrec.spec.get("axis") == "pitch" else "yz"
-    if panels:
-        save_figure(plot_side_views(panels, plane=plane, title=mrec.name, target=tuple(target)),
+    if panels:  # the plane(s) the flights move in: a maneuver along x is drawn in X–Z, not piled up at Y = 0
+        save_figure(plot_side_views(panels, title=f"{mrec.name} on {rec.plant_kind}, {_loop(store, rec)}",
+                                    target=_final_position(mrec.spec, target)),
                     out / "side_views.png", dpi=130)
     if records:
         iterations = [{"i": it.index, "status": it.status, "params": it.params.tolist(),
@@ -152,6 +152,20 @@ def replay_notes(store: Store, session_id: int, iterations: list[int] | None = N
         notes.append(f"session {session_id} has no measured trajectories{why}: the replay shows the model's "
                      f"flight only, no measured trial")
     return notes
+def _loop(store: Store, rec: Any) -> str:
+    """``open loop`` or ``tracking feedback``: what the onboard loop did during the measured flights."""
+    scheme = (store.plant(rec.plant_id).config.get("feedback") or {}).get("scheme", "none")
+    return "open loop" if scheme in (None, "none") else f"{scheme} feedback"
+
+
+def _final_position(spec: dict[str, Any], target: Any) -> tuple[float, ...] | None:
+    """The desired final position a side view marks: a translation's target, a flip's start, else none known."""
+    kind = str(spec.get("kind", ""))
+    if "target_yz" in spec or kind == "translation":
+        return (0.0, float(target[0]), float(target[1]))
+    if kind in ("flip", "multiflip") or "flips" in spec:
+        return (0.0, 0.0, 0.0)
+    return None
 
 
 def session_replay(store: Store, session_id: int, path: Path, *, iterations: list[int] | None = None) -> Path:

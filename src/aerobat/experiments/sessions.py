@@ -173,8 +173,8 @@ class StoredSession:
             status = SessionStatus.COMPLETED
         if status is SessionStatus.COMPLETED:
             fresh = summary.n_measured - before
-            message = f"{summary.n_measured} measured iterations" + (f" ({fresh} after resuming)" if self.resumed
-                                                                     else "")
+            noun = "iteration" if summary.n_measured == 1 else "iterations"
+            message = f"{summary.n_measured} measured {noun}" + (f", {fresh} after resuming" if self.resumed else "")
         store.finish_session(sid, status, message)
         return SessionOutcome(sid, status, message, summary.n_measured, self.target, summary.last_index,
                               tuple(self.warnings), time.perf_counter() - started)

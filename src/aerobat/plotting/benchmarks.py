@@ -30,18 +30,19 @@ def plot_solution(solution: TimeOptimalSolution) -> Any:
     tt = np.linspace(0.0, t_final, 2001)
     f, w = solution.inputs(tt)
     fig = new_figure(figsize=(11, 6))
-    ax_f = fig.add_subplot(2, 2, 1)
-    ax_w = fig.add_subplot(2, 2, 3, sharex=ax_f)
-    ax_p = fig.add_subplot(1, 2, 2)
+    grid = fig.add_gridspec(2, 2)  # one grid: the layout keeps the path panel off the input panels
+    ax_f = fig.add_subplot(grid[0, 0])
+    ax_w = fig.add_subplot(grid[1, 0], sharex=ax_f)
+    ax_p = fig.add_subplot(grid[:, 1])
     ax_f.plot(tt, f, drawstyle="steps-post")
     ax_f.axhline(lim.f_max_m_s2, ls=":", c="gray")
     ax_f.axhline(lim.f_min_m_s2, ls=":", c="gray")
     ax_f.set_ylabel("thrust f [m/s²]")
     ax_f.set_title(f"T* = {t_final:.4f} s")
-    ax_w.plot(tt, w, drawstyle="steps-post")
-    ax_w.axhline(lim.max_rate_rad_s, ls=":", c="gray")
-    ax_w.axhline(-lim.max_rate_rad_s, ls=":", c="gray")
-    ax_w.set_ylabel("rate ω [rad/s]")
+    ax_w.plot(tt, np.degrees(w), drawstyle="steps-post")  # degrees, as --body-rate-deg-s
+    ax_w.axhline(math.degrees(lim.max_rate_rad_s), ls=":", c="gray")
+    ax_w.axhline(-math.degrees(lim.max_rate_rad_s), ls=":", c="gray")
+    ax_w.set_ylabel("rate ω [°/s]")
     ax_w.set_xlabel("time [s]")
     for ts in switch_times(solution):
         ax_f.axvline(ts, c="k", lw=0.5, alpha=0.3)
@@ -58,8 +59,12 @@ def plot_solution(solution: TimeOptimalSolution) -> Any:
         ax_p.plot([y, y + 0.6 * arm * math.sin(th)], [z, z + 0.6 * arm * math.cos(th)], c="C3", lw=1)
     ax_p.plot([0.0], [0.0], "go")
     ax_p.plot([solution.target_m[0]], [solution.target_m[1]], "r*", ms=10)
-    ax_p.set_aspect("equal", adjustable="datalim")
+    ax_p.set_aspect("equal", adjustable="box")  # "datalim" let the panel grow over the left column
+    ax_p.margins(0.08)  # the vehicle glyphs at the ends stay inside, and no tick label is clipped
     ax_p.set_xlabel("y [m]")
+    # the path's labels on its outer side: between the columns, "z [m]" ran into the tick labels
+    ax_p.yaxis.tick_right()
+    ax_p.yaxis.set_label_position("right")
     ax_p.set_ylabel("z [m]")
     ax_p.set_title("path (vehicle every 0.05 s, red: thrust direction)")
     return fig

@@ -56,8 +56,11 @@ def plot_learning(iterations: Sequence[dict], error_names: Sequence[str], error_
     axes[0, 0].set_title("final-state errors" + (" (green: ± the error's scale)" if error_scales is not None
                                                   else ""))
     axes[0, 1].set_title("parameters (red lines: lost/rejected trials)")
-    axes[-1, 0].set_xlabel("iteration")
-    axes[-1, 1].set_xlabel("iteration")
+    # each column's lowest panel in use carries the iteration ticks (the rows below it are switched off)
+    for col, used in ((0, n_e if errors.size else 0), (1, n_p)):
+        if used:
+            axes[used - 1, col].tick_params(labelbottom=True)
+            axes[used - 1, col].set_xlabel("iteration")
     if title:
         fig.suptitle(title)
     return fig

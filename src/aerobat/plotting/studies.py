@@ -22,6 +22,10 @@ def plot_trials_to_tolerance(trials_to_tolerance: Sequence[int | None], toleranc
     if reached:
         ax.hist(reached, bins=[float(b) for b in np.arange(0.5, max(reached) + 1.5)], color="C0")
     never = sum(1 for t in trials_to_tolerance if t is None)
+    from matplotlib.ticker import MaxNLocator
+
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))  # trial and vehicle counts: no half-integer ticks
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel(f"trials until the position error first falls below {tolerance_m:g} m")
     ax.set_ylabel("vehicles")
     ax.set_title(f"{len(reached)} reached the tolerance, {never} never did")
@@ -109,18 +113,24 @@ def plot_rules(curves: Mapping[str, Sequence[Sequence[float]]], trials: int, tol
         data = np.full((len(runs), trials), np.nan)
         for i, c in enumerate(runs):
             data[i, : min(trials, len(c))] = c[:trials]
-        if np.all(np.isnan(data)):
+        if np.all(np.isnan(data)):  # listed in the legend all the same, so legend and table agree
+            ax.plot([], [], color=f"C{k}", ls="none", marker="x", label=f"{method}: no trial measured")
             continue
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # a trial no run reached is a gap in the line
             med = np.nanmedian(data, axis=0)
             q1, q3 = np.nanpercentile(data, 25, axis=0), np.nanpercentile(data, 75, axis=0)
-        ax.plot(x, med, color=f"C{k}", label=method)
+        # markers too: a median with gaps (trials some runs lost) is isolated points, which a bare line hides
+        ax.plot(x, med, ".-", color=f"C{k}", ms=3, label=method)
         ax.fill_between(x, q1, q3, color=f"C{k}", alpha=0.15)
-    ax.axhline(tolerance_m, color="k", lw=0.8, ls="--")
+    ax.axhline(tolerance_m, color="k", lw=0.8, ls="--", label=f"tolerance {tolerance_m:g} m")
     ax.set_yscale("log")
+    from matplotlib.ticker import MaxNLocator, NullFormatter
+
+    ax.yaxis.set_minor_formatter(NullFormatter())  # one set of labels on the log axis, the decades
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel("trial")
-    ax.set_ylabel("position error [m] (median, quartiles)")
+    ax.set_ylabel("position error [m], median and quartiles")
     if ax.get_legend_handles_labels()[0]:
         ax.legend(fontsize=8)
     else:  # every run failed before measuring a trial: say so rather than draw an empty panel
@@ -140,8 +150,12 @@ def plot_feedback(curves: Mapping[str, Mapping[str, Sequence[Sequence[float]]]],
     fig, axes = plt.subplots(rows, cols, figsize=(6.5 * cols, 4.2 * rows), squeeze=False, sharey=True)
     for ax in axes.flat[n:]:
         ax.set_visible(False)
-    for ax, (scenario, by_scheme) in zip(axes.flat, curves.items(), strict=False):
+    for k, (ax, (scenario, by_scheme)) in enumerate(zip(axes.flat, curves.items(), strict=False)):
         plot_rules(by_scheme, trials, tolerance_m, ax=ax)
-        ax.set_title(scenario)
+        ax.set_title(f"scenario {scenario}")
+        if k % cols:
+            ax.set_ylabel("")  # the shared axis is labelled once, on the left
+    fig.suptitle(f"position error per trial with each onboard feedback scheme, {trials} trials; "
+                 f"dashed: the {tolerance_m:g} m tolerance")
     fig.tight_layout()
     return fig

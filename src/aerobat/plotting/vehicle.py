@@ -11,7 +11,7 @@ from matplotlib.patches import Polygon
 from aerobat.plotting.files import new_figure
 from aerobat.quadrotor.dynamics import POS, RATE_INT, rotation_matrices
 
-__all__ = ["draw_side_view", "maneuver_plane", "plot_side_views", "plot_trajectory"]
+__all__ = ["draw_side_view", "maneuver_plane", "plot_side_views", "plot_trajectory", "side_view_planes"]
 
 
 def maneuver_plane(states: np.ndarray) -> str:
@@ -21,6 +21,38 @@ def maneuver_plane(states: np.ndarray) -> str:
         return "xz" if turns[1] > turns[0] else "yz"
     travel = np.ptp(states[:, POS], axis=0) if states.shape[0] else np.zeros(3)
     return "xz" if travel[0] > travel[1] else "yz"
+
+
+def side_view_planes(flights: Sequence[np.ndarray]) -> tuple[str, ...]:
+    """The vertical plane(s) that show these flights: ``("yz",)``, ``("xz",)`` or both.
+
+    A flip is seen along its axis; any other motion in the plane it travels in. When the flights
+    turn or travel about as much along x as along y (both at least a third of the larger, and
+    more than 10 cm or a quarter turn), both planes are drawn: a motion along x is never
+    squashed into a pile of markers at Y = 0.
+    """
+    flights = [s for s in flights if s.shape[0]]
+    if not flights:
+        return ("yz",)
+    turns = np.max([np.abs(s[-1, RATE_INT] - s[0, RATE_INT])[:2] for s in flights], axis=0)
+    travel = np.max([np.ptp(s[:, POS], axis=0)[:2] for s in flights], axis=0)
+    for amount, least in ((turns, 0.5), (travel, 0.1)):
+        if amount.max() > least:
+            if amount.min() >= amount.max() / 3 and amount.min() > least:
+                return ("yz", "xz")
+            # a turn about x is seen in the y-z plane; travel along x in the x-z plane
+            about_x = amount[0] >= amount[1]
+            return ("yz",) if (about_x if amount is turns else not about_x) else ("xz",)
+    return ("yz",)
+
+
+def _target_in(plane: str, target: Sequence[float] | None) -> tuple[float, float] | None:
+    """The target in a plane: a 3D (X, Y, Z) target, or a (Y, Z) pair (which has X = 0)."""
+    if target is None:
+        return None
+    values = [float(v) for v in target]
+    x, y, z = values if len(values) == 3 else (0.0, values[0], values[1])
+    return (y, z) if plane == "yz" else (x, z)
 
 
 def draw_side_view(
@@ -101,32 +133,44 @@ def plot_trajectory(times_s: np.ndarray, states: np.ndarray, commands: np.ndarra
     return fig
 
 
-def plot_side_views(panels: Sequence[tuple[str, np.ndarray, np.ndarray]], *, plane: str | None = None,
-                    title: str = "", target: Sequence[float] = (0.0, 0.0), arm_m: float = 0.17) -> Any:
+def plot_side_views(panels: Sequence[tuple[str, np.ndarray, np.ndarray]], *,
+                    plane: str | Sequence[str] | None = None, title: str = "",
+                    target: Sequence[float] | None = (0.0, 0.0), arm_m: float = 0.17) -> Any:
     """Figs. 9/11/12: one panel per trajectory (label, times, states), each at true positions, same scale.
 
-    ``plane`` defaults to the first trajectory's own plane (:func:`maneuver_plane`).
+    ``plane`` (``"yz"``, ``"xz"`` or both) defaults to the plane(s) the flights move in
+    (:func:`side_view_planes`); with two planes, one row each. ``target`` is (Y, Z) or (X, Y, Z),
+    or None when the maneuver names no final position (then none is drawn).
     """
     panels = [(label, t, s) for label, t, s in panels if s.shape[0]]
     if not panels:
         raise ValueError("no trajectory to draw")
-    plane = plane or maneuver_plane(panels[0][2])
-    h = 1 if plane == "yz" else 0
-    every = np.concatenate([s[:, [h, 2]] for _, _, s in panels])
-    low, high = every.min(axis=0) - 2 * arm_m, every.max(axis=0) + 2 * arm_m
-    low = np.minimum(low, np.asarray(target) - 2 * arm_m)
-    high = np.maximum(high, np.asarray(target) + 2 * arm_m)
-    ratio = float((high[0] - low[0]) / max(high[1] - low[1], 1e-9))
-    fig = new_figure(figsize=(len(panels) * (max(1.6, min(6.0, 4.0 * ratio)) + 0.7) + 0.4, 4.9))
-    axes = np.atleast_1d(fig.subplots(1, len(panels), sharex=True, sharey=True))
-    for k, (ax, (label, times, states)) in enumerate(zip(axes, panels, strict=True)):
-        draw_side_view(ax, times, states, plane=plane, color=f"C{k}", target=target, arm_m=arm_m)
-        ax.set_title(label, fontsize=9)
-        ax.set_xlim(low[0], high[0])
-        ax.set_ylim(low[1], high[1])
-        if k:
-            ax.set_ylabel("")
-    axes[0].legend(loc="best", fontsize=7)
-    fig.suptitle(title + ("\n" if title else "") + "vehicle every 50 ms (triangle apex = thrust); "
-                 "× desired final position, ● start", fontsize=9)
+    planes = side_view_planes([s for _, _, s in panels]) if plane is None else (
+        (plane,) if isinstance(plane, str) else tuple(plane))
+    lows, highs = [], []
+    for p in planes:
+        h = 1 if p == "yz" else 0
+        every = np.concatenate([s[:, [h, 2]] for _, _, s in panels])
+        low, high = every.min(axis=0) - 2 * arm_m, every.max(axis=0) + 2 * arm_m
+        goal = _target_in(p, target)
+        if goal is not None:
+            low, high = np.minimum(low, np.asarray(goal) - 2 * arm_m), np.maximum(high, np.asarray(goal) + 2 * arm_m)
+        lows.append(low)
+        highs.append(high)
+    ratio = max(float((hi[0] - lo[0]) / max(hi[1] - lo[1], 1e-9)) for lo, hi in zip(lows, highs, strict=True))
+    fig = new_figure(figsize=(len(panels) * (max(1.6, min(6.0, 4.0 * ratio)) + 0.7) + 0.4, 0.4 + 4.5 * len(planes)))
+    axes = np.atleast_2d(fig.subplots(len(planes), len(panels), squeeze=False, sharex="row", sharey="row"))
+    for row, p in enumerate(planes):
+        for k, (label, times, states) in enumerate(panels):
+            ax = axes[row, k]
+            draw_side_view(ax, times, states, plane=p, color=f"C{k}", target=_target_in(p, target), arm_m=arm_m)
+            ax.set_title(label if len(planes) == 1 else f"{label}, {p[0].upper()}–Z", fontsize=9)
+            ax.set_xlim(lows[row][0], highs[row][0])
+            ax.set_ylim(lows[row][1], highs[row][1])
+            if k:
+                ax.set_ylabel("")
+    axes[0, 0].legend(loc="best", fontsize=7)
+    marks = ("× desired final position, ● start" if target is not None
+             else "● start; the maneuver names no final position")
+    fig.suptitle(title + ("\n" if title else "") + f"vehicle every 50 ms, triangle apex = thrust; {marks}", fontsize=9)
     return fig

@@ -160,13 +160,13 @@ def solve_translation(
     states.setflags(write=False)
     n_sing = sum(a.kind == "singular" for a in rate_arcs)
     msg = (
-        f"optimal: T*={duration:.6f} s (transcription {t_trans:.6f} s, {intervals} intervals); "
-        f"{len(thrust_arcs)} thrust arcs, {len(rate_arcs)} rate arcs ({n_sing} singular); "
+        f"T*={duration:.6f} s, transcription {t_trans:.6f} s on {intervals} intervals; "
+        f"{len(thrust_arcs)} thrust arcs, {len(rate_arcs)} rate arcs of which {n_sing} singular; "
         f"boundary error {err:.1e}; PMP residual {pmp:.1e}; refinement rounds {rounds}"
     )
     if vertical:
         msg = (
-            f"optimal: T*={duration:.6f} s (transcription {t_trans:.6f} s, {intervals} intervals); "
+            f"T*={duration:.6f} s, transcription {t_trans:.6f} s on {intervals} intervals; "
             "vertical bang-bang with theta == 0 (closed form; the transcription's multi-start found no "
             f"faster tilted motion; minimum-principle certificate not evaluated); boundary error {err:.1e}"
         )

@@ -19,7 +19,7 @@ $(STAMP): pyproject.toml
 		{ echo "make: the replay test needs Debian's chromium: apt-get install chromium (as root)"; exit 1; }
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[test,dev,rotorpy,dask,baselines,replay,logs]"
+	$(PY) -m pip install --quiet -e ".[test,dev,rotorpy,dask,baselines,replay,logs,viewers]"
 	$(MAKE) --no-print-directory betaflight
 	touch $(STAMP)
 

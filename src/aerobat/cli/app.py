@@ -67,9 +67,9 @@ def exit_status(exc: BaseException) -> int:
 
 
 def _commands() -> list:
-    from aerobat.cli import benchmark, design, identify, learn, log, sessions, simulate, study, vehicles
+    from aerobat.cli import benchmark, browse, design, identify, learn, log, sessions, simulate, study, vehicles
 
-    return [simulate, design, learn, sessions, benchmark, study, identify, vehicles, log]
+    return [simulate, design, learn, sessions, browse, benchmark, study, identify, vehicles, log]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -100,6 +100,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
         raise ConfigError("--trajectories: only with --format json")
     if args.iteration is not None and args.program is None:
         raise ConfigError("--iteration: only with --program")
+    if args.format == "mcap" and (args.output is None or args.program is not None):
+        raise ConfigError("--format mcap: give --output FILE.mcap (an MCAP file is binary; not with --program)")
     if args.json and args.output is None and args.program is None:
         if args.format == "csv":
             raise ConfigError("--json with --format csv: --json prints JSON; give --output FILE for the CSV")
@@ -109,6 +111,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
         session_id = store.resolve_session(args.session)
         if args.program is not None:
             return _export_program(store, session_id, args)
+        if args.format == "mcap":
+            return _export_mcap(store, session_id, args)
         output = Path(args.output) if args.output else None
         if output is not None:
             refuse_overwrite(output, store_path=store.path, force=args.force, option="--output")
@@ -142,6 +146,23 @@ def _cmd_export(args: argparse.Namespace) -> int:
             print(f"session {session_id} written to {output}", file=sys.stderr)
     else:
         sys.stdout.write(text)
+    return 0
+
+
+def _export_mcap(store: Any, session_id: int, args: argparse.Namespace) -> int:
+    """The session's trials as an MCAP file (Foxglove, PlotJuggler): poses, states, commands, errors."""
+    from aerobat.export import write_session_mcap
+
+    output = Path(args.output)
+    refuse_overwrite(output, store_path=store.path, force=args.force, option="--output")
+    summary = write_session_mcap(store, session_id, output)
+    if args.json:
+        print(json.dumps({"session": session_id, "written": str(output), "format": "mcap",
+                          "trials": len(summary.trials), "messages": summary.messages,
+                          "start_ns": summary.start_ns, "end_ns": summary.end_ns}))
+    else:
+        print(f"session {session_id}: {len(summary.trials)} trials, {sum(summary.messages.values())} messages "
+              f"written to {output} (open it in Foxglove or PlotJuggler)", file=sys.stderr)
     return 0
 
 
@@ -297,11 +318,12 @@ def register(sub: Any) -> None:
     add_db_option(plot)
     plot.set_defaults(func=_cmd_plot)
 
-    export = sub.add_parser("export", help="a stored session as CSV (one row per iteration) or JSON",
+    export = sub.add_parser("export", help="a stored session as CSV (one row per iteration), JSON or MCAP",
                             formatter_class=fmt)
     export.add_argument("session", type=session_ref, help="session id or 'last' (required)")
-    export.add_argument("--format", choices=("csv", "json"), default=None,
-                        help="output format (default: csv; json with --json)")
+    export.add_argument("--format", choices=("csv", "json", "mcap"), default=None,
+                        help="output format; mcap (Foxglove, PlotJuggler) needs --output (default: csv; json with "
+                             "--json)")
     export.add_argument("--output", metavar="FILE", help="write to FILE (default: standard output)")
     export.add_argument("--force", action="store_true", help="replace --output if it exists (never the store)")
     export.add_argument("--trajectories", action="store_true", help="include measured trajectories (json)")

@@ -56,13 +56,16 @@ class Site:
     Parameters
     ----------
     path : the store (opened read-only; a file that is not an aerobat store is refused).
-    static : pages for a static export (no live polling, replays only of the default trials).
+    static : pages for a static export (no live polling, replays only of the default trials, and no figures
+        of study sessions unless ``study_figures``: a study of hundreds of vehicles would take minutes).
     cache : folder for drawn figures and replays (default: a temporary one, removed by :meth:`close`).
     """
 
-    def __init__(self, path: str | Path, *, static: bool = False, cache: Path | None = None) -> None:
+    def __init__(self, path: str | Path, *, static: bool = False, cache: Path | None = None,
+                 study_figures: bool = False) -> None:
         self.store = Store(path, create=False)
         self.static = static
+        self.study_figures = study_figures
         self._own_cache = cache is None
         self.cache = Path(tempfile.mkdtemp(prefix="aerobat-browse-")) if cache is None else cache
         self._lock = threading.RLock()
@@ -167,7 +170,7 @@ class Site:
             "session.html", rec=rec, row=row, mrec=mrec, drec=drec, prec=prec, table=table, measured=measured,
             parameters=parameters, vehicle=store.vehicle(prec.vehicle_id).config,
             design_vehicle=store.vehicle(drec.vehicle_id).config, tags=extras.get("tags"), notes=extras.get("notes"),
-            replays=(["default"] if self.static else ["default", *measured]),
+            replays=(["default"] if self.static else ["default", *measured]), figures=self._draws(row.study_id),
             live=not self.static and row.status == "running")
 
     def progress(self, session_id: int) -> dict[str, Any]:
@@ -200,6 +203,10 @@ class Site:
         return self._render("compare.html", sessions=sessions, names=names, key="-".join(map(str, ids)))
 
     # ---------------------------------------------------------- figures
+    def _draws(self, study_id: int | None) -> bool:
+        """Whether a session's page shows figures and replays (a static export leaves study sessions' out)."""
+        return not self.static or study_id is None or self.study_figures
+
     def _folder(self, session_id: int) -> Path:
         rec = self.store.session(session_id)
         folder = self.cache / f"session-{session_id}" / f"v{rec.n_records}-{rec.display_state}"
@@ -273,7 +280,7 @@ class Site:
         pages = ["index.html"]
         for row in session_rows(self.store):
             pages.append(f"session-{row.id}.html")
-            if row.n_measured:
+            if row.n_measured and self._draws(row.study_id):
                 pages += [f"session-{row.id}/learning.png", f"session-{row.id}/side_views.png",
                           f"session-{row.id}/replay-default.html"]
         for study in study_rows(self.store):

@@ -38,7 +38,7 @@ def _cmd_browse(args: argparse.Namespace) -> int:
     if args.export is not None:
         folder = output_dir(args.export)
         started = time.perf_counter()
-        with Site(db, static=True) as site:
+        with Site(db, static=True, study_figures=args.study_figures) as site:
             for sid in compare:
                 site.store.resolve_session(sid)
             written = site.export(folder, compare=compare)
@@ -77,6 +77,8 @@ def register(sub: Any) -> None:
                    help="write the pages as static files into DIR instead of serving (default: serve)")
     p.add_argument("--compare", metavar="IDS", default=None,
                    help="with --export: also write compare.html for these session ids, e.g. 1,2 (default: none)")
+    p.add_argument("--study-figures", action="store_true",
+                   help="with --export: also draw the figures of every study session (default: plain sessions only)")
     p.add_argument("--seconds", type=bounded_int(1, 10**7), default=None,
                    help="stop serving after N seconds (default: serve until Ctrl-C)")
     p.add_argument("--json", action="store_true", help="print one JSON object: the address, or what was written")

@@ -72,7 +72,7 @@ def _epoch_ns(text: str) -> int:
         moment = datetime.fromisoformat(text.replace("Z", "+00:00"))
     except ValueError:
         return 0
-    return int(moment.timestamp() * 1e9)
+    return int(moment.timestamp()) * 1_000_000_000 + moment.microsecond * 1000
 
 
 def _finite(value: float) -> float | None:

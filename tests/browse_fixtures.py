@@ -6,10 +6,12 @@ the trials are real arena flights of one small flip, so figures and replays have
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from aerobat import hummingbird
 from aerobat.config import dataclass_to_table
@@ -100,10 +102,17 @@ def check_session_mcap(path: Path, store: Store, session_id: int) -> dict[str, i
                          for _, d in poses])
         assert np.array_equal(xyz, it.states[:, 0:3]) and np.array_equal(quat, it.states[:, 6:10])
         assert all(d.frame_id == "world" and d.timestamp.ToNanoseconds() == t for t, d in poses)
-        states = [d for _, _, _, d in reader.iter_decoded_messages(topics=[f"/trial/{it.index}/state"])]
-        assert [s["f1_n"] for s in states] == it.states[:, 13].tolist()
-        assert [s["p_rad_s"] for s in states] == it.states[:, 10].tolist()
-        errors = [d for _, _, _, d in reader.iter_decoded_messages(topics=["/errors"])]
+        states = [json.loads(m.data) for _, _, m in reader.iter_messages(topics=[f"/trial/{it.index}/state"])]
+        def as_json(column: np.ndarray) -> list[float | None]:
+            return [float(v) if np.isfinite(v) else None for v in column]
+
+        assert [s["f1_n"] for s in states] == as_json(it.states[:, 13])  # null where not measured (the arena)
+        assert [s["p_rad_s"] for s in states] == as_json(it.states[:, 10])
+        assert [s["vz_m_s"] for s in states] == as_json(it.states[:, 5]) and states[0]["vz_m_s"] is not None
+        for _, _, m in reader.iter_messages():
+            if m.data[:1] == b"{":
+                json.loads(m.data, parse_constant=lambda c: pytest.fail(f"{c} is not JSON"))
+        errors = [json.loads(m.data) for _, _, m in reader.iter_messages(topics=["/errors"])]
         assert [e["trial"] for e in errors] == [i.index for i in iterations]
         assert [e["status"] for e in errors] == [i.status for i in iterations]
         last = iterations[-1]

@@ -37,16 +37,19 @@ __all__ = ["GAP_S", "McapSummary", "write_session_mcap"]
 GAP_S = 1.0
 """Seconds between one trial's last sample and the next trial's first on the file's timeline."""
 
+_STATE_COLUMNS = ((3, "vx_m_s"), (4, "vy_m_s"), (5, "vz_m_s"), (10, "p_rad_s"), (11, "q_rad_s"), (12, "r_rad_s"),
+                  (13, "f1_n"), (14, "f2_n"), (15, "f3_n"), (16, "f4_n"))
+"""State columns sent on ``/trial/N/state`` (a value the plant did not measure, e.g. the arena's thrusts, is null)."""
+_COMMAND_COLUMNS = ((0, "collective_m_s2"), (1, "p_hat_rad_s"), (2, "q_hat_rad_s"), (3, "r_hat_rad_s"))
+
 _STATE_SCHEMA = {
     "type": "object", "title": "aerobat.TrialState",
     "properties": {"trial": {"type": "integer"}, "t_s": {"type": "number"},
-                   **{k: {"type": "number"} for k in ("vx_m_s", "vy_m_s", "vz_m_s", "p_rad_s", "q_rad_s", "r_rad_s",
-                                                      "f1_n", "f2_n", "f3_n", "f4_n")}}}
+                   **{k: {"type": ["number", "null"]} for _, k in _STATE_COLUMNS}}}
 _COMMAND_SCHEMA = {
     "type": "object", "title": "aerobat.Command",
     "properties": {"trial": {"type": "integer"}, "t_s": {"type": "number"},
-                   **{k: {"type": "number"} for k in ("collective_m_s2", "p_hat_rad_s", "q_hat_rad_s",
-                                                      "r_hat_rad_s")}}}
+                   **{k: {"type": ["number", "null"]} for _, k in _COMMAND_COLUMNS}}}
 _ERROR_SCHEMA = {"type": "object", "title": "aerobat.TrialError",
                  "properties": {"trial": {"type": "integer"}, "status": {"type": "string"},
                                 "position_error_m": {"type": ["number", "null"]},
@@ -77,6 +80,17 @@ def _epoch_ns(text: str) -> int:
 
 def _finite(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
+
+
+def _json_safe(value: Any) -> Any:
+    """Plain JSON (non-finite numbers as null), as Foxglove's JSON decoder reads it."""
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, float):
+        return _finite(value)
+    return value if value is None or isinstance(value, str | int | bool) else str(value)
 
 
 def write_session_mcap(store: Store, session_id: int, path: str | Path) -> McapSummary:
@@ -130,7 +144,7 @@ def write_session_mcap(store: Store, session_id: int, path: str | Path) -> McapS
             last_ns = max(last_ns, time_ns)
 
         def emit_json(topic: str, kind: str, time_ns: int, value: dict[str, Any]) -> None:
-            emit(topic, json_schemas[kind], "json", time_ns, json.dumps(value).encode())
+            emit(topic, json_schemas[kind], "json", time_ns, json.dumps(value, allow_nan=False).encode())
 
         indices = [it.index for it in store.iterations(session_id)]
         for k in range(0, len(indices), 20):  # a few trajectories in memory at a time
@@ -155,13 +169,9 @@ def write_session_mcap(store: Store, session_id: int, path: str | Path) -> McapS
                         tf.rotation.w, tf.rotation.x, tf.rotation.y, tf.rotation.z = map(float, x[6:10])
                         emit("/tf", tf_schema, "protobuf", row, tf.SerializeToString())
                         emit_json(f"/trial/{it.index}/state", "state", row, {
-                            "trial": it.index, "t_s": t, "vx_m_s": float(x[3]), "vy_m_s": float(x[4]),
-                            "vz_m_s": float(x[5]), "p_rad_s": float(x[10]), "q_rad_s": float(x[11]),
-                            "r_rad_s": float(x[12]), "f1_n": float(x[13]), "f2_n": float(x[14]),
-                            "f3_n": float(x[15]), "f4_n": float(x[16])})
+                            "trial": it.index, "t_s": t, **{name: _finite(x[k]) for k, name in _STATE_COLUMNS}})
                         emit_json(f"/trial/{it.index}/command", "command", row, {
-                            "trial": it.index, "t_s": t, "collective_m_s2": float(u[0]), "p_hat_rad_s": float(u[1]),
-                            "q_hat_rad_s": float(u[2]), "r_hat_rad_s": float(u[3])})
+                            "trial": it.index, "t_s": t, **{name: _finite(u[k]) for k, name in _COMMAND_COLUMNS}})
                     end = int(stamps[-1])
                 else:
                     end = t0
@@ -171,7 +181,7 @@ def write_session_mcap(store: Store, session_id: int, path: str | Path) -> McapS
                     "error": {n: _finite(v) for n, v in zip(mrec.error_names, it.error.tolist(), strict=True)},
                     "message": it.message})
                 emit_json("/firmware", "firmware", end, {"trial": it.index, "plant": rec.plant_kind,
-                                                         "info": json.loads(json.dumps(it.info, default=str))})
+                                                         "info": _json_safe(it.info)})
                 clock_ns = end + int(GAP_S * 1e9)
         writer.finish()
     return McapSummary(path=path, session_id=session_id, messages=counts,

@@ -18,11 +18,11 @@ import urllib.request
 from pathlib import Path
 
 import pytest
-from browse_fixtures import build_store
 
 from aerobat.browse import Site, start
 from aerobat.cli import main
 from aerobat.store import Store
+from browse_fixtures import build_store
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 ROOT = Path(__file__).resolve().parents[1]
@@ -73,7 +73,7 @@ def test_served_pages_show_what_the_store_holds_and_never_write_it(store_path):
         rows = re.findall(r'<tr class="session" data-id="(\d+)"[^>]*?(hidden)?>', page)
         assert [int(r[0]) for r in rows] == [s.id for s in sessions] and len(rows) == 203
         assert sum(1 for r in rows if r[1]) == 198 == sum(1 for s in sessions if s.study_id is not None)
-        assert f'<span id="shown">5</span> of 203 sessions' in page
+        assert '<span id="shown">5</span> of 203 sessions' in page
         assert 'data-plant="rotorpy"' in page and 'data-rule="broyden"' in page
         # a session: its trials table and figures
         status, _, body = fetch(browser.url + f"session-{first.id}.html")

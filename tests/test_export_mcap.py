@@ -6,10 +6,9 @@ import contextlib
 import io
 import json
 
-from browse_fixtures import build_store, check_session_mcap
-
 from aerobat.cli import main
 from aerobat.store import Store
+from browse_fixtures import build_store, check_session_mcap
 
 
 def call(argv: list[str]) -> tuple[int, str, str]:

@@ -61,7 +61,7 @@ class Browser:
         self.site = site
         self.server = server
         host, port = server.server_address[:2]
-        self.url = f"http://{host}:{port}/"
+        self.url = f"http://{host if isinstance(host, str) else host.decode()}:{port}/"
         self._thread = threading.Thread(target=server.serve_forever, name="aerobat-browse", daemon=True)
         self._thread.start()
 

@@ -55,7 +55,8 @@ _ERROR_SCHEMA = {"type": "object", "title": "aerobat.TrialError",
                                 "position_error_m": {"type": ["number", "null"]},
                                 "error": {"type": "object"}, "message": {"type": "string"}}}
 _FIRMWARE_SCHEMA = {"type": "object", "title": "aerobat.TrialPlantInfo",
-                    "properties": {"trial": {"type": "integer"}, "plant": {"type": "string"}, "info": {"type": "object"}}}
+                    "properties": {"trial": {"type": "integer"}, "plant": {"type": "string"},
+                                   "info": {"type": "object"}}}
 
 
 @dataclass(frozen=True)
@@ -101,8 +102,7 @@ def write_session_mcap(store: Store, session_id: int, path: str | Path) -> McapS
         from mcap.writer import Writer
         from mcap_protobuf.schema import register_schema
     except ImportError as exc:
-        raise MissingDependency(f"--format mcap needs the mcap packages: pip install 'aerobat[viewers]' "
-                                f"({exc.name} is missing)") from None
+        raise MissingDependency(str(exc.name or "mcap"), extra="viewers", purpose="export --format mcap") from None
     from aerobat.core.registry import from_spec
 
     rec = store.session(session_id)
@@ -124,7 +124,7 @@ def write_session_mcap(store: Store, session_id: int, path: str | Path) -> McapS
         writer.start(profile="", library="aerobat")
         pose_schema = register_schema(writer, PoseInFrame)
         tf_schema = register_schema(writer, FrameTransform)
-        json_schemas = {name: writer.register_schema(name=schema["title"], encoding="jsonschema",
+        json_schemas = {name: writer.register_schema(name=str(schema["title"]), encoding="jsonschema",
                                                      data=json.dumps(schema).encode())
                         for name, schema in (("state", _STATE_SCHEMA), ("command", _COMMAND_SCHEMA),
                                              ("errors", _ERROR_SCHEMA), ("firmware", _FIRMWARE_SCHEMA))}

@@ -6,11 +6,11 @@ import contextlib
 import io
 import json
 
-from browse_fixtures import check_session_mcap
 from mcap.reader import make_reader
 
 from aerobat.cli import main
 from aerobat.store import Store
+from browse_fixtures import check_session_mcap
 
 
 def test_a_betaflight_session_reads_back_from_its_mcap_file(tmp_path, firmware):

@@ -23,9 +23,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from browse_fixtures import build_store  # noqa: E402
-
 from aerobat.browse import start  # noqa: E402
+from browse_fixtures import build_store  # noqa: E402
 
 
 def timed(url: str, repeat: int) -> dict[str, float]:

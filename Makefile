@@ -12,7 +12,7 @@ KERNEL_SOURCES := $(wildcard src/aerobat/quadrotor/*.py src/aerobat/plants/arena
 	src/aerobat/logs/blackbox_*.py)
 OUT ?= out
 # the extras make installs: every optional piece, the tests' and the docs'
-EXTRAS := test,dev,docs,rotorpy,dask,baselines,replay,logs
+EXTRAS := test,dev,docs,rotorpy,dask,baselines,replay,logs,viewers
 
 .PHONY: demo test test-slow test-release docs bench lint clean setup betaflight
 

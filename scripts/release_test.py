@@ -2,7 +2,7 @@
 
 1. ``python -m build`` makes the sdist and the wheel from this clone into a temporary folder;
    the wheel must carry the vehicle presets, the Betaflight patch and settings, and the examples.
-2. A new venv outside the clone installs the wheel (with the ``replay`` and ``logs`` extras) from
+2. A new venv outside the clone installs the wheel (with the ``replay``, ``logs`` and ``viewers`` extras) from
    the package index, as ``pip install aerobat-*.whl`` would.
 3. From a folder that is not the clone, with no PYTHONPATH: ``aerobat setup`` (reuses a built
    SITL in ``~/.cache/aerobat``; compiles the kernels), ``aerobat setup --check``, ``aerobat
@@ -26,7 +26,7 @@ import zipfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-EXTRAS = "replay,logs"
+EXTRAS = "replay,logs,viewers"
 MUST_SHIP = ("aerobat/quadrotor/vehicles/hummingbird.toml", "aerobat/plants/betaflight/lockstep.patch",
              "aerobat/plants/betaflight/sitl_settings.json", "aerobat/examples/single_flip.toml",
              "aerobat/examples/maneuvers/", "aerobat/py.typed")

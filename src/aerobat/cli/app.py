@@ -73,9 +73,21 @@ def _commands(only: str | None = None) -> list:
         from aerobat.cli import log  # loads numba and the arena (~0.5 s of a `log info`), which log needs not
 
         return [log]
-    from aerobat.cli import benchmark, design, identify, learn, log, sessions, setup, simulate, study, vehicles
+    from aerobat.cli import (
+        benchmark,
+        browse,
+        design,
+        identify,
+        learn,
+        log,
+        sessions,
+        setup,
+        simulate,
+        study,
+        vehicles,
+    )
 
-    return [simulate, design, learn, sessions, benchmark, study, identify, vehicles, log, setup]
+    return [simulate, design, learn, sessions, browse, benchmark, study, identify, vehicles, log, setup]
 
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:

@@ -10,8 +10,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from aerobat.cli import browse
-from aerobat.cli.browse import table
+from aerobat.cli import curate
+from aerobat.cli.curate import table
 from aerobat.cli.common import (
     HelpFormatter,
     add_db_option,
@@ -107,6 +107,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
         raise ConfigError("--trajectories: only with --format json")
     if args.iteration is not None and args.program is None:
         raise ConfigError("--iteration: only with --program")
+    if args.format == "mcap" and (args.output is None or args.program is not None):
+        raise ConfigError("--format mcap: give --output FILE.mcap (an MCAP file is binary; not with --program)")
     if args.json and args.output is None and args.program is None:
         if args.format == "csv":
             raise ConfigError("--json with --format csv: --json prints JSON; give --output FILE for the CSV")
@@ -117,6 +119,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
         store.verify_session(session_id)  # nothing is exported from a session with a damaged record
         if args.program is not None:
             return _export_program(store, session_id, args)
+        if args.format == "mcap":
+            return _export_mcap(store, session_id, args)
         if args.output is not None and not args.output.strip():  # Path("") is "."
             raise ConfigError("--output: empty file name")
         output = Path(args.output) if args.output is not None else None
@@ -149,6 +153,23 @@ def _cmd_export(args: argparse.Namespace) -> int:
             print(f"session {session_id} written to {output}", file=sys.stderr)
     else:
         sys.stdout.write(text)
+    return 0
+
+
+def _export_mcap(store: Any, session_id: int, args: argparse.Namespace) -> int:
+    """The session's trials as an MCAP file (Foxglove, PlotJuggler): poses, states, commands, errors."""
+    from aerobat.export import write_session_mcap
+
+    output = Path(args.output)
+    refuse_overwrite(output, store_path=store.path, force=args.force, option="--output")
+    summary = write_session_mcap(store, session_id, output)
+    if args.json:
+        print(json.dumps({"session": session_id, "written": str(output), "format": "mcap",
+                          "trials": len(summary.trials), "messages": summary.messages,
+                          "start_ns": summary.start_ns, "end_ns": summary.end_ns}))
+    else:
+        print(f"session {session_id}: {len(summary.trials)} trials, {sum(summary.messages.values())} messages "
+              f"written to {output} (open it in Foxglove or PlotJuggler)", file=sys.stderr)
     return 0
 
 
@@ -329,11 +350,12 @@ def register(sub: Any) -> None:
     add_db_option(plot)
     plot.set_defaults(func=_cmd_plot)
 
-    export = sub.add_parser("export", help="a stored session as CSV (one row per iteration) or JSON",
+    export = sub.add_parser("export", help="a stored session as CSV (one row per iteration), JSON or MCAP",
                             formatter_class=fmt)
     export.add_argument("session", type=session_ref, help="session id or 'last' (required)")
-    export.add_argument("--format", choices=("csv", "json"), default=None,
-                        help="output format (default: csv; json with --json)")
+    export.add_argument("--format", choices=("csv", "json", "mcap"), default=None,
+                        help="output format; mcap (Foxglove, PlotJuggler) needs --output (default: csv; json with "
+                             "--json)")
     export.add_argument("--output", metavar="FILE", help="write to FILE (default: standard output)")
     export.add_argument("--force", action="store_true", help="replace --output if it exists (never the store)")
     export.add_argument("--trajectories", action="store_true", help="include measured trajectories (json)")
@@ -364,7 +386,7 @@ def register(sub: Any) -> None:
     examples.add_argument("--json", action="store_true", help="print one JSON object: the files copied")
     examples.set_defaults(func=_cmd_examples)
 
-    browse.register(sub)
+    curate.register(sub)
 
     studies = sub.add_parser("studies", help="list the stored studies, or show one", formatter_class=fmt)
     studies.add_argument("study", nargs="?", type=session_ref, default=None,

@@ -81,6 +81,8 @@ EXTRAS: dict[str, tuple[tuple[str, ...], str]] = {
     "baselines": (("cma", "bayes_opt"), "the rules study's CMA-ES and Bayesian-optimisation baselines"),
     "replay": (("plotly",), "aerobat replay: the 3D replay page"),
     "logs": (("pyulog", "orangebox"), "aerobat log and identify --log for PX4 ULog and Betaflight blackbox logs"),
+    "viewers": (("jinja2", "mcap", "mcap_protobuf", "foxglove_schemas_protobuf"),
+                "aerobat browse (the store's web pages) and aerobat export --format mcap (Foxglove)"),
     "test": (("pytest", "hypothesis"), "the test suite (make test)"),
     "docs": (("mkdocs", "material", "mkdocstrings", "mkdocs_jupyter", "nbclient"),
              "the documentation site (mkdocs build) and the executed tutorial"),

@@ -1,0 +1,312 @@
+"""The browser's pages: every page of a store as bytes, for the server and for a static export alike.
+
+A :class:`Site` opens the store read-only (SQLite ``mode=ro``: it never writes the file) and
+answers a relative path (``index.html``, ``session-3.html``, ``session-3/learning.png``…)
+with its content type and bytes. Pages link to each other by relative paths, so the same
+pages work served by :mod:`aerobat.browse.server` and written to a folder by :meth:`Site.export`.
+Figures are drawn from stored data alone (:func:`aerobat.experiments.reports.session_figures`)
+and cached per session state; the 3D replay is the one ``aerobat replay`` writes.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import shutil
+import tempfile
+import threading
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aerobat.browse.catalog import json_text, session_rows, study_rows
+from aerobat.errors import ConfigError, SessionNotFound
+from aerobat.store import Store
+
+__all__ = ["NotFound", "Site"]
+
+
+class NotFound(SessionNotFound):
+    """A page the store has nothing for (an unknown session, study, figure or path)."""
+
+
+_PAGE = re.compile(r"^(?:(index)\.html|session-(\d+)\.html|study-(\d+)\.html|compare\.html|api/session-(\d+)\.json"
+                   r"|session-(\d+)/(learning|side_views)\.png|session-(\d+)/replay-(\d+|default)\.html"
+                   r"|study-(\d+)/([\w.-]+\.png)|compare/(\d+(?:-\d+)+)\.png)$")
+
+
+def _environment() -> Any:
+    from jinja2 import Environment, PackageLoader, select_autoescape
+
+    env = Environment(loader=PackageLoader("aerobat.browse", "templates"), autoescape=select_autoescape(["html"]))
+    env.filters["num"] = lambda v, d=4: "—" if v is None or (isinstance(v, float) and not math.isfinite(v)) \
+        else f"{v:.{d}g}"
+    env.filters["when"] = lambda s: "—" if not s else str(s)[:19].replace("T", " ")
+    env.filters["json"] = json_text
+    env.globals["zip"] = zip
+    return env
+
+
+class Site:
+    """The pages of one store.
+
+    Parameters
+    ----------
+    path : the store (opened read-only; a file that is not an aerobat store is refused).
+    static : pages for a static export (no live polling, replays only of the default trials, and no figures
+        of study sessions unless ``study_figures``: a study of hundreds of vehicles would take minutes).
+    cache : folder for drawn figures and replays (default: a temporary one, removed by :meth:`close`).
+    """
+
+    def __init__(self, path: str | Path, *, static: bool = False, cache: Path | None = None,
+                 study_figures: bool = False) -> None:
+        self.store = Store(path, create=False)
+        self.static = static
+        self.study_figures = study_figures
+        self._own_cache = cache is None
+        self.cache = Path(tempfile.mkdtemp(prefix="aerobat-browse-")) if cache is None else cache
+        self._lock = threading.RLock()
+        self._env = _environment()
+
+    def close(self) -> None:
+        """Close the store and remove the temporary figure cache."""
+        self.store.close()
+        if self._own_cache:
+            shutil.rmtree(self.cache, ignore_errors=True)
+
+    def __enter__(self) -> Site:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ---------------------------------------------------------- routing
+    def get(self, page: str, query: dict[str, str] | None = None) -> tuple[str, bytes]:
+        """``(content type, bytes)`` of a relative path; :class:`NotFound` for anything else."""
+        page = page.lstrip("/") or "index.html"
+        match = _PAGE.match(page)
+        if match is None:
+            raise NotFound(f"no page {page!r} (pages: index.html, session-ID.html, study-ID.html, compare.html)")
+        g = match.groups()
+        with self._lock:
+            if g[0]:
+                return "text/html", self.index().encode()
+            if g[1]:
+                return "text/html", self.session_page(self._session(g[1])).encode()
+            if g[2]:
+                return "text/html", self.study_page(self._study(g[2])).encode()
+            if g[3]:
+                return "application/json", json.dumps(self.progress(self._session(g[3]))).encode()
+            if g[4]:
+                return "image/png", self.session_figure(self._session(g[4]), g[5]).read_bytes()
+            if g[6]:
+                trial = None if g[7] == "default" else int(g[7])
+                return "text/html", self.replay(self._session(g[6]), trial).read_bytes()
+            if g[8]:
+                return "image/png", self.study_figure(self._study(g[8]), g[9]).read_bytes()
+            if g[10]:
+                return "image/png", self.compare_figure([int(v) for v in g[10].split("-")]).read_bytes()
+            ids = (query or {}).get("ids", "")
+            return "text/html", self.compare_page(self._ids(ids)).encode()
+
+    def _session(self, text: str) -> int:
+        try:
+            return self.store.resolve_session(int(text))
+        except SessionNotFound as exc:
+            raise NotFound(str(exc)) from None
+
+    def _study(self, text: str) -> int:
+        try:
+            return self.store.resolve_study(int(text))
+        except SessionNotFound as exc:
+            raise NotFound(str(exc)) from None
+
+    def _ids(self, text: str) -> list[int]:
+        try:
+            ids = [int(v) for v in re.split(r"[,\s-]+", text.strip()) if v]
+        except ValueError:
+            raise ConfigError(f"compare: ids={text!r}: expected session ids separated by commas") from None
+        if len(ids) < 2:
+            raise ConfigError(f"compare: ids={text!r}: choose two or more sessions")
+        return [self._session(str(i)) for i in ids]
+
+    def _render(self, template: str, **values: Any) -> str:
+        return str(self._env.get_template(template).render(static=self.static, db=str(self.store.path), **values))
+
+    # ---------------------------------------------------------- pages
+    def index(self) -> str:
+        """The sessions and studies tables (study sessions hidden until asked for)."""
+        rows = session_rows(self.store)
+        studies = study_rows(self.store)
+        choices = {name: sorted({str(getattr(r, name)) for r in rows if getattr(r, name) is not None})
+                   for name in ("maneuver", "plant", "vehicle", "feedback", "rule", "status", "study_id")}
+        choices["tags"] = sorted({t for r in rows for t in r.tags})
+        return self._render("index.html", rows=rows, studies=studies, choices=choices)
+
+    def session_page(self, session_id: int) -> str:
+        """One session: figures, tables, maneuver, design, plant, replay, tags and notes."""
+        store = self.store
+        rec = store.session(session_id)
+        mrec = store.maneuver(rec.maneuver_id)
+        drec = store.design(rec.design_id)
+        prec = store.plant(rec.plant_id)
+        row = session_rows(store, session_id=session_id)[0]
+        iterations = store.iterations(session_id)
+        mask = np.array(mrec.position_mask, dtype=bool)
+        table = []
+        for it in iterations:
+            position = float(np.linalg.norm(it.error[mask])) if mask.any() and np.isfinite(it.error[mask]).all() \
+                else None
+            table.append({"it": it, "position_m": position, "error": it.error.tolist()})
+        measured = [it.index for it in iterations if it.status == "ok" and it.trajectory_rows > 0]
+        parameters = [{"name": n, "unit": u, "guess": float(drec.p_guess[k]), "nominal": float(drec.p_nominal[k]),
+                       "start": float(rec.start_params[k]), "learned": float(rec.current_params[k])}
+                      for k, (n, u) in enumerate(zip(mrec.parameter_names, mrec.parameter_units, strict=True))]
+        return self._render(
+            "session.html", rec=rec, row=row, mrec=mrec, drec=drec, prec=prec, table=table, measured=measured,
+            parameters=parameters, vehicle=store.vehicle(prec.vehicle_id).config,
+            design_vehicle=store.vehicle(drec.vehicle_id).config, tags=rec.tags,
+            notes=[f"{at}  {text}" for at, text in rec.notes],
+            replays=(["default"] if self.static else ["default", *measured]), figures=self._draws(row.study_id),
+            live=not self.static and row.status == "running")
+
+    def progress(self, session_id: int) -> dict[str, Any]:
+        """A running session's counters (the page polls them for live progress)."""
+        row = session_rows(self.store, session_id=session_id)[0]
+        return {"session": row.id, "status": row.status, "trials": row.n_records, "measured": row.n_measured,
+                "target": row.target_iterations, "last_position_error_m": row.last_position_error_m,
+                "updated_at": row.updated_at}
+
+    def study_page(self, study_id: int) -> str:
+        """One study: its jobs, failed ones first, its sessions and the figures in its output folder."""
+        study = self.store.study(study_id)
+        jobs = self.store.study_jobs(study_id)
+        sessions = [r for r in session_rows(self.store) if r.study_id == study_id]
+        return self._render("study.html", study=study, jobs=jobs, failed=[j for j in jobs if j.status == "failed"],
+                            sessions=sessions, figures=self._study_figures(study.out_dir))
+
+    def compare_page(self, ids: Sequence[int]) -> str:
+        """Two or more sessions: error curves overlaid, parameters side by side."""
+        sessions = []
+        names: list[str] = []
+        for sid in ids:
+            rec = self.store.session(sid)
+            mrec = self.store.maneuver(rec.maneuver_id)
+            sessions.append({"row": session_rows(self.store, session_id=sid)[0],
+                             "params": dict(zip(mrec.parameter_names, rec.current_params.tolist(), strict=True)),
+                             "start": dict(zip(mrec.parameter_names, rec.start_params.tolist(), strict=True)),
+                             "units": dict(zip(mrec.parameter_names, mrec.parameter_units, strict=True))})
+            names += [n for n in mrec.parameter_names if n not in names]
+        return self._render("compare.html", sessions=sessions, names=names, key="-".join(map(str, ids)))
+
+    # ---------------------------------------------------------- figures
+    def _draws(self, study_id: int | None) -> bool:
+        """Whether a session's page shows figures and replays (a static export leaves study sessions' out)."""
+        return not self.static or study_id is None or self.study_figures
+
+    def _folder(self, session_id: int) -> Path:
+        rec = self.store.session(session_id)
+        folder = self.cache / f"session-{session_id}" / f"v{rec.n_records}-{rec.display_state}"
+        folder.mkdir(parents=True, exist_ok=True)
+        return folder
+
+    def session_figure(self, session_id: int, name: str) -> Path:
+        """``learning.png`` or ``side_views.png`` of a session (drawn once per stored state)."""
+        from aerobat.experiments.reports import session_figures
+
+        path = self._folder(session_id) / f"{name}.png"
+        if not path.exists():
+            session_figures(self.store, session_id, path.parent)
+        if not path.exists():
+            raise NotFound(f"session {session_id}: no {name}.png (no measured trial yet)")
+        return path
+
+    def replay(self, session_id: int, trial: int | None) -> Path:
+        """The 3D replay HTML (``aerobat replay``'s) of one trial, or of the first and last measured."""
+        from aerobat.experiments.reports import session_replay
+
+        path = self._folder(session_id) / f"replay-{'default' if trial is None else trial}.html"
+        if not path.exists():
+            try:
+                session_replay(self.store, session_id, path, iterations=None if trial is None else [trial])
+            except ConfigError as exc:
+                raise NotFound(str(exc)) from None
+        return path
+
+    @staticmethod
+    def _study_figures(out_dir: str | None) -> list[str]:
+        if not out_dir or not Path(out_dir).is_dir():
+            return []
+        return sorted(p.name for p in Path(out_dir).glob("*.png"))
+
+    def study_figure(self, study_id: int, name: str) -> Path:
+        """A figure the study wrote to its output folder."""
+        out_dir = self.store.study(study_id).out_dir
+        if name not in self._study_figures(out_dir):
+            raise NotFound(f"study {study_id}: no figure {name!r} in {out_dir or 'its output folder (none)'}")
+        return Path(str(out_dir)) / name
+
+    def compare_figure(self, ids: Sequence[int]) -> Path:
+        """The position error of each session over its trials, overlaid (log scale)."""
+        from aerobat.plotting.files import new_figure, save_figure
+
+        key = "-".join(str(self._session(str(i))) for i in ids)
+        versions = "-".join(str(self.store.session(i).n_records) for i in ids)
+        path = self.cache / "compare" / f"{key}.v{versions}.png"
+        if path.exists():
+            return path
+        fig = new_figure(figsize=(8, 4))
+        ax = fig.subplots()
+        for sid in ids:
+            mask = np.array(self.store.maneuver(self.store.session(sid).maneuver_id).position_mask, dtype=bool)
+            its = [it for it in self.store.iterations(sid) if it.status == "ok"]
+            if its and mask.any():
+                ax.semilogy([it.index for it in its], [float(np.linalg.norm(it.error[mask])) for it in its], ".-",
+                            label=f"session {sid}")
+        ax.set_xlabel("trial")
+        ax.set_ylabel("position error [m]")
+        ax.grid(True, which="both", alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return save_figure(fig, path)
+
+    # ---------------------------------------------------------- export
+    def export(self, folder: Path, *, compare: Sequence[int] = ()) -> list[Path]:
+        """Write every page, figure and default replay as static files under ``folder``; the files written."""
+        pages = ["index.html"]
+        for row in session_rows(self.store):
+            pages.append(f"session-{row.id}.html")
+            if row.n_measured and self._draws(row.study_id):
+                pages += [f"session-{row.id}/learning.png", f"session-{row.id}/side_views.png",
+                          f"session-{row.id}/replay-default.html"]
+        for study in study_rows(self.store):
+            pages.append(f"study-{study.id}.html")
+            pages += [f"study-{study.id}/{name}" for name in self._study_figures(study.out_dir)]
+        written = []
+        for page in pages:
+            try:
+                _, data = self.get(page)
+            except NotFound:
+                continue  # a session without a figure: its page says so
+            written.append(_write(folder / page, data))
+        if compare:
+            key = "-".join(map(str, compare))
+            written.append(_write(folder / "compare.html",
+                                  self.get("compare.html", {"ids": ",".join(map(str, compare))})[1]))
+            written.append(_write(folder / "compare" / f"{key}.png", self.get(f"compare/{key}.png")[1]))
+        return written
+
+
+def _write(path: Path, data: bytes) -> Path:
+    from aerobat.errors import OutputError
+
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(data)
+    except OSError as exc:
+        raise OutputError(f"--export {path}: cannot write: {exc.strerror or exc}") from None
+    return path

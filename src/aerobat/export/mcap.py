@@ -1,0 +1,188 @@
+"""A stored session as an MCAP file that Foxglove's 3D and Plot panels (and PlotJuggler) open as they are.
+
+Every trial with a measured trajectory becomes, on one timeline (trial after trial, a gap of
+``GAP_S`` between them, starting at the session's start time):
+
+* ``/trial/N/pose`` — ``foxglove.PoseInFrame`` in frame ``world`` (z up), one per measured sample;
+* ``/tf`` — ``foxglove.FrameTransform`` ``world`` → ``body``, the same samples (the 3D panel
+  draws the body's axes flying);
+* ``/trial/N/state`` — JSON: velocity, body rates and the four rotor thrusts (plottable);
+* ``/trial/N/command`` — JSON: the program's commands (collective, p̂, q̂, r̂) at each sample;
+* ``/errors`` — JSON, one per stored trial (measured or not) at its end: status, every error
+  component and the position error;
+* ``/firmware`` — JSON, one per trial: what the plant recorded of its firmware (Betaflight: the
+  firmware, arming, hover and frame counters); per-sample firmware traces are sent only when
+  the store holds them (today's plants do not store them).
+
+Foxglove's published protobuf schemas (``foxglove-schemas-protobuf``) are used for poses and
+transforms, JSON Schema for the plottable channels, so no user has to write a layout.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aerobat.errors import MissingDependency, OutputError
+from aerobat.store import Store
+
+__all__ = ["GAP_S", "McapSummary", "write_session_mcap"]
+
+GAP_S = 1.0
+"""Seconds between one trial's last sample and the next trial's first on the file's timeline."""
+
+_STATE_COLUMNS = ((3, "vx_m_s"), (4, "vy_m_s"), (5, "vz_m_s"), (10, "p_rad_s"), (11, "q_rad_s"), (12, "r_rad_s"),
+                  (13, "f1_n"), (14, "f2_n"), (15, "f3_n"), (16, "f4_n"))
+"""State columns sent on ``/trial/N/state`` (a value the plant did not measure, e.g. the arena's thrusts, is null)."""
+_COMMAND_COLUMNS = ((0, "collective_m_s2"), (1, "p_hat_rad_s"), (2, "q_hat_rad_s"), (3, "r_hat_rad_s"))
+
+_STATE_SCHEMA = {
+    "type": "object", "title": "aerobat.TrialState",
+    "properties": {"trial": {"type": "integer"}, "t_s": {"type": "number"},
+                   **{k: {"type": ["number", "null"]} for _, k in _STATE_COLUMNS}}}
+_COMMAND_SCHEMA = {
+    "type": "object", "title": "aerobat.Command",
+    "properties": {"trial": {"type": "integer"}, "t_s": {"type": "number"},
+                   **{k: {"type": ["number", "null"]} for _, k in _COMMAND_COLUMNS}}}
+_ERROR_SCHEMA = {"type": "object", "title": "aerobat.TrialError",
+                 "properties": {"trial": {"type": "integer"}, "status": {"type": "string"},
+                                "position_error_m": {"type": ["number", "null"]},
+                                "error": {"type": "object"}, "message": {"type": "string"}}}
+_FIRMWARE_SCHEMA = {"type": "object", "title": "aerobat.TrialPlantInfo",
+                    "properties": {"trial": {"type": "integer"}, "plant": {"type": "string"},
+                                   "info": {"type": "object"}}}
+
+
+@dataclass(frozen=True)
+class McapSummary:
+    """What :func:`write_session_mcap` wrote: messages per topic and the time range [ns since 1970]."""
+
+    path: Path
+    session_id: int
+    messages: dict[str, int]
+    start_ns: int
+    end_ns: int
+    trials: tuple[int, ...]
+
+
+def _epoch_ns(text: str) -> int:
+    try:
+        moment = datetime.fromisoformat(text.replace("Z", "+00:00"))
+    except ValueError:
+        return 0
+    return int(moment.timestamp()) * 1_000_000_000 + moment.microsecond * 1000
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
+
+
+def _json_safe(value: Any) -> Any:
+    """Plain JSON (non-finite numbers as null), as Foxglove's JSON decoder reads it."""
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, float):
+        return _finite(value)
+    return value if value is None or isinstance(value, str | int | bool) else str(value)
+
+
+def write_session_mcap(store: Store, session_id: int, path: str | Path) -> McapSummary:
+    """Write session ``session_id``'s trials to an MCAP file at ``path`` (see the module's description)."""
+    try:
+        from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
+        from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
+        from mcap.writer import Writer
+        from mcap_protobuf.schema import register_schema
+    except ImportError as exc:
+        raise MissingDependency(str(exc.name or "mcap"), extra="viewers", purpose="export --format mcap") from None
+    from aerobat.core.registry import from_spec
+
+    rec = store.session(session_id)
+    mrec = store.maneuver(rec.maneuver_id)
+    maneuver = from_spec(mrec.spec, source=f"{store.path}: session {session_id} maneuver")
+    mask = np.array(mrec.position_mask, dtype=bool)
+    path = Path(path)
+    counts: dict[str, int] = {}
+    trials: list[int] = []
+    start_ns = clock_ns = _epoch_ns(rec.started_at)
+    first_ns: int | None = None
+    last_ns = start_ns
+    try:
+        stream = path.open("wb")
+    except OSError as exc:
+        raise OutputError(f"--output {path}: cannot write: {exc.strerror or exc}") from None
+    with stream:
+        writer = Writer(stream)
+        writer.start(profile="", library="aerobat")
+        pose_schema = register_schema(writer, PoseInFrame)
+        tf_schema = register_schema(writer, FrameTransform)
+        json_schemas = {name: writer.register_schema(name=str(schema["title"]), encoding="jsonschema",
+                                                     data=json.dumps(schema).encode())
+                        for name, schema in (("state", _STATE_SCHEMA), ("command", _COMMAND_SCHEMA),
+                                             ("errors", _ERROR_SCHEMA), ("firmware", _FIRMWARE_SCHEMA))}
+        channels: dict[str, int] = {}
+
+        def channel(topic: str, schema_id: int, encoding: str) -> int:
+            if topic not in channels:
+                channels[topic] = writer.register_channel(topic=topic, message_encoding=encoding, schema_id=schema_id)
+            return channels[topic]
+
+        def emit(topic: str, schema_id: int, encoding: str, time_ns: int, data: bytes) -> None:
+            nonlocal first_ns, last_ns
+            writer.add_message(channel(topic, schema_id, encoding), log_time=time_ns, data=data,
+                               publish_time=time_ns, sequence=counts.get(topic, 0))
+            counts[topic] = counts.get(topic, 0) + 1
+            first_ns = time_ns if first_ns is None else min(first_ns, time_ns)
+            last_ns = max(last_ns, time_ns)
+
+        def emit_json(topic: str, kind: str, time_ns: int, value: dict[str, Any]) -> None:
+            emit(topic, json_schemas[kind], "json", time_ns, json.dumps(value, allow_nan=False).encode())
+
+        indices = [it.index for it in store.iterations(session_id)]
+        for k in range(0, len(indices), 20):  # a few trajectories in memory at a time
+            for it in store.iterations(session_id, trajectories=True, plant_state=False, indices=indices[k:k + 20]):
+                t0 = clock_ns
+                if it.times_s is not None and it.states is not None and len(it.times_s):
+                    trials.append(it.index)
+                    times = np.asarray(it.times_s, dtype=np.float64)
+                    states = np.asarray(it.states, dtype=np.float64)
+                    commands = maneuver.program(it.params).commands_at(times)
+                    stamps = t0 + np.round((times - times[0]) * 1e9).astype(np.int64)
+                    for row, t, x, u in zip(stamps.tolist(), times.tolist(), states, commands, strict=True):
+                        pose = PoseInFrame(frame_id="world")
+                        pose.timestamp.FromNanoseconds(row)
+                        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = map(float, x[0:3])
+                        q = pose.pose.orientation
+                        q.w, q.x, q.y, q.z = map(float, x[6:10])
+                        emit(f"/trial/{it.index}/pose", pose_schema, "protobuf", row, pose.SerializeToString())
+                        tf = FrameTransform(parent_frame_id="world", child_frame_id="body")
+                        tf.timestamp.FromNanoseconds(row)
+                        tf.translation.x, tf.translation.y, tf.translation.z = map(float, x[0:3])
+                        tf.rotation.w, tf.rotation.x, tf.rotation.y, tf.rotation.z = map(float, x[6:10])
+                        emit("/tf", tf_schema, "protobuf", row, tf.SerializeToString())
+                        emit_json(f"/trial/{it.index}/state", "state", row, {
+                            "trial": it.index, "t_s": t, **{name: _finite(x[k]) for k, name in _STATE_COLUMNS}})
+                        emit_json(f"/trial/{it.index}/command", "command", row, {
+                            "trial": it.index, "t_s": t, **{name: _finite(u[k]) for k, name in _COMMAND_COLUMNS}})
+                    end = int(stamps[-1])
+                else:
+                    end = t0
+                position = float(np.linalg.norm(it.error[mask])) if mask.any() else math.nan
+                emit_json("/errors", "errors", end, {
+                    "trial": it.index, "status": it.status, "position_error_m": _finite(position),
+                    "error": {n: _finite(v) for n, v in zip(mrec.error_names, it.error.tolist(), strict=True)},
+                    "message": it.message})
+                emit_json("/firmware", "firmware", end, {"trial": it.index, "plant": rec.plant_kind,
+                                                         "info": _json_safe(it.info)})
+                clock_ns = end + int(GAP_S * 1e9)
+        writer.finish()
+    return McapSummary(path=path, session_id=session_id, messages=counts,
+                       start_ns=start_ns if first_ns is None else first_ns, end_ns=last_ns, trials=tuple(trials))

@@ -1,0 +1,124 @@
+"""A store for the browser's tests and benchmark: plain sessions with flown trials and a large study.
+
+Sessions are written through the store's own API (the CLI's ``learn`` writes the same rows);
+the trials are real arena flights of one small flip, so figures and replays have data.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from aerobat import hummingbird
+from aerobat.config import dataclass_to_table
+from aerobat.core.design import design
+from aerobat.plants import Arena
+from aerobat.quadrotor.maneuvers import MultiFlip
+from aerobat.quadrotor.simulate import NominalModel
+from aerobat.store import Store
+
+CONFIG = hummingbird()
+FLIP = MultiFlip(vehicle=CONFIG.vehicle, flips=1, max_rate_rad_s=math.radians(800), dims=2)
+DESIGN = design(FLIP, NominalModel(CONFIG))
+VEHICLE = {"name": CONFIG.name, "vehicle": dataclass_to_table(CONFIG.vehicle),
+           "controller": dataclass_to_table(CONFIG.controller)}
+PLANTS = (("arena", {"settings": {}}), ("rotorpy", {"settings": {}, "feedback": {"scheme": "tracking"}}))
+RULES = ("paper", "broyden")
+
+
+def add_session(store: Store, *, plant: int = 0, rule: int = 0, trials: int = 3, flown: bool = True,
+                study_id: int | None = None, seed: int = 1) -> int:
+    """A session with ``trials`` iterations (the first and last with a measured arena flight if ``flown``)."""
+    kind, config = PLANTS[plant % len(PLANTS)]
+    sid = store.create_session(vehicle=VEHICLE, plant_kind=kind, plant_config=config, maneuver=FLIP, design=DESIGN,
+                               seed=seed, rule={"name": RULES[rule % len(RULES)], "schedule": {"kind": "paper"}},
+                               target_iterations=max(trials, 1), start_params=DESIGN.p_nominal, study_id=study_id)
+    arena = Arena(CONFIG, seed=seed) if flown else None
+    params = DESIGN.p_nominal.copy()
+    for index in range(1, trials + 1):
+        trial = arena.fly(FLIP.program(params)) if arena is not None and index in (1, trials) else None
+        error = np.linspace(0.1, 0.5, len(FLIP.errors)) / index
+        store.append_iteration(
+            sid, index=index, correction=index, status="ok", params=params, next_params=params + 1e-4,
+            error=error, gamma=1.0 / index, scale=1.0, message=f"trial {index}",
+            final_state=None if trial is None else trial.final_state,
+            start_state=None if trial is None else trial.start_state,
+            times_s=None if trial is None else trial.times_s, states=None if trial is None else trial.states,
+            info=None if trial is None else trial.info)
+        params = params + 1e-4
+    store.finish_session(sid, "completed", f"{trials} measured iterations")
+    return sid
+
+
+def build_store(path: Path, *, sessions: int = 5, study_vehicles: int = 200, failed_jobs: int = 2,
+                flown: bool = True) -> dict[str, int]:
+    """``sessions`` plain sessions (plants and rules alternating) and a study of ``study_vehicles`` sessions."""
+    with Store(path) as store:
+        plain = [add_session(store, plant=k, rule=k // 2, trials=3 + k % 3, flown=flown, seed=k + 1)
+                 for k in range(sessions)]
+        study = store.create_study("robustness", {"vehicles": study_vehicles}, command=["study", "robustness"])
+        for k in range(study_vehicles):
+            key = f"vehicle-{k:03d}"
+            if k < failed_jobs:
+                store.record_study_job(study, key, {"vehicle": k}, {}, status="failed", error=f"diverged at {k}")
+                continue
+            sid = add_session(store, trials=1, flown=False, study_id=study, seed=1000 + k)
+            store.record_study_job(study, key, {"vehicle": k}, {"trials_to_tolerance": 1 + k % 7}, session_id=sid)
+    return {"plain": len(plain), "study": study, "study_sessions": study_vehicles - failed_jobs}
+
+
+def check_session_mcap(path: Path, store: Store, session_id: int) -> dict[str, int]:
+    """Read an exported MCAP back and check it against the store: channels, schemas, counts, times, values."""
+    from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory
+
+    iterations = store.iterations(session_id, trajectories=True)
+    flown = [it for it in iterations if it.times_s is not None and len(it.times_s)]
+    assert flown, "the session has no measured trajectory"
+    with path.open("rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        summary = reader.get_summary()
+        assert summary is not None and summary.statistics is not None
+        counts = {c.topic: summary.statistics.channel_message_counts[c.id] for c in summary.channels.values()}
+        schemas = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+        for it in flown:
+            rows = len(it.times_s)
+            assert counts[f"/trial/{it.index}/pose"] == rows == it.trajectory_rows
+            assert schemas[f"/trial/{it.index}/pose"] == "foxglove.PoseInFrame"
+            assert counts[f"/trial/{it.index}/state"] == counts[f"/trial/{it.index}/command"] == rows
+        assert schemas["/tf"] == "foxglove.FrameTransform" and counts["/tf"] == sum(len(it.times_s) for it in flown)
+        assert counts["/errors"] == counts["/firmware"] == len(iterations)
+        # the first trial's poses: time-stamped as flown, positions and attitude as stored
+        it = flown[0]
+        poses = [(m.log_time, d) for _, _, m, d in reader.iter_decoded_messages(topics=[f"/trial/{it.index}/pose"])]
+        times = np.array([t for t, _ in poses], dtype=np.int64)
+        assert np.allclose((times - times[0]) / 1e9, it.times_s - it.times_s[0], atol=2e-9)
+        xyz = np.array([[d.pose.position.x, d.pose.position.y, d.pose.position.z] for _, d in poses])
+        quat = np.array([[d.pose.orientation.w, d.pose.orientation.x, d.pose.orientation.y, d.pose.orientation.z]
+                         for _, d in poses])
+        assert np.array_equal(xyz, it.states[:, 0:3]) and np.array_equal(quat, it.states[:, 6:10])
+        assert all(d.frame_id == "world" and d.timestamp.ToNanoseconds() == t for t, d in poses)
+        states = [json.loads(m.data) for _, _, m in reader.iter_messages(topics=[f"/trial/{it.index}/state"])]
+        def as_json(column: np.ndarray) -> list[float | None]:
+            return [float(v) if np.isfinite(v) else None for v in column]
+
+        assert [s["f1_n"] for s in states] == as_json(it.states[:, 13])  # null where not measured (the arena)
+        assert [s["p_rad_s"] for s in states] == as_json(it.states[:, 10])
+        assert [s["vz_m_s"] for s in states] == as_json(it.states[:, 5]) and states[0]["vz_m_s"] is not None
+        for _, _, m in reader.iter_messages():
+            if m.data[:1] == b"{":
+                json.loads(m.data, parse_constant=lambda c: pytest.fail(f"{c} is not JSON"))
+        errors = [json.loads(m.data) for _, _, m in reader.iter_messages(topics=["/errors"])]
+        assert [e["trial"] for e in errors] == [i.index for i in iterations]
+        assert [e["status"] for e in errors] == [i.status for i in iterations]
+        last = iterations[-1]
+        names = store.maneuver(store.session(session_id).maneuver_id).error_names
+        assert [errors[-1]["error"][n] for n in names] == last.error.tolist()
+        # trials follow one another on the timeline, never overlapping
+        starts = [next(reader.iter_messages(topics=[f"/trial/{i.index}/pose"]))[2].log_time for i in flown]
+        assert starts == sorted(starts) and summary.statistics.message_start_time == starts[0]
+    return counts

@@ -1,0 +1,31 @@
+"""A Betaflight session's MCAP file (issue 26): every trial's pose stream, the plant's firmware records."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+
+from mcap.reader import make_reader
+
+from aerobat.cli import main
+from aerobat.store import Store
+from browse_fixtures import check_session_mcap
+
+
+def test_a_betaflight_session_reads_back_from_its_mcap_file(tmp_path, firmware):
+    db, path = tmp_path / "bf.sqlite", tmp_path / "bf.mcap"
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        assert main(["learn", "flip", "--flips", "1", "--dims", "2", "--max-rate-deg-s", "800", "--plant",
+                     "betaflight", "--iterations", "2", "--db", str(db), "--out", str(tmp_path / "out")]) == 0
+        assert main(["export", "last", "--db", str(db), "--format", "mcap", "--output", str(path)]) == 0
+    with Store(db, create=False) as store:
+        counts = check_session_mcap(path, store, 1)
+        iterations = store.iterations(1)
+    assert len([t for t in counts if t.endswith("/pose")]) == len([i for i in iterations if i.trajectory_rows]) >= 2
+    with path.open("rb") as stream:
+        records = [json.loads(m.data) for _, _, m in make_reader(stream).iter_messages(topics=["/firmware"])]
+    assert [r["plant"] for r in records] == ["betaflight"] * len(iterations)
+    assert all(r["info"]["firmware"].startswith("Betaflight 4.6") for r in records)
+    assert [r["trial"] for r in records] == [i.index for i in iterations]
+    assert [r["info"]["frames_sent"] for r in records] == [i.info.get("frames_sent") for i in iterations]

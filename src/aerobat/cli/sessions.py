@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import Any
 
 from aerobat.cli import curate
-from aerobat.cli.curate import table
 from aerobat.cli.common import (
     HelpFormatter,
     add_db_option,
@@ -24,6 +23,7 @@ from aerobat.cli.common import (
     session_folder,
     session_ref,
 )
+from aerobat.cli.curate import table
 from aerobat.cli.show import print_stored_session
 from aerobat.errors import ConfigError, OutputError
 from aerobat.fileio import check_output, write_output

@@ -139,7 +139,8 @@ class Parser(argparse.ArgumentParser):
     def _get_values(self, action: argparse.Action, arg_strings: list[str]) -> Any:
         if action.option_strings and action.nargs != 0 and any(a in _NO_VALUE for a in arg_strings):
             given = next(a for a in arg_strings if a in _NO_VALUE)
-            self.error(f"{action.option_strings[0]}: expected a value, got {given!r}")
+            what = "an empty name" if not given.strip() else repr(given)
+            self.error(f"{action.option_strings[0]}: expected a value, got {what}")
         return super()._get_values(action, arg_strings)
 
     def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:

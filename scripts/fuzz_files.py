@@ -91,6 +91,10 @@ BASES: dict[str, tuple[dict[str, str], list[str]]] = {
     "study envelope": ({}, ["--flips", "1", "--rates-deg-s", "800", "--workers", "1"]),
     "identify": ({}, ["--plant", "nominal", "--output", "{new}.toml", "--max-flights", "2"]),
     "vehicles": ({}, ["--flip-counts", "1", "--rates-deg-s", "800"]),
+    "tag": ({"session": "1", "tag": "t"}, []), "note": ({"session": "1", "text": "n"}, []),
+    "compare": ({"a": "1", "b": "1"}, []), "delete": ({"session": "1"}, []),  # no --yes: refused, nothing deleted
+    "browse": ({}, ["--export", "{new}"]),  # static pages: served pages would run until the budget stops them
+    "setup": ({}, ["--check"]),  # only looks
 }
 
 
@@ -329,3 +333,20 @@ def run_files_phase(fz: Any, campaign: Any, fx: Any, n: int, *, kinds: tuple[str
             campaign.say(f"fuzz: files {k + 1}/{len(cases)}: "
                          + " ".join(f"{c}={v}" for c, v in sorted(report["counts"].items())))
     shutil.rmtree(root / "cases", ignore_errors=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Only the files phase: ``scripts/fuzz_campaign.py --cli 0 --api 0`` with the same options."""
+    import importlib.util
+    import sys
+
+    spec = importlib.util.spec_from_file_location("fuzz_campaign", Path(__file__).with_name("fuzz_campaign.py"))
+    assert spec is not None and spec.loader is not None
+    campaign = importlib.util.module_from_spec(spec)
+    sys.modules["fuzz_campaign"] = campaign
+    spec.loader.exec_module(campaign)
+    return int(campaign.main(["--cli", "0", "--api", "0", *(sys.argv[1:] if argv is None else argv)]))
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -307,7 +307,9 @@ def write_output(path: Any, data: str | bytes, *, option: str | None = None, sto
 
 def folder_owner(store: Any, kind: str, number: int, started: str = "") -> str:
     """The owner marker's text: the store's absolute path, ``session 3`` or ``study 2``, and when it started."""
-    return f"{Path(os.fspath(store)).resolve()}\n{kind} {number}\n{started}\n"
+    # a name with bytes that are not UTF-8 is written with them escaped (the marker is UTF-8 text)
+    where = os.fsencode(Path(os.fspath(store)).resolve()).decode("utf-8", "backslashreplace")
+    return f"{where}\n{kind} {number}\n{started}\n"
 
 
 def _marker(folder: Path) -> str | None:
@@ -326,7 +328,9 @@ def default_folder(store: Any, kind: str, number: int, started: str = "", *, roo
     """
     absolute = Path(os.fspath(store)).resolve()
     digest = hashlib.sha256(os.fsencode(absolute)).hexdigest()[:8]
-    base = Path(root) / f"{absolute.stem[:40]}-{digest}" / f"{kind}-{number}"
+    # the folder's name is UTF-8 text (the store records it): bytes that are not become "_", the digest keeps it unique
+    stem = os.fsencode(absolute.stem[:40]).decode("utf-8", "replace").replace("\ufffd", "_")
+    base = Path(root) / f"{stem}-{digest}" / f"{kind}-{number}"
     owner = folder_owner(store, kind, number, started)
     for k in range(1, 1000):
         candidate = base if k == 1 else base.with_name(f"{base.name}-{k}")

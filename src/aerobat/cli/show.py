@@ -86,4 +86,4 @@ def print_stored_session(store: Any, session_id: int, *, iterations: bool, heade
     names = mrec.parameter_names
     out.print("p⁰:      " + "  ".join(f"{n}={v:.4g}" for n, v in zip(names, drec.p_nominal, strict=True)))
     out.print("learned: " + "  ".join(f"{n}={v:.4g}" for n, v in zip(names, rec.current_params, strict=True)))
-    out.print(f"{rec.message}")
+    out.print(f"session {rec.id} {rec.display_state}: {rec.message}")

@@ -128,6 +128,7 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
 
     from aerobat.experiments.log_identify import (
         airframe_from_log_fit,
+        airframe_notes,
         identify_from_logs,
         parse_log_ref,
         vehicle_from_log_fit,
@@ -153,8 +154,11 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
     airframe = None
     if args.airframe:
         airframe = airframe_from_log_fit(fit)
+        # the pilot flies with the mass the user gave, as a pilot who weighed the quad would
+        pilot = {"vehicle_mass_kg": airframe["mass_kg"]}
         write_text(args.airframe, f"# [airframe] of the Betaflight plant, identified from {fit.name}\n"
-                                  + tomli_w.dumps({"airframe": airframe}))
+                                  + "".join(f"# {line}\n" for line in airframe_notes(fit))
+                                  + tomli_w.dumps({"airframe": airframe, "pilot": pilot}))
     if args.json:
         print(json.dumps({
             "logs": list(result.fitted), "values": {k: {"value": v, "sigma": s, "unit": u}

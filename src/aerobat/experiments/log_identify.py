@@ -36,8 +36,8 @@ from aerobat.quadrotor.identification.logfit import (
 )
 from aerobat.quadrotor.vehicle import ModelEffects, VehicleConfig, VehicleParams
 
-__all__ = ["LogIdentification", "LogRef", "airframe_from_log_fit", "identify_from_logs", "parse_log_ref",
-           "vehicle_from_log_fit"]
+__all__ = ["LogIdentification", "LogRef", "airframe_from_log_fit", "airframe_notes", "identify_from_logs",
+           "parse_log_ref", "vehicle_from_log_fit"]
 
 
 @dataclass(frozen=True)
@@ -184,6 +184,12 @@ def airframe_from_log_fit(fit: LogFit, *, base: Any | None = None) -> dict[str, 
 
     ``base`` (an :class:`~aerobat.plants.betaflight.params.Airframe`) gives what a log does not
     tell: motor spread, rotor inertia, output delay; its defaults otherwise.
+
+    The output delay stays the base's (the SITL's ESC delay), not the fit's ``delay_s``: the fit
+    measures from the logged motor command to the logged, *filtered* gyro, so its delay holds
+    filtering that the SITL's firmware runs itself, and a 250 Hz log cannot tell a delay from a
+    lag. Flown as a pure delay, the ROMA F5's 12 ms made the tune's roll loop limit-cycle (motors
+    between idle and full; docs/plants.md). :func:`airframe_notes` says so in the written file.
     """
     from aerobat.plants.betaflight.params import Airframe
 
@@ -200,7 +206,6 @@ def airframe_from_log_fit(fit: LogFit, *, base: Any | None = None) -> dict[str, 
         curve_min_speed_ratio=min(max(fit.model.r, 0.0), 0.9), curve_shape=min(max(fit.model.k, 0.0), 1.0),
         motor_tau_up_s=tau, motor_tau_down_s=tau,
         kappa_m=min(max(_require(fit, "kappa_m"), 1e-4), 0.5),
-        output_delay_s=min(max(fit.model.delay_s, 0.0), 0.05),
     )
     for key, value in list(table.items()):
         if isinstance(value, tuple):
@@ -208,3 +213,10 @@ def airframe_from_log_fit(fit: LogFit, *, base: Any | None = None) -> dict[str, 
     checked: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in table.items()}
     Airframe(**checked)  # validates
     return table
+
+
+def airframe_notes(fit: LogFit) -> list[str]:
+    """Comment lines for the written ``[airframe]``: what the fit gave that the table does not use."""
+    return [f"the fit's delay from motor command to the logged (filtered) gyro: {fit.model.delay_s * 1e3:.1f} ms;",
+            "not used as output_delay_s: it holds the gyro filtering the SITL's firmware runs itself, and a",
+            "pure delay of that size made the tune's roll loop limit-cycle on the SITL (docs/plants.md)"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Sequence
 from typing import Any
 
@@ -167,10 +168,15 @@ def plot_side_views(panels: Sequence[tuple[str, np.ndarray, np.ndarray]], *,
             ax.set_title(label if len(planes) == 1 else f"{label}, {p[0].upper()}–Z", fontsize=9)
             ax.set_xlim(lows[row][0], highs[row][0])
             ax.set_ylim(lows[row][1], highs[row][1])
+            ax.set_aspect("equal", adjustable="box")  # the limits are fixed: the box adjusts, not the data
             if k:
                 ax.set_ylabel("")
     axes[0, 0].legend(loc="best", fontsize=7)
     marks = ("× desired final position, ● start" if target is not None
              else "● start; the maneuver names no final position")
-    fig.suptitle(title + ("\n" if title else "") + f"vehicle every 50 ms, triangle apex = thrust; {marks}", fontsize=9)
+    # wrapped to the figure's width (about 13 characters per inch at 9 pt): a narrow figure clipped the title
+    width = max(int(fig.get_figwidth() * 13), 30)
+    text = "\n".join(textwrap.fill(line, width) for line in
+                     [*(title.splitlines() if title else []), f"vehicle every 50 ms, triangle apex = thrust; {marks}"])
+    fig.suptitle(text, fontsize=9)
     return fig

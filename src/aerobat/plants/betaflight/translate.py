@@ -155,13 +155,19 @@ class TuneReport:
     def text(self) -> str:
         """The report as people read it (one line per setting)."""
         t = self.tune
+        # a log header's lines that are no setting (field layouts, dates, board) are counted apart, on one line
+        header = [n for n, _, _, why in self.refused if why == _HARDWARE_COMMANDS["header"]]
+        refused = [r for r in self.refused if r[3] != _HARDWARE_COMMANDS["header"]]
         head = [f"tune {t.source}: written by {t.firmware or 'an unknown firmware'} (version {t.version_text}), "
                 f"profile {t.active_profile}, rate profile {t.active_rateprofile}: {len(self.applied)} applied, "
-                f"{len(self.translated)} translated, {len(self.refused)} refused, {len(self.pinned)} pinned"]
+                f"{len(self.translated)} translated, {len(refused)} refused, {len(self.pinned)} pinned"
+                + (f" ({len(header)} log header lines are no setting)" if header else "")]
         rows = [f"  applied     {n} = {v}  (line {line})" for n, v, line in self.applied]
         rows += [f"  translated  {o} = {ov} -> {n} = {nv}  (line {line}: {why})"
                  for o, ov, n, nv, line, why in self.translated]
-        rows += [f"  refused     {n} = {v}  (line {line}: {why})" for n, v, line, why in self.refused]
+        rows += [f"  refused     {n} = {v}  (line {line}: {why})" for n, v, line, why in refused]
+        if header:
+            rows.append(f"  not applied {len(header)} log header lines that are no setting: {', '.join(header)}")
         rows += [f"  pinned      {n}{' = ' + v if v else ''}  ({why})" for n, v, why in self.pinned]
         rows += [f"  note        {note}" for note in self.notes]
         return "\n".join(head + rows)

@@ -40,8 +40,10 @@ demo: $(COMPILED)
 	$(VENV)/bin/aerobat learn flip --flips 3 --max-rate-deg-s 1800 --dims 3 --plant arena --seed 1 \
 		--trials 30 --out $(OUT)/demo
 
+# the fast suite on every core (pytest-xdist): each test is independent (own folders, free ports, its own
+# firmware processes), so two workers halve the wall time on the 2-core machine
 test: $(COMPILED)
-	$(PY) -m pytest -q -m "not slow"; rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; exit 0; fi; exit $$rc
+	$(PY) -m pytest -q -m "not slow" -n auto; rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; exit 0; fi; exit $$rc
 
 test-slow: $(COMPILED)
 	$(PY) -m pytest -q -m slow

@@ -60,6 +60,7 @@ def _same(a: list[tuple], b: list[tuple]) -> None:
             assert np.array_equal(u, v, equal_nan=True), (x[0], u - v)
 
 
+@pytest.mark.slow  # a cold compile in a fresh cache (~150 s on 2 busy cores): make test-slow
 def test_compiled_and_cached_kernels_give_the_same_records_and_a_cold_killed_warm_resumed_session_too(tmp_path):
     cold, other = tmp_path / "cache-a", tmp_path / "cache-b"
     cold.mkdir()

@@ -83,7 +83,7 @@ EXTRAS: dict[str, tuple[tuple[str, ...], str]] = {
     "logs": (("pyulog", "orangebox"), "aerobat log and identify --log for PX4 ULog and Betaflight blackbox logs"),
     "viewers": (("jinja2", "mcap", "mcap_protobuf", "foxglove_schemas_protobuf"),
                 "aerobat browse (the store's web pages) and aerobat export --format mcap (Foxglove)"),
-    "test": (("pytest", "hypothesis"), "the test suite (make test)"),
+    "test": (("pytest", "xdist", "hypothesis"), "the test suite (make test, on every core with pytest-xdist)"),
     "docs": (("mkdocs", "material", "mkdocstrings", "mkdocs_jupyter", "nbclient"),
              "the documentation site (mkdocs build) and the executed tutorial"),
 }

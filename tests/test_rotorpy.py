@@ -18,7 +18,7 @@ from aerobat.config import ConfigError
 from aerobat.core.design import design
 from aerobat.core.learning import learn
 from aerobat.plants import Plant
-from aerobat.plants.arena.params import MotionCapture
+from aerobat.plants.world_params import MotionCapture
 from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel
 

@@ -76,7 +76,7 @@ def _warm_part(part: str) -> None:
 
 def _plant_kernels(nominal: object) -> None:
     """The kernels RotorPy and Betaflight call from Python, once each with the types they pass."""
-    from aerobat.plants.arena.kernel import MOCAP_COLUMNS, estimate_pose, mocap_sample, pd_command
+    from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose, mocap_sample, pd_command
     from aerobat.quadrotor.feedback import (
         apply_feedback,
         as_feedback,
@@ -141,9 +141,9 @@ def _betaflight_kernels(x: np.ndarray, cmd: np.ndarray) -> None:
     prime(world, plant, aux, counters, noise[0], packet, scratch)
     step(world, np.zeros(4, dtype=np.float32), plant, aux, np.zeros((2, 4)), counters, noise[1], packet, scratch)
     # the compiled lockstep loop (a run of no steps: nothing is sent)
-    from aerobat.plants.arena.kernel import MOCAP_COLUMNS
     from aerobat.plants.betaflight.lockstep import N_IO, run_steps
     from aerobat.plants.betaflight.packets import MOTOR_STRUCT
+    from aerobat.plants.lab_kernels import MOCAP_COLUMNS
 
     block = np.zeros(MOTOR_STRUCT.size, dtype=np.uint8)
     run_steps(-1, -1, 0, 0, False, 0, 8, step_s, world, block, block[:16].view(np.float32), plant, aux,

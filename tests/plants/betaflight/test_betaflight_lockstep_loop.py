@@ -10,13 +10,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aerobat.plants.arena.kernel import mocap_sample
 from aerobat.plants.betaflight.errors import FirmwareNotResponding
 from aerobat.plants.betaflight.flight import Flight
 from aerobat.plants.betaflight.packets import MOTOR_STRUCT
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import airframe_plant, step
 from aerobat.plants.betaflight.plant import BetaflightPlant
+from aerobat.plants.lab_kernels import mocap_sample
 from aerobat.quadrotor.vehicle import fpv5
 
 FAKE = Path(__file__).with_name("fake_sitl.py")

@@ -18,8 +18,9 @@ import numpy as np
 
 from aerobat.config import check_int, check_type
 from aerobat.core.plant import Trial, TrialStatus
-from aerobat.plants.arena.kernel import MOCAP_COLUMNS, supervise
+from aerobat.plants.arena.kernel import supervise
 from aerobat.plants.arena.params import ArenaParams
+from aerobat.plants.lab_kernels import MOCAP_COLUMNS
 from aerobat.plants.mocap import estimate_final_state, measured_states
 from aerobat.quadrotor.dynamics import (
     N_STATE,

@@ -25,7 +25,6 @@ from pathlib import Path
 import numpy as np
 
 from aerobat.errors import ConfigError
-from aerobat.plants.arena.kernel import MOCAP_COLUMNS, estimate_pose
 from aerobat.plants.betaflight.lockstep import (
     IO_EXCHANGES,
     IO_LOG,
@@ -50,6 +49,7 @@ from aerobat.plants.betaflight.physics import (
     prime,
 )
 from aerobat.plants.betaflight.sitl import SitlProcess
+from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose
 from aerobat.quadrotor.dynamics import N_STATE
 
 __all__ = ["Flight", "NonFinite"]

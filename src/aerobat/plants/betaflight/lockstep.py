@@ -25,8 +25,8 @@ from __future__ import annotations
 import numba as nb
 from numba.core import types
 
-from aerobat.plants.arena.kernel import mocap_sample
 from aerobat.plants.betaflight.physics import step
+from aerobat.plants.lab_kernels import mocap_sample
 
 __all__ = ["DONE", "IO_EXCHANGES", "IO_LOG", "IO_MOCAP_USED", "N_IO", "NON_FINITE", "NO_ANSWER", "SEND_FAILED",
            "run_steps"]

@@ -1,8 +1,8 @@
 """Settings of the Betaflight plant: the physical vehicle and the arena around the firmware.
 
 One TOML file (``--betaflight FILE.toml``), one table per section, any field may be
-omitted. Where the arena's sections describe the same thing they are reused
-(:class:`~aerobat.plants.arena.params.Aerodynamics`, ``Drift``, ``Disturbances``,
+omitted. Where the world around the vehicle is the same as the arena's, its sections are reused
+(:class:`~aerobat.plants.world_params.Aerodynamics`, ``Drift``, ``Disturbances``,
 ``MotionCapture``, ``Volume``) with defaults for a 5-inch racer; the rest is the
 Betaflight plant's own. Sources and reasons: ``docs/plants.md`` (Betaflight).
 
@@ -30,8 +30,8 @@ from aerobat.config import (
     write_file,
 )
 from aerobat.errors import ConfigError
-from aerobat.plants.arena.params import Aerodynamics, Disturbances, Drift, MotionCapture, Volume
 from aerobat.plants.betaflight.tune import Tune
+from aerobat.plants.world_params import Aerodynamics, Disturbances, Drift, MotionCapture, Volume
 
 __all__ = [
     "Airframe",

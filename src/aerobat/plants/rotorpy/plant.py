@@ -41,7 +41,7 @@ import numpy as np
 
 from aerobat.core.plant import Trial, TrialStatus
 from aerobat.errors import MissingDependency
-from aerobat.plants.arena.kernel import MOCAP_COLUMNS, estimate_pose, mocap_sample, pd_command
+from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose, mocap_sample, pd_command
 from aerobat.plants.mocap import estimate_final_state, measured_states
 from aerobat.plants.rotorpy.settings import (
     RotorPySettings,

@@ -13,7 +13,7 @@ import numpy as np
 
 from aerobat.config import as_path, check_range, dataclass_from_table, dataclass_to_table, read_toml
 from aerobat.errors import ConfigError, MissingDependency
-from aerobat.plants.arena.params import MotionCapture, Supervisor, Volume
+from aerobat.plants.world_params import MotionCapture, Supervisor, Volume
 
 __all__ = [
     "INSTALL_HINT",

@@ -269,3 +269,18 @@ def test_a_read_only_location_is_a_clear_error(tmp_path):
                              str(tmp_path)], capture_output=True, text=True, timeout=120)
     assert result.returncode == 2
     assert result.stderr.startswith("aerobat: error: /proc/aerobat.sqlite") and result.stderr.count("\n") == 1
+
+
+def test_a_second_interrupt_after_learning_stopped_is_ignored_while_the_session_closes():
+    """The race behind a flaky double-SIGINT run: learning had stopped (the first signal polled), the
+    second arrived while the session was being closed, escaped as KeyboardInterrupt, and left the
+    session open with no resume hint. Once stopping, a further interrupt is ignored."""
+    from aerobat.cli.learn import Interrupts
+
+    interrupts = Interrupts()
+    interrupts._handle(signal.SIGINT, None)  # the first: stop after the trial in flight
+    with pytest.raises(KeyboardInterrupt):  # a second during the trial still aborts it
+        interrupts._handle(signal.SIGINT, None)
+    assert interrupts.requested()  # the learner polls it: learning stops
+    interrupts._handle(signal.SIGINT, None)  # closing: ignored, no exception
+    assert interrupts.signum == signal.SIGINT

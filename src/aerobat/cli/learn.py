@@ -51,6 +51,7 @@ class Interrupts:
         self.signum: int | None = None
         self._critical = 0
         self._pending = False
+        self._stopping = False
         self._previous: dict[int, Any] = {}
 
     def install(self) -> None:
@@ -70,12 +71,19 @@ class Interrupts:
             self.signum = signum
             os.write(2, b"aerobat: stopping after the trial in flight (interrupt again to abort it)\n")
             return
+        if self._stopping:  # learning has already stopped: nothing is in flight, the session is being closed
+            os.write(2, b"aerobat: already stopping: closing the session\n")
+            return
         if self._critical:
             self._pending = True
             return
         raise KeyboardInterrupt
 
     def requested(self) -> bool:
+        """Polled between trials: True stops learning, and from then on a further interrupt is ignored
+        (raised while the session is closed, it left the session open and the resume hint unprinted)."""
+        if self.signum is not None:
+            self._stopping = True
         return self.signum is not None
 
     @contextlib.contextmanager

@@ -551,3 +551,14 @@ def test_arena_sections_of_the_wrong_type_are_config_errors():
 
     with pytest.raises(ConfigError, match="links: expected a Links, got int 5"):
         ArenaParams(links=5)
+
+
+@pytest.mark.parametrize("kwargs, fragment", [({"create": np.full(5, np.nan)}, "create = "),
+                                              ({"create": "yes"}, "create"), ({"synchronous": ["full"]}, "synchronous"),
+                                              ({"on_wait": 3}, "on_wait")])
+def test_store_options_of_the_wrong_type_are_refused_naming_them(tmp_path, kwargs, fragment):
+    """Found by the fuzz campaign: ``Store(path, create=array)`` raised numpy's 'truth value … ambiguous'."""
+    from aerobat.store import Store
+
+    _refused(Store, tmp_path / "s.sqlite", fragment=fragment, **kwargs)
+    assert not (tmp_path / "s.sqlite").exists()

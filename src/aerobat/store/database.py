@@ -85,8 +85,12 @@ class Database:
     def __init__(self, path: str | os.PathLike[str], *, create: bool = True,
                  synchronous: Literal["normal", "full"] = "normal", busy_timeout_s: float = 60.0,
                  on_wait: Any = None) -> None:
-        if synchronous not in ("normal", "full"):
-            raise ConfigError(f"synchronous = {synchronous!r}: allowed 'normal' or 'full'")
+        if not isinstance(synchronous, str) or synchronous not in ("normal", "full"):
+            raise ConfigError(f"synchronous = {short_repr(synchronous)}: allowed 'normal' or 'full'")
+        if not isinstance(create, bool):
+            raise ConfigError(f"create = {short_repr(create)}: allowed True or False")
+        if on_wait is not None and not callable(on_wait):
+            raise ConfigError(f"on_wait = {short_repr(on_wait)}: allowed a callable or None")
         if not isinstance(path, str | os.PathLike):
             raise StoreAccessError(f"--db: expected a database file path, got {type(path).__name__} "
                                    f"{short_repr(path)}")

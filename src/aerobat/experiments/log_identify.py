@@ -186,10 +186,11 @@ def airframe_from_log_fit(fit: LogFit, *, base: Any | None = None) -> dict[str, 
     tell: motor spread, rotor inertia, output delay; its defaults otherwise.
 
     The output delay stays the base's (the SITL's ESC delay), not the fit's ``delay_s``: the fit
-    measures from the logged motor command to the logged, *filtered* gyro, so its delay holds
-    filtering that the SITL's firmware runs itself, and a 250 Hz log cannot tell a delay from a
-    lag. Flown as a pure delay, the ROMA F5's 12 ms made the tune's roll loop limit-cycle (motors
-    between idle and full; docs/plants.md). :func:`airframe_notes` says so in the written file.
+    measures from the logged motor command to the logged, *filtered* gyro, so its delay includes
+    filtering that the SITL's firmware runs itself (not most of it: the ROMA F5's two PT1 gyro
+    lowpasses, ≥ 190 and 238 Hz, delay by at most 1.5 ms), and a 250 Hz log cannot tell a delay
+    from a lag. Flown as a pure delay, the ROMA F5's 12 ms made the tune's roll loop limit-cycle
+    (motors between idle and full; docs/plants.md). :func:`airframe_notes` says so in the file.
     """
     from aerobat.plants.betaflight.params import Airframe
 
@@ -218,5 +219,6 @@ def airframe_from_log_fit(fit: LogFit, *, base: Any | None = None) -> dict[str, 
 def airframe_notes(fit: LogFit) -> list[str]:
     """Comment lines for the written ``[airframe]``: what the fit gave that the table does not use."""
     return [f"the fit's delay from motor command to the logged (filtered) gyro: {fit.model.delay_s * 1e3:.1f} ms;",
-            "not used as output_delay_s: it holds the gyro filtering the SITL's firmware runs itself, and a",
-            "pure delay of that size made the tune's roll loop limit-cycle on the SITL (docs/plants.md)"]
+            "not used as output_delay_s: it includes gyro filtering the SITL's firmware runs itself, a 250 Hz",
+            "log cannot tell a delay from a lag, and a pure delay of that size made the tune's roll loop",
+            "limit-cycle on the SITL (docs/plants.md)"]

@@ -156,7 +156,13 @@ def test_browse_follows_a_learn_that_writes_the_same_store(tmp_path):
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 600
-        while not db.exists() or not Store(db, create=False).list_sessions():
+        def started() -> bool:
+            if not db.exists():
+                return False
+            with Store(db, create=False) as store:
+                return bool(store.list_sessions())
+
+        while not started():
             assert learn.poll() is None and time.monotonic() < deadline, learn.communicate()
             time.sleep(0.2)
         seen = []
@@ -168,7 +174,8 @@ def test_browse_follows_a_learn_that_writes_the_same_store(tmp_path):
                 seen.append(progress["trials"])
                 if len(seen) % 10 == 1:  # the pages too, now and then, while the writer commits
                     page = fetch(browser.url + "session-1.html")
-                    assert page[0] == 200 and page[2].decode().count('<tr class="trial">') >= progress["trials"]
+                    assert page[0] == 200, page[2][:1000]
+                    assert page[2].decode().count('<tr class="trial">') >= progress["trials"]
                     assert fetch(browser.url)[0] == 200
                 if progress["status"] != "running" or time.monotonic() > deadline:
                     break

@@ -262,9 +262,18 @@ class Reading(StudyTables):
             args += wanted
         n = len(checksums.COVERED["iterations"]) + 1
         with self._guard(f"reading iterations of session {session_id}"):
-            rows = self._db.execute(sql + " ORDER BY idx", args).fetchall()
-            count = None if wanted is not None else self._db.execute(
-                "SELECT n_records FROM sessions WHERE id = ?", (session_id,)).fetchone()[0]
+            # one read transaction: both answers describe the same moment (read apart, a writer's commit
+            # in between made the summary count one more iteration than the rows: "damaged", falsely)
+            own = not self._db.in_transaction
+            if own:
+                self._db.execute("BEGIN")
+            try:
+                rows = self._db.execute(sql + " ORDER BY idx", args).fetchall()
+                count = None if wanted is not None else self._db.execute(
+                    "SELECT n_records FROM sessions WHERE id = ?", (session_id,)).fetchone()[0]
+            finally:
+                if own:
+                    self._db.execute("COMMIT")
         checked = [(checksums.verify(self.path, "iterations", r[:n]), r[n] if trajectories else None) for r in rows]
         found = [r["idx"] for r, _ in checked]
         if any(r["session_id"] != session_id for r, _ in checked) or (

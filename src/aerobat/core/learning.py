@@ -23,6 +23,7 @@ import numpy as np
 from aerobat.config import check_int, short_repr
 from aerobat.core.design import Design
 from aerobat.core.maneuver import Maneuver, bounds_arrays, check_maneuver, error_scales, position_indices
+from aerobat.core.notes import IterationNote, NoteKind, message_with_notes
 from aerobat.core.plant import Plant, Trial, TrialStatus
 from aerobat.core.rules.base import PaperRule, UpdateRule
 from aerobat.core.rules.registry import RuleChoice, make_rule
@@ -38,6 +39,7 @@ __all__ = [
     "SessionStatus",
     "constraint_scale",
     "learn",
+    "step_to",
 ]
 
 
@@ -59,6 +61,16 @@ class IterationStatus(StrEnum):
         if self is IterationStatus.REJECTED:
             return "measured, but the measurement was absurd (non-finite or far beyond the error scales): not used"
         return TrialStatus(self.value).meaning
+
+    @property
+    def measured(self) -> bool:
+        """A final state was measured and learned from."""
+        return self is IterationStatus.OK
+
+    @property
+    def retry(self) -> bool:
+        """The trial was lost (no trigger, no contact) and its parameters flown again (:attr:`TrialStatus.retry`)."""
+        return self is not IterationStatus.REJECTED and TrialStatus(self.value).retry
 
     @classmethod
     def of_trial(cls, status: TrialStatus) -> IterationStatus:
@@ -103,8 +115,10 @@ class Iteration:
     scale : constraint scaling applied to the correction (1 = none, Sect. 4.2).
     step : (n_par,) the step actually applied after this trial (held parameters and
         constraint scaling included; zeros if no correction).
-    message : the plant's or learner's explanation.
+    message : the plant's or learner's explanation, its notes included (in words).
     trial : the trial itself (measured trajectory and final state).
+    notes : what learning noted about the correction (:class:`~aerobat.core.notes.IterationNote`:
+        parameters held or pinned at a bound).
     """
 
     index: int
@@ -117,9 +131,16 @@ class Iteration:
     step: np.ndarray
     message: str
     trial: Trial | None = None
+    notes: tuple[IterationNote, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "status", IterationStatus(self.status))
+        object.__setattr__(self, "notes", tuple(self.notes))
+
+    @property
+    def warnings(self) -> tuple[str, ...]:
+        """The notes that are warnings, in words."""
+        return tuple(note.text for note in self.notes if note.kind.warning)
 
     @property
     def next_params(self) -> np.ndarray:
@@ -147,6 +168,26 @@ class Iteration:
             "scale": self.scale,
             "message": self.message,
         }
+
+    @classmethod
+    def from_json_dict(cls, table: dict[str, Any], notes: tuple[IterationNote, ...] = ()) -> Iteration:
+        """The iteration :meth:`to_json_dict` wrote (without its trial), ``next_params`` exactly as written."""
+        params = np.asarray(table["params"], dtype=float)
+        return cls(int(table["i"]), int(table["correction"]), IterationStatus(table["status"]), params,
+                   np.array([math.nan if v is None else v for v in table["error"]], dtype=float),
+                   float(table["gamma"]), float(table["scale"]),
+                   step_to(params, np.asarray(table["next_params"], dtype=float)), str(table["message"]), None, notes)
+
+
+def step_to(params: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """A step ``s`` with ``params + s == target`` bit for bit (``target - params``, nudged where that rounds off)."""
+    step = np.asarray(target, dtype=float) - params
+    for _ in range(4):
+        off = params + step != target
+        if not off.any():
+            break
+        step = np.where(off, np.nextafter(step, np.where(params + step < target, np.inf, -np.inf)), step)
+    return step
 
 
 @dataclass(frozen=True)
@@ -315,7 +356,7 @@ class Learner:
         self.measured += 1
         self.correction += 1
         step, gamma = self.rule.propose(self.correction, params, error, trial)
-        note = trial.message
+        notes: list[IterationNote] = []
         lower, upper = self._lower, self._upper
         if self.hold_pinned:
             # a parameter already at a bound, pushed further out, would make the Sect. 4.2 scale
@@ -327,8 +368,7 @@ class Learner:
             held = (near_lower & (step < 0)) | (near_upper & (step > 0))
             if held.any() and not held.all():
                 step = np.where(held, 0.0, step)
-                note += "; held at a bound: " + ", ".join(self.maneuver.parameters[k].name
-                                                          for k in np.nonzero(held)[0])
+                notes += [IterationNote.held(self.maneuver.parameters[k].name) for k in np.nonzero(held)[0]]
         scale = constraint_scale(self.maneuver, params, step)
         applied = scale * step
         at_bound = (np.abs(params + applied - lower) < 1e-9 * np.maximum(1.0, np.abs(lower))) | (
@@ -338,12 +378,13 @@ class Learner:
             if k not in self.warned:
                 self.warned.add(int(k))
                 spec = self.maneuver.parameters[k]
-                note += (f"; warning: {spec.name} ({spec.description}) pinned at a bound for "
-                         f"{self.pinned_streak[k]} corrections: maneuver poorly formulated or infeasible here")
+                notes.append(IterationNote(
+                    NoteKind.PINNED_AT_BOUND, spec.name, f"{spec.name} ({spec.description}) pinned at a bound for "
+                    f"{self.pinned_streak[k]} corrections: maneuver poorly formulated or infeasible here"))
         self.rule.observe(params, error, applied)
         self.params = params + applied
         return Iteration(self.index, self.correction, IterationStatus.OK, params.copy(), error, gamma, scale,
-                         applied, note, trial)
+                         applied, message_with_notes(trial.message, notes), trial, tuple(notes))
 
     def _absurd(self, error: np.ndarray) -> str | None:
         if not np.all(np.isfinite(error)):

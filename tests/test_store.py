@@ -587,15 +587,16 @@ def test_pinned_parameters_are_warned_about_in_the_output(tmp_path, capsys, monk
     import dataclasses
 
     from aerobat.core.learning import Learner
+    from aerobat.core.notes import IterationNote, NoteKind, message_with_notes
 
     tell = Learner.tell
 
     def tell_with_warning(self, trial):  # as if p1 sat at a bound for 8 corrections
         record = tell(self, trial)
         if record.index == 2:
-            record = dataclasses.replace(record, message=record.message + "; warning: p1 (accelerate duration) "
-                                         "pinned at a bound for 8 corrections: maneuver poorly formulated or "
-                                         "infeasible here")
+            note = IterationNote(NoteKind.PINNED_AT_BOUND, "p1", "p1 (accelerate duration) pinned at a bound for "
+                                 "8 corrections: maneuver poorly formulated or infeasible here")
+            record = dataclasses.replace(record, message=message_with_notes(record.message, (note,)), notes=(note,))
         return record
 
     monkeypatch.setattr(Learner, "tell", tell_with_warning)

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.config import check_type, short_repr
-from aerobat.core.learning import IterationStatus, SessionStatus
+from aerobat.core.outcomes import IterationStatus, SessionStatus
 from aerobat.errors import ConfigError, SessionInUse
 from aerobat.store import checksums
 from aerobat.store.codec import utc_now

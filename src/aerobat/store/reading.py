@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.config import check_int, check_type, short_repr
-from aerobat.core.learning import IterationStatus, SessionStatus
+from aerobat.core.outcomes import IterationStatus, SessionStatus
 from aerobat.errors import ConfigError, SessionNotFound, StoreFormatError
 from aerobat.store import checksums
 from aerobat.store.codec import TRAJECTORY_CODEC, decode_trajectory, from_columns, notes_from_message, unpack_f8

@@ -9,9 +9,9 @@ from typing import Any
 import numpy as np
 
 from aerobat.core.design import Design, DesignStatus
-from aerobat.core.learning import Iteration, IterationStatus, SessionStatus
 from aerobat.core.maneuver import Maneuver
 from aerobat.core.notes import IterationNote
+from aerobat.core.outcomes import Iteration, IterationStatus, SessionStatus, step_to
 
 __all__ = [
     "DesignRecord",
@@ -272,8 +272,6 @@ class IterationRecord:
 
     def iteration(self) -> Iteration:
         """The stored trial as the core's :class:`~aerobat.core.learning.Iteration` (without its trial)."""
-        from aerobat.core.learning import step_to
-
         return Iteration(self.index, self.correction, self.status, self.params, self.error, self.gamma, self.scale,
                          step_to(self.params, self.next_params), self.message, None, self.notes)
 

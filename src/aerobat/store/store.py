@@ -31,8 +31,8 @@ import numpy as np
 
 from aerobat.config import check_int, short_repr
 from aerobat.core.design import Design
-from aerobat.core.learning import Iteration, IterationStatus, SessionStatus
 from aerobat.core.maneuver import Maneuver
+from aerobat.core.outcomes import Iteration, IterationStatus, SessionStatus
 from aerobat.errors import ConfigError, SessionInUse, SessionNotFound, StoreError
 from aerobat.store import checksums
 from aerobat.store.browse import SESSION_STATES, Browsing

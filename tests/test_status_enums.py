@@ -112,3 +112,37 @@ def test_status_properties_say_what_strings_used_to():
     assert [s for s in IterationStatus if s.retry] == [IterationStatus.NO_TRIGGER, IterationStatus.LOST]
     assert [s for s in IterationStatus if s.measured] == [IterationStatus.OK]
     assert SessionStatus("completed") is SessionStatus.COMPLETED
+
+
+def test_the_store_takes_an_iteration_and_hands_back_its_notes_and_enums(tmp_path):
+    from aerobat.core.design import DesignStatus
+    from aerobat.store import Store
+    from aerobat.store.records import JobStatus
+    from browse_fixtures import DESIGN, FLIP, VEHICLE
+
+    notes = (IterationNote.held("t1"),
+             IterationNote(NoteKind.PINNED_AT_BOUND, "t2", "t2 (coast) pinned at a bound for 8 corrections: bad"))
+    params = DESIGN.p_nominal.copy()
+    step = np.full(params.shape, 1e-3)
+    sent = Iteration(1, 1, IterationStatus.OK, params, np.linspace(0.1, 0.2, len(FLIP.errors)), 0.5, 1.0, step,
+                     message_with_notes("measured", notes), None, notes)
+    with Store(tmp_path / "s.sqlite") as store:
+        sid = store.create_session(vehicle=VEHICLE, plant_kind="nominal", plant_config={}, maneuver=FLIP,
+                                   design=DESIGN, seed=None, rule={"name": "paper"}, target_iterations=1,
+                                   start_params=params)
+        store.append_iteration(sid, sent)
+        store.finish_session(sid, SessionStatus.COMPLETED, "1 measured iteration")
+        study = store.create_study("robustness", {})
+        store.record_study_job(study, "a", {}, {}, status=JobStatus.FAILED, error="x")
+        got = store.iterations(sid)[0]
+        assert got.status is IterationStatus.OK and got.notes == notes and got.message == sent.message
+        assert np.array_equal(got.next_params, sent.next_params)
+        back = got.iteration()
+        assert np.array_equal(back.next_params, sent.next_params) and back.warnings == sent.warnings
+        assert store.session(sid).state is SessionStatus.COMPLETED
+        assert store.list_sessions()[0].state is SessionStatus.COMPLETED
+        drec = store.design(store.session(sid).design_id)
+        assert drec.status is DesignStatus(DESIGN.status)
+        rebuilt = drec.design(FLIP)
+        assert all(np.array_equal(getattr(rebuilt, k), getattr(DESIGN, k)) for k in ("jacobian", "correction"))
+        assert store.study_jobs(study)[0].status is JobStatus.FAILED

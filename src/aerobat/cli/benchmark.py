@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
 import math
 from typing import Any
@@ -93,7 +94,7 @@ def _parse_range(text: str, option: str) -> tuple[float, float, int]:
 
 def _cmd_map(args: argparse.Namespace) -> int:
     """Minimum time over a grid of targets, one job per target, each result committed as it arrives."""
-    from aerobat.experiments.studies import map_csv, map_grid, map_jobs
+    from aerobat.experiments.studies import map_csv, map_grid, map_jobs, run_study
     from aerobat.plotting import save_figure, write_text
     from aerobat.plotting.benchmarks import plot_map
 
@@ -104,7 +105,8 @@ def _cmd_map(args: argparse.Namespace) -> int:
     limits = dataclasses.asdict(_limits(args))
     jobs = map_jobs(ys, zs, limits)
     spec = {"ys_m": ys.tolist(), "zs_m": zs.tolist(), "limits": limits}
-    outcome, out = run_cli_study(args, "map", spec, jobs, written=("benchmark_map.csv", "benchmark_map.png"))
+    run = functools.partial(run_study, kind="map", spec=spec, jobs=jobs)
+    outcome, out = run_cli_study(args, "map", run, written=("benchmark_map.csv", "benchmark_map.png"))
     grid = map_grid(outcome.results, ys, zs)
     csv_path = out / "benchmark_map.csv"
     write_text(csv_path, map_csv(ys, zs, grid))

@@ -18,6 +18,7 @@ import os
 import shlex
 import signal
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -94,14 +95,16 @@ def study_eta(elapsed_s: float, ran: int, remaining: int, job_walls_s: list[floa
 
 
 
-def run_cli_study(args: argparse.Namespace, kind: str, spec: dict[str, Any], jobs: list[Any],
+def run_cli_study(args: argparse.Namespace, kind: str, run: Callable[..., Any],
                   written: tuple[str, ...] = ()) -> tuple[Any, Path]:
-    """Run a study with progress lines; returns (outcome, output folder). Failed jobs are the caller's to report.
+    """Run a study with progress lines; returns (what ``run`` returned, output folder).
 
-    ``written``: the files the caller writes into the folder afterwards (checked before any job runs).
+    ``run(store, **options)`` runs the study (one of :mod:`aerobat.experiments.studies.run_and_report`'s
+    calls, or :func:`~aerobat.experiments.studies.runner.run_study` bound to a specification and
+    jobs) with the options of :func:`~aerobat.experiments.studies.runner.run_study`. Failed jobs are
+    the caller's to report. ``written``: the files the caller writes into the folder afterwards
+    (checked before any job runs).
     """
-    from aerobat.experiments.studies import run_study
-
     if args.out is not None:  # an unusable --out (the store itself, a file, no text) is refused before anything runs
         folder = output_dir(text_path(args.out, "--out"))
         check_outputs({folder / name: "--out" for name in written}, stores=(getattr(args, "db", None),))
@@ -113,6 +116,7 @@ def run_cli_study(args: argparse.Namespace, kind: str, spec: dict[str, Any], job
     def on_start(study_id: int, todo: int, done: int) -> None:
         state["first"] = done
         state["study"] = study_id
+        state["total"] = todo + done
         state["out"] = _study_folder(args, store, study_id, written)
         out_console.print(f"study {study_id} ({kind}): {todo} jobs to run, {done} already done "
                           f"(resume with --resume {study_id})", soft_wrap=True)
@@ -132,20 +136,19 @@ def run_cli_study(args: argparse.Namespace, kind: str, spec: dict[str, Any], job
 
     with open_store(args) as store, sigterm_stops(standalone=getattr(args, "standalone", False)):
         try:
-            outcome = run_study(store, kind, spec, jobs, resume=args.resume, workers=args.workers,
-                                scheduler=args.scheduler, progress=progress, on_start=on_start,
-                                command=args.argv)
+            result = run(store, resume=args.resume, workers=args.workers, scheduler=args.scheduler,
+                         progress=progress, on_start=on_start, command=args.argv)
         except KeyboardInterrupt as exc:  # SIGINT or SIGTERM: every finished job is stored, the workers ended
             if "study" not in state:
                 raise
             signum = getattr(exc, "signum", signal.SIGINT)
-            study_id, total = state["study"], len(jobs)
+            study_id, total = state["study"], state["total"]
             done = len(store.finished_study_jobs(study_id))
             raise Stopped(signum, f"interrupted by {signal.Signals(signum).name}: study {study_id} stopped with "
                                   f"{done} of {total} jobs stored; resume with: "
                                   f"{_resume_command(getattr(args, 'argv', None), study_id)}") from None
-        out = state.get("out") or _study_folder(args, store, outcome.study_id, written)
-    return outcome, out
+        out = state.get("out") or _study_folder(args, store, result.study_id, written)
+    return result, out
 
 
 def _resume_command(argv: list[str] | None, study_id: int) -> str:
@@ -201,7 +204,7 @@ def _design(args: argparse.Namespace) -> tuple[Any, Any, Any]:
 
 def _cmd_robustness(args: argparse.Namespace) -> int:
     from aerobat.core.rules import RuleChoice
-    from aerobat.experiments.studies import RobustnessRanges, load_ranges, robustness_jobs, robustness_report
+    from aerobat.experiments.studies import RobustnessRanges, load_ranges, robustness_study
     from aerobat.plants import PlantChoice
 
     rule = RuleChoice.parse(args.rule, source="--rule")
@@ -215,18 +218,13 @@ def _cmd_robustness(args: argparse.Namespace) -> int:
     if args.plant != "betaflight" and getattr(args, "tune", None) is not None:
         raise ConfigError(f"--tune applies only with --plant betaflight (got --plant {args.plant})")
     config, maneuver, nominal = _design(args)
-    jobs = robustness_jobs(maneuver, nominal, config, vehicles=args.vehicles, iterations=args.iterations,
-                           seed=args.seed, ranges=ranges, rule=rule, tolerance_m=args.tolerance_m, plant=args.plant,
-                           base=base, feedback=args.feedback)
-    spec = {"maneuver": maneuver.spec(), "vehicles": args.vehicles, "iterations": args.iterations,
-            "seed": args.seed, "rule": rule.label, "tolerance_m": args.tolerance_m, "plant": args.plant,
-            "ranges": {k: list(v) if isinstance(v, tuple) else v for k, v in ranges.__dict__.items()}}
-    scheme = jobs[0].spec["plant"].get("feedback", {}).get("scheme", "none") if jobs else "none"
-    if scheme != "none":
-        spec["feedback"] = scheme
-    outcome, out = run_cli_study(args, "robustness", spec, jobs,
-                                 written=("trials_to_tolerance.png", "success_vs_property.png", "robustness.json"))
-    study = robustness_report(outcome, jobs, vehicles=args.vehicles)
+    run = functools.partial(robustness_study, maneuver=maneuver, design=nominal, model=config,
+                            vehicles=args.vehicles, iterations=args.iterations, seed=args.seed, ranges=ranges,
+                            rule=rule, tolerance_m=args.tolerance_m, plant=args.plant, base=base,
+                            feedback=args.feedback)
+    study, out = run_cli_study(args, "robustness", run,
+                               written=("trials_to_tolerance.png", "success_vs_property.png", "robustness.json"))
+    outcome = study.outcome
     study.write(out)
     summary = study.summary
     if args.json:
@@ -267,22 +265,21 @@ def _parse_list(text: str, option: str, cast: Any) -> list:
 
 
 def _cmd_envelope(args: argparse.Namespace) -> int:
-    from aerobat.experiments.studies import envelope_jobs, envelope_report
-    from aerobat.quadrotor.maneuvers import MultiFlip
+    from aerobat.experiments.studies import ENVELOPE_FLIPS, ENVELOPE_RATES_DEG_S, envelope_study
     from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
 
     flips = _parse_list(args.flips, "--flips", int)
-    if not all(1 <= n <= 10 for n in flips):
-        raise ConfigError(f"--flips {args.flips!r}: flip counts must be 1 … 10")
+    if not all(ENVELOPE_FLIPS[0] <= n <= ENVELOPE_FLIPS[1] for n in flips):
+        raise ConfigError(f"--flips {args.flips!r}: flip counts must be {ENVELOPE_FLIPS[0]} … {ENVELOPE_FLIPS[1]}")
     rates = _parse_list(args.rates_deg_s, "--rates-deg-s", float)
-    if not all(30.0 <= r <= 5700.0 for r in rates):
-        raise ConfigError(f"--rates-deg-s {args.rates_deg_s!r}: rates must be 30 … 5700 deg/s")
+    if not all(ENVELOPE_RATES_DEG_S[0] <= r <= ENVELOPE_RATES_DEG_S[1] for r in rates):
+        raise ConfigError(f"--rates-deg-s {args.rates_deg_s!r}: rates must be {ENVELOPE_RATES_DEG_S[0]:g} … "
+                          f"{ENVELOPE_RATES_DEG_S[1]:g} deg/s")
     config = vehicle_from_name_or_file(args.vehicle)
-    base = MultiFlip(vehicle=config.vehicle, dims=args.dims, axis=args.axis).spec()
-    jobs = envelope_jobs(base, config, flips, rates)
-    spec = {"base": base, "flips": flips, "rates_deg_s": rates}
-    outcome, out = run_cli_study(args, "envelope", spec, jobs, written=("envelope.json", "envelope_feasible.png"))
-    study = envelope_report(outcome, flips, rates)
+    run = functools.partial(envelope_study, model=config, flips=flips, rates_deg_s=rates, dims=args.dims,
+                            axis=args.axis)
+    study, out = run_cli_study(args, "envelope", run, written=("envelope.json", "envelope_feasible.png"))
+    outcome = study.outcome
     study.write(out)
     feasible = study.feasible
     report = {"study": outcome.study_id, "feasible": int(np.nansum(feasible)), "designs": int(feasible.size),
@@ -302,19 +299,17 @@ def _cmd_envelope(args: argparse.Namespace) -> int:
 
 def _cmd_rules(args: argparse.Namespace) -> int:
     from aerobat.experiments.baselines import check_methods
-    from aerobat.experiments.studies import parse_methods, rules_report, rules_study_jobs
+    from aerobat.experiments.studies import parse_methods, rules_study
 
     methods = parse_methods(args.methods)
     plant = plant_choice_from_args(args)
     check_methods(methods)  # every method's package is there before a single job runs
     plant.spec.check_available()
     config, maneuver, nominal = _design(args)
-    jobs = rules_study_jobs(maneuver, nominal, config, methods=methods, seeds=args.seeds, trials=args.trials,
-                            plant=plant, tolerance_m=args.tolerance_m)
-    spec = {"maneuver": maneuver.spec(), "methods": methods, "seeds": args.seeds, "trials": args.trials,
-            "plant": plant.to_table(), "tolerance_m": args.tolerance_m}
-    outcome, out = run_cli_study(args, "rules", spec, jobs, written=("rules.csv", "rules.png"))
-    study = rules_report(outcome, jobs, methods=methods)
+    run = functools.partial(rules_study, maneuver=maneuver, design=nominal, model=config, methods=methods,
+                            seeds=args.seeds, trials=args.trials, plant=plant, tolerance_m=args.tolerance_m)
+    study, out = run_cli_study(args, "rules", run, written=("rules.csv", "rules.png"))
+    outcome = study.outcome
     study.write(out)
     rows = study.rows
     if args.json:
@@ -345,7 +340,7 @@ def _cmd_rules(args: argparse.Namespace) -> int:
 
 
 def _cmd_feedback(args: argparse.Namespace) -> int:
-    from aerobat.experiments.studies import feedback_report, feedback_study_jobs, parse_scenarios, parse_schemes
+    from aerobat.experiments.studies import feedback_study, parse_scenarios, parse_schemes
     from aerobat.quadrotor.feedback import Feedback
 
     schemes = parse_schemes(args.schemes)
@@ -355,13 +350,11 @@ def _cmd_feedback(args: argparse.Namespace) -> int:
     for scheme in schemes:
         plant.spec.check_feedback(Feedback(scheme))
     config, maneuver, nominal = _design(args)
-    jobs = feedback_study_jobs(maneuver, nominal, config, schemes=schemes, scenarios=scenarios, seeds=args.seeds,
-                               trials=args.trials, plant=plant, rule=args.rule, tolerance_m=args.tolerance_m)
-    spec = {"maneuver": maneuver.spec(), "schemes": [s.value for s in schemes], "scenarios": scenarios,
-            "seeds": args.seeds, "trials": args.trials, "plant": plant.to_table(), "rule": args.rule,
-            "tolerance_m": args.tolerance_m}
-    outcome, out = run_cli_study(args, "feedback", spec, jobs, written=("feedback.csv", "feedback.png"))
-    study = feedback_report(outcome, jobs, schemes=[s.value for s in schemes], scenarios=scenarios)
+    run = functools.partial(feedback_study, maneuver=maneuver, design=nominal, model=config, schemes=schemes,
+                            scenarios=scenarios, seeds=args.seeds, trials=args.trials, plant=plant, rule=args.rule,
+                            tolerance_m=args.tolerance_m)
+    study, out = run_cli_study(args, "feedback", run, written=("feedback.csv", "feedback.png"))
+    outcome = study.outcome
     study.write(out)
     rows = study.rows
     if args.json:

@@ -4,7 +4,9 @@ Each study is a list of :class:`~aerobat.experiments.execution.Job` built from a
 seed; :func:`~aerobat.experiments.studies.runner.run_study` runs them and commits
 every outcome to the store as it arrives; :mod:`~aerobat.experiments.studies.reports` makes
 each study's rows, CSV and figures (``feedback_report(outcome, jobs)``, or
-``study_report(store, study_id)`` for a stored study).
+``study_report(store, study_id)`` for a stored study);
+:mod:`~aerobat.experiments.studies.run_and_report` does all of it in one call
+(``feedback_study(store, maneuver, design, model, …)`` returns the report).
 """
 
 from aerobat.experiments.studies.envelope import envelope_grid, envelope_jobs
@@ -44,11 +46,26 @@ from aerobat.experiments.studies.robustness import (
     summarize_robustness,
 )
 from aerobat.experiments.studies.rules import DEFAULT_METHODS, parse_methods, rules_study_jobs, summarize_rules
+from aerobat.experiments.studies.run_and_report import (
+    ENVELOPE_FLIPS,
+    ENVELOPE_RATES_DEG_S,
+    StudyRunOptions,
+    envelope_spec,
+    envelope_study,
+    feedback_spec,
+    feedback_study,
+    robustness_spec,
+    robustness_study,
+    rules_spec,
+    rules_study,
+)
 from aerobat.experiments.studies.runner import FailedJob, StudyOutcome, run_study
 
 __all__ = [
     "BETAFLIGHT_PROPERTIES",
     "DEFAULT_METHODS",
+    "ENVELOPE_FLIPS",
+    "ENVELOPE_RATES_DEG_S",
     "SAMPLED_PROPERTIES",
     "SCENARIOS",
     "EnvelopeCell",
@@ -64,10 +81,15 @@ __all__ = [
     "RulesRow",
     "StudyOutcome",
     "StudyReport",
+    "StudyRunOptions",
     "envelope_grid",
     "envelope_jobs",
     "envelope_report",
+    "envelope_spec",
+    "envelope_study",
     "feedback_report",
+    "feedback_spec",
+    "feedback_study",
     "feedback_study_jobs",
     "load_ranges",
     "map_csv",
@@ -78,7 +100,11 @@ __all__ = [
     "parse_schemes",
     "robustness_jobs",
     "robustness_report",
+    "robustness_spec",
+    "robustness_study",
     "rules_report",
+    "rules_spec",
+    "rules_study",
     "rules_study_jobs",
     "run_study",
     "sample_arena",

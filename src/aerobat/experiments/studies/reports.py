@@ -6,7 +6,9 @@ and its jobs, or a stored study: :func:`study_report`). Every report has
 * ``rows``: the table, frozen dataclass rows (one per (scenario, scheme), method, vehicle or cell);
 * ``to_csv(path=None)``: the table as CSV text (written to ``path`` if given);
 * ``plot(path=None)``: its main figure (saved to ``path`` if given);
-* ``write(folder)``: every file ``aerobat study …`` writes, by the names it uses.
+* ``write(folder)``: every file ``aerobat study …`` writes, by the names it uses (the folder made if
+  missing);
+* ``outcome``: what the run did (jobs run now, already done, failed).
 
 Printing is the command line's: a report knows no console. A job that raised counts as a failed
 run of its row and its error is listed in the row, never dropped.
@@ -71,6 +73,9 @@ class StudyReport(Protocol):
     @property
     def rows(self) -> tuple[Any, ...]: ...
 
+    @property
+    def outcome(self) -> StudyOutcome: ...
+
     def to_csv(self, path: str | Path | None = None) -> str: ...
 
     def plot(self, path: str | Path | None = None) -> Any: ...
@@ -89,6 +94,13 @@ def _csv(fieldnames: Sequence[str], rows: Sequence[Mapping[str, Any]], path: str
 
         write_text(path, text)
     return text
+
+
+def _made(folder: str | Path) -> Path:
+    """The folder a report writes into, made if missing."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
 
 
 def _saved(fig: Any, path: str | Path | None) -> Any:
@@ -147,6 +159,8 @@ class FeedbackReport:
     """Position errors per trial [m] of every run, by scenario and scheme."""
     trials: int
     tolerance_m: float
+    outcome: StudyOutcome
+    """What the run did: jobs run now, already done, failed (a stored study's: none run now)."""
 
     def to_csv(self, path: str | Path | None = None) -> str:
         """``feedback.csv``: job errors joined by `` | ``, angles by spaces (3 decimals)."""
@@ -161,7 +175,7 @@ class FeedbackReport:
         return _saved(plot_feedback(self.curves, self.trials, self.tolerance_m), path)
 
     def write(self, folder: str | Path) -> list[Path]:
-        folder = Path(folder)
+        folder = _made(folder)
         self.to_csv(folder / "feedback.csv")
         self.plot(folder / "feedback.png")
         return [folder / "feedback.csv", folder / "feedback.png"]
@@ -191,7 +205,8 @@ def feedback_report(outcome: StudyOutcome, jobs: Sequence[Job], *, schemes: Sequ
     curves = {sc: {s.value: [r["position_errors_m"] for r in results
                              if r["scenario"] == sc and r["scheme"] == s.value] for s in chosen}
               for sc in scenarios}
-    return FeedbackReport(outcome.study_id, rows, curves, trials, float(_job_value(jobs, "tolerance_m", 0.12)))
+    return FeedbackReport(outcome.study_id, rows, curves, trials, float(_job_value(jobs, "tolerance_m", 0.12)),
+                          outcome)
 
 
 # ------------------------------------------------------------------ rules
@@ -228,6 +243,8 @@ class RulesReport:
     """Position errors per trial [m] of every run, by method."""
     trials: int
     tolerance_m: float
+    outcome: StudyOutcome
+    """What the run did: jobs run now, already done, failed (a stored study's: none run now)."""
 
     def to_csv(self, path: str | Path | None = None) -> str:
         """``rules.csv``: job errors joined by `` | ``."""
@@ -241,7 +258,7 @@ class RulesReport:
         return _saved(plot_rules(self.curves, self.trials, self.tolerance_m, ax=ax), path)
 
     def write(self, folder: str | Path) -> list[Path]:
-        folder = Path(folder)
+        folder = _made(folder)
         self.to_csv(folder / "rules.csv")
         self.plot(folder / "rules.png")
         return [folder / "rules.csv", folder / "rules.png"]
@@ -264,7 +281,7 @@ def rules_report(outcome: StudyOutcome, jobs: Sequence[Job], *, methods: Sequenc
                  for r in summarize_rules(results, methods, failed))
     curves = {m: [r["position_errors_m"] for r in results if r["method"] == m] for m in methods}
     return RulesReport(outcome.study_id, rows, curves, int(_job_value(jobs, "trials", 0)),
-                       float(_job_value(jobs, "tolerance_m", 0.12)))
+                       float(_job_value(jobs, "tolerance_m", 0.12)), outcome)
 
 
 # ------------------------------------------------------------------ robustness
@@ -296,9 +313,23 @@ class RobustnessReport:
     """The sampled properties, in the order of the CSV columns and the figure's panels."""
     vehicles: int
     tolerance_m: float
-    failed: tuple[FailedJob, ...]
-    ran: int
-    skipped: int
+    outcome: StudyOutcome
+    """What the run did: jobs run now, already done, failed (a stored study's: none run now)."""
+
+    @property
+    def failed(self) -> tuple[FailedJob, ...]:
+        """The jobs that raised, with their errors."""
+        return self.outcome.failed
+
+    @property
+    def ran(self) -> int:
+        """Jobs run by this run."""
+        return self.outcome.ran
+
+    @property
+    def skipped(self) -> int:
+        """Jobs already done before this run."""
+        return self.outcome.skipped
 
     def to_json(self) -> dict[str, Any]:
         """``robustness.json``: the summary, the failed jobs and what ran now."""
@@ -339,7 +370,7 @@ class RobustnessReport:
         """``trials_to_tolerance.png``, ``success_vs_property.png`` (if any vehicle learned) and ``robustness.json``."""
         from aerobat.plotting.files import write_text
 
-        folder = Path(folder)
+        folder = _made(folder)
         written = [folder / "trials_to_tolerance.png"]
         self.plot(written[0])
         if self.plot_properties(folder / "success_vs_property.png") is not None:
@@ -363,7 +394,7 @@ def robustness_report(outcome: StudyOutcome, jobs: Sequence[Job], *, vehicles: i
                  for key, r in keyed)
     return RobustnessReport(outcome.study_id, rows, summarize_robustness(results, properties), properties,
                             len(jobs) if vehicles is None else vehicles, float(_job_value(jobs, "tolerance_m", 0.12)),
-                            outcome.failed, outcome.ran, outcome.skipped)
+                            outcome)
 
 
 # ------------------------------------------------------------------ envelope
@@ -397,6 +428,8 @@ class EnvelopeReport:
     """1 where the design converged, 0 where not, NaN where the job failed (flips × rates)."""
     grids: Mapping[str, np.ndarray]
     """Each of :data:`~aerobat.experiments.studies.envelope.ENVELOPE_QUANTITIES` over flips × rates."""
+    outcome: StudyOutcome
+    """What the run did: jobs run now, already done, failed (a stored study's: none run now)."""
 
     def to_json(self) -> list[dict[str, Any]]:
         """``envelope.json``: one object per cell."""
@@ -419,7 +452,7 @@ class EnvelopeReport:
         """``envelope.json`` and ``envelope_feasible.png`` with one figure per quantity."""
         from aerobat.plotting.files import write_text
 
-        folder = Path(folder)
+        folder = _made(folder)
         written = [write_text(folder / "envelope.json", json.dumps(self.to_json(), indent=1))]
         for name in ("feasible", *self.grids):
             written.append(folder / f"envelope_{name}.png")
@@ -433,7 +466,7 @@ def envelope_report(outcome: StudyOutcome, flips: Sequence[int], rates_deg_s: Se
     feasible, grids, cells = envelope_grid(outcome.results, flips, rates_deg_s)
     rows = tuple(EnvelopeCell(**c) for c in cells)
     return EnvelopeReport(outcome.study_id, rows, tuple(flips), tuple(rates_deg_s), feasible,
-                          {q: grids[q] for q in ENVELOPE_QUANTITIES})
+                          {q: grids[q] for q in ENVELOPE_QUANTITIES}, outcome)
 
 
 # ------------------------------------------------------------------ stored studies

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -16,7 +17,7 @@ from aerobat.experiments.job import Job
 from aerobat.plants import PlantChoice
 from aerobat.quadrotor.vehicle import VehicleConfig, vehicle_table
 
-__all__ = ["DEFAULT_METHODS", "parse_methods", "rules_study_jobs", "summarize_rules"]
+__all__ = ["DEFAULT_METHODS", "check_method_names", "parse_methods", "rules_study_jobs", "summarize_rules"]
 
 DEFAULT_METHODS = ("paper", "tsvd", "damped", "kalman", "broyden", "tsvd+isc", "cma", "bayesopt")
 """What ``aerobat study rules`` compares by default."""
@@ -25,13 +26,20 @@ DEFAULT_METHODS = ("paper", "tsvd", "damped", "kalman", "broyden", "tsvd+isc", "
 def parse_methods(text: str, *, source: str = "--methods") -> list[str]:
     """A comma list of update rules (``+isc`` allowed) and baselines (``cma``, ``bayesopt``), checked."""
     methods = [m.strip() for m in str(text).split(",") if m.strip()]
+    return check_method_names(methods, source=source, text=text)
+
+
+def check_method_names(methods: Sequence[str], *, source: str = "methods", text: str | None = None) -> list[str]:
+    """``methods`` if each is an update rule (``+isc`` allowed) or a baseline, named once; else
+    :class:`~aerobat.errors.ConfigError` naming ``source`` (``text``: what the user wrote, for the message)."""
+    methods = list(methods)
     if not methods:
         raise ConfigError(f"{source}: name at least one method")
     for method in methods:
         if method not in BASELINES:
             RuleChoice.parse(method, source=source)
     if len(set(methods)) != len(methods):
-        raise ConfigError(f"{source} {text!r}: a method is named twice")
+        raise ConfigError(f"{source} {text if text is not None else ','.join(methods)!r}: a method is named twice")
     return methods
 
 

@@ -29,7 +29,14 @@ from .packets import SitlState
 from .settings import BetaflightSettings, load_settings
 from .sitl import SitlProcess
 
-__all__ = ["AT_REST_LEVEL", "AtRestStepper", "check_arms", "ensure_eeprom", "step_at_rest"]
+__all__ = [
+    "ARMING_DIAGNOSIS_TIMEOUT_S",
+    "AT_REST_LEVEL",
+    "AtRestStepper",
+    "check_arms",
+    "ensure_eeprom",
+    "step_at_rest",
+]
 
 AT_REST_LEVEL = SitlState(
     time_s=0.0,
@@ -122,6 +129,10 @@ def _verify(sitl: SitlProcess, settings: BetaflightSettings) -> None:
         stepper.stop()
 
 
+ARMING_DIAGNOSIS_TIMEOUT_S = 15.0
+"""How long :func:`check_arms` waits for the firmware's arming-disable flags after it did not arm [s, wall]."""
+
+
 def check_arms(binary: Path, eeprom: Path, settings: BetaflightSettings, *, calibration_s: float = 1.6) -> None:
     """Power a fresh process from ``eeprom`` on at rest, give ARM as the pilot does, and raise unless it arms.
 
@@ -148,7 +159,9 @@ def check_arms(binary: Path, eeprom: Path, settings: BetaflightSettings, *, cali
         stepper = AtRestStepper(sitl)
         try:
             with sitl.open_link() as link:
-                flags = link.msp.status_ex().arming_disable_flags
+                # the answer comes only as the stepper advances the firmware, which a loaded machine slows
+                # (a 1 s wait failed under five processes on two cores): a diagnosis can wait
+                flags = link.msp.status_ex(timeout_s=ARMING_DIAGNOSIS_TIMEOUT_S).arming_disable_flags
         finally:
             stepper.stop()
     why = (f"arming disabled by {', '.join(flags)}" if flags else

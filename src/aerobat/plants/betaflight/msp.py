@@ -277,9 +277,9 @@ class MspClient:
         protocol, major, minor = struct.unpack_from("<BBB", self.request(MSP_API_VERSION))
         return ApiVersion(protocol, major, minor)
 
-    def status_ex(self) -> StatusEx:
-        """MSP_STATUS_EX: arming state and arming-disable flags."""
-        return StatusEx.decode(self.request(MSP_STATUS_EX))
+    def status_ex(self, timeout_s: float | None = None) -> StatusEx:
+        """MSP_STATUS_EX: arming state and arming-disable flags (``timeout_s``: this request's, else the client's)."""
+        return StatusEx.decode(self.request(MSP_STATUS_EX, timeout_s=timeout_s))
 
     def rc_us(self) -> tuple[int, ...]:
         """MSP_RC: the channels as the firmware sees them, in microseconds.

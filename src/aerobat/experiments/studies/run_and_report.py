@@ -1,0 +1,200 @@
+"""A whole study in one call: its specification, its jobs, the run, and its report.
+
+What ``aerobat study feedback|rules|robustness|envelope`` does, a library user does with one
+call that returns the study's report (:mod:`~aerobat.experiments.studies.reports`)::
+
+    report = feedback_study(store, maneuver, design, model, schemes=[FeedbackScheme.NONE],
+                            scenarios=["default"], seeds=2, trials=8, plant=PlantChoice("arena"))
+    report.to_csv("feedback.csv")
+
+Each ``*_spec`` function gives the specification the study is stored (and resumed) under, the
+same the command line stores. The keyword options of the run (``resume``, ``workers``,
+``scheduler``, ``executor``, ``progress``, ``on_start``, ``command``) are those of
+:func:`~aerobat.experiments.studies.runner.run_study`. Failed jobs are in the report's rows
+(and ``report`` of the outcome), never dropped.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any, TypedDict, Unpack
+
+from aerobat.core.design import Design
+from aerobat.core.maneuver import Maneuver
+from aerobat.errors import ConfigError
+from aerobat.experiments.execution import Executor
+from aerobat.experiments.studies.envelope import envelope_jobs
+from aerobat.experiments.studies.feedback import feedback_study_jobs
+from aerobat.experiments.studies.reports import (
+    EnvelopeReport,
+    FeedbackReport,
+    RobustnessReport,
+    RulesReport,
+    envelope_report,
+    feedback_report,
+    robustness_report,
+    rules_report,
+)
+from aerobat.experiments.studies.robustness import RobustnessRanges, robustness_jobs
+from aerobat.experiments.studies.rules import check_method_names, rules_study_jobs
+from aerobat.experiments.studies.runner import Progress, run_study
+from aerobat.quadrotor.feedback import FeedbackScheme
+from aerobat.quadrotor.vehicle import VehicleConfig
+
+if TYPE_CHECKING:
+    from aerobat.core.rules import RuleChoice
+    from aerobat.plants import PlantChoice
+    from aerobat.quadrotor.maneuvers.flip import Axis
+    from aerobat.store import Store
+
+__all__ = [
+    "ENVELOPE_FLIPS",
+    "ENVELOPE_RATES_DEG_S",
+    "StudyRunOptions",
+    "envelope_spec",
+    "envelope_study",
+    "feedback_spec",
+    "feedback_study",
+    "robustness_spec",
+    "robustness_study",
+    "rules_spec",
+    "rules_study",
+]
+
+ENVELOPE_FLIPS = (1, 10)
+"""The flip counts an envelope may span (both included)."""
+ENVELOPE_RATES_DEG_S = (30.0, 5700.0)
+"""The maximum rates an envelope may span [deg/s] (both included)."""
+
+
+class StudyRunOptions(TypedDict, total=False):
+    """How a study runs (:func:`~aerobat.experiments.studies.runner.run_study`'s keywords)."""
+
+    resume: int | str | None
+    executor: Executor | None
+    workers: int | None
+    scheduler: str | None
+    progress: Progress | None
+    on_start: Callable[[int, int, int], None] | None
+    command: Sequence[str]
+
+
+# ------------------------------------------------------------------ feedback
+
+
+def feedback_spec(maneuver: Maneuver, *, schemes: Sequence[FeedbackScheme], scenarios: Sequence[str], seeds: int,
+                  trials: int, plant: PlantChoice, rule: str = "paper", tolerance_m: float = 0.12) -> dict[str, Any]:
+    """The specification a feedback study is stored and resumed under."""
+    return {"maneuver": maneuver.spec(), "schemes": [s.value for s in schemes], "scenarios": list(scenarios),
+            "seeds": seeds, "trials": trials, "plant": plant.to_table(), "rule": rule, "tolerance_m": tolerance_m}
+
+
+def feedback_study(store: Store, maneuver: Maneuver, design: Design, model: VehicleConfig, *,
+                   schemes: Sequence[FeedbackScheme], scenarios: Sequence[str], seeds: int, trials: int,
+                   plant: PlantChoice, rule: str = "paper", tolerance_m: float = 0.12,
+                   **options: Unpack[StudyRunOptions]) -> FeedbackReport:
+    """Every (scenario, onboard scheme) learning ``maneuver`` on ``seeds`` plant seeds; its report.
+
+    ``design`` is the maneuver's nominal design on ``model``; ``plant`` the plant every run flies
+    (the scenarios change an arena's settings, :data:`~aerobat.experiments.studies.feedback.SCENARIOS`).
+    """
+    schemes = [FeedbackScheme(s) for s in schemes]
+    jobs = feedback_study_jobs(maneuver, design, model, schemes=schemes, scenarios=list(scenarios), seeds=seeds,
+                               trials=trials, plant=plant, rule=rule, tolerance_m=tolerance_m)
+    spec = feedback_spec(maneuver, schemes=schemes, scenarios=scenarios, seeds=seeds, trials=trials, plant=plant,
+                         rule=rule, tolerance_m=tolerance_m)
+    outcome = run_study(store, "feedback", spec, jobs, **options)
+    return feedback_report(outcome, jobs, schemes=[s.value for s in schemes], scenarios=list(scenarios))
+
+
+# ------------------------------------------------------------------ rules
+
+
+def rules_spec(maneuver: Maneuver, *, methods: Sequence[str], seeds: int, trials: int, plant: PlantChoice,
+               tolerance_m: float = 0.12) -> dict[str, Any]:
+    """The specification a rules study is stored and resumed under."""
+    return {"maneuver": maneuver.spec(), "methods": list(methods), "seeds": seeds, "trials": trials,
+            "plant": plant.to_table(), "tolerance_m": tolerance_m}
+
+
+def rules_study(store: Store, maneuver: Maneuver, design: Design, model: VehicleConfig, *, methods: Sequence[str],
+                seeds: int, trials: int, plant: PlantChoice, tolerance_m: float = 0.12,
+                **options: Unpack[StudyRunOptions]) -> RulesReport:
+    """Every update rule or baseline in ``methods`` learning ``maneuver`` on ``seeds`` plant seeds; its report.
+
+    Every method's name and package are checked before a job runs
+    (:func:`~aerobat.experiments.baselines.check_methods`).
+    """
+    from aerobat.experiments.baselines import check_methods
+
+    methods = check_method_names(methods)
+    check_methods(methods)
+    jobs = rules_study_jobs(maneuver, design, model, methods=methods, seeds=seeds, trials=trials, plant=plant,
+                            tolerance_m=tolerance_m)
+    spec = rules_spec(maneuver, methods=methods, seeds=seeds, trials=trials, plant=plant, tolerance_m=tolerance_m)
+    outcome = run_study(store, "rules", spec, jobs, **options)
+    return rules_report(outcome, jobs, methods=methods)
+
+
+# ------------------------------------------------------------------ robustness
+
+
+def robustness_spec(maneuver: Maneuver, *, vehicles: int, iterations: int, seed: int, ranges: RobustnessRanges,
+                    rule: RuleChoice, tolerance_m: float, plant: str, feedback: str = "none") -> dict[str, Any]:
+    """The specification a robustness study is stored and resumed under (``feedback``: the scheme's name)."""
+    spec: dict[str, Any] = {
+        "maneuver": maneuver.spec(), "vehicles": vehicles, "iterations": iterations, "seed": seed,
+        "rule": rule.label, "tolerance_m": tolerance_m, "plant": plant,
+        "ranges": {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(ranges).items()}}
+    if feedback != "none":
+        spec["feedback"] = feedback
+    return spec
+
+
+def robustness_study(store: Store, maneuver: Maneuver, design: Design, model: VehicleConfig, *, vehicles: int,
+                     iterations: int, seed: int, ranges: RobustnessRanges | None = None,
+                     rule: RuleChoice | None = None, tolerance_m: float = 0.12, plant: str = "arena",
+                     base: Any = None, feedback: Any = None,
+                     **options: Unpack[StudyRunOptions]) -> RobustnessReport:
+    """``vehicles`` vehicles sampled from ``ranges`` around ``model`` (or a Betaflight ``base``), each
+    learning ``maneuver`` for ``iterations`` trials; its report
+    (:func:`~aerobat.experiments.studies.robustness.robustness_jobs` says what is sampled)."""
+    from aerobat.core.rules import RuleChoice
+
+    ranges = ranges if ranges is not None else RobustnessRanges()
+    rule = rule if rule is not None else RuleChoice.parse("paper", source="rule")
+    jobs = robustness_jobs(maneuver, design, model, vehicles=vehicles, iterations=iterations, seed=seed,
+                           ranges=ranges, rule=rule, tolerance_m=tolerance_m, plant=plant, base=base,
+                           feedback=feedback)
+    scheme = jobs[0].spec["plant"].get("feedback", {}).get("scheme", "none") if jobs else "none"
+    spec = robustness_spec(maneuver, vehicles=vehicles, iterations=iterations, seed=seed, ranges=ranges, rule=rule,
+                           tolerance_m=tolerance_m, plant=plant, feedback=scheme)
+    outcome = run_study(store, "robustness", spec, jobs, **options)
+    return robustness_report(outcome, jobs, vehicles=vehicles)
+
+
+# ------------------------------------------------------------------ envelope
+
+
+def envelope_spec(base: dict[str, Any], *, flips: Sequence[int], rates_deg_s: Sequence[float]) -> dict[str, Any]:
+    """The specification an envelope study is stored and resumed under (``base``: a flip's specification)."""
+    return {"base": base, "flips": list(flips), "rates_deg_s": list(rates_deg_s)}
+
+
+def envelope_study(store: Store, model: VehicleConfig, *, flips: Sequence[int], rates_deg_s: Sequence[float],
+                   dims: int = 3, axis: Axis = "roll", **options: Unpack[StudyRunOptions]) -> EnvelopeReport:
+    """A flip designed on ``model`` for every (flip count, maximum rate [deg/s]); its report."""
+    from aerobat.quadrotor.maneuvers import MultiFlip
+
+    low, high = ENVELOPE_FLIPS
+    if not flips or not all(low <= int(n) <= high for n in flips):
+        raise ConfigError(f"flips = {list(flips)!r}: flip counts must be {low} … {high}")
+    low_rate, high_rate = ENVELOPE_RATES_DEG_S
+    if not rates_deg_s or not all(low_rate <= float(r) <= high_rate for r in rates_deg_s):
+        raise ConfigError(f"rates_deg_s = {list(rates_deg_s)!r}: rates must be {low_rate:g} … {high_rate:g} deg/s")
+    base = MultiFlip(vehicle=model.vehicle, dims=dims, axis=axis).spec()
+    jobs = envelope_jobs(base, model, flips, rates_deg_s)
+    outcome = run_study(store, "envelope", envelope_spec(base, flips=flips, rates_deg_s=rates_deg_s), jobs,
+                        **options)
+    return envelope_report(outcome, flips, rates_deg_s)

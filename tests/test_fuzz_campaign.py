@@ -81,7 +81,7 @@ def test_the_judge_calls_what_must_not_happen_internal():
 
 def test_a_small_campaign_finds_no_internal_error(tmp_path):
     """Also 30 cases of the files phase (issue 31): special files as inputs and outputs, links to the store."""
-    data = _campaign(tmp_path, cli=60, api=40, seed=1, budget_s=4.0, timeout=420, files=30,
+    data = _campaign(tmp_path, cli=40, api=25, seed=1, budget_s=4.0, timeout=420, files=30,
                      files_kinds="special-input,special-output,store-link")
     assert data["cli"]["counts"].get("ok", 0) > 0 and data["cli"]["counts"].get("bad-input", 0) > 0
     assert sum(data["files"]["counts"].values()) == 30 and data["files"]["counts"].get("bad-input", 0) >= 20

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.config import check_int
+from aerobat.core.bounds import ITERATIONS
 from aerobat.errors import ConfigError, SessionInUse, SessionNotFound, StoreError
 from aerobat.store import checksums
 from aerobat.store.browse import SESSION_STATES, Browsing
@@ -122,8 +123,7 @@ class Store(Browsing):
         start = np.asarray(start_params, dtype=np.float64)
         if start.shape != (n_par,):
             raise ConfigError(f"start_params: expected {n_par} values, got shape {start.shape}")
-        if isinstance(target_iterations, bool) or not isinstance(target_iterations, int) or target_iterations < 1:
-            raise ConfigError(f"target_iterations = {target_iterations!r}: expected an integer >= 1")
+        target_iterations = ITERATIONS.check("target_iterations", target_iterations)
         design_arrays = {
             "p_guess": pack_f8(design.p_guess), "p_nominal": pack_f8(design.p_nominal),
             "residual": pack_f8(design.residual),

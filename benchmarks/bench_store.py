@@ -35,6 +35,7 @@ from aerobat import hummingbird  # noqa: E402
 from aerobat.cli import main  # noqa: E402
 from aerobat.config import dataclass_to_table  # noqa: E402
 from aerobat.core.design import design  # noqa: E402
+from aerobat.core.learning import Iteration, IterationStatus  # noqa: E402
 from aerobat.plants import Arena, NominalPlant  # noqa: E402
 from aerobat.quadrotor.maneuvers import MultiFlip  # noqa: E402
 from aerobat.quadrotor.simulate import NominalModel  # noqa: E402
@@ -69,11 +70,9 @@ def bench_append(tmp: Path, label: str, maneuver, plant, synchronous: str, n: in
             cpu_start = time.thread_time()
             plant_state = plant.get_state() if state is not None else None
             middle = time.perf_counter()
-            store.append_iteration(
-                sid, index=k, correction=k, status="ok", params=params, next_params=params,
-                error=maneuver.error(trial.final_state), gamma=0.1, scale=1.0, message=trial.message,
-                final_state=trial.final_state, start_state=trial.start_state, times_s=trial.times_s,
-                states=trial.states, plant_state=plant_state, info=trial.info)
+            store.append_iteration(sid, Iteration(k, k, IterationStatus.OK, params, maneuver.error(trial.final_state),
+                                                  0.1, 1.0, np.zeros_like(params), trial.message, trial),
+                                   plant_state=plant_state)
             end = time.perf_counter()
             cpu_times.append(time.thread_time() - cpu_start)
             times.append(end - start)

@@ -16,10 +16,12 @@ import pytest
 from aerobat import hummingbird
 from aerobat.config import dataclass_to_table
 from aerobat.core.design import design
+from aerobat.core.learning import Iteration, IterationStatus, SessionStatus
 from aerobat.plants import Arena
 from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel
 from aerobat.store import Store
+from aerobat.store.records import JobStatus
 
 CONFIG = hummingbird()
 FLIP = MultiFlip(vehicle=CONFIG.vehicle, flips=1, max_rate_rad_s=math.radians(800), dims=2)
@@ -42,15 +44,10 @@ def add_session(store: Store, *, plant: int = 0, rule: int = 0, trials: int = 3,
     for index in range(1, trials + 1):
         trial = arena.fly(FLIP.program(params)) if arena is not None and index in (1, trials) else None
         error = np.linspace(0.1, 0.5, len(FLIP.errors)) / index
-        store.append_iteration(
-            sid, index=index, correction=index, status="ok", params=params, next_params=params + 1e-4,
-            error=error, gamma=1.0 / index, scale=1.0, message=f"trial {index}",
-            final_state=None if trial is None else trial.final_state,
-            start_state=None if trial is None else trial.start_state,
-            times_s=None if trial is None else trial.times_s, states=None if trial is None else trial.states,
-            info=None if trial is None else trial.info)
+        store.append_iteration(sid, Iteration(index, index, IterationStatus.OK, params, error, 1.0 / index, 1.0,
+                                              np.full(params.shape, 1e-4), f"trial {index}", trial))
         params = params + 1e-4
-    store.finish_session(sid, "completed", f"{trials} measured iterations")
+    store.finish_session(sid, SessionStatus.COMPLETED, f"{trials} measured iterations")
     return sid
 
 
@@ -64,7 +61,8 @@ def build_store(path: Path, *, sessions: int = 5, study_vehicles: int = 200, fai
         for k in range(study_vehicles):
             key = f"vehicle-{k:03d}"
             if k < failed_jobs:
-                store.record_study_job(study, key, {"vehicle": k}, {}, status="failed", error=f"diverged at {k}")
+                store.record_study_job(study, key, {"vehicle": k}, {}, status=JobStatus.FAILED,
+                                       error=f"diverged at {k}")
                 continue
             sid = add_session(store, trials=1, flown=False, study_id=study, seed=1000 + k)
             store.record_study_job(study, key, {"vehicle": k}, {"trials_to_tolerance": 1 + k % 7}, session_id=sid)

@@ -23,6 +23,7 @@ from aerobat import hummingbird
 from aerobat.cli import main
 from aerobat.config import ConfigError, dataclass_to_table
 from aerobat.core.design import design
+from aerobat.core.learning import Iteration, IterationStatus
 from aerobat.core.registry import from_spec, register_maneuver, registered_kinds
 from aerobat.plants import Arena, NominalPlant, Trial
 from aerobat.quadrotor.maneuvers import MultiFlip
@@ -61,13 +62,9 @@ def append(store: Store, sid: int, index: int, *, status: str = "ok", trial: Tri
     params = DESIGN.p_nominal + 0.001 * index if params is None else params
     nxt = params + 0.0005 if status == "ok" else params
     error = np.arange(5.0) * 0.01 * index if status == "ok" else np.full(5, np.nan)
-    store.append_iteration(
-        sid, index=index, correction=index if status == "ok" else 0, status=status, params=params, next_params=nxt,
-        error=error, gamma=1.0 / index, scale=1.0, message=f"trial {index}",
-        final_state=None if trial is None else trial.final_state,
-        start_state=None if trial is None else trial.start_state,
-        times_s=None if trial is None else trial.times_s, states=None if trial is None else trial.states,
-        plant_state=plant_state, info=None if trial is None else trial.info)
+    store.append_iteration(sid, Iteration(index, index if status == "ok" else 0, IterationStatus(status), params, error,
+                                          1.0 / index, 1.0, nxt - params, f"trial {index}", trial),
+                           plant_state=plant_state)
     return nxt
 
 
@@ -590,15 +587,16 @@ def test_pinned_parameters_are_warned_about_in_the_output(tmp_path, capsys, monk
     import dataclasses
 
     from aerobat.core.learning import Learner
+    from aerobat.core.notes import IterationNote, NoteKind, message_with_notes
 
     tell = Learner.tell
 
     def tell_with_warning(self, trial):  # as if p1 sat at a bound for 8 corrections
         record = tell(self, trial)
         if record.index == 2:
-            record = dataclasses.replace(record, message=record.message + "; warning: p1 (accelerate duration) "
-                                         "pinned at a bound for 8 corrections: maneuver poorly formulated or "
-                                         "infeasible here")
+            note = IterationNote(NoteKind.PINNED_AT_BOUND, "p1", "p1 (accelerate duration) pinned at a bound for "
+                                 "8 corrections: maneuver poorly formulated or infeasible here")
+            record = dataclasses.replace(record, message=message_with_notes(record.message, (note,)), notes=(note,))
         return record
 
     monkeypatch.setattr(Learner, "tell", tell_with_warning)

@@ -23,8 +23,10 @@ from typing import Any
 import numpy as np
 
 from aerobat.browse.catalog import json_text, session_rows, study_rows
+from aerobat.core.learning import IterationStatus, SessionStatus
 from aerobat.errors import ConfigError, SessionNotFound
 from aerobat.store import Store
+from aerobat.store.records import JobStatus
 
 __all__ = ["NotFound", "Site"]
 
@@ -161,7 +163,7 @@ class Site:
             position = float(np.linalg.norm(it.error[mask])) if mask.any() and np.isfinite(it.error[mask]).all() \
                 else None
             table.append({"it": it, "position_m": position, "error": it.error.tolist()})
-        measured = [it.index for it in iterations if it.status == "ok" and it.trajectory_rows > 0]
+        measured = [it.index for it in iterations if it.status is IterationStatus.OK and it.trajectory_rows > 0]
         parameters = [{"name": n, "unit": u, "guess": float(drec.p_guess[k]), "nominal": float(drec.p_nominal[k]),
                        "start": float(rec.start_params[k]), "learned": float(rec.current_params[k])}
                       for k, (n, u) in enumerate(zip(mrec.parameter_names, mrec.parameter_units, strict=True))]
@@ -171,7 +173,7 @@ class Site:
             design_vehicle=store.vehicle(drec.vehicle_id).config, tags=rec.tags,
             notes=[f"{at}  {text}" for at, text in rec.notes],
             replays=(["default"] if self.static else ["default", *measured]), figures=self._draws(row.study_id),
-            live=not self.static and row.status == "running")
+            live=not self.static and rec.display_state == SessionStatus.RUNNING)  # running, and not killed
 
     def progress(self, session_id: int) -> dict[str, Any]:
         """A running session's counters (the page polls them for live progress)."""
@@ -185,7 +187,8 @@ class Site:
         study = self.store.study(study_id)
         jobs = self.store.study_jobs(study_id)
         sessions = [r for r in session_rows(self.store) if r.study_id == study_id]
-        return self._render("study.html", study=study, jobs=jobs, failed=[j for j in jobs if j.status == "failed"],
+        failed = [j for j in jobs if j.status is JobStatus.FAILED]
+        return self._render("study.html", study=study, jobs=jobs, failed=failed,
                             sessions=sessions, figures=self._study_figures(study.out_dir))
 
     def compare_page(self, ids: Sequence[int]) -> str:
@@ -262,7 +265,7 @@ class Site:
         ax = fig.subplots()
         for sid in ids:
             mask = np.array(self.store.maneuver(self.store.session(sid).maneuver_id).position_mask, dtype=bool)
-            its = [it for it in self.store.iterations(sid) if it.status == "ok"]
+            its = [it for it in self.store.iterations(sid) if it.status is IterationStatus.OK]
             if its and mask.any():
                 ax.semilogy([it.index for it in its], [float(np.linalg.norm(it.error[mask])) for it in its], ".-",
                             label=f"session {sid}")

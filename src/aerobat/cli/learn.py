@@ -206,9 +206,8 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
                 f"γ={it.gamma:.2f}  scale={it.scale:.2f}  {when}")
         else:
             say(f"  {it.index:3d}  {it.status.value:10s}  {it.message}  {when}")
-        for part in it.message.split(";"):
-            if part.strip().startswith("warning:"):
-                say(f"  {part.strip()}")
+        for warning in it.warnings:
+            say(f"  warning: {warning}")
 
     # the folder and every file written at the end are checked before the first flight (issue 31 D4)
     out = session_folder(args, store, sid, explicit=args.out if args.out is not None else _stored_out(store, sid))
@@ -229,7 +228,9 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
         # once stopped by a signal, the program only closes the session and exits: a repeated Ctrl-C must
         # not kill it by signal while the interpreter shuts down (in-process callers get their handlers back)
         interrupts.restore(ignore=interrupts.requested() and getattr(args, "standalone", False))
-    if outcome.status.value == "interrupted":
+    from aerobat.core.learning import SessionStatus
+
+    if outcome.status is SessionStatus.INTERRUPTED:
         signum = interrupts.signum or (signal.SIGPIPE if closed["stdout"] else signal.SIGINT)
         why = "standard output was closed: " if closed["stdout"] and not interrupts.signum else ""
         print(f"aerobat: interrupted: {why}session {sid} stopped after iteration {outcome.last_index} "

@@ -28,6 +28,7 @@ from aerobat.cli.show import print_stored_session
 from aerobat.errors import ConfigError, OutputError
 from aerobat.fileio import check_output, write_output
 from aerobat.store.browse import SHOWN_STATES
+from aerobat.store.records import JobStatus
 
 __all__ = ["register"]
 
@@ -245,7 +246,7 @@ def _show_study(store: Any, args: argparse.Namespace) -> int:
     if study.out_dir:
         out.print(f"  report and figures: {study.out_dir}")
     for job in jobs:
-        if job.status == "failed":
+        if job.status is JobStatus.FAILED:
             out.print(f"  failed: {job.key} (attempt {job.attempts}): {job.error}")
     if sessions:
         shown = ", ".join(str(s.id) for s in sessions[:20]) + (" …" if len(sessions) > 20 else "")

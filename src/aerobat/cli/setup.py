@@ -17,15 +17,17 @@ def _report_rows(report: Any) -> list[dict[str, Any]]:
 
 
 def _print_report(report: Any) -> None:
+    from aerobat.experiments.installation import PieceKind
+
     say = console().print
     for p in report.pieces:
-        mark = "ok     " if p.present else ("MISSING" if p.kind.value == "required" else "missing")
+        mark = "ok     " if p.present else ("MISSING" if p.kind is PieceKind.REQUIRED else "missing")
         say(f"{mark}  {p.name}: {p.detail}", markup=False, highlight=False)
         if not p.present:
             say(f"         needed for: {p.enables}", markup=False, highlight=False)
             say(f"         to get it: {p.how_to_get}", markup=False, highlight=False)
     missing = report.missing
-    optional = [p for p in missing if p.kind.value == "optional"]
+    optional = [p for p in missing if p.kind is PieceKind.OPTIONAL]
     if not report.ok:
         say("aerobat cannot run: a required piece is missing (above)", markup=False)
     elif optional:

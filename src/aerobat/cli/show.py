@@ -65,7 +65,7 @@ def print_stored_session(store: Any, session_id: int, *, iterations: bool, heade
             rows.add_column("position error [m]", justify="right")
             rows.add_column("largest angle error [°]", justify="right")
         for it in records:
-            if it.status != "ok":
+            if not it.status.measured:
                 cells = ["—"] * (len(mrec.error_names) if full else 2)
             elif full:
                 cells = [f"{np.degrees(v):+.2f}" if unit == "rad" else f"{v:+.3f}"
@@ -77,7 +77,7 @@ def print_stored_session(store: Any, session_id: int, *, iterations: bool, heade
             rows.add_row(str(it.index), it.status, f"{it.gamma:.2f}", f"{it.scale:.2f}", *cells)
         if table:
             out.print(rows)
-        measured = [it for it in records if it.status == "ok"]
+        measured = [it for it in records if it.status.measured]
         if measured and position.any():
             errors = np.array([np.linalg.norm(it.error[position]) for it in measured])
             last = errors[-10:]

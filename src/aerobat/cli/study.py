@@ -10,8 +10,8 @@ included) and writes where the study wrote.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import functools
-import io
 import json
 import math
 import os
@@ -203,11 +203,8 @@ def _design(args: argparse.Namespace) -> tuple[Any, Any, Any]:
 
 def _cmd_robustness(args: argparse.Namespace) -> int:
     from aerobat.core.rules import RuleChoice
-    from aerobat.experiments.studies import RobustnessRanges, load_ranges, robustness_jobs, summarize_robustness
-    from aerobat.experiments.studies.robustness import BETAFLIGHT_PROPERTIES, SAMPLED_PROPERTIES
+    from aerobat.experiments.studies import RobustnessRanges, load_ranges, robustness_jobs, robustness_report
     from aerobat.plants import PlantChoice
-    from aerobat.plotting import save_figure, write_text
-    from aerobat.plotting.studies import plot_success_by_property, plot_trials_to_tolerance
 
     rule = RuleChoice.parse(args.rule, source="--rule")
     if args.ranges is not None and not args.ranges.strip():  # it was ignored: the default ranges ran
@@ -219,7 +216,6 @@ def _cmd_robustness(args: argparse.Namespace) -> int:
             if args.plant == "betaflight" else None)
     if args.plant != "betaflight" and getattr(args, "tune", None) is not None:
         raise ConfigError(f"--tune applies only with --plant betaflight (got --plant {args.plant})")
-    properties = BETAFLIGHT_PROPERTIES if args.plant == "betaflight" else SAMPLED_PROPERTIES
     config, maneuver, nominal = _design(args)
     jobs = robustness_jobs(maneuver, nominal, config, vehicles=args.vehicles, iterations=args.iterations,
                            seed=args.seed, ranges=ranges, rule=rule, tolerance_m=args.tolerance_m, plant=args.plant,
@@ -232,25 +228,11 @@ def _cmd_robustness(args: argparse.Namespace) -> int:
         spec["feedback"] = scheme
     outcome, out = run_cli_study(args, "robustness", spec, jobs,
                                  written=("trials_to_tolerance.png", "success_vs_property.png", "robustness.json"))
-    results = [r for _, r in sorted(outcome.results.items())]
-    summary = summarize_robustness(results, properties)
-    save_figure(plot_trials_to_tolerance(summary.trials_to_tolerance, args.tolerance_m),
-                out / "trials_to_tolerance.png")
-    with_props = [r for r in results if r.get("properties")]
-    if with_props:
-        save_figure(plot_success_by_property([r["properties"] for r in with_props],
-                                             [bool(r.get("success")) for r in with_props], properties),
-                    out / "success_vs_property.png")
-    report = {
-        "study": outcome.study_id, "vehicles": args.vehicles, "learned": summary.completed,
-        "failed_jobs": [{"key": f.key, "error": f.error} for f in outcome.failed],
-        "success_rate": summary.success_rate, "median_trials_to_tolerance": summary.median_trials_to_tolerance,
-        "median_final_error_m": float(np.nanmedian(summary.final_errors_m)) if summary.final_errors_m else None,
-        "predictors": summary.predictors, "ran": outcome.ran, "skipped": outcome.skipped,
-    }
-    write_text(out / "robustness.json", json.dumps(report, indent=1))
+    study = robustness_report(outcome, jobs, vehicles=args.vehicles)
+    study.write(out)
+    summary = study.summary
     if args.json:
-        print(json.dumps(report))
+        print(json.dumps(study.to_json()))
     else:
         c = console()
         c.print(f"study {outcome.study_id}: {summary.completed}/{args.vehicles} vehicles learned "
@@ -287,9 +269,7 @@ def _parse_list(text: str, option: str, cast: Any) -> list:
 
 
 def _cmd_envelope(args: argparse.Namespace) -> int:
-    from aerobat.experiments.studies import envelope_grid, envelope_jobs
-    from aerobat.plotting import save_figure, write_text
-    from aerobat.plotting.studies import plot_envelope
+    from aerobat.experiments.studies import envelope_jobs, envelope_report
     from aerobat.quadrotor.maneuvers import MultiFlip
     from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
 
@@ -304,12 +284,11 @@ def _cmd_envelope(args: argparse.Namespace) -> int:
     jobs = envelope_jobs(base, config, flips, rates)
     spec = {"base": base, "flips": flips, "rates_deg_s": rates}
     outcome, out = run_cli_study(args, "envelope", spec, jobs, written=("envelope.json", "envelope_feasible.png"))
-    feasible, grid, rows = envelope_grid(outcome.results, flips, rates)
-    write_text(out / "envelope.json", json.dumps(rows, indent=1))
-    for name, values in (("feasible", feasible), *grid.items()):
-        save_figure(plot_envelope(name, flips, rates, values), out / f"envelope_{name}.png")
+    study = envelope_report(outcome, flips, rates)
+    study.write(out)
+    feasible = study.feasible
     report = {"study": outcome.study_id, "feasible": int(np.nansum(feasible)), "designs": int(feasible.size),
-              "failed_jobs": len(outcome.failed), "cells": rows}
+              "failed_jobs": len(outcome.failed), "cells": study.to_json()}
     if args.json:
         print(json.dumps(report))
     else:
@@ -324,12 +303,8 @@ def _cmd_envelope(args: argparse.Namespace) -> int:
 
 
 def _cmd_rules(args: argparse.Namespace) -> int:
-    import csv
-
     from aerobat.experiments.baselines import check_methods
-    from aerobat.experiments.studies import parse_methods, rules_study_jobs, summarize_rules
-    from aerobat.plotting import save_figure, write_text
-    from aerobat.plotting.studies import plot_rules
+    from aerobat.experiments.studies import parse_methods, rules_report, rules_study_jobs
 
     methods = parse_methods(args.methods)
     plant = plant_choice_from_args(args)
@@ -341,22 +316,11 @@ def _cmd_rules(args: argparse.Namespace) -> int:
     spec = {"maneuver": maneuver.spec(), "methods": methods, "seeds": args.seeds, "trials": args.trials,
             "plant": plant.to_table(), "tolerance_m": args.tolerance_m}
     outcome, out = run_cli_study(args, "rules", spec, jobs, written=("rules.csv", "rules.png"))
-    results = [r for _, r in sorted(outcome.results.items()) if "method" in r]
-    failed: dict[str, list[str]] = {}
-    by_key = {job.key: job for job in jobs}
-    for f in outcome.failed:
-        method = by_key[f.key].spec["method"] if f.key in by_key else f.label
-        failed.setdefault(method, []).append(f.error)
-    rows = summarize_rules(results, methods, failed)
-    handle = io.StringIO(newline="")
-    writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-    writer.writeheader()
-    writer.writerows({**r, "job_errors": " | ".join(r["job_errors"])} for r in rows)
-    write_text(out / "rules.csv", handle.getvalue())
-    curves = {m: [r["position_errors_m"] for r in results if r["method"] == m] for m in methods}
-    save_figure(plot_rules(curves, args.trials, args.tolerance_m), out / "rules.png")
+    study = rules_report(outcome, jobs, methods=methods)
+    study.write(out)
+    rows = study.rows
     if args.json:
-        print(json.dumps({"study": outcome.study_id, "methods": rows}))
+        print(json.dumps({"study": outcome.study_id, "methods": [dataclasses.asdict(r) for r in rows]}))
     else:
         from rich.table import Table
 
@@ -365,15 +329,15 @@ def _cmd_rules(args: argparse.Namespace) -> int:
                     "last-10 [m]", "failed", "s/run"):
             table.add_column(col, justify="right" if col != "method" else "left")
         for r in rows:
-            share = r["share_below_after"]
-            table.add_row(r["method"], trials_text(r["median_trials_to_tolerance"]), f"{r['reached']}/{r['runs']}",
-                          "—" if math.isnan(share) else f"{100 * share:.0f} %", f"{r['last10_mean_m']:.3f}",
-                          str(r["failures"]), f"{r['wall_s']:.1f}")
+            share = r.share_below_after
+            table.add_row(r.method, trials_text(r.median_trials_to_tolerance), f"{r.reached}/{r.runs}",
+                          "—" if math.isnan(share) else f"{100 * share:.0f} %", f"{r.last10_mean_m:.3f}",
+                          str(r.failures), f"{r.wall_s:.1f}")
         c = console()
         c.print(table)
         for r in rows:
-            for error in r["job_errors"]:
-                c.print(f"{r['method']}: a job failed: {error}")
+            for error in r.job_errors:
+                c.print(f"{r.method}: a job failed: {error}")
         c.print(f"({outcome.ran} runs now, {outcome.skipped} already done); rules.csv and rules.png in {out}/")
     report_failures(outcome)
     return 0
@@ -383,11 +347,7 @@ def _cmd_rules(args: argparse.Namespace) -> int:
 
 
 def _cmd_feedback(args: argparse.Namespace) -> int:
-    import csv
-
-    from aerobat.experiments.studies import feedback_study_jobs, parse_scenarios, parse_schemes, summarize_feedback
-    from aerobat.plotting import save_figure, write_text
-    from aerobat.plotting.studies import plot_feedback
+    from aerobat.experiments.studies import feedback_report, feedback_study_jobs, parse_scenarios, parse_schemes
     from aerobat.quadrotor.feedback import Feedback
 
     schemes = parse_schemes(args.schemes)
@@ -403,26 +363,11 @@ def _cmd_feedback(args: argparse.Namespace) -> int:
             "seeds": args.seeds, "trials": args.trials, "plant": plant.to_table(), "rule": args.rule,
             "tolerance_m": args.tolerance_m}
     outcome, out = run_cli_study(args, "feedback", spec, jobs, written=("feedback.csv", "feedback.png"))
-    results = [r for _, r in sorted(outcome.results.items()) if "scheme" in r]
-    by_key = {job.key: job for job in jobs}
-    failed: dict[tuple[str, str], list[str]] = {}
-    for f in outcome.failed:
-        job = by_key.get(f.key)
-        pair = (job.spec["scenario"], job.spec["scheme"]) if job else ("?", f.label)
-        failed.setdefault(pair, []).append(f.error)
-    rows = summarize_feedback(results, schemes, scenarios, args.trials, failed)
-    handle = io.StringIO(newline="")
-    writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-    writer.writeheader()
-    writer.writerows({**r, "job_errors": " | ".join(r["job_errors"]),
-                      "last10_angle_deg": " ".join(f"{a:.3f}" for a in r["last10_angle_deg"])} for r in rows)
-    write_text(out / "feedback.csv", handle.getvalue())
-    curves = {sc: {s.value: [r["position_errors_m"] for r in results
-                             if r["scenario"] == sc and r["scheme"] == s.value] for s in schemes}
-              for sc in scenarios}
-    save_figure(plot_feedback(curves, args.trials, args.tolerance_m), out / "feedback.png")
+    study = feedback_report(outcome, jobs, schemes=[s.value for s in schemes], scenarios=scenarios)
+    study.write(out)
+    rows = study.rows
     if args.json:
-        print(json.dumps({"study": outcome.study_id, "rows": rows}))
+        print(json.dumps({"study": outcome.study_id, "rows": [dataclasses.asdict(r) for r in rows]}))
     else:
         from rich.table import Table
 
@@ -432,15 +377,15 @@ def _cmd_feedback(args: argparse.Namespace) -> int:
                     f"median to {args.tolerance_m:g} m", "failed", "ms/trial"):
             table.add_column(col, justify="left" if col in ("scenario", "scheme") else "right")
         for r in rows:
-            angles = "/".join(f"{a:.2f}" for a in r["last10_angle_deg"]) or "—"
-            table.add_row(r["scenario"], r["scheme"], f"{r['last10_mean_m']:.3f}", f"{r['last10_worst_seed_m']:.3f}",
-                          angles, trials_text(r["median_trials_to_tolerance"]), f"{r['failures']}/{r['runs']}",
-                          f"{r['wall_ms_per_trial']:.1f}")
+            angles = "/".join(f"{a:.2f}" for a in r.last10_angle_deg) or "—"
+            table.add_row(r.scenario, r.scheme, f"{r.last10_mean_m:.3f}", f"{r.last10_worst_seed_m:.3f}",
+                          angles, trials_text(r.median_trials_to_tolerance), f"{r.failures}/{r.runs}",
+                          f"{r.wall_ms_per_trial:.1f}")
         c = console()
         c.print(table)
         for r in rows:
-            for error in r["job_errors"]:
-                c.print(f"{r['scenario']}/{r['scheme']}: a job failed: {error}")
+            for error in r.job_errors:
+                c.print(f"{r.scenario}/{r.scheme}: a job failed: {error}")
         c.print(f"({outcome.ran} runs now, {outcome.skipped} already done); feedback.csv and feedback.png in {out}/")
     report_failures(outcome)
     return 0

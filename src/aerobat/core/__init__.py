@@ -9,6 +9,7 @@ solver and no plotting library.
 from aerobat.core.design import Design, DesignStatus, FinalStateModel, design, finite_difference_jacobian
 from aerobat.core.learning import Iteration, IterationStatus, Learner, Session, SessionStatus, learn
 from aerobat.core.maneuver import ErrorKind, ErrorSpec, Maneuver, ParameterSpec
+from aerobat.core.notes import IterationNote, NoteKind
 from aerobat.core.plant import Plant, StatefulPlant, Trial, TrialStatus
 from aerobat.core.registry import Registry, from_spec, register_maneuver
 from aerobat.core.rules import RULES, RuleChoice, UpdateRule, make_rule
@@ -21,9 +22,11 @@ __all__ = [
     "ErrorSpec",
     "FinalStateModel",
     "Iteration",
+    "IterationNote",
     "IterationStatus",
     "Learner",
     "Maneuver",
+    "NoteKind",
     "ParameterSpec",
     "Plant",
     "Registry",

@@ -15,7 +15,6 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -24,6 +23,8 @@ from aerobat.config import check_int, short_repr
 from aerobat.core.bounds import ITERATIONS, MAX_ITERATIONS
 from aerobat.core.design import Design
 from aerobat.core.maneuver import Maneuver, bounds_arrays, check_maneuver, error_scales, position_indices
+from aerobat.core.notes import IterationNote, NoteKind, message_with_notes
+from aerobat.core.outcomes import Iteration, IterationStatus, SessionStatus, step_to
 from aerobat.core.plant import Plant, Trial, TrialStatus
 from aerobat.core.rules.base import PaperRule, UpdateRule
 from aerobat.core.rules.registry import RuleChoice, make_rule
@@ -40,115 +41,8 @@ __all__ = [
     "SessionStatus",
     "constraint_scale",
     "learn",
+    "step_to",
 ]
-
-
-class IterationStatus(StrEnum):
-    """What learning did with one trial."""
-
-    OK = "ok"
-    REJECTED = "rejected"
-    NO_TRIGGER = "no_trigger"
-    LOST = "lost"
-    CRASHED = "crashed"
-    ABORTED = "aborted"
-
-    @property
-    def meaning(self) -> str:
-        """One sentence on what this outcome means."""
-        if self is IterationStatus.OK:
-            return "measured and learned from"
-        if self is IterationStatus.REJECTED:
-            return "measured, but the measurement was absurd (non-finite or far beyond the error scales): not used"
-        return TrialStatus(self.value).meaning
-
-    @classmethod
-    def of_trial(cls, status: TrialStatus) -> IterationStatus:
-        return cls(TrialStatus(status).value)
-
-
-class SessionStatus(StrEnum):
-    """How a learning session stands or ended."""
-
-    RUNNING = "running"
-    COMPLETED = "completed"
-    INTERRUPTED = "interrupted"
-    CRASHED = "crashed"
-    ABORTED = "aborted"
-    FAILED = "failed"
-
-    @property
-    def meaning(self) -> str:
-        """One sentence on what this status means for the session."""
-        return {
-            SessionStatus.RUNNING: "learning (or its process was killed: the store shows that as 'killed')",
-            SessionStatus.COMPLETED: "every requested measured iteration is done",
-            SessionStatus.INTERRUPTED: "stopped on request after the trial in flight; resumable",
-            SessionStatus.CRASHED: "a trial crashed the vehicle; resumable once the cause is fixed",
-            SessionStatus.ABORTED: "a trial was aborted; resumable once the cause is fixed",
-            SessionStatus.FAILED: "gave up (too many lost trials, or an error while recording); resumable",
-        }[self]
-
-
-@dataclass(frozen=True)
-class Iteration:
-    """One trial and what learning did with it.
-
-    Attributes
-    ----------
-    index : 1-based record number (every trial, including lost ones).
-    correction : 1-based number of the correction this trial drove (0 if none).
-    status : :class:`IterationStatus`.
-    params : (n_par,) parameters flown.
-    error : (n_err,) measured error (NaN if none).
-    gamma : step size used (0 if no correction).
-    scale : constraint scaling applied to the correction (1 = none, Sect. 4.2).
-    step : (n_par,) the step actually applied after this trial (held parameters and
-        constraint scaling included; zeros if no correction).
-    message : the plant's or learner's explanation.
-    trial : the trial itself (measured trajectory and final state).
-    """
-
-    index: int
-    correction: int
-    status: IterationStatus
-    params: np.ndarray
-    error: np.ndarray
-    gamma: float
-    scale: float
-    step: np.ndarray
-    message: str
-    trial: Trial | None = None
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "status", IterationStatus(self.status))
-
-    @property
-    def next_params(self) -> np.ndarray:
-        """(n_par,) the parameters after this iteration's correction."""
-        return self.params + self.step
-
-    @property
-    def measured(self) -> bool:
-        """True when the trial of this iteration measured a final state (it was not lost)."""
-        return self.status is IterationStatus.OK
-
-    def __repr__(self) -> str:
-        return f"Iteration({self.index}, {self.status.value!r}, correction={self.correction}, gamma={self.gamma:.3g})"
-
-    def to_json_dict(self) -> dict[str, Any]:
-        """The iteration as plain JSON types (arrays as lists), as ``session.json`` keeps it."""
-        return {
-            "i": self.index,
-            "correction": self.correction,
-            "status": self.status.value,
-            "params": [float(v) for v in self.params],
-            "next_params": [float(v) for v in self.next_params],
-            "error": [float(v) if math.isfinite(v) else None for v in self.error],
-            "gamma": self.gamma,
-            "scale": self.scale,
-            "message": self.message,
-        }
 
 
 @dataclass(frozen=True)
@@ -317,7 +211,7 @@ class Learner:
         self.measured += 1
         self.correction += 1
         step, gamma = self.rule.propose(self.correction, params, error, trial)
-        note = trial.message
+        notes: list[IterationNote] = []
         lower, upper = self._lower, self._upper
         if self.hold_pinned:
             # a parameter already at a bound, pushed further out, would make the Sect. 4.2 scale
@@ -329,8 +223,7 @@ class Learner:
             held = (near_lower & (step < 0)) | (near_upper & (step > 0))
             if held.any() and not held.all():
                 step = np.where(held, 0.0, step)
-                note += "; held at a bound: " + ", ".join(self.maneuver.parameters[k].name
-                                                          for k in np.nonzero(held)[0])
+                notes += [IterationNote.held(self.maneuver.parameters[k].name) for k in np.nonzero(held)[0]]
         scale = constraint_scale(self.maneuver, params, step)
         applied = scale * step
         at_bound = (np.abs(params + applied - lower) < 1e-9 * np.maximum(1.0, np.abs(lower))) | (
@@ -340,12 +233,13 @@ class Learner:
             if k not in self.warned:
                 self.warned.add(int(k))
                 spec = self.maneuver.parameters[k]
-                note += (f"; warning: {spec.name} ({spec.description}) pinned at a bound for "
-                         f"{self.pinned_streak[k]} corrections: maneuver poorly formulated or infeasible here")
+                notes.append(IterationNote(
+                    NoteKind.PINNED_AT_BOUND, spec.name, f"{spec.name} ({spec.description}) pinned at a bound for "
+                    f"{self.pinned_streak[k]} corrections: maneuver poorly formulated or infeasible here"))
         self.rule.observe(params, error, applied)
         self.params = params + applied
         return Iteration(self.index, self.correction, IterationStatus.OK, params.copy(), error, gamma, scale,
-                         applied, note, trial)
+                         applied, message_with_notes(trial.message, notes), trial, tuple(notes))
 
     def _absurd(self, error: np.ndarray) -> str | None:
         if not np.all(np.isfinite(error)):

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.core.design import Design
+from aerobat.core.learning import SessionStatus
 from aerobat.core.maneuver import Maneuver, bounds_arrays, error_scales, parameter_scales
 from aerobat.core.plant import Plant, TrialStatus
 from aerobat.errors import require
@@ -82,7 +83,7 @@ def run_baseline(method: str, maneuver: Maneuver, design: Design, plant: Plant, 
     lo = np.maximum((lower - p0) / scales, -1.5)
     hi = np.minimum((upper - p0) / scales, 1.5)
     errors: list[np.ndarray] = []
-    status = "completed"
+    status = SessionStatus.COMPLETED
 
     def evaluate(z: np.ndarray) -> float | None:
         params = np.clip(p0 + scales * np.asarray(z, dtype=float), lower, upper)
@@ -104,10 +105,10 @@ def run_baseline(method: str, maneuver: Maneuver, design: Design, plant: Plant, 
                     break
                 v = evaluate(z)
                 if v is None:
-                    status = "crashed"
+                    status = SessionStatus.CRASHED
                     break
                 values.append(v)
-            if status != "completed" or len(values) < len(candidates):
+            if status is not SessionStatus.COMPLETED or len(values) < len(candidates):
                 break
             es.tell(candidates, values)
     elif method == "bayesopt":
@@ -120,10 +121,10 @@ def run_baseline(method: str, maneuver: Maneuver, design: Design, plant: Plant, 
         while len(errors) < trials:
             v = evaluate(np.array([point[n] for n in names]))
             if v is None:
-                status = "crashed"
+                status = SessionStatus.CRASHED
                 break
             optimizer.register(params=point, target=-v)
             point = optimizer.suggest()
     else:
         raise ValueError(f"unknown model-free method {method!r}")
-    return {"errors": errors, "status": status}
+    return {"errors": errors, "status": status.value}

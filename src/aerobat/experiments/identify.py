@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.core.design import Design, DesignStatus
+from aerobat.core.learning import Iteration, IterationStatus, SessionStatus, step_to
 from aerobat.core.plant import Plant, StatefulPlant, Trial, TrialStatus
 from aerobat.errors import ConfigError, IdentificationFailed, OutputError
 from aerobat.experiments.setup import plant_choice_from_record, plant_record_config
@@ -208,10 +209,11 @@ def identify(plant: PlantChoice, prior: VehicleConfig, *, store: Store | None = 
         fit = fit_vehicle(prior, run.final_flights, options=options, name=name)
     except IdentificationFailed as exc:
         if store is not None and session_id is not None:
-            store.finish_session(session_id, "failed", str(exc))
+            store.finish_session(session_id, SessionStatus.FAILED, str(exc))
         raise
     if store is not None and session_id is not None:
-        store.finish_session(session_id, "completed" if fit.acceptable else "failed", _fit_message(fit))
+        store.finish_session(session_id, SessionStatus.COMPLETED if fit.acceptable else SessionStatus.FAILED,
+                             _fit_message(fit))
     return IdentificationRun(sequence, plant, tuple(flights), tuple(notes), fit, session_id,
                              time.perf_counter() - started)
 
@@ -222,14 +224,14 @@ def _store_flight(store: Store, session_id: int, sequence: IdentificationSequenc
     result = flight.result
     error = sequence.error(result.final_state) if result.ok else np.full(len(sequence.errors), np.nan)
     retried = "" if flight.attempt == 1 else f", attempt {flight.attempt}"
-    store.append_iteration(
-        session_id, index=flight.number, correction=0, status=result.status.value, params=np.array([float(index)]),
-        next_params=np.array([float(min(index + 1, len(sequence.trials) - 1))]), error=error, gamma=0.0, scale=1.0,
-        message=f"{flight.trial.name}{retried}: {result.message}", final_state=result.final_state,
-        start_state=result.start_state, times_s=result.times_s, states=result.states,
-        plant_state=plant.get_state() if isinstance(plant, StatefulPlant) else None,
-        info={**result.info, "trial": flight.trial.name, "trial_kind": flight.trial.kind.value,
-              "attempt": flight.attempt})
+    params = np.array([float(index)])
+    trial = dataclasses.replace(result, info={**result.info, "trial": flight.trial.name,
+                                              "trial_kind": flight.trial.kind.value, "attempt": flight.attempt})
+    iteration = Iteration(flight.number, 0, IterationStatus.of_trial(result.status), params, error, 0.0, 1.0,
+                          step_to(params, np.array([float(min(index + 1, len(sequence.trials) - 1))])),
+                          f"{flight.trial.name}{retried}: {result.message}", trial)
+    store.append_iteration(session_id, iteration,
+                           plant_state=plant.get_state() if isinstance(plant, StatefulPlant) else None)
 
 
 def _fit_message(fit: VehicleFit) -> str:

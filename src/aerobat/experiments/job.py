@@ -12,8 +12,9 @@ import json
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from enum import StrEnum
 from typing import Any
+
+from aerobat.store.records import JobStatus
 
 __all__ = ["Job", "JobResult", "JobStatus", "job_kind", "run_job"]
 
@@ -35,13 +36,6 @@ class Job:
 
     def to_json(self) -> str:
         return json.dumps({"key": self.key, "kind": self.kind, "spec": self.spec}, sort_keys=True)
-
-
-class JobStatus(StrEnum):
-    """How one job ended: ``done`` (its result is valid) or ``failed`` (it raised; run again on resume)."""
-
-    DONE = "done"
-    FAILED = "failed"
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.core.design import Design, design
-from aerobat.core.learning import Iteration, learn
+from aerobat.core.learning import Iteration, SessionStatus, learn
 from aerobat.core.maneuver import ErrorKind, Maneuver, position_indices
 from aerobat.core.registry import from_spec
 from aerobat.core.rules import RuleChoice
@@ -67,9 +67,9 @@ def learn_job(spec: dict[str, Any]) -> dict[str, Any]:
         "first_error_m": errors[0] if errors else math.nan,
         "final_error_m": float(np.mean(last)),
         "trials_to_tolerance": first_below,
-        "success": bool(session.status.value == "completed" and float(np.mean(last)) <= tol),
+        "success": bool(session.status is SessionStatus.COMPLETED and float(np.mean(last)) <= tol),
         "final_params": session.final_params.tolist(),
-        "lost_trials": sum(1 for it in session.iterations if it.status.value in ("no_trigger", "lost")),
+        "lost_trials": sum(1 for it in session.iterations if it.status.retry),
         "properties": spec.get("properties", {}),
         "iterations": _records(session.iterations),
         "wall_s": time.perf_counter() - start,
@@ -122,11 +122,11 @@ def rule_run_job(spec: dict[str, Any]) -> dict[str, Any]:
     iterations: list[dict[str, Any]] = []
     if method in BASELINES:
         outcome = run_baseline(method, maneuver, result, plant, trials, int(plant_choice.seed))
-        errors, status = outcome["errors"], outcome["status"]
+        errors, status = outcome["errors"], SessionStatus(outcome["status"])
     else:
         choice = RuleChoice.parse(method, source="job method")
         session = learn(maneuver, result, plant, iterations=trials, rule=build_rule(choice, result, model))
-        errors, status = [it.error for it in session.measured], session.status.value
+        errors, status = [it.error for it in session.measured], session.status
         iterations = _records(session.iterations)
     pos = _position_errors(maneuver, errors)
     tol = float(spec.get("tolerance_m", 0.12))
@@ -141,13 +141,13 @@ def rule_run_job(spec: dict[str, Any]) -> dict[str, Any]:
         **labels,
         "last10_angle_deg": ([] if tail is None else np.degrees(np.mean(np.abs(tail), axis=0)).tolist()),
         "method": method,
-        "status": status,
+        "status": status.value,
         "position_errors_m": pos,
         "trials_to_tolerance": first,
         "share_below_after": (float(np.mean([e < tol for e in later])) if later
                               else (math.nan if first is None else 1.0)),
         "last10_mean_m": float(np.mean(last)),
-        "failed": bool(status != "completed" or diverged or len(pos) < trials),
+        "failed": bool(status is not SessionStatus.COMPLETED or diverged or len(pos) < trials),
         "iterations": iterations,
         "wall_s": time.perf_counter() - start,
     }

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from aerobat.core.learning import IterationStatus, SessionStatus
 from aerobat.core.registry import from_spec
 from aerobat.errors import ConfigError
 from aerobat.plotting.files import save_figure
@@ -102,7 +103,7 @@ def session_figures(store: Store, session_id: int, out: Path) -> list[str]:
     except ConfigError as exc:
         notes.append(f"note: nominal trajectory not drawn: {exc}")
     records = store.iterations(session_id)
-    measured = [it.index for it in records if it.status == "ok" and it.trajectory_rows > 0]
+    measured = [it.index for it in records if it.status is IterationStatus.OK and it.trajectory_rows > 0]
     if measured:
         loaded = store.iterations(session_id, trajectories=True, indices=[measured[0], measured[-1]])
         by_index = {it.index: it for it in loaded}
@@ -132,7 +133,8 @@ IDENTIFICATION_KIND = "identification"
 
 
 def _measured_with_trajectories(store: Store, session_id: int) -> list[int]:
-    return [it.index for it in store.iterations(session_id) if it.status == "ok" and it.trajectory_rows > 0]
+    return [it.index for it in store.iterations(session_id)
+            if it.status is IterationStatus.OK and it.trajectory_rows > 0]
 
 
 def replay_notes(store: Store, session_id: int, iterations: list[int] | None = None) -> list[str]:
@@ -210,20 +212,26 @@ def session_replay(store: Store, session_id: int, path: Path, *, iterations: lis
     return write_replay_html(fig, path)
 
 
+def _ended(status: str) -> SessionStatus:
+    """How an exported session stands: a ``running`` (or ``killed``) one as ``interrupted``."""
+    try:
+        state = SessionStatus(status)
+    except ValueError:  # killed: its process is gone
+        return SessionStatus.INTERRUPTED
+    return SessionStatus.INTERRUPTED if state is SessionStatus.RUNNING else state
+
+
 def load_session(store: Store, session_id: int) -> Session:
     """A stored session as a :class:`~aerobat.core.learning.Session` (its iterations without trials)."""
     from aerobat.config import check_type
-    from aerobat.core.learning import Iteration, IterationStatus, Session, SessionStatus
-    from aerobat.experiments.setup import design_from_record
+    from aerobat.core.learning import Session
 
     check_type("store", store, Store, "a Store")
     rec = store.session(session_id)
     maneuver = from_spec(store.maneuver(rec.maneuver_id).spec, source=f"{store.path}: session {session_id}")
-    design = design_from_record(maneuver, store.design(rec.design_id))
-    iterations = tuple(Iteration(it.index, it.correction, IterationStatus(it.status), it.params, it.error, it.gamma,
-                                 it.scale, it.next_params - it.params, it.message)
-                       for it in store.iterations(session_id))
-    status = SessionStatus(rec.state if rec.state != "running" else "interrupted")
+    design = store.design(rec.design_id).design(maneuver)
+    iterations = tuple(it.iteration() for it in store.iterations(session_id))
+    status = SessionStatus.INTERRUPTED if rec.state is SessionStatus.RUNNING else rec.state
     return Session(maneuver, design, rec.plant_kind, iterations, rec.current_params, status, rec.message, math.nan)
 
 
@@ -231,8 +239,9 @@ def session_from_json(data: dict[str, Any]) -> Session:
     """A session from ``aerobat export … --format json`` (or ``show --json``) output."""
     import numpy as np
 
-    from aerobat.core.design import Design
-    from aerobat.core.learning import Iteration, IterationStatus, Session, SessionStatus
+    from aerobat.core.design import Design, DesignStatus
+    from aerobat.core.learning import Iteration, Session
+    from aerobat.store.codec import notes_from_message
 
     if not isinstance(data, dict):
         raise ConfigError(f"session JSON: expected an object (a dict), got {type(data).__name__}")
@@ -242,16 +251,14 @@ def session_from_json(data: dict[str, Any]) -> Session:
     try:
         maneuver = from_spec(data["maneuver"], source="session JSON maneuver")
         table = dict(data["design"])
-        table.update(converged=table["status"] == "converged",
+        table.update(converged=DesignStatus(table["status"]) is DesignStatus.CONVERGED,
                      **{k: [[math.nan if v is None else v for v in row] for row in table[k]]
                         for k in ("jacobian", "correction")})
         table["residual"] = [math.nan if v is None else v for v in table["residual"]]
         design = Design.from_json_dict(maneuver, table)
-        iterations = tuple(Iteration(it["i"], it["correction"], IterationStatus(it["status"]), np.asarray(it["params"]),
-                                     np.array([math.nan if v is None else v for v in it["error"]]), it["gamma"],
-                                     it["scale"], np.asarray(it["next_params"]) - np.asarray(it["params"]),
-                                     it["message"]) for it in data["iterations"])
-        status = SessionStatus(data["status"] if data["status"] not in ("running", "killed") else "interrupted")
+        iterations = tuple(Iteration.from_json_dict(it, notes_from_message(str(it["message"])))
+                           for it in data["iterations"])
+        status = _ended(data["status"])
         return Session(maneuver, design, data["plant"], iterations, np.asarray(data["final_params"]), status,
                        data["message"], float(data.get("wall_s", math.nan)))
     except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:

@@ -32,13 +32,13 @@ import numpy as np
 from aerobat.config import as_float_array, check_int, check_type, short_repr
 from aerobat.core.bounds import ITERATIONS
 from aerobat.core.design import Design, design
-from aerobat.core.learning import Iteration, Learner, SessionStatus, learn
+from aerobat.core.learning import Iteration, IterationStatus, Learner, SessionStatus, learn
 from aerobat.core.maneuver import Maneuver, check_maneuver, position_indices
 from aerobat.core.plant import Plant, StatefulPlant
 from aerobat.core.registry import from_spec
 from aerobat.core.rules import RuleChoice
 from aerobat.errors import ConfigError, DesignFailed, StoreError
-from aerobat.experiments.setup import build_rule, design_from_record, plant_choice_from_record, plant_record_config
+from aerobat.experiments.setup import build_rule, plant_choice_from_record, plant_record_config
 from aerobat.plants import PlantChoice
 from aerobat.quadrotor.simulate import NominalModel
 from aerobat.quadrotor.vehicle import VehicleConfig, vehicle_from_table, vehicle_table
@@ -137,19 +137,10 @@ class StoredSession:
         before = self.measured
 
         def record(it: Iteration) -> None:
-            trial = it.trial
             with guard():
-                store.append_iteration(
-                    sid, index=it.index, correction=it.correction, status=it.status.value, params=it.params,
-                    next_params=it.next_params, error=it.error, gamma=it.gamma, scale=it.scale, message=it.message,
-                    final_state=None if trial is None else trial.final_state,
-                    start_state=None if trial is None else trial.start_state,
-                    times_s=None if trial is None else trial.times_s, states=None if trial is None else trial.states,
-                    plant_state=get_state() if get_state is not None else None,
-                    learner_state=self.learner.state(),
-                    info=None if trial is None else trial.info,
-                )
-            for warning in _warnings(it.message):
+                store.append_iteration(sid, it, plant_state=get_state() if get_state is not None else None,
+                                       learner_state=self.learner.state())
+            for warning in it.warnings:
                 self.warnings.append(f"iteration {it.index}: {warning}")
             if on_iteration is not None:
                 on_iteration(it)
@@ -179,11 +170,6 @@ class StoredSession:
         store.finish_session(sid, status, message)
         return SessionOutcome(sid, status, message, summary.n_measured, self.target, summary.last_index,
                               tuple(self.warnings), time.perf_counter() - started)
-
-
-def _warnings(message: str) -> list[str]:
-    parts = (part.strip() for part in message.split(";"))
-    return [part[len("warning:"):].strip() for part in parts if part.startswith("warning:")]
 
 
 def _check_target(iterations: Any) -> int:
@@ -299,10 +285,10 @@ def resume_session(store: Store, ref: int | str, *, iterations: int | None = Non
     model = vehicle_from_table(store.vehicle(drec.vehicle_id).config, source=f"{where} design vehicle")
     plant_vehicle = vehicle_from_table(store.vehicle(prec.vehicle_id).config, source=f"{where} plant vehicle")
     target = rec.target_iterations if iterations is None else _check_target(iterations)
-    if target <= rec.n_measured and (rec.state == "completed" or target < rec.n_measured):
+    if target <= rec.n_measured and (rec.state is SessionStatus.COMPLETED or target < rec.n_measured):
         raise ConfigError(f"{where} already has {rec.n_measured} of {rec.target_iterations} measured iterations "
                           f"({rec.display_state}); ask for more than {rec.n_measured} to learn more")
-    result = design_from_record(maneuver, drec)
+    result = drec.design(maneuver)
     rule_choice = RuleChoice.from_table(rec.rule, source=f"{where} rule")
     update_rule = build_rule(rule_choice, result, model)
     plant_choice = plant_choice_from_record(prec.kind, prec.config, rec.seed, source=f"{where} plant")
@@ -362,7 +348,7 @@ def _replay_legacy(learner: Learner, store: Store, session_id: int, choice: Rule
     rule = learner.rule
     assert rule is not None
     for it in store.iterations(session_id):
-        if it.status != "ok":
+        if it.status is not IterationStatus.OK:
             continue
         rule.propose(it.correction, np.asarray(it.params), np.asarray(it.error), None)
         rule.observe(np.asarray(it.params), np.asarray(it.error), np.asarray(it.next_params) - np.asarray(it.params))

@@ -11,12 +11,12 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from aerobat.core.design import Design, DesignStatus
+from aerobat.core.design import Design
 from aerobat.core.maneuver import Maneuver
 from aerobat.core.rules import RuleChoice, UpdateRule, make_rule
-from aerobat.errors import ConfigError
 from aerobat.plants import PlantChoice
 from aerobat.quadrotor.vehicle import VehicleConfig
+from aerobat.store.records import DesignRecord
 
 __all__ = ["build_rule", "design_from_record", "plant_choice_from_record", "plant_record_config"]
 
@@ -61,16 +61,6 @@ def plant_choice_from_record(kind: str, config: Mapping[str, Any], seed: int | N
     return PlantChoice.from_table(table, source=source)
 
 
-def design_from_record(maneuver: Maneuver, record: Any) -> Design:
-    """The :class:`Design` a :class:`~aerobat.store.DesignRecord` holds, arrays bit for bit."""
-    try:
-        status = DesignStatus(record.status)
-    except ValueError:
-        raise ConfigError(f"stored design {record.id}: unknown status {record.status!r}") from None
-    return Design(
-        maneuver=maneuver, p_guess=record.p_guess, p_nominal=record.p_nominal, residual=record.residual,
-        residual_norm=record.residual_norm, converged=record.converged, status=status, message=record.message,
-        jacobian=record.jacobian, correction=record.correction, correction_kind=record.correction_kind,
-        singular_values=record.singular_values, condition_number=record.condition_number, rank=record.rank,
-        duration_s=record.duration_s, compute_s=record.compute_s, evaluations=record.evaluations,
-    )
+def design_from_record(maneuver: Maneuver, record: DesignRecord) -> Design:
+    """The :class:`Design` a :class:`~aerobat.store.DesignRecord` holds, arrays bit for bit (``record.design``)."""
+    return record.design(maneuver)

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from aerobat.core.learning import IterationStatus
 from aerobat.plotting.files import new_figure
 
 __all__ = ["plot_learning"]
@@ -21,8 +22,8 @@ def plot_learning(iterations: Sequence[dict], error_names: Sequence[str], error_
     ``error_scales`` draws each error's band ±scale (the size of an error that matters);
     ``parameter_descriptions`` labels each parameter by its meaning as well as its name.
     """
-    ok = [it for it in iterations if it["status"] == "ok"]
-    lost = [it for it in iterations if it["status"] != "ok"]
+    ok = [it for it in iterations if IterationStatus(it["status"]).measured]
+    lost = [it for it in iterations if not IterationStatus(it["status"]).measured]
     idx = np.array([it["i"] for it in ok])
     errors = np.array([[np.nan if v is None else v for v in it["error"]] for it in ok]) if ok else np.empty((0, 0))
     params = np.array([it["params"] for it in iterations])

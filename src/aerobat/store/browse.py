@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.config import check_type, short_repr
+from aerobat.core.outcomes import IterationStatus, SessionStatus
 from aerobat.errors import ConfigError, SessionInUse
 from aerobat.store import checksums
 from aerobat.store.codec import utc_now
@@ -20,7 +21,7 @@ from aerobat.store.records import SessionSummary
 
 __all__ = ["Browsing", "SessionComparison", "SESSION_STATES", "SHOWN_STATES"]
 
-SESSION_STATES = ("running", "completed", "interrupted", "crashed", "aborted", "failed")
+SESSION_STATES: tuple[SessionStatus, ...] = tuple(SessionStatus)
 """States a session can be stored in. ``running`` sessions whose process is gone are shown as ``killed``."""
 
 SHOWN_STATES = (*SESSION_STATES, "killed")
@@ -157,7 +158,8 @@ class Browsing(Reading):
         def write(conn: sqlite3.Connection) -> int:
             row = checksums.fetch(conn, self.path, "sessions", {"id": session_id})
             assert row is not None
-            if row["state"] == "running" and row["owner"] != self.owner and owner_alive(row["owner"]) is not False:
+            running = self._state(row) is SessionStatus.RUNNING
+            if running and row["owner"] != self.owner and owner_alive(row["owner"]) is not False:
                 raise SessionInUse(f"{self.path}: session {session_id} is being run by process {row['pid']}; stop "
                                    f"it before deleting the session")
             jobs = conn.execute("SELECT study_id, key FROM study_jobs WHERE session_id = ?", (session_id,)).fetchall()
@@ -184,7 +186,8 @@ class Browsing(Reading):
         mans = [self.maneuver(r.maneuver_id) for r in recs]
         firsts, bests = [], []
         for rec in recs:
-            found = [self._position_error(rec.id, it.error) for it in self.iterations(rec.id) if it.status == "ok"]
+            found = [self._position_error(rec.id, it.error) for it in self.iterations(rec.id)
+                     if it.status is IterationStatus.OK]
             errors = [e for e in found if e is not None]
             firsts.append(_metres(errors[0] if errors else None))
             bests.append(_metres(min(errors) if errors else None))

@@ -34,7 +34,15 @@ from aerobat.errors import (
 from aerobat.fileio import default_store_path, store_sibling_suffix
 from aerobat.store import checksums
 from aerobat.store.codec import utc_now
-from aerobat.store.migrations import APPLICATION_ID, SCHEMA, SCHEMA_VERSION, TABLES, TABLES_SINCE, migrate
+from aerobat.store.migrations import (
+    APPLICATION_ID,
+    SCHEMA,
+    SCHEMA_VERSION,
+    TABLES,
+    TABLES_SINCE,
+    migrate,
+    sql_statements,
+)
 from aerobat.store.owners import owner_token
 
 __all__ = ["DEFAULT_PATH", "Database", "default_path", "next_id", "rollback", "sql_statements"]
@@ -478,9 +486,3 @@ def rollback(conn: sqlite3.Connection) -> None:
     if conn.in_transaction:
         with contextlib.suppress(sqlite3.Error):
             conn.execute("ROLLBACK")
-
-
-def sql_statements(script: str) -> list[str]:
-    """Split a schema script into statements (no semicolons inside our DDL's strings)."""
-    lines = [line.split("--", 1)[0] for line in script.splitlines()]
-    return [s.strip() for s in "\n".join(lines).split(";") if s.strip()]

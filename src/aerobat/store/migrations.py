@@ -45,7 +45,8 @@ import numpy as np
 from aerobat.errors import StoreFormatError
 from aerobat.store.checksums import backfill
 
-__all__ = ["APPLICATION_ID", "MIGRATIONS", "SCHEMA", "SCHEMA_V1", "SCHEMA_VERSION", "TABLES", "TABLES_SINCE", "migrate"]
+__all__ = ["APPLICATION_ID", "MIGRATIONS", "SCHEMA", "SCHEMA_V1", "SCHEMA_VERSION", "TABLES", "TABLES_SINCE", "migrate",
+           "sql_statements"]
 
 SCHEMA_VERSION = 5
 """The version this aerobat writes; it reads 1 to 4 (migrating them) and 5."""
@@ -277,6 +278,17 @@ CREATE TABLE study_jobs (
 """
 
 
+def sql_statements(script: str) -> list[str]:
+    """A schema script's statements, each ending where SQLite says one is complete (comments dropped)."""
+    statements, pending = [], ""
+    for line in script.splitlines():
+        pending += line.split("--", 1)[0] + "\n"
+        if sqlite3.complete_statement(pending):
+            statements.append(pending.strip())
+            pending = ""
+    return statements + ([pending.strip()] if pending.strip() else [])
+
+
 def _migrate_1_to_2(conn: sqlite3.Connection) -> None:
     for column in ("n_records INTEGER NOT NULL DEFAULT 0", "n_measured INTEGER NOT NULL DEFAULT 0",
                    "last_index INTEGER NOT NULL DEFAULT 0", "last_correction INTEGER NOT NULL DEFAULT 0",
@@ -311,7 +323,7 @@ def _migrate_1_to_2(conn: sqlite3.Connection) -> None:
 
 
 def _migrate_2_to_3(conn: sqlite3.Connection) -> None:
-    for statement in (s.strip() for s in _STUDY_TABLES_V3.split(";")):
+    for statement in sql_statements(_STUDY_TABLES_V3):
         if statement:
             conn.execute(statement)
 

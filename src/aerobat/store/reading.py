@@ -11,9 +11,10 @@ from typing import Any
 import numpy as np
 
 from aerobat.config import check_int, check_type, short_repr
+from aerobat.core.outcomes import IterationStatus, SessionStatus
 from aerobat.errors import ConfigError, SessionNotFound, StoreFormatError
 from aerobat.store import checksums
-from aerobat.store.codec import TRAJECTORY_CODEC, decode_trajectory, nan_if_none, unpack_f8
+from aerobat.store.codec import TRAJECTORY_CODEC, decode_trajectory, from_columns, notes_from_message, unpack_f8
 from aerobat.store.owners import owner_alive
 from aerobat.store.records import (
     DesignRecord,
@@ -42,6 +43,17 @@ class Reading(StudyTables):
         except (TypeError, ValueError) as exc:
             raise StoreFormatError(f"{self.path}: {what}: damaged JSON ({exc}); restore the store from a "
                                    f"backup") from None
+
+    def _enum(self, cls: type[Any], value: Any, what: str) -> Any:
+        """A stored status as its enum; :class:`StoreFormatError` naming the record if it is none of them."""
+        try:
+            return cls(value)
+        except ValueError:
+            raise StoreFormatError(f"{self.path}: {what}: unknown status {short_repr(value)} (written by another "
+                                   f"aerobat?)") from None
+
+    def _state(self, row: Mapping[str, Any]) -> SessionStatus:
+        return self._enum(SessionStatus, row["state"], f"session {row['id']}")  # type: ignore[no-any-return]
 
     def _fetch(self, table: str, key: Mapping[str, Any], action: str) -> dict[str, Any] | None:
         with self._guard(action):
@@ -123,8 +135,9 @@ class Reading(StudyTables):
         cache: dict[tuple[str, int], Any] = {}
         out = []
         for r in rows:
-            display = r["state"]
-            if r["state"] == "running":
+            state = self._state(r)
+            display = state.value
+            if state is SessionStatus.RUNNING:
                 if r["owner"] not in alive:
                     alive[r["owner"]] = owner_alive(r["owner"])
                 if alive[r["owner"]] is False:
@@ -132,7 +145,7 @@ class Reading(StudyTables):
             out.append(SessionSummary(
                 id=r["id"], seed=r["seed"], n_records=r["n_records"], n_measured=r["n_measured"],
                 target_iterations=r["target_iterations"], last_position_error_m=r["last_position_error_m"],
-                state=r["state"], display_state=display, started_at=r["started_at"], updated_at=r["updated_at"],
+                state=state, display_state=display, started_at=r["started_at"], updated_at=r["updated_at"],
                 study_id=r["study_id"], **self._names(r, cache)))
         return out
 
@@ -142,14 +155,15 @@ class Reading(StudyTables):
         r = self._fetch("sessions", {"id": session_id}, f"reading session {session_id}")
         if r is None:
             raise SessionNotFound(f"{self.path}: no session {session_id} (see `aerobat sessions --db {self.path}`)")
-        display = "killed" if r["state"] == "running" and owner_alive(r["owner"]) is False else r["state"]
+        state = self._state(r)
+        display = "killed" if state is SessionStatus.RUNNING and owner_alive(r["owner"]) is False else state.value
         names = self._names(r, {})
         notes = self._loads(r["notes"], f"session {session_id} notes") if r["notes"] else []
         return SessionRecord(
             id=r["id"], maneuver_id=r["maneuver_id"], design_id=r["design_id"], plant_id=r["plant_id"],
             seed=r["seed"], rule=self._loads(r["rule"], f"session {session_id} rule"),
             target_iterations=r["target_iterations"], start_params=unpack_f8(r["start_params"]),
-            warm_start_from=r["warm_start_from"], state=r["state"], display_state=display, message=r["message"],
+            warm_start_from=r["warm_start_from"], state=state, display_state=display, message=r["message"],
             started_at=r["started_at"], updated_at=r["updated_at"], ended_at=r["ended_at"], host=r["host"],
             pid=r["pid"], owner=r["owner"],
             command=tuple(self._loads(r["command"] or "[]", f"session {session_id} command")),
@@ -183,14 +197,10 @@ class Reading(StudyTables):
             jacobian, correction = unpack_f8(r["jacobian"], (n_err, n_par)), unpack_f8(r["correction"], (n_par, n_err))
         except ValueError as exc:
             raise StoreFormatError(f"{self.path}: design {design_id}: damaged arrays ({exc})") from None
-        return DesignRecord(
-            id=r["id"], maneuver_id=r["maneuver_id"], vehicle_id=r["vehicle_id"], p_guess=unpack_f8(r["p_guess"]),
-            p_nominal=unpack_f8(r["p_nominal"]), residual=unpack_f8(r["residual"]),
-            residual_norm=nan_if_none(r["residual_norm"]), jacobian=jacobian, correction=correction,
-            correction_kind=r["correction_kind"], singular_values=unpack_f8(r["singular_values"]),
-            condition_number=nan_if_none(r["condition_number"]), rank=r["rank"], converged=bool(r["converged"]),
-            status=r["status"], message=r["message"], duration_s=nan_if_none(r["duration_s"]),
-            compute_s=nan_if_none(r["compute_s"]), evaluations=r["evaluations"], created_at=r["created_at"])
+        try:
+            return from_columns(DesignRecord, r, jacobian=jacobian, correction=correction)  # type: ignore[no-any-return]
+        except ValueError as exc:
+            raise StoreFormatError(f"{self.path}: design {design_id}: damaged ({exc})") from None
 
     def vehicle(self, vehicle_id: int) -> VehicleRecord:
         """A stored vehicle configuration."""
@@ -217,14 +227,10 @@ class Reading(StudyTables):
                     times, states = decode_trajectory(blob, r["traj_rows"], r["traj_cols"])
                 except (ValueError, zlib.error) as exc:
                     raise StoreFormatError(f"{self.path}: {where}: damaged trajectory ({exc})") from None
-        return IterationRecord(
-            session_id=r["session_id"], index=r["idx"], correction=r["correction"], status=r["status"],
-            params=unpack_f8(r["params"]), next_params=unpack_f8(r["next_params"]), error=unpack_f8(r["error"]),
-            gamma=r["gamma"], scale=r["scale"], message=r["message"],
-            final_state=None if r["final_state"] is None else unpack_f8(r["final_state"]),
-            start_state=None if r["start_state"] is None else unpack_f8(r["start_state"]),
-            trajectory_rows=r["traj_rows"], recorded_at=r["recorded_at"],
-            info=self._loads(r["info"], where) if r["info"] else {}, times_s=times, states=states,
+        return from_columns(  # type: ignore[no-any-return]
+            IterationRecord, r, index=r["idx"], status=self._enum(IterationStatus, r["status"], where),
+            trajectory_rows=r["traj_rows"], info=self._loads(r["info"], where) if r["info"] else {}, times_s=times,
+            states=states, notes=notes_from_message(r["message"]),
             plant_state=self._loads(r["plant_state"], where) if plant_state and r["plant_state"] else None,
             learner_state=self._loads(r["learner_state"], where) if learner_state and r["learner_state"] else None)
 

@@ -2,14 +2,21 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
 
+from aerobat.core.design import Design, DesignStatus
+from aerobat.core.maneuver import Maneuver
+from aerobat.core.notes import IterationNote
+from aerobat.core.outcomes import Iteration, IterationStatus, SessionStatus, step_to
+
 __all__ = [
     "DesignRecord",
     "IterationRecord",
+    "JobStatus",
     "ManeuverRecord",
     "PlantRecord",
     "SessionRecord",
@@ -86,6 +93,7 @@ class DesignRecord:
     jacobian : (n_err, n_par) J.
     correction : (n_par, n_err) C.
     singular_values : of J in scaled coordinates.
+    status : :class:`~aerobat.core.design.DesignStatus`.
     """
 
     id: int
@@ -102,12 +110,17 @@ class DesignRecord:
     condition_number: float
     rank: int
     converged: bool
-    status: str
+    status: DesignStatus
     message: str
     duration_s: float
     compute_s: float
     evaluations: int
     created_at: str
+
+    def design(self, maneuver: Maneuver) -> Design:
+        """The :class:`~aerobat.core.design.Design` this record holds, for ``maneuver``, arrays bit for bit."""
+        own = {f.name: getattr(self, f.name) for f in fields(Design) if f.name != "maneuver"}
+        return Design(maneuver=maneuver, **own)
 
 
 @dataclass(frozen=True)
@@ -121,7 +134,7 @@ class SessionRecord:
     target_iterations : measured iterations the session aims for.
     start_params : (n_par,) parameters of the first trial (p⁰, or a warm start).
     warm_start_from : the session whose learned parameters ``start_params`` are, if any.
-    state : one of :data:`SESSION_STATES`.
+    state : :class:`~aerobat.core.learning.SessionStatus`.
     display_state : ``state``, except ``killed`` for a ``running`` session whose process is gone.
     owner : ``host:pid:start`` of the process that runs (or last ran) it.
     command : the command-line arguments that started it.
@@ -145,7 +158,7 @@ class SessionRecord:
     target_iterations: int
     start_params: np.ndarray
     warm_start_from: int | None
-    state: str
+    state: SessionStatus
     display_state: str
     message: str
     started_at: str
@@ -194,7 +207,7 @@ class SessionSummary:
     n_measured: int
     target_iterations: int
     last_position_error_m: float | None
-    state: str
+    state: SessionStatus
     display_state: str
     started_at: str
     updated_at: str
@@ -213,7 +226,7 @@ class IterationRecord:
     ----------
     index : 1-based record number in its session (every trial, lost ones included).
     correction : number of the correction this trial drove (0 if none).
-    status : ``ok``, ``rejected``, ``no_trigger``, ``crashed`` or ``aborted``.
+    status : :class:`~aerobat.core.learning.IterationStatus`.
     params : (n_par,) parameters flown.
     next_params : (n_par,) parameters after this record's correction (= ``params`` unless ``ok``).
     error : (n_err,) measured error (NaN if none).
@@ -225,12 +238,13 @@ class IterationRecord:
     learner_state : the learner's state after this trial (counters, parameters, the update
         rule's state; JSON table), if loaded and stored (schema 4).
     info : the plant's extras.
+    notes : what learning noted about the correction (parameters held or pinned at a bound).
     """
 
     session_id: int
     index: int
     correction: int
-    status: str
+    status: IterationStatus
     params: np.ndarray
     next_params: np.ndarray
     error: np.ndarray
@@ -246,9 +260,20 @@ class IterationRecord:
     plant_state: dict[str, Any] | None = None
     learner_state: dict[str, Any] | None = None
     info: dict[str, Any] = field(default_factory=dict)
+    notes: tuple[IterationNote, ...] = ()
 
     def __repr__(self) -> str:
-        return f"IterationRecord(session {self.session_id}, {self.index}, {self.status!r})"
+        return f"IterationRecord(session {self.session_id}, {self.index}, {self.status.value!r})"
+
+    @property
+    def warnings(self) -> tuple[str, ...]:
+        """The notes that are warnings, in words."""
+        return tuple(note.text for note in self.notes if note.kind.warning)
+
+    def iteration(self) -> Iteration:
+        """The stored trial as the core's :class:`~aerobat.core.learning.Iteration` (without its trial)."""
+        return Iteration(self.index, self.correction, self.status, self.params, self.error, self.gamma, self.scale,
+                         step_to(self.params, self.next_params), self.message, None, self.notes)
 
 
 
@@ -275,13 +300,20 @@ class StudyRecord:
     jobs_failed: int
 
 
+class JobStatus(StrEnum):
+    """How one job ended: ``done`` (its result is valid) or ``failed`` (it raised; run again on resume)."""
+
+    DONE = "done"
+    FAILED = "failed"
+
+
 @dataclass(frozen=True)
 class StudyJobRecord:
     """One job of a study: its specification, its result (or failure) and the session it learned in."""
 
     study_id: int
     key: str
-    status: str
+    status: JobStatus
     spec: dict[str, Any]
     result: dict[str, Any]
     error: str | None

@@ -29,14 +29,18 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.config import check_int
+from aerobat.config import check_int, short_repr
 from aerobat.core.bounds import ITERATIONS
+from aerobat.core.design import Design
+from aerobat.core.maneuver import Maneuver
+from aerobat.core.outcomes import Iteration, IterationStatus, SessionStatus
 from aerobat.errors import ConfigError, SessionInUse, SessionNotFound, StoreError
 from aerobat.store import checksums
 from aerobat.store.browse import SESSION_STATES, Browsing
 from aerobat.store.codec import (
     TRAJECTORY_CODEC,
     canonical_json,
+    columns_of,
     digest,
     encode_trajectory,
     json_ready,
@@ -45,11 +49,37 @@ from aerobat.store.codec import (
 )
 from aerobat.store.database import next_id
 from aerobat.store.owners import owner_alive
-from aerobat.store.records import (
-    SessionRecord,
-)
+from aerobat.store.records import JobStatus, SessionRecord
 
-__all__ = ["SESSION_STATES", "Store"]
+__all__ = ["DESIGN_ARRAYS", "DESIGN_COLUMNS", "SESSION_STATES", "Store"]
+
+DESIGN_ARRAYS = ("p_guess", "p_nominal", "residual", "jacobian", "correction", "singular_values")
+"""A design's arrays, stored exact (float64 bytes); the design's digest covers them in this order."""
+DESIGN_COLUMNS = (*DESIGN_ARRAYS, "residual_norm", "correction_kind", "condition_number", "rank", "converged",
+                  "status", "message", "duration_s", "compute_s", "evaluations")
+"""The fields of a :class:`~aerobat.core.design.Design` the ``designs`` table keeps (its maneuver has a row)."""
+
+
+def _session_state(state: SessionStatus | str) -> SessionStatus:
+    """A session state as its enum (the store's tables hold its value)."""
+    try:
+        return SessionStatus(state)
+    except ValueError:
+        raise ConfigError(f"session state {short_repr(state)}: allowed {', '.join(SESSION_STATES)}") from None
+
+
+def _maneuver_columns(maneuver: Maneuver) -> dict[str, Any]:
+    """The ``maneuvers`` row of a maneuver: its spec, and its parameters' and errors' names, units and scales."""
+    spec_json = canonical_json(json_ready(maneuver.spec()))
+    return {
+        "kind": str(maneuver.spec().get("kind", "")), "name": maneuver.name, "spec": spec_json,
+        "parameter_names": json.dumps([p.name for p in maneuver.parameters]),
+        "parameter_units": json.dumps([p.unit for p in maneuver.parameters]),
+        "error_names": json.dumps([e.name for e in maneuver.errors]),
+        "error_units": json.dumps([e.unit for e in maneuver.errors]),
+        "error_scales": json.dumps([float(e.scale) for e in maneuver.errors]),
+        "error_kinds": json.dumps([str(getattr(e, "kind", "other")) for e in maneuver.errors]),
+        "digest": digest(spec_json)}
 
 class Store(Browsing):
     """An aerobat experiment store: sessions, their iterations and studies (see :class:`Database` for opening)."""
@@ -77,7 +107,7 @@ class Store(Browsing):
         vehicle : the plant's vehicle configuration table (``{"name", "vehicle", "controller"}``).
         plant_kind, plant_config : the plant (e.g. ``"arena"``, ``{"settings": {...}}``).
         maneuver : a :class:`~aerobat.core.maneuver.Maneuver` with ``spec()``.
-        design : a :class:`~aerobat.core.design.Design` (any object with its attributes).
+        design : the :class:`~aerobat.core.design.Design` it learns from.
         design_vehicle : the design model's vehicle table (default: ``vehicle``).
         seed : the plant's seed.
         rule : the update rule and schedule as a JSON table.
@@ -95,8 +125,8 @@ class Store(Browsing):
         vehicle: Mapping[str, Any],
         plant_kind: str,
         plant_config: Mapping[str, Any],
-        maneuver: Any,
-        design: Any,
+        maneuver: Maneuver,
+        design: Design,
         design_vehicle: Mapping[str, Any] | None = None,
         seed: int | None,
         rule: Mapping[str, Any],
@@ -112,24 +142,12 @@ class Store(Browsing):
         vehicle_json = canonical_json(json_ready(dict(vehicle)))
         model_json = canonical_json(json_ready(dict(design_vehicle if design_vehicle is not None else vehicle)))
         plant_json = canonical_json(json_ready(dict(plant_config)))
-        spec_json = canonical_json(json_ready(maneuver.spec()))
-        pnames = json.dumps([p.name for p in maneuver.parameters])
-        punits = json.dumps([p.unit for p in maneuver.parameters])
-        enames = json.dumps([e.name for e in maneuver.errors])
-        eunits = json.dumps([e.unit for e in maneuver.errors])
-        escales = json.dumps([float(e.scale) for e in maneuver.errors])
-        ekinds = json.dumps([str(getattr(e, "kind", "other")) for e in maneuver.errors])
-        n_par, n_err = len(maneuver.parameters), len(maneuver.errors)
+        maneuver_columns = _maneuver_columns(maneuver)
         start = np.asarray(start_params, dtype=np.float64)
-        if start.shape != (n_par,):
-            raise ConfigError(f"start_params: expected {n_par} values, got shape {start.shape}")
+        if start.shape != (len(maneuver.parameters),):
+            raise ConfigError(f"start_params: expected {len(maneuver.parameters)} values, got shape {start.shape}")
         target_iterations = ITERATIONS.check("target_iterations", target_iterations)
-        design_arrays = {
-            "p_guess": pack_f8(design.p_guess), "p_nominal": pack_f8(design.p_nominal),
-            "residual": pack_f8(design.residual),
-            "jacobian": pack_f8(design.jacobian), "correction": pack_f8(design.correction),
-            "singular_values": pack_f8(design.singular_values),
-        }
+        design_columns = columns_of(design, DESIGN_COLUMNS)
         now = utc_now()
 
         def write(conn: sqlite3.Connection) -> int:
@@ -141,28 +159,19 @@ class Store(Browsing):
             plant_id = self._upsert(conn, "plants", {
                 "kind": plant_kind, "vehicle_id": vehicle_id, "config": plant_json,
                 "digest": digest(plant_kind, vehicle_id, plant_json)})
-            maneuver_id = self._upsert(conn, "maneuvers", {
-                "kind": str(maneuver.spec().get("kind", "")), "name": maneuver.name, "spec": spec_json,
-                "parameter_names": pnames, "parameter_units": punits, "error_names": enames,
-                "error_units": eunits, "error_scales": escales, "error_kinds": ekinds, "digest": digest(spec_json)})
+            maneuver_id = self._upsert(conn, "maneuvers", maneuver_columns)
             design_id = self._upsert(conn, "designs", {
-                "maneuver_id": maneuver_id, "vehicle_id": model_id, "n_par": n_par, "n_err": n_err,
-                **design_arrays,
-                "residual_norm": float(design.residual_norm), "correction_kind": str(design.correction_kind),
-                "condition_number": float(design.condition_number), "rank": int(design.rank),
-                "converged": int(bool(design.converged)), "status": str(getattr(design.status, "value", design.status)),
-                "message": str(design.message), "duration_s": float(design.duration_s),
-                "compute_s": float(design.compute_s), "evaluations": int(getattr(design, "evaluations", 0)),
-                "created_at": now,
-                "digest": digest(maneuver_id, model_id, design.correction_kind, *design_arrays.values()),
-            })
+                "maneuver_id": maneuver_id, "vehicle_id": model_id, "n_par": len(maneuver.parameters),
+                "n_err": len(maneuver.errors), **design_columns, "created_at": now,
+                "digest": digest(maneuver_id, model_id, design.correction_kind,
+                                 *(design_columns[name] for name in DESIGN_ARRAYS))})
             session_id = next_id(conn, "sessions")
             checksums.insert(conn, "sessions", {
                 "id": session_id, "maneuver_id": maneuver_id, "design_id": design_id, "plant_id": plant_id,
                 "seed": seed, "rule": canonical_json(json_ready(dict(rule))), "target_iterations": target_iterations,
-                "start_params": pack_f8(start), "warm_start_from": warm_start_from, "state": "running",
-                "message": "started", "started_at": now, "updated_at": now, "ended_at": None,
-                "host": socket.gethostname(), "pid": os.getpid(), "owner": self.owner,
+                "start_params": pack_f8(start), "warm_start_from": warm_start_from,
+                "state": SessionStatus.RUNNING.value, "message": "started", "started_at": now, "updated_at": now,
+                "ended_at": None, "host": socket.gethostname(), "pid": os.getpid(), "owner": self.owner,
                 "command": json.dumps(list(command)), "aerobat_version": __version__, "n_records": 0,
                 "n_measured": 0, "last_index": 0, "last_correction": 0, "last_error": None,
                 "last_position_error_m": None, "current_params": pack_f8(start), "study_id": study_id,
@@ -171,35 +180,19 @@ class Store(Browsing):
 
         return write
 
-    def append_iteration(
-        self,
-        session_id: int,
-        *,
-        index: int,
-        correction: int,
-        status: str,
-        params: np.ndarray,
-        next_params: np.ndarray,
-        error: np.ndarray,
-        gamma: float,
-        scale: float,
-        message: str,
-        final_state: np.ndarray | None = None,
-        start_state: np.ndarray | None = None,
-        times_s: np.ndarray | None = None,
-        states: np.ndarray | None = None,
-        plant_state: Mapping[str, Any] | None = None,
-        learner_state: Mapping[str, Any] | None = None,
-        info: Mapping[str, Any] | None = None,
-    ) -> None:
+    def append_iteration(self, session_id: int, iteration: Iteration, *,
+                         plant_state: Mapping[str, Any] | None = None,
+                         learner_state: Mapping[str, Any] | None = None) -> None:
         """Store one trial and update its session's summary, in one committed transaction.
 
-        ``next_params`` are the parameters after this trial's correction exactly as applied,
-        and ``learner_state`` everything needed to continue from here: one commit holds the
-        whole iteration, so a process killed at any instant resumes from the right place.
+        ``iteration`` is the core's record of the trial (its measured trajectory, final and start
+        states and the plant's extras come from ``iteration.trial``, if it has one); its
+        ``next_params`` are stored exactly as applied. ``plant_state`` and ``learner_state``
+        are everything needed to continue from here: one commit holds the whole iteration, so
+        a process killed at any instant resumes from the right place.
 
         Only the process that owns the session (created or resumed it) may append, and
-        ``index`` must be the session's last index + 1: a gap or a duplicate is refused.
+        ``iteration.index`` must be the session's last index + 1: a gap or a duplicate is refused.
 
         Raises
         ------
@@ -208,16 +201,12 @@ class Store(Browsing):
         StoreError
             Wrong index, or the session belongs to another process.
         """
-        row, ok, position = self._iteration_row(
-            session_id, index=index, correction=correction, status=status, params=params, next_params=next_params,
-            error=error, gamma=gamma, scale=scale, message=message, final_state=final_state,
-            start_state=start_state, times_s=times_s, states=states, plant_state=plant_state,
-            learner_state=learner_state, info=info)
-        self._write(f"storing iteration {index} of session {session_id}",
+        row, ok, position = self._iteration_row(session_id, iteration, plant_state, learner_state)
+        self._write(f"storing iteration {iteration.index} of session {session_id}",
                     lambda conn: self._insert_iteration(conn, row, ok, position))
 
     def record_study_run(self, study_id: int, key: str, spec: Mapping[str, Any], result: Mapping[str, Any], *,
-                         session: Mapping[str, Any], iterations: Sequence[Mapping[str, Any]], state: str,
+                         session: Mapping[str, Any], iterations: Sequence[Iteration], state: SessionStatus,
                          message: str) -> int:
         """A study's finished learning job, all in one transaction: its session, iterations and job row.
 
@@ -225,58 +214,41 @@ class Store(Browsing):
         leaves either all of it or none of it; returns the new session's id.
         """
         insert_session = self._session_writer(**session)
-        state = str(getattr(state, "value", state))
-        if state not in SESSION_STATES:
-            raise ConfigError(f"session state {state!r}: allowed {', '.join(SESSION_STATES)}")
+        state = _session_state(state)
 
         def write(conn: sqlite3.Connection) -> int:
             session_id = insert_session(conn)
             for it in iterations:
-                row, ok, position = self._iteration_row(session_id, **dict(it))
+                row, ok, position = self._iteration_row(session_id, it)
                 self._insert_iteration(conn, row, ok, position)
             now = utc_now()
             checksums.update(conn, self.path, "sessions", {"id": session_id},
-                             {"state": state, "message": message, "ended_at": now, "updated_at": now})
-            self._insert_study_job(conn, study_id, key, spec, result, "done", None, session_id)
+                             {"state": state.value, "message": message, "ended_at": now, "updated_at": now})
+            self._insert_study_job(conn, study_id, key, spec, result, JobStatus.DONE, None, session_id)
             return session_id
 
         return int(self._write(f"recording study {study_id} job {key}", write))
 
-    def append_iterations(self, session_id: int, iterations: Sequence[Mapping[str, Any]]) -> None:
-        """Store several trials in one transaction (each a mapping of :meth:`append_iteration`'s arguments).
-
-        Used to record a study's finished learning run as a session: all of it, or nothing.
-        """
-        rows = [self._iteration_row(session_id, **dict(it)) for it in iterations]
-
-        def write(conn: sqlite3.Connection) -> None:
-            for row, ok, position in rows:
-                self._insert_iteration(conn, row, ok, position)
-
-        self._write(f"storing {len(rows)} iterations of session {session_id}", write)
-
-    def _iteration_row(self, session_id: int, *, index: int, correction: int, status: str, params: np.ndarray,
-                       next_params: np.ndarray, error: np.ndarray, gamma: float, scale: float, message: str,
-                       final_state: np.ndarray | None = None, start_state: np.ndarray | None = None,
-                       times_s: np.ndarray | None = None, states: np.ndarray | None = None,
-                       plant_state: Mapping[str, Any] | None = None,
-                       learner_state: Mapping[str, Any] | None = None,
-                       info: Mapping[str, Any] | None = None) -> tuple[dict[str, Any], bool, float | None]:
+    def _iteration_row(self, session_id: int, iteration: Iteration, plant_state: Mapping[str, Any] | None = None,
+                       learner_state: Mapping[str, Any] | None = None) -> tuple[dict[str, Any], bool, float | None]:
+        trial = iteration.trial
         traj: tuple[int, int, bytes | None] = (0, 0, None)
-        if times_s is not None and states is not None and np.asarray(times_s).size:
-            traj = encode_trajectory(times_s, states)
-        err = np.asarray(error, dtype=np.float64)
-        ok = str(status) == "ok"
+        if trial is not None and trial.times_s is not None and trial.states is not None and \
+                np.asarray(trial.times_s).size:
+            traj = encode_trajectory(trial.times_s, trial.states)
+        err = np.asarray(iteration.error, dtype=np.float64)
+        ok = iteration.status is IterationStatus.OK
         mask = self._position_mask(session_id)
         position = float(np.linalg.norm(err[mask])) if ok and mask.shape == err.shape and mask.any() else None
         row = {
-            "session_id": int(session_id), "idx": int(index), "correction": int(correction), "status": str(status),
-            "params": pack_f8(params), "next_params": pack_f8(next_params), "error": pack_f8(err),
-            "gamma": float(gamma), "scale": float(scale), "message": str(message),
-            "final_state": None if final_state is None else pack_f8(final_state),
-            "start_state": None if start_state is None else pack_f8(start_state), "traj_rows": traj[0],
-            "traj_cols": traj[1], "traj_codec": TRAJECTORY_CODEC if traj[2] is not None else None,
-            "info": json.dumps(json_ready(dict(info or {}))), "recorded_at": utc_now(),
+            "session_id": int(session_id), "idx": int(iteration.index),
+            **columns_of(iteration, ("correction", "status", "params", "next_params", "message")),
+            "gamma": float(iteration.gamma), "scale": float(iteration.scale), "error": pack_f8(err),
+            "final_state": None if trial is None or trial.final_state is None else pack_f8(trial.final_state),
+            "start_state": None if trial is None or trial.start_state is None else pack_f8(trial.start_state),
+            "traj_rows": traj[0], "traj_cols": traj[1],
+            "traj_codec": TRAJECTORY_CODEC if traj[2] is not None else None,
+            "info": json.dumps(json_ready(dict({} if trial is None else trial.info))), "recorded_at": utc_now(),
             "plant_state": None if plant_state is None else json.dumps(plant_state, separators=(",", ":")),
             "learner_state": None if learner_state is None else json.dumps(json_ready(dict(learner_state)),
                                                                            separators=(",", ":")),
@@ -324,8 +296,8 @@ class Store(Browsing):
             row = checksums.fetch(conn, self.path, "sessions", {"id": session_id})
             if row is None:
                 raise SessionNotFound(f"{self.path}: no session {session_id} (see `aerobat sessions --db {self.path}`)")
-            state, owner, pid, host = row["state"], row["owner"], row["pid"], row["host"]
-            alive = owner_alive(owner) if state == "running" and owner != self.owner else False
+            state, owner, pid, host = _session_state(row["state"]), row["owner"], row["pid"], row["host"]
+            alive = owner_alive(owner) if state is SessionStatus.RUNNING and owner != self.owner else False
             if alive is None and not take_over:
                 raise SessionInUse(f"{self.path}: session {session_id} was last run by process {pid} on another "
                                    f"machine ({host}), which this one cannot check; if that process is gone, "
@@ -334,8 +306,9 @@ class Store(Browsing):
                 raise SessionInUse(f"{self.path}: session {session_id} is still being run by process {pid} on "
                                    f"{host}; stop that process before resuming")
             checksums.update(conn, self.path, "sessions", {"id": session_id}, {
-                "state": "running", "owner": self.owner, "pid": os.getpid(), "host": socket.gethostname(),
-                "ended_at": None, "updated_at": utc_now(), "message": f"resumed (was {state})"}, old=row)
+                "state": SessionStatus.RUNNING.value, "owner": self.owner, "pid": os.getpid(),
+                "host": socket.gethostname(), "ended_at": None, "updated_at": utc_now(),
+                "message": f"resumed (was {state})"}, old=row)
 
         self._write(f"claiming session {session_id}", write)
         return self.session(session_id)
@@ -346,18 +319,17 @@ class Store(Browsing):
         self._write(f"updating session {session_id}", lambda conn: checksums.update(
             conn, self.path, "sessions", {"id": session_id}, {"target_iterations": target, "updated_at": utc_now()}))
 
-    def finish_session(self, session_id: int, state: str, message: str) -> None:
-        """Record how the session ended (``state`` one of :data:`SESSION_STATES`)."""
-        state = str(getattr(state, "value", state))
-        if state not in SESSION_STATES:
-            raise ConfigError(f"session state {state!r}: allowed {', '.join(SESSION_STATES)}")
+    def finish_session(self, session_id: int, state: SessionStatus, message: str) -> None:
+        """Record how the session ended (a :class:`~aerobat.core.learning.SessionStatus`)."""
+        state = _session_state(state)
         now = utc_now()
 
         def write(conn: sqlite3.Connection) -> None:
             row = checksums.fetch(conn, self.path, "sessions", {"id": session_id})
             if row is not None and row["owner"] == self.owner:
                 checksums.update(conn, self.path, "sessions", {"id": session_id}, {
-                    "state": state, "message": message, "ended_at": None if state == "running" else now,
+                    "state": state.value, "message": message,
+                    "ended_at": None if state is SessionStatus.RUNNING else now,
                     "updated_at": now}, old=row)
 
         self._write(f"closing session {session_id}", write)

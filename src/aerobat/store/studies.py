@@ -10,9 +10,9 @@ from typing import Any
 from aerobat.config import short_repr
 from aerobat.errors import ConfigError, SessionNotFound, StoreFormatError
 from aerobat.store import checksums
-from aerobat.store.codec import canonical_json, json_ready, utc_now
+from aerobat.store.codec import canonical_json, from_columns, json_ready, utc_now
 from aerobat.store.database import Database, next_id
-from aerobat.store.records import StudyJobRecord, StudyRecord
+from aerobat.store.records import JobStatus, StudyJobRecord, StudyRecord
 
 __all__ = ["StudyTables"]
 
@@ -71,15 +71,21 @@ class StudyTables(Database):
         with self._guard("reading study jobs"):
             rows = (self._db.execute(sql + " ORDER BY study_id, key").fetchall() if study_id is None else
                     self._db.execute(sql + " WHERE study_id = ? ORDER BY key", (study_id,)).fetchall())
-        return [checksums.verify(self.path, "study_jobs", r) for r in rows]
+        jobs = [checksums.verify(self.path, "study_jobs", r) for r in rows]
+        for job in jobs:
+            try:
+                job["status"] = JobStatus(job["status"])
+            except ValueError:
+                raise StoreFormatError(f"{self.path}: study {job['study_id']} job {job['key']}: unknown status "
+                                       f"{short_repr(job['status'])} (written by another aerobat?)") from None
+        return jobs
 
     def _study(self, r: dict[str, Any], jobs: Sequence[dict[str, Any]]) -> StudyRecord:
         what = f"study {r['id']}"
-        return StudyRecord(id=int(r["id"]), kind=str(r["kind"]), spec=self._json(r["spec"], what),
-                           created_at=str(r["created_at"]),
-                           command=tuple(self._json(r["command"] or "[]", what)), out_dir=r["out_dir"],
-                           jobs_done=sum(j["study_id"] == r["id"] and j["status"] == "done" for j in jobs),
-                           jobs_failed=sum(j["study_id"] == r["id"] and j["status"] == "failed" for j in jobs))
+        own = [j["status"] for j in jobs if j["study_id"] == r["id"]]
+        return from_columns(  # type: ignore[no-any-return]
+            StudyRecord, r, spec=self._json(r["spec"], what), command=tuple(self._json(r["command"] or "[]", what)),
+            jobs_done=own.count(JobStatus.DONE), jobs_failed=own.count(JobStatus.FAILED))
 
     def list_studies(self) -> list[StudyRecord]:
         """Every study, oldest first, with its job counts (every row verified against its checksum)."""
@@ -100,22 +106,26 @@ class StudyTables(Database):
 
     def finished_study_jobs(self, study_id: int) -> set[str]:
         """Keys of the jobs that are done (failed jobs are not: they run again on resume)."""
-        return {j["key"] for j in self._jobs(study_id) if j["status"] == "done"}
+        return {j["key"] for j in self._jobs(study_id) if j["status"] is JobStatus.DONE}
 
     def record_study_job(self, study_id: int, key: str, spec: Mapping[str, Any], result: Mapping[str, Any], *,
-                         status: str = "done", error: str | None = None, session_id: int | None = None) -> None:
+                         status: JobStatus = JobStatus.DONE, error: str | None = None,
+                         session_id: int | None = None) -> None:
         """Store one finished (or failed) job, committed before the next result is taken.
 
         A job recorded again (a failed job run on resume) replaces its row; ``attempts`` counts the runs.
         """
-        if status not in ("done", "failed"):
-            raise ConfigError(f"study job status {status!r}: allowed 'done' or 'failed'")
+        try:
+            job_status = JobStatus(status)
+        except ValueError:
+            raise ConfigError(f"study job status {short_repr(status)}: allowed 'done' or 'failed'") from None
         self._write("recording a study job", lambda conn: self._insert_study_job(
-            conn, study_id, key, spec, result, status, error, session_id))
+            conn, study_id, key, spec, result, job_status, error, session_id))
 
     @staticmethod
     def _insert_study_job(conn: sqlite3.Connection, study_id: int, key: str, spec: Mapping[str, Any],
-                          result: Mapping[str, Any], status: str, error: str | None, session_id: int | None) -> None:
+                          result: Mapping[str, Any], status: JobStatus, error: str | None,
+                          session_id: int | None) -> None:
         spec_json = canonical_json(json_ready(dict(spec)))
         result_json = json.dumps(json_ready(dict(result)), allow_nan=True)
         row = conn.execute("SELECT attempts FROM study_jobs WHERE study_id = ? AND key = ?",
@@ -123,17 +133,15 @@ class StudyTables(Database):
         attempts = 1 + (int(row[0]) if row else 0)
         checksums.insert(conn, "study_jobs", {
             "study_id": study_id, "key": str(key), "spec": spec_json, "result": result_json,
-            "recorded_at": utc_now(), "status": status, "error": error, "attempts": attempts,
+            "recorded_at": utc_now(), "status": status.value, "error": error, "attempts": attempts,
             "session_id": session_id}, verb="INSERT OR REPLACE")
 
     def study_jobs(self, study_id: int) -> list[StudyJobRecord]:
         """Every recorded job of the study (done and failed), by key."""
-        return [StudyJobRecord(study_id=r["study_id"], key=r["key"], status=r["status"],
-                               spec=self._json(r["spec"], f"study {study_id} job {r['key']}"),
-                               result=self._json(r["result"], f"study {study_id} job {r['key']}"),
-                               error=r["error"], attempts=int(r["attempts"]), session_id=r["session_id"],
-                               recorded_at=r["recorded_at"]) for r in self._jobs(study_id)]
+        return [from_columns(StudyJobRecord, r, spec=self._json(r["spec"], f"study {study_id} job {r['key']}"),
+                             result=self._json(r["result"], f"study {study_id} job {r['key']}"))
+                for r in self._jobs(study_id)]
 
     def study_results(self, study_id: int) -> dict[str, dict[str, Any]]:
         """Results of the jobs that are done, by key."""
-        return {job.key: job.result for job in self.study_jobs(study_id) if job.status == "done"}
+        return {job.key: job.result for job in self.study_jobs(study_id) if job.status is JobStatus.DONE}

@@ -2,7 +2,9 @@
 
 Each study is a list of :class:`~aerobat.experiments.execution.Job` built from a
 seed; :func:`~aerobat.experiments.studies.runner.run_study` runs them and commits
-every outcome to the store as it arrives.
+every outcome to the store as it arrives; :mod:`~aerobat.experiments.studies.reports` makes
+each study's rows, CSV and figures (``feedback_report(outcome, jobs)``, or
+``study_report(store, study_id)`` for a stored study).
 """
 
 from aerobat.experiments.studies.envelope import envelope_grid, envelope_jobs
@@ -14,6 +16,22 @@ from aerobat.experiments.studies.feedback import (
     summarize_feedback,
 )
 from aerobat.experiments.studies.maps import map_csv, map_grid, map_jobs
+from aerobat.experiments.studies.reports import (
+    EnvelopeCell,
+    EnvelopeReport,
+    FeedbackReport,
+    FeedbackRow,
+    RobustnessReport,
+    RobustnessVehicle,
+    RulesReport,
+    RulesRow,
+    StudyReport,
+    envelope_report,
+    feedback_report,
+    robustness_report,
+    rules_report,
+    study_report,
+)
 from aerobat.experiments.studies.robustness import (
     BETAFLIGHT_PROPERTIES,
     SAMPLED_PROPERTIES,
@@ -33,12 +51,23 @@ __all__ = [
     "DEFAULT_METHODS",
     "SAMPLED_PROPERTIES",
     "SCENARIOS",
+    "EnvelopeCell",
+    "EnvelopeReport",
     "FailedJob",
+    "FeedbackReport",
+    "FeedbackRow",
     "RobustnessRanges",
+    "RobustnessReport",
     "RobustnessSummary",
+    "RobustnessVehicle",
+    "RulesReport",
+    "RulesRow",
     "StudyOutcome",
+    "StudyReport",
     "envelope_grid",
     "envelope_jobs",
+    "envelope_report",
+    "feedback_report",
     "feedback_study_jobs",
     "load_ranges",
     "map_csv",
@@ -48,10 +77,13 @@ __all__ = [
     "parse_scenarios",
     "parse_schemes",
     "robustness_jobs",
+    "robustness_report",
+    "rules_report",
     "rules_study_jobs",
     "run_study",
     "sample_arena",
     "sample_betaflight",
+    "study_report",
     "summarize_feedback",
     "summarize_robustness",
     "summarize_rules",

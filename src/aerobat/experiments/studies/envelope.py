@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.experiments.job import Job
+from aerobat.experiments.job import Job, JobStatus
 from aerobat.quadrotor.vehicle import VehicleConfig, vehicle_table
 
 __all__ = ["ENVELOPE_QUANTITIES", "envelope_grid", "envelope_jobs", "envelope_key"]
@@ -43,7 +43,8 @@ def envelope_grid(results: Mapping[str, Mapping[str, Any]], flips: Sequence[int]
                 for q in grid:
                     value = r.get(q)
                     grid[q][i, j] = value if isinstance(value, float) else np.nan
-            rows.append({"flips": n, "max_rate_deg_s": rate, "job": "done" if r is not None else "failed",
+            job = JobStatus.DONE if r is not None else JobStatus.FAILED
+            rows.append({"flips": n, "max_rate_deg_s": rate, "job": job,
                          **{k: (r or {}).get(k) for k in ("converged", "status", "duration_s", "apex_m", "lowest_m",
                                                           "condition_number")}})
     return feasible, grid, rows

@@ -19,11 +19,12 @@ import numpy as np
 
 from aerobat.config import short_repr
 from aerobat.core.design import Design
+from aerobat.core.learning import Iteration, SessionStatus
 from aerobat.core.registry import from_spec
 from aerobat.core.rules import RuleChoice
 from aerobat.errors import ConfigError
 from aerobat.experiments.execution import Executor, make_executor
-from aerobat.experiments.job import Job, JobResult
+from aerobat.experiments.job import Job, JobResult, JobStatus
 from aerobat.experiments.setup import plant_record_config
 from aerobat.plants import PlantChoice
 from aerobat.store import Store
@@ -73,12 +74,21 @@ def _label(job: Job) -> str:
     return str(job.spec.get("method", job.kind))
 
 
+def _ended(status: str) -> SessionStatus:
+    """How a study's learning run ended, from its result's ``status`` (``failed`` for anything else)."""
+    try:
+        state = SessionStatus(status)
+    except ValueError:
+        return SessionStatus.FAILED
+    return SessionStatus.FAILED if state is SessionStatus.RUNNING else state
+
+
 def _record(store: Store, study_id: int, job: Job, outcome: JobResult) -> None:
     """Commit one job's outcome; a finished learning run also becomes a session, in the same transaction."""
     iterations = outcome.result.get("iterations") if outcome.done else None
     spec = job.spec
     if not iterations or not all(k in spec for k in ("maneuver", "design", "model", "plant")):
-        store.record_study_job(study_id, job.key, spec, outcome.result, status=outcome.status.value,
+        store.record_study_job(study_id, job.key, spec, outcome.result, status=outcome.status,
                                error=outcome.error)
         return
     source = f"study {study_id} job {job.key}"
@@ -86,7 +96,6 @@ def _record(store: Store, study_id: int, job: Job, outcome: JobResult) -> None:
     design = Design.from_json_dict(maneuver, spec["design"])
     plant = PlantChoice.from_table(spec["plant"], source=f"{source} plant")
     rule = RuleChoice.parse(str(spec.get("rule") or spec.get("method", "paper")), source=f"{source} rule")
-    nan = float("nan")
     status = str(outcome.result.get("status", "completed"))
     store.record_study_run(
         study_id, job.key, spec, outcome.result,
@@ -95,13 +104,8 @@ def _record(store: Store, study_id: int, job: Job, outcome: JobResult) -> None:
                  "target_iterations": max(1, int(spec.get("iterations", spec.get("trials", 1)))),
                  "start_params": design.p_nominal, "command": ("study", str(study_id), job.key),
                  "study_id": study_id},
-        iterations=[{
-            "index": int(it["i"]), "correction": int(it["correction"]), "status": str(it["status"]),
-            "params": np.asarray(it["params"], dtype=float), "next_params": np.asarray(it["next_params"], dtype=float),
-            "error": np.array([nan if v is None else v for v in it["error"]], dtype=float),
-            "gamma": float(it["gamma"]), "scale": float(it["scale"]), "message": str(it["message"]),
-        } for it in iterations],
-        state=status if status in ("completed", "crashed", "aborted", "failed", "interrupted") else "failed",
+        iterations=[Iteration.from_json_dict(it) for it in iterations],
+        state=_ended(status),
         message=str(outcome.result.get("message", status)))
 
 
@@ -165,7 +169,7 @@ def run_study(
             runner.close()
     by_key = {job.key: job for job in jobs}
     failed = tuple(FailedJob(j.key, _label(by_key[j.key]) if j.key in by_key else j.key, j.error or "failed")
-                   for j in store.study_jobs(study_id) if j.status == "failed")
+                   for j in store.study_jobs(study_id) if j.status is JobStatus.FAILED)
     return StudyOutcome(study_id, len(jobs), len(todo), len(jobs) - len(todo), failed,
                         store.study_results(study_id))
 

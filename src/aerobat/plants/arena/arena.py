@@ -22,6 +22,7 @@ from aerobat.plants.arena.kernel import supervise
 from aerobat.plants.arena.params import ArenaParams
 from aerobat.plants.lab_kernels import MOCAP_COLUMNS
 from aerobat.plants.mocap import estimate_final_state, measured_states
+from aerobat.plants.plant_state import StateLayout
 from aerobat.quadrotor.dynamics import (
     N_STATE,
     controller_vector,
@@ -54,6 +55,9 @@ class _Failure:
     status: TrialStatus
     message: str
 
+
+# the true state may hold NaN after a diverged trial: the next trial starts from hover again
+_LAYOUT = StateLayout("arena", counters=("trials_flown", "tick"), fractions=("capacity",), finite=False)
 
 _SETTLED = _Failure(TrialStatus.OK, "settled")
 """Returned by a settling flight that reached its tolerance (not a failure)."""
@@ -188,6 +192,8 @@ class Arena:
         """A fresh battery and propellers: thrust capacity back to 100 %."""
         self.capacity = 1.0
 
+    _ARRAYS = ("x", "gyro_prev", "radio_cmd", "integral", "plant", "start_m")
+
     def get_state(self) -> dict[str, object]:
         """Everything that changes from trial to trial, as JSON-ready plain values.
 
@@ -201,22 +207,14 @@ class Arena:
             ``rng`` (the generator's ``bit_generator.state``, integers only),
             ``trials_flown``, ``capacity``, ``tick``, and the arrays ``x`` (true
             vehicle state), ``gyro_prev``, ``radio_cmd``, ``integral``, ``plant``,
-            ``start_m`` as lists of floats.
+            ``start_m`` (and with onboard feedback its estimator's ``onboard`` and
+            ``history``) as lists of floats; :mod:`aerobat.plants.plant_state` has the format.
         """
-        rng = self.rng.bit_generator.state
-        state: dict[str, object] = {
-            "format": 1,
-            "rng": {key: (dict(value) if isinstance(value, dict) else value) for key, value in rng.items()},
-            "trials_flown": int(self.trials_flown),
-            "capacity": float(self.capacity),
-            "tick": int(self.tick),
-        }
-        for name in ("x", "gyro_prev", "radio_cmd", "integral", "plant", "start_m"):
-            state[name] = [float(v) for v in getattr(self, name)]
+        arrays = {name: getattr(self, name) for name in self._ARRAYS}
         if self.feedback.enabled:
-            state["onboard"] = [float(v) for v in self.onboard]
-            state["history"] = [float(v) for v in self.history.ravel()]
-        return state
+            arrays.update(onboard=self.onboard, history=self.history)
+        return _LAYOUT.encode(self.rng, {"trials_flown": self.trials_flown, "tick": self.tick},
+                              {"capacity": self.capacity}, arrays)
 
     def set_state(self, state: dict[str, object]) -> None:
         """Restore a state from :meth:`get_state` (of an arena built with the same arguments).
@@ -226,62 +224,21 @@ class Arena:
         ValueError
             A field is missing, of the wrong type or length, or the generator kind differs.
         """
-        from collections.abc import Mapping
-
-        if not isinstance(state, Mapping):
-            raise ValueError(f"arena state: expected a table, got {type(state).__name__}")
-        array_names = ("x", "gyro_prev", "radio_cmd", "integral", "plant", "start_m")
-        missing = [k for k in ("format", "rng", "trials_flown", "capacity", "tick", *array_names) if k not in state]
-        if missing:
-            raise ValueError(f"arena state: missing field(s) {', '.join(missing)}")
-        if state["format"] != 1:
-            raise ValueError(f"arena state.format = {state['format']!r}: this aerobat reads format 1")
-        rng = state["rng"]
-        kind = self.rng.bit_generator.state["bit_generator"]
-        if not isinstance(rng, Mapping) or rng.get("bit_generator") != kind:
-            raise ValueError(f"arena state.rng: expected a {kind} generator state")
-        arrays = {}
-        for name in array_names:
-            current = getattr(self, name)
-            try:
-                values = np.array(state[name], dtype=np.float64)
-            except (TypeError, ValueError):
-                raise ValueError(f"arena state.{name}: expected a list of numbers") from None
-            if name == "plant" and values.shape == (current.shape[0] - 1,):
-                values = np.append(values, 0.0)  # stored before the axial rotor-drag entry existed (0 = none)
-            if values.shape != current.shape:
-                raise ValueError(f"arena state.{name}: expected {current.shape[0]} values, got {values.size}")
-            arrays[name] = values
-        counters = {}
-        for name in ("trials_flown", "tick"):
-            count = state[name]
-            if isinstance(count, bool) or not isinstance(count, int) or count < 0:
-                raise ValueError(f"arena state.{name} = {count!r}: expected an integer >= 0")
-            counters[name] = count
-        capacity = state["capacity"]
-        if isinstance(capacity, bool) or not isinstance(capacity, int | float) or not 0.0 < capacity <= 1.0:
-            raise ValueError(f"arena state.capacity = {capacity!r}: expected a number in (0, 1]")
-        try:
-            self.rng.bit_generator.state = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in rng.items()}
-        except (TypeError, ValueError, KeyError) as exc:
-            raise ValueError(f"arena state.rng: {exc}") from None
         onboard, history = onboard_state()
+        sizes = {name: getattr(self, name).size for name in self._ARRAYS}
         if self.feedback.enabled:
-            for name, default in (("onboard", onboard), ("history", history)):
-                if name not in state:
-                    raise ValueError(f"arena state: missing field {name} (the onboard feedback's estimator)")
-                try:
-                    values = np.array(state[name], dtype=np.float64)
-                except (TypeError, ValueError):
-                    raise ValueError(f"arena state.{name}: expected a list of numbers") from None
-                if values.size != default.size:
-                    raise ValueError(f"arena state.{name}: expected {default.size} values, got {values.size}")
-                default[...] = values.reshape(default.shape)
-        self.trials_flown = counters["trials_flown"]
-        self.capacity = float(capacity)
-        self.tick = counters["tick"]
-        for name, values in arrays.items():
-            setattr(self, name, values)
+            sizes.update(onboard=onboard.size, history=history.size)
+        # a state stored before the axial rotor-drag entry existed lacks it (0 = none)
+        read = _LAYOUT.decode(state, self.rng, sizes, padding={"plant": 0.0})
+        self.rng.bit_generator.state = read.rng
+        self.trials_flown = read.counters["trials_flown"]
+        self.tick = read.counters["tick"]
+        self.capacity = read.fractions["capacity"]
+        for name in self._ARRAYS:
+            setattr(self, name, read.arrays[name])
+        if self.feedback.enabled:
+            onboard[...] = read.arrays["onboard"].reshape(onboard.shape)
+            history[...] = read.arrays["history"].reshape(history.shape)
         self.onboard, self.history = onboard, history
 
     # ------------------------------------------------------------ simulation

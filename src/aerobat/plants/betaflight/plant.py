@@ -43,6 +43,7 @@ from aerobat.plants.betaflight.pilot import L_CLIMB, StickMap, angle_sticks, pro
 from aerobat.plants.betaflight.rc import RC_MIN_US, stick_to_us
 from aerobat.plants.betaflight.settings import BetaflightSettings, load_settings
 from aerobat.plants.mocap import estimate_final_state, measured_states
+from aerobat.plants.plant_state import StateLayout
 from aerobat.quadrotor.dynamics import N_STATE, quaternion_from_rotation_vector, quaternion_multiply
 from aerobat.quadrotor.feedback import (
     Feedback,
@@ -59,6 +60,8 @@ from aerobat.quadrotor.simulate import simulate
 from aerobat.quadrotor.vehicle import VehicleConfig
 
 __all__ = ["BetaflightPlant"]
+
+_LAYOUT = StateLayout("betaflight", counters=("trials_flown",), fractions=("capacity",))
 
 _MARGIN_S = 0.015  # program's hover command after its end (the estimate looks 10 ms past it)
 _LANDING_SPEED_M_S = 1.0
@@ -139,13 +142,7 @@ class BetaflightPlant:
     # ---------------------------------------------------------------- state
     def get_state(self) -> dict[str, Any]:
         """What changes from trial to trial: ``format``, ``rng``, ``trials_flown``, ``capacity`` (JSON-ready)."""
-        rng = self.rng.bit_generator.state
-        return {
-            "format": 1,
-            "rng": {key: (dict(value) if isinstance(value, dict) else value) for key, value in rng.items()},
-            "trials_flown": int(self.trials_flown),
-            "capacity": float(self.capacity),
-        }
+        return _LAYOUT.encode(self.rng, {"trials_flown": self.trials_flown}, {"capacity": self.capacity}, {})
 
     def set_state(self, state: Mapping[str, Any]) -> None:
         """Restore :meth:`get_state` (of a plant built with the same arguments).
@@ -155,29 +152,10 @@ class BetaflightPlant:
         ValueError
             A field is missing or of the wrong type, or the generator kind differs.
         """
-        if not isinstance(state, Mapping):
-            raise ValueError(f"betaflight state: expected a table, got {type(state).__name__}")
-        missing = [k for k in ("format", "rng", "trials_flown", "capacity") if k not in state]
-        if missing:
-            raise ValueError(f"betaflight state: missing field(s) {', '.join(missing)}")
-        if state["format"] != 1:
-            raise ValueError(f"betaflight state.format = {state['format']!r}: this aerobat reads format 1")
-        kind = self.rng.bit_generator.state["bit_generator"]
-        rng = state["rng"]
-        if not isinstance(rng, Mapping) or rng.get("bit_generator") != kind:
-            raise ValueError(f"betaflight state.rng: expected a {kind} generator state")
-        count = state["trials_flown"]
-        if isinstance(count, bool) or not isinstance(count, int) or count < 0:
-            raise ValueError(f"betaflight state.trials_flown = {count!r}: expected an integer >= 0")
-        capacity = state["capacity"]
-        if isinstance(capacity, bool) or not isinstance(capacity, int | float) or not 0.0 < capacity <= 1.0:
-            raise ValueError(f"betaflight state.capacity = {capacity!r}: expected a number in (0, 1]")
-        try:
-            self.rng.bit_generator.state = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in rng.items()}
-        except (TypeError, ValueError, KeyError) as exc:
-            raise ValueError(f"betaflight state.rng: {exc}") from None
-        self.trials_flown = count
-        self.capacity = float(capacity)
+        read = _LAYOUT.decode(state, self.rng, {})
+        self.rng.bit_generator.state = read.rng
+        self.trials_flown = read.counters["trials_flown"]
+        self.capacity = read.fractions["capacity"]
 
     def reset_drift(self) -> None:
         """A fresh battery: thrust capacity back to 100 %."""

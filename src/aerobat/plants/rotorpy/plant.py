@@ -43,6 +43,7 @@ from aerobat.core.plant import Trial, TrialStatus
 from aerobat.errors import MissingDependency
 from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose, mocap_sample, pd_command
 from aerobat.plants.mocap import estimate_final_state, measured_states
+from aerobat.plants.plant_state import StateLayout
 from aerobat.plants.rotorpy.settings import (
     RotorPySettings,
     WindSettings,
@@ -68,6 +69,8 @@ from aerobat.quadrotor.simulate import simulate
 from aerobat.quadrotor.vehicle import VehicleConfig
 
 __all__ = ["RotorPyPlant"]
+
+_LAYOUT = StateLayout("rotorpy", counters=("trials_flown", "tick"))
 
 
 # ------------------------------------------------------------ integrators
@@ -298,17 +301,10 @@ class RotorPyPlant:
             ``tick``, ``vehicle`` (RotorPy's state dict as lists), ``integral``, ``start_m``,
             ``supervisor_cmd`` (lists of floats).
         """
-        rng = self.rng.bit_generator.state
-        return {
-            "format": 1,
-            "rng": {key: (dict(value) if isinstance(value, dict) else value) for key, value in rng.items()},
-            "trials_flown": int(self.trials_flown),
-            "tick": int(self.tick),
-            "vehicle": {key: [float(v) for v in self.state[key]] for key in self._VEHICLE_KEYS},
-            "integral": [float(v) for v in self.integral],
-            "start_m": [float(v) for v in self.start_m],
-            "supervisor_cmd": [float(v) for v in self._supervisor_cmd],
-        }
+        arrays = {f"vehicle.{key}": self.state[key] for key in self._VEHICLE_KEYS}
+        arrays.update({name: getattr(self, name) for name in self._ARRAYS})
+        arrays["supervisor_cmd"] = self._supervisor_cmd
+        return _LAYOUT.encode(self.rng, {"trials_flown": self.trials_flown, "tick": self.tick}, {}, arrays)
 
     def set_state(self, state: Mapping[str, Any]) -> None:
         """Restore a state from :meth:`get_state` (of a plant built with the same arguments).
@@ -318,46 +314,16 @@ class RotorPyPlant:
         ValueError
             A field is missing, of the wrong type or length, or the generator kind differs.
         """
-        if not isinstance(state, Mapping):
-            raise ValueError(f"rotorpy state: expected a table, got {type(state).__name__}")
-        fields = ("format", "rng", "trials_flown", "tick", "vehicle", "integral", "start_m", "supervisor_cmd")
-        missing = [k for k in fields if k not in state]
-        if missing:
-            raise ValueError(f"rotorpy state: missing field(s) {', '.join(missing)}")
-        if state["format"] != 1:
-            raise ValueError(f"rotorpy state.format = {state['format']!r}: this aerobat reads format 1")
-        kind = self.rng.bit_generator.state["bit_generator"]
-        rng = state["rng"]
-        if not isinstance(rng, Mapping) or rng.get("bit_generator") != kind:
-            raise ValueError(f"rotorpy state.rng: expected a {kind} generator state")
-        for name in ("trials_flown", "tick"):
-            count = state[name]
-            if isinstance(count, bool) or not isinstance(count, int) or count < 0:
-                raise ValueError(f"rotorpy state.{name} = {count!r}: expected an integer >= 0")
-
-        def floats(value: Any, size: int, where: str) -> np.ndarray:
-            try:
-                arr = np.array(value, dtype=np.float64)
-            except (TypeError, ValueError):
-                raise ValueError(f"rotorpy state.{where}: expected a list of numbers") from None
-            if arr.shape != (size,) or not np.all(np.isfinite(arr)):
-                raise ValueError(f"rotorpy state.{where}: expected {size} finite numbers")
-            return arr
-
-        vehicle = state["vehicle"]
-        if not isinstance(vehicle, Mapping):
-            raise ValueError("rotorpy state.vehicle: expected a table")
-        restored = {key: floats(vehicle.get(key), self.state[key].size, f"vehicle.{key}")
-                    for key in self._VEHICLE_KEYS}
-        arrays = {name: floats(state[name], 3, name) for name in self._ARRAYS}
-        cmd = floats(state["supervisor_cmd"], 4, "supervisor_cmd")
-        self.rng.bit_generator.state = dict(rng)
-        self.trials_flown = state["trials_flown"]
-        self.tick = state["tick"]
-        self.state = restored
-        self.integral = arrays["integral"]
-        self.start_m = arrays["start_m"]
-        self._supervisor_cmd = cmd
+        sizes = {f"vehicle.{key}": self.state[key].size for key in self._VEHICLE_KEYS}
+        sizes.update({name: 3 for name in self._ARRAYS}, supervisor_cmd=4)
+        read = _LAYOUT.decode(state, self.rng, sizes)
+        self.rng.bit_generator.state = read.rng
+        self.trials_flown = read.counters["trials_flown"]
+        self.tick = read.counters["tick"]
+        self.state = {key: read.arrays[f"vehicle.{key}"] for key in self._VEHICLE_KEYS}
+        self.integral = read.arrays["integral"]
+        self.start_m = read.arrays["start_m"]
+        self._supervisor_cmd = read.arrays["supervisor_cmd"]
 
     # ------------------------------------------------------------ stepping
     def _record(self) -> None:

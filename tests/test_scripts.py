@@ -48,5 +48,6 @@ def test_an_in_memory_session_draws_its_side_views_and_learning_figure(tmp_path)
     save_figure(plot_session_learning(session), tmp_path / "learning.png")
     assert (tmp_path / "side.png").stat().st_size > 10_000 and (tmp_path / "learning.png").stat().st_size > 10_000
     move = translation_maneuver(config, (1.0, 0.0))  # a target away from the start is drawn where it is
-    nominal_only = learn(move, design(move, NominalModel(config)), Arena(config, seed=1), iterations=0)
+    nominal_only = learn(move, design(move, NominalModel(config)), Arena(config, seed=1), iterations=1,
+                         should_stop=lambda: True)
     assert [label for label, _, _ in session_flights(nominal_only, config)] == ["nominal (model)"]

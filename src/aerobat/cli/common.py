@@ -15,7 +15,10 @@ import sys
 from pathlib import Path
 from typing import Any, NoReturn
 
+from aerobat.core.bounds import choices_of
+from aerobat.core.correction import CorrectionKind
 from aerobat.errors import AerobatError, ConfigError, OutputError
+from aerobat.quadrotor.feedback import FeedbackScheme
 
 __all__ = [
     "CommandFailed",
@@ -292,7 +295,7 @@ def add_maneuver_options(p: argparse.ArgumentParser, *, optional: bool = False, 
     old_spelling(p, "--final-angle-rad", "final_angle_deg", type=finite_float(-40.0, 40.0, "rad"),
                  convert=math.degrees)
     p.add_argument("--vehicle", default="hummingbird", help="design vehicle: a preset name or a vehicle TOML file")
-    p.add_argument("--correction", choices=("tsvd", "inverse", "damped"), default="tsvd",
+    p.add_argument("--correction", choices=choices_of(CorrectionKind), default="tsvd",
                    help="right inverse used for C, see docs/results.md")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
@@ -338,7 +341,7 @@ def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | No
     p.add_argument("--seed", type=bounded_int(0, 2**63 - 1), default=0, help="seed of the plant's random generator")
     if not feedback:
         return
-    p.add_argument("--feedback", choices=("none", "attitude", "tracking"), default=None,
+    p.add_argument("--feedback", choices=choices_of(FeedbackScheme), default=None,
                    help="what the vehicle's onboard loop mixes into the program: none is the paper's open "
                         "loop, attitude, tracking; see docs/feedback.md (default: the plant's best measured, "
                         "tracking on the arena and Betaflight, none on RotorPy)")

@@ -39,6 +39,7 @@ from aerobat.cli.common import (
     text_path,
 )
 from aerobat.cli.show import print_stored_session
+from aerobat.core.bounds import ITERATIONS
 from aerobat.errors import ConfigError
 
 __all__ = ["register"]
@@ -300,9 +301,9 @@ def register(sub: Any) -> None:
                        formatter_class=HelpFormatter)
     add_maneuver_options(p, optional=True)
     add_plant_options(p)
-    p.add_argument("--trials", dest="iterations", type=bounded_int(1, 10000), default=None,
+    p.add_argument("--trials", dest="iterations", type=bounded_int(*ITERATIONS.bounds()), default=None,
                    help="measured trials, one learning iteration each (default: 30; with --resume the stored target)")
-    old_spelling(p, "--iterations", "iterations", type=bounded_int(1, 10000))
+    old_spelling(p, "--iterations", "iterations", type=bounded_int(*ITERATIONS.bounds()))
     p.add_argument("--gamma", default="paper", help="'paper', that is max(1/i, 0.1), or a constant in (0, 1]")
     p.add_argument("--rule", default="paper",
                    help="update rule: paper, tsvd, damped, kalman, broyden, or <rule>+isc (docs/method.md)")

@@ -44,7 +44,9 @@ from aerobat.cli.common import (
     with_tune_from_args,
 )
 from aerobat.cli.stopping import Stopped, sigterm_stops
+from aerobat.core.bounds import choices_of
 from aerobat.errors import ConfigError, DesignFailed
+from aerobat.quadrotor.feedback import FeedbackScheme
 
 __all__ = ["add_execution_options", "register", "report_failures", "run_cli_study"]
 
@@ -418,7 +420,7 @@ def register(sub: Any) -> None:
                      help="sampling ranges, a [ranges] table (default: docs/plants.md's)")
     rob.add_argument("--plant", choices=("arena", "betaflight"), default="arena",
                      help="whose true vehicle is sampled (docs/plants.md says what varies)")
-    rob.add_argument("--feedback", choices=("none", "attitude", "tracking"), default=None,
+    rob.add_argument("--feedback", choices=choices_of(FeedbackScheme), default=None,
                      help="onboard feedback of every vehicle, see docs/feedback.md "
                           "(default: the plant's best measured)")
     rob.add_argument("--betaflight", metavar="FILE.toml",
@@ -448,7 +450,7 @@ def register(sub: Any) -> None:
     fb = ssub.add_parser("feedback", help="open loop and each onboard feedback scheme side by side, across "
                          "scenarios", formatter_class=fmt)
     add_maneuver_options(fb)
-    fb.add_argument("--schemes", metavar="LIST", default="none,attitude,tracking",
+    fb.add_argument("--schemes", metavar="LIST", default=",".join(choices_of(FeedbackScheme)),
                     help="comma list of feedback schemes")
     fb.add_argument("--scenarios", metavar="LIST", default="default,gyro-x5,lossy-link,slow-link",
                     help="comma list of arena scenarios (docs/feedback.md)")

@@ -16,6 +16,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from aerobat.config import as_float_array, check_int, check_number, check_type, short_repr
+from aerobat.core.bounds import OneOf
 from aerobat.core.correction import CorrectionKind, correction_matrix, svd_info
 from aerobat.core.maneuver import Maneuver, batch_errors, bounds_arrays, check_maneuver, error_scales, parameter_scales
 from aerobat.errors import ConfigError, DesignFailed
@@ -263,8 +264,7 @@ def design(
     if not callable(getattr(model, "final_states", None)):
         raise ConfigError(f"model: expected a final-state model (e.g. NominalModel(config)), got "
                           f"{type(model).__name__} {short_repr(model)}")
-    if not isinstance(correction, str) or correction not in ("inverse", "tsvd", "damped"):
-        raise ConfigError(f"correction = {short_repr(correction)}: allowed 'inverse', 'tsvd', 'damped'")
+    OneOf(CorrectionKind).check("correction", correction)
     tolerance = check_number("tolerance", tolerance, low=0.0, low_inclusive=False)
     tsvd_rtol = check_number("tsvd_rtol", tsvd_rtol, low=0.0)
     damping = check_number("damping", damping, low=0.0)

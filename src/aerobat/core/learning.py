@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.config import check_int, short_repr
+from aerobat.core.bounds import ITERATIONS, MAX_ITERATIONS
 from aerobat.core.design import Design
 from aerobat.core.maneuver import Maneuver, bounds_arrays, check_maneuver, error_scales, position_indices
 from aerobat.core.notes import IterationNote, NoteKind, message_with_notes
@@ -31,6 +32,7 @@ from aerobat.errors import ConfigError, DesignFailed
 
 __all__ = [
     "MAX_ATTEMPTS",
+    "ITERATIONS",
     "MAX_ITERATIONS",
     "Iteration",
     "IterationStatus",
@@ -282,9 +284,6 @@ class Learner:
             raise ConfigError(f"learner state: {type(exc).__name__}: {exc}") from None
 
 
-MAX_ITERATIONS = 10_000
-"""The most measured trials one :func:`learn` call takes: every record (with its trial) is kept in
-memory for the returned :class:`Session`, tens of kilobytes each (a durable session has the same cap)."""
 MAX_ATTEMPTS = 3 * MAX_ITERATIONS + 10
 """The most trials one :func:`learn` call flies, lost and rejected ones included (its default cap at
 :data:`MAX_ITERATIONS`)."""
@@ -311,7 +310,7 @@ def learn(
     ----------
     maneuver, design : what to learn and its nominal design (p⁰, C).
     plant : anything implementing :class:`~aerobat.core.plant.Plant`.
-    iterations : number of measured trials (``ok``) to learn from, 0 … :data:`MAX_ITERATIONS`.
+    iterations : number of measured trials (``ok``) to learn from, in :data:`ITERATIONS` (1 … :data:`MAX_ITERATIONS`).
     rule : update rule; default the paper's, with ``design.correction`` and γ = max(1/i, 0.1).
     learner : continue this learner instead of starting a new one (``rule`` and ``start_params``
         must then be None).
@@ -338,9 +337,7 @@ def learn(
     if not force and getattr(design, "converged", True) is False:
         raise DesignFailed(f"design failed, nothing to learn: {design.message} (learn(..., force=True) learns from "
                            f"it anyway)", design)
-    if isinstance(iterations, bool) or not isinstance(iterations, int | np.integer) or \
-            not 0 <= iterations <= MAX_ITERATIONS:
-        raise ConfigError(f"iterations = {short_repr(iterations)}: allowed integers 0 … {MAX_ITERATIONS}")
+    iterations = ITERATIONS.check("iterations", iterations)
     if not callable(getattr(plant, "fly", None)):
         raise ConfigError(f"plant: expected a plant (with fly(program), e.g. Arena(config)), got "
                           f"{type(plant).__name__} {short_repr(plant)}")

@@ -30,8 +30,9 @@ from typing import Any
 import numpy as np
 
 from aerobat.config import as_float_array, check_int, check_type, short_repr
+from aerobat.core.bounds import ITERATIONS
 from aerobat.core.design import Design, design
-from aerobat.core.learning import MAX_ITERATIONS, Iteration, IterationStatus, Learner, SessionStatus, learn
+from aerobat.core.learning import Iteration, IterationStatus, Learner, SessionStatus, learn
 from aerobat.core.maneuver import Maneuver, check_maneuver, position_indices
 from aerobat.core.plant import Plant, StatefulPlant
 from aerobat.core.registry import from_spec
@@ -172,10 +173,7 @@ class StoredSession:
 
 
 def _check_target(iterations: Any) -> int:
-    if isinstance(iterations, bool) or not isinstance(iterations, int | np.integer) or \
-            not 1 <= iterations <= MAX_ITERATIONS:
-        raise ConfigError(f"iterations = {short_repr(iterations)}: allowed integers 1 … {MAX_ITERATIONS}")
-    return int(iterations)
+    return ITERATIONS.check("iterations", iterations)
 
 
 def start_session(

@@ -10,9 +10,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from aerobat.config import check_range
+from aerobat.core.bounds import Interval, Items, bounded, validate
 
 __all__ = ["Aerodynamics", "Disturbances", "Drift", "MotionCapture", "Supervisor", "Volume"]
+
+_SIDES = Items((Interval(high=0.0, closed="left", unit="m"), Interval(low=0.0, closed="right", unit="m")))
+"""A side of the flight volume: (low, high) with low < 0 < high [m]."""
+_GAIN = Interval(0.0, 1000.0, closed="right")
+"""A supervisor gain, in (0, 1000]."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -20,25 +25,23 @@ class Aerodynamics:
     """Body drag, rotor (induced) drag and rotational damping (see docs/plants.md for sources)."""
 
     enabled: bool = True
-    body_drag_n_s2_m2: float = 5e-3
-    rotor_drag_s_m: float = 0.0455
-    rotational_damping_n_m_s: tuple[float, float, float] = (2.0e-3, 2.0e-3, 2.0e-3)
+    body_drag_n_s2_m2: float = bounded(5e-3, Interval(0.0, 1.0, unit="N s²/m²"))
+    rotor_drag_s_m: float = bounded(0.0455, Interval(0.0, 1.0, unit="s/m"))
+    rotational_damping_n_m_s: tuple[float, float, float] = bounded(
+        (2.0e-3, 2.0e-3, 2.0e-3), Items.each(Interval(0.0, 0.1, unit="N m s/rad"), 3))
 
     def __post_init__(self) -> None:
-        check_range("body_drag_n_s2_m2", self.body_drag_n_s2_m2, low=0.0, high=1.0, unit="N s²/m²")
-        check_range("rotor_drag_s_m", self.rotor_drag_s_m, low=0.0, high=1.0, unit="s/m")
-        for i, c in enumerate(self.rotational_damping_n_m_s):
-            check_range(f"rotational_damping_n_m_s[{i}]", c, low=0.0, high=0.1, unit="N m s/rad")
+        validate(self)
 
 @dataclass(frozen=True, kw_only=True)
 class Drift:
     """Slow loss of thrust capacity from trial to trial (battery, propeller wear)."""
 
     enabled: bool = True
-    thrust_loss_per_trial: float = 2e-4
+    thrust_loss_per_trial: float = bounded(2e-4, Interval(0.0, 0.01))
 
     def __post_init__(self) -> None:
-        check_range("thrust_loss_per_trial", self.thrust_loss_per_trial, low=0.0, high=0.01)
+        validate(self)
 
 @dataclass(frozen=True, kw_only=True)
 class Disturbances:
@@ -57,75 +60,55 @@ class Disturbances:
     """
 
     enabled: bool = True
-    wind_std_m_s: float = 0.03
-    gust_amplitude_std_m_s: float = 0.03
-    gust_frequency_hz: float = 1.5
-    thrust_gain_jitter: float = 0.0035
-    motor_gain_jitter: float = 0.001
-    start_velocity_std_m_s: float = 0.015
-    start_tilt_std_rad: float = 0.003
+    wind_std_m_s: float = bounded(0.03, Interval(0.0, 5.0, unit="m/s"))
+    gust_amplitude_std_m_s: float = bounded(0.03, Interval(0.0, 5.0, unit="m/s"))
+    gust_frequency_hz: float = bounded(1.5, Interval(0.0, 50.0, unit="Hz"))
+    thrust_gain_jitter: float = bounded(0.0035, Interval(0.0, 0.1))
+    motor_gain_jitter: float = bounded(0.001, Interval(0.0, 0.1))
+    start_velocity_std_m_s: float = bounded(0.015, Interval(0.0, 1.0, unit="m/s"))
+    start_tilt_std_rad: float = bounded(0.003, Interval(0.0, 0.2, unit="rad"))
 
     def __post_init__(self) -> None:
-        check_range("wind_std_m_s", self.wind_std_m_s, low=0.0, high=5.0, unit="m/s")
-        check_range("gust_amplitude_std_m_s", self.gust_amplitude_std_m_s, low=0.0, high=5.0, unit="m/s")
-        check_range("gust_frequency_hz", self.gust_frequency_hz, low=0.0, high=50.0, unit="Hz")
-        check_range("thrust_gain_jitter", self.thrust_gain_jitter, low=0.0, high=0.1)
-        check_range("motor_gain_jitter", self.motor_gain_jitter, low=0.0, high=0.1)
-        check_range("start_velocity_std_m_s", self.start_velocity_std_m_s, low=0.0, high=1.0, unit="m/s")
-        check_range("start_tilt_std_rad", self.start_tilt_std_rad, low=0.0, high=0.2, unit="rad")
+        validate(self)
 
 @dataclass(frozen=True, kw_only=True)
 class MotionCapture:
     """Motion capture: rate, noise and latency (Sect. 10.1: 200 Hz, mm and sub-degree)."""
 
-    rate_hz: float = 200.0
-    position_noise_m: float = 0.001
-    attitude_noise_rad: float = 0.002
-    latency_s: float = 0.005
+    rate_hz: float = bounded(200.0, Interval(10.0, 2000.0, unit="Hz"))
+    position_noise_m: float = bounded(0.001, Interval(0.0, 0.1, unit="m"))
+    attitude_noise_rad: float = bounded(0.002, Interval(0.0, 0.2, unit="rad"))
+    latency_s: float = bounded(0.005, Interval(0.0, 0.2, unit="s"))
 
     def __post_init__(self) -> None:
-        check_range("rate_hz", self.rate_hz, low=10.0, high=2000.0, unit="Hz")
-        check_range("position_noise_m", self.position_noise_m, low=0.0, high=0.1, unit="m")
-        check_range("attitude_noise_rad", self.attitude_noise_rad, low=0.0, high=0.2, unit="rad")
-        check_range("latency_s", self.latency_s, low=0.0, high=0.2, unit="s")
+        validate(self)
 
 @dataclass(frozen=True, kw_only=True)
 class Volume:
     """The flyable volume relative to the maneuver start (floor, walls, ceiling) [m]."""
 
-    x_m: tuple[float, float] = (-8.0, 8.0)
-    y_m: tuple[float, float] = (-8.0, 8.0)
-    z_m: tuple[float, float] = (-2.5, 6.0)
+    x_m: tuple[float, float] = bounded((-8.0, 8.0), _SIDES)
+    y_m: tuple[float, float] = bounded((-8.0, 8.0), _SIDES)
+    z_m: tuple[float, float] = bounded((-2.5, 6.0), _SIDES)
 
     def __post_init__(self) -> None:
-        for name in ("x_m", "y_m", "z_m"):
-            lo, hi = getattr(self, name)
-            check_range(f"{name}[0]", lo, high=0.0, high_inclusive=False, unit="m")
-            check_range(f"{name}[1]", hi, low=0.0, low_inclusive=False, unit="m")
+        validate(self)
 
 @dataclass(frozen=True, kw_only=True)
 class Supervisor:
     """The offboard supervisor's cascaded PD hover controller and its timing rules."""
 
-    position_gain_per_s2: float = 6.0
-    velocity_gain_per_s: float = 4.0
-    attitude_gain_per_s: float = 10.0
-    yaw_gain_per_s: float = 4.0
-    settle_position_m: float = 0.02
-    settle_velocity_m_s: float = 0.05
-    settle_tilt_rad: float = 0.015
-    settle_hold_s: float = 0.1
-    settle_timeout_s: float = 8.0
-    trigger_timeout_s: float = 0.15
-    return_time_s: float = 2.5
+    position_gain_per_s2: float = bounded(6.0, _GAIN)
+    velocity_gain_per_s: float = bounded(4.0, _GAIN)
+    attitude_gain_per_s: float = bounded(10.0, _GAIN)
+    yaw_gain_per_s: float = bounded(4.0, _GAIN)
+    settle_position_m: float = bounded(0.02, Interval(0.001, 1.0, unit="m"))
+    settle_velocity_m_s: float = bounded(0.05, Interval(0.001, 1.0, unit="m/s"))
+    settle_tilt_rad: float = bounded(0.015, Interval(0.001, 0.5, unit="rad"))
+    settle_hold_s: float = bounded(0.1, Interval(0.0, 10.0, unit="s"))
+    settle_timeout_s: float = bounded(8.0, Interval(0.1, 120.0, unit="s"))
+    trigger_timeout_s: float = bounded(0.15, Interval(0.02, 5.0, unit="s"))
+    return_time_s: float = bounded(2.5, Interval(0.1, 60.0, unit="s"))
 
     def __post_init__(self) -> None:
-        for name in ("position_gain_per_s2", "velocity_gain_per_s", "attitude_gain_per_s", "yaw_gain_per_s"):
-            check_range(name, getattr(self, name), low=0.0, high=1000.0, low_inclusive=False)
-        check_range("settle_position_m", self.settle_position_m, low=0.001, high=1.0, unit="m")
-        check_range("settle_velocity_m_s", self.settle_velocity_m_s, low=0.001, high=1.0, unit="m/s")
-        check_range("settle_tilt_rad", self.settle_tilt_rad, low=0.001, high=0.5, unit="rad")
-        check_range("settle_hold_s", self.settle_hold_s, low=0.0, high=10.0, unit="s")
-        check_range("settle_timeout_s", self.settle_timeout_s, low=0.1, high=120.0, unit="s")
-        check_range("trigger_timeout_s", self.trigger_timeout_s, low=0.02, high=5.0, unit="s")
-        check_range("return_time_s", self.return_time_s, low=0.1, high=60.0, unit="s")
+        validate(self)

@@ -71,7 +71,7 @@ class FeedbackScheme(StrEnum):
     @property
     def code(self) -> int:
         """The scheme's number in the compiled kernels."""
-        return {"none": 0, "attitude": 1, "tracking": 2}[self.value]
+        return list(type(self)).index(self)
 
     @classmethod
     def parse(cls, text: str, *, where: str = "--feedback") -> FeedbackScheme:

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.config import check_int, short_repr
+from aerobat.core.bounds import ITERATIONS
 from aerobat.core.design import Design
 from aerobat.core.maneuver import Maneuver
 from aerobat.core.outcomes import Iteration, IterationStatus, SessionStatus
@@ -145,8 +146,7 @@ class Store(Browsing):
         start = np.asarray(start_params, dtype=np.float64)
         if start.shape != (len(maneuver.parameters),):
             raise ConfigError(f"start_params: expected {len(maneuver.parameters)} values, got shape {start.shape}")
-        if isinstance(target_iterations, bool) or not isinstance(target_iterations, int) or target_iterations < 1:
-            raise ConfigError(f"target_iterations = {target_iterations!r}: expected an integer >= 1")
+        target_iterations = ITERATIONS.check("target_iterations", target_iterations)
         design_columns = columns_of(design, DESIGN_COLUMNS)
         now = utc_now()
 

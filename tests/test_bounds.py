@@ -1,0 +1,95 @@
+"""Every declared bound refuses what is outside it, with one line naming the field and the range.
+
+The parameter classes are found by walking :mod:`aerobat` for dataclasses with declared bounds
+(:func:`aerobat.core.bounds.constraints`), and the bad inputs are derived from the declarations,
+as scikit-learn's common tests do with its parameter constraints: a new bounded field is tested
+without a line here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import pkgutil
+
+import pytest
+
+import aerobat
+from aerobat.core.bounds import Integer, Interval, Items, OneOf, constraints
+from aerobat.errors import ConfigError
+
+
+def _bounded_classes() -> list[type]:
+    found: dict[str, type] = {}
+    for info in pkgutil.walk_packages(aerobat.__path__, "aerobat."):
+        if info.name.endswith("__main__"):  # running the command line is no declaration
+            continue
+        try:
+            module = importlib.import_module(info.name)
+        except ImportError:  # an optional dependency (RotorPy, CasADi) not installed
+            continue
+        for value in vars(module).values():
+            if isinstance(value, type) and dataclasses.is_dataclass(value) and value.__module__ == info.name \
+                    and constraints(value):
+                found[f"{value.__module__}.{value.__qualname__}"] = value
+    return [found[k] for k in sorted(found)]
+
+
+CLASSES = _bounded_classes()
+
+
+def _cases() -> list[tuple[type, str, object, str]]:
+    cases = []
+    for cls in CLASSES:
+        default = cls()
+        for name, constraint in constraints(cls).items():
+            if isinstance(constraint, Items):
+                for label, value, allowed in constraint.outside_items(getattr(default, name), default):
+                    cases.append((cls, name, value, f"{name}{label}", allowed))
+            else:
+                for value in constraint.outside(default):
+                    cases.append((cls, name, value, name, constraint.describe(default)))
+    return cases
+
+
+def test_the_walk_finds_the_parameter_classes():
+    names = {cls.__name__ for cls in CLASSES}
+    assert {"Aerodynamics", "Disturbances", "Drift", "MotionCapture", "Supervisor", "Volume"} <= names
+
+
+@pytest.mark.parametrize("cls, field, value, where, allowed", _cases(),
+                         ids=lambda v: v.__name__ if isinstance(v, type) else None)
+def test_a_value_outside_the_declared_bound_is_refused_naming_field_and_range(cls, field, value, where, allowed):
+    with pytest.raises(ConfigError) as info:
+        dataclasses.replace(cls(), **{field: value})
+    message = str(info.value)
+    assert "\n" not in message
+    assert message.startswith(f"{where} = ")
+    assert message.endswith(f"allowed {allowed}")
+
+
+@pytest.mark.parametrize("cls", CLASSES, ids=lambda c: c.__name__)
+def test_the_defaults_are_inside_their_bounds(cls):
+    default = cls()
+    for name, constraint in constraints(cls).items():
+        assert constraint.check(name, getattr(default, name), default) == getattr(default, name)
+
+
+def test_the_constraints_describe_their_ranges_as_the_messages_do():
+    assert Interval(0.0, 600.0, closed="right", unit="s").describe() == "(0, 600] (s)"
+    assert Interval(low=0.0).describe() == ">= 0"
+    assert Interval(high=0.0, closed="left").describe() == "< 0"
+    assert Integer(1, 10_000).describe() == "1 … 10000"
+    with pytest.raises(ConfigError, match=r"^n = 2.5 must be an integer|^n must be an integer, got float 2.5$"):
+        Integer(1, 3).check("n", 2.5)
+
+
+def test_choices_come_from_the_enum_or_the_literal():
+    from aerobat.core.correction import CorrectionKind
+    from aerobat.quadrotor.feedback import FeedbackScheme
+
+    assert OneOf(CorrectionKind).choices == ("inverse", "tsvd", "damped")
+    assert OneOf(FeedbackScheme).choices == tuple(s.value for s in FeedbackScheme)
+    assert OneOf(FeedbackScheme).check("scheme", "none") is FeedbackScheme.NONE
+    with pytest.raises(ConfigError, match=r"^correction = 'svd': allowed 'inverse', 'tsvd', 'damped'$"):
+        OneOf(CorrectionKind).check("correction", "svd")

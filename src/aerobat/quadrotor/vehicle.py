@@ -38,7 +38,6 @@ import tomli_w
 from aerobat.config import (
     as_path,
     check_finite,
-    check_range,
     check_type,
     dataclass_from_table,
     dataclass_to_table,
@@ -46,6 +45,7 @@ from aerobat.config import (
     short_repr,
     write_file,
 )
+from aerobat.core.bounds import Interval, Items, bounded, validate
 from aerobat.errors import ConfigError
 
 __all__ = [
@@ -67,6 +67,14 @@ __all__ = [
 
 STANDARD_GRAVITY_M_S2 = 9.81
 
+_MASS = Interval(0.01, 100.0, unit="kg")
+_ARM = Interval(0.01, 5.0, unit="m")
+_INERTIA = Interval(1e-7, 100.0, unit="kg m²")
+_MOTOR_RATE = Interval(0.1, 1e4, unit="1/s")
+_DRAG_CONSTANT = Interval(1e-5, 1.0, unit="m")
+_RATE_GAIN = Interval(0.0, 1e4, unit="1/s")
+_REDUCED_ENVELOPE = ("collective_reduced_min_m_s2", "collective_reduced_max_m_s2")
+
 
 @dataclass(frozen=True, kw_only=True)
 class VehicleParams:
@@ -86,35 +94,27 @@ class VehicleParams:
     gravity_m_s2 : gravitational acceleration g [m/s²].
     """
 
-    mass_kg: float = 0.468
-    arm_length_m: float = 0.17
-    inertia_xx_kg_m2: float = 0.0023
-    inertia_yy_kg_m2: float = 0.0023
-    inertia_zz_kg_m2: float = 0.0046
-    motor_rate_up_per_s: float = 80.0
-    motor_rate_down_per_s: float = 60.0
-    rotor_thrust_min_n: float = 0.08
-    rotor_thrust_max_n: float = 2.8
-    collective_reduced_min_m_s2: float = 3.92
-    collective_reduced_max_m_s2: float = 21.58
-    drag_constant_m: float = 0.016
-    gravity_m_s2: float = STANDARD_GRAVITY_M_S2
+    mass_kg: float = bounded(0.468, _MASS)
+    arm_length_m: float = bounded(0.17, _ARM)
+    inertia_xx_kg_m2: float = bounded(0.0023, _INERTIA)
+    inertia_yy_kg_m2: float = bounded(0.0023, _INERTIA)
+    inertia_zz_kg_m2: float = bounded(0.0046, _INERTIA)
+    motor_rate_up_per_s: float = bounded(80.0, _MOTOR_RATE)
+    motor_rate_down_per_s: float = bounded(60.0, _MOTOR_RATE)
+    rotor_thrust_min_n: float = bounded(0.08, Interval(0.0, 1e4, unit="N"))
+    rotor_thrust_max_n: float = bounded(2.8, Interval("rotor_thrust_min_n", 1e4, closed="right", unit="N"))
+    collective_reduced_min_m_s2: float = bounded(3.92, Interval(
+        "collective_min_m_s2", "gravity_m_s2", closed="neither", unit="m/s², eq 24: 4 f_min/m < β̲ < g"))
+    collective_reduced_max_m_s2: float = bounded(21.58, Interval(
+        "gravity_m_s2", "collective_max_m_s2", closed="neither", unit="m/s², eq 24: g < β̄ < 4 f_max/m"))
+    drag_constant_m: float = bounded(0.016, _DRAG_CONSTANT)
+    gravity_m_s2: float = bounded(STANDARD_GRAVITY_M_S2, Interval(0.1, 100.0, unit="m/s²"))
 
     def __post_init__(self) -> None:
-        check_range("mass_kg", self.mass_kg, low=0.01, high=100.0, unit="kg")
-        check_range("arm_length_m", self.arm_length_m, low=0.01, high=5.0, unit="m")
-        for name in ("inertia_xx_kg_m2", "inertia_yy_kg_m2", "inertia_zz_kg_m2"):
-            check_range(name, getattr(self, name), low=1e-7, high=100.0, unit="kg m²")
-        check_range("motor_rate_up_per_s", self.motor_rate_up_per_s, low=0.1, high=1e4, unit="1/s")
-        check_range("motor_rate_down_per_s", self.motor_rate_down_per_s, low=0.1, high=1e4, unit="1/s")
-        check_range("rotor_thrust_min_n", self.rotor_thrust_min_n, low=0.0, high=1e4, unit="N")
-        check_range("rotor_thrust_max_n", self.rotor_thrust_max_n, low=self.rotor_thrust_min_n,
-                    low_inclusive=False, high=1e4, unit="N")
-        check_range("gravity_m_s2", self.gravity_m_s2, low=0.1, high=100.0, unit="m/s²")
-        check_range("drag_constant_m", self.drag_constant_m, low=1e-5, high=1.0, unit="m")
+        # the envelope's limits depend on the others: checked last, once hover is known to fit in it
+        validate(self, skip=_REDUCED_ENVELOPE)
         # eq 24: 4 f_min < m β̲ <= m β̄ < 4 f_max, and hover must be inside the envelope.
-        lo = 4.0 * self.rotor_thrust_min_n / self.mass_kg
-        hi = 4.0 * self.rotor_thrust_max_n / self.mass_kg
+        lo, hi = self.collective_min_m_s2, self.collective_max_m_s2
         if hi <= self.gravity_m_s2:
             raise ConfigError(f"rotor_thrust_max_n = {self.rotor_thrust_max_n:g} N is too small for mass_kg = "
                               f"{self.mass_kg:g} kg: four rotors give at most 4 f_max/m = {hi:.3g} m/s², below "
@@ -123,11 +123,7 @@ class VehicleParams:
             raise ConfigError(f"rotor_thrust_min_n = {self.rotor_thrust_min_n:g} N is too large for mass_kg = "
                               f"{self.mass_kg:g} kg: 4 f_min/m = {lo:.3g} m/s² is above gravity_m_s2 = "
                               f"{self.gravity_m_s2:g}; the vehicle cannot hover")
-        check_range("collective_reduced_min_m_s2", self.collective_reduced_min_m_s2, low=lo,
-                    high=self.gravity_m_s2, low_inclusive=False, high_inclusive=False,
-                    unit="m/s², eq 24: 4 f_min/m < β̲ < g")
-        check_range("collective_reduced_max_m_s2", self.collective_reduced_max_m_s2, low=self.gravity_m_s2,
-                    high=hi, low_inclusive=False, high_inclusive=False, unit="m/s², eq 24: g < β̄ < 4 f_max/m")
+        validate(self, only=_REDUCED_ENVELOPE)
 
     # ---- derived quantities -------------------------------------------------
     @property
@@ -189,25 +185,20 @@ class ControllerParams:
         controller's motor command 1, 2, 3, 4. Identity on a correctly wired vehicle.
     """
 
-    rate_gain_p_per_s: float = 100.0
-    rate_gain_q_per_s: float = 100.0
-    rate_gain_r_per_s: float = 10.0
-    mass_kg: float = 0.468
-    arm_length_m: float = 0.17
-    inertia_xx_kg_m2: float = 0.0023
-    inertia_yy_kg_m2: float = 0.0023
-    inertia_zz_kg_m2: float = 0.0046
-    drag_constant_m: float = 0.016
+    rate_gain_p_per_s: float = bounded(100.0, _RATE_GAIN)
+    rate_gain_q_per_s: float = bounded(100.0, _RATE_GAIN)
+    rate_gain_r_per_s: float = bounded(10.0, _RATE_GAIN)
+    mass_kg: float = bounded(0.468, _MASS)
+    arm_length_m: float = bounded(0.17, _ARM)
+    inertia_xx_kg_m2: float = bounded(0.0023, _INERTIA)
+    inertia_yy_kg_m2: float = bounded(0.0023, _INERTIA)
+    inertia_zz_kg_m2: float = bounded(0.0046, _INERTIA)
+    drag_constant_m: float = bounded(0.016, _DRAG_CONSTANT)
     motor_order: tuple[int, int, int, int] = (1, 2, 3, 4)
+    """Checked by hand: a permutation, which no per-item range says."""
 
     def __post_init__(self) -> None:
-        for name in ("rate_gain_p_per_s", "rate_gain_q_per_s", "rate_gain_r_per_s"):
-            check_range(name, getattr(self, name), low=0.0, high=1e4, unit="1/s")
-        check_range("mass_kg", self.mass_kg, low=0.01, high=100.0, unit="kg")
-        check_range("arm_length_m", self.arm_length_m, low=0.01, high=5.0, unit="m")
-        for name in ("inertia_xx_kg_m2", "inertia_yy_kg_m2", "inertia_zz_kg_m2"):
-            check_range(name, getattr(self, name), low=1e-7, high=100.0, unit="kg m²")
-        check_range("drag_constant_m", self.drag_constant_m, low=1e-5, high=1.0, unit="m")
+        validate(self)
         order = self.motor_order
         whole = isinstance(order, tuple | list) and all(isinstance(m, int) and not isinstance(m, bool) for m in order)
         if not whole or sorted(order) != [1, 2, 3, 4]:
@@ -225,6 +216,10 @@ class ControllerParams:
             drag_constant_m=vehicle.drag_constant_m,
             **gains,
         )
+
+
+def _per_axis(low: float, high: float, unit: str) -> Items:
+    return Items.each(Interval(low, high, unit=unit), "xyz", "three numbers (body x, y, z)")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -253,30 +248,17 @@ class ModelEffects:
     body_drag_n_s2_m2 : quadratic body drag, force −c·|v|·v [N s²/m²].
     """
 
-    rate_latency_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    rate_damping_n_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    thrust_moment_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    motor_thrust_gains: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
-    rotor_drag_s_m: float = 0.0
-    rotor_drag_axial_s_m: float = 0.0
-    body_drag_n_s2_m2: float = 0.0
+    rate_latency_s: tuple[float, float, float] = bounded((0.0, 0.0, 0.0), _per_axis(0.0, 0.1, "s"))
+    rate_damping_n_m_s: tuple[float, float, float] = bounded((0.0, 0.0, 0.0), _per_axis(-10.0, 10.0, "N m s/rad"))
+    thrust_moment_arm_m: tuple[float, float, float] = bounded((0.0, 0.0, 0.0), _per_axis(-0.5, 0.5, "m"))
+    motor_thrust_gains: tuple[float, float, float, float] = bounded(
+        (1.0, 1.0, 1.0, 1.0), Items.each(Interval(0.5, 1.5), (1, 2, 3, 4), "four numbers (motors 1-4)"))
+    rotor_drag_s_m: float = bounded(0.0, Interval(0.0, 1.0, unit="s/m"))
+    rotor_drag_axial_s_m: float = bounded(0.0, Interval(0.0, 1.0, unit="s/m"))
+    body_drag_n_s2_m2: float = bounded(0.0, Interval(0.0, 1.0, unit="N s²/m²"))
 
     def __post_init__(self) -> None:
-        for name, low, high, unit in (("rate_latency_s", 0.0, 0.1, "s"),
-                                      ("rate_damping_n_m_s", -10.0, 10.0, "N m s/rad"),
-                                      ("thrust_moment_arm_m", -0.5, 0.5, "m")):
-            values = getattr(self, name)
-            if not isinstance(values, tuple) or len(values) != 3:
-                raise ConfigError(f"{name} = {values!r}: expected three numbers (body x, y, z)")
-            for axis, value in zip("xyz", values, strict=True):
-                check_range(f"{name}[{axis}]", value, low=low, high=high, unit=unit)
-        if not isinstance(self.motor_thrust_gains, tuple) or len(self.motor_thrust_gains) != 4:
-            raise ConfigError(f"motor_thrust_gains = {self.motor_thrust_gains!r}: expected four numbers (motors 1-4)")
-        for motor, value in enumerate(self.motor_thrust_gains, start=1):
-            check_range(f"motor_thrust_gains[{motor}]", value, low=0.5, high=1.5)
-        check_range("rotor_drag_s_m", self.rotor_drag_s_m, low=0.0, high=1.0, unit="s/m")
-        check_range("rotor_drag_axial_s_m", self.rotor_drag_axial_s_m, low=0.0, high=1.0, unit="s/m")
-        check_range("body_drag_n_s2_m2", self.body_drag_n_s2_m2, low=0.0, high=1.0, unit="N s²/m²")
+        validate(self)
 
     @property
     def neutral(self) -> bool:

@@ -11,7 +11,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from aerobat.config import as_path, check_range, dataclass_from_table, dataclass_to_table, read_toml
+from aerobat.config import as_path, dataclass_from_table, dataclass_to_table, read_toml
+from aerobat.core.bounds import Interval, Items, OneOf, bounded, validate
 from aerobat.errors import ConfigError, MissingDependency
 from aerobat.plants.world_params import MotionCapture, Supervisor, Volume
 
@@ -40,9 +41,8 @@ PAPER_RATE_GAINS_PER_S = (100.0, 100.0, 10.0)
 PAPER_ROTOR_THRUST_MIN_N = 0.08
 PAPER_ROTOR_THRUST_MAX_N = 2.8
 
-_FIXED_STEP_METHODS = ("rk3", "rk4")
-_SCIPY_METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
 Integrator = Literal["rk3", "rk4", "RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA"]
+"""The fixed-step solvers written here (``rk3``, ``rk4``), then scipy ``solve_ivp`` methods."""
 
 
 def import_rotorpy() -> tuple[Any, dict[str, Any]]:
@@ -55,6 +55,11 @@ def import_rotorpy() -> tuple[Any, dict[str, Any]]:
     return Multirotor, quad_params
 
 
+
+
+WindModel = Literal["none", "constant", "sinusoid", "dryden"]
+"""The RotorPy wind models :class:`WindSettings` offers."""
+_WIND_SPEEDS = Items.each(Interval(-30.0, 30.0, unit="m/s"), 3)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -73,27 +78,16 @@ class WindSettings:
     altitude_m : Dryden operating altitude (sets its length scales) [m].
     """
 
-    model: Literal["none", "constant", "sinusoid", "dryden"] = "none"
-    velocity_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    amplitude_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    frequency_hz: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    phase_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    sigma_m_s: tuple[float, float, float] = (0.1, 0.1, 0.1)
-    altitude_m: float = 2.0
+    model: WindModel = bounded("none", OneOf(WindModel))
+    velocity_m_s: tuple[float, float, float] = bounded((0.0, 0.0, 0.0), _WIND_SPEEDS)
+    amplitude_m_s: tuple[float, float, float] = bounded((0.0, 0.0, 0.0), _WIND_SPEEDS)
+    frequency_hz: tuple[float, float, float] = bounded((1.0, 1.0, 1.0), Items.each(Interval(0.0, 100.0, unit="Hz"), 3))
+    phase_s: tuple[float, float, float] = bounded((0.0, 0.0, 0.0), Items.each(Interval(-100.0, 100.0, unit="s"), 3))
+    sigma_m_s: tuple[float, float, float] = bounded((0.1, 0.1, 0.1), Items.each(Interval(0.0, 10.0, unit="m/s"), 3))
+    altitude_m: float = bounded(2.0, Interval(0.1, 1000.0, unit="m"))
 
     def __post_init__(self) -> None:
-        if self.model not in ("none", "constant", "sinusoid", "dryden"):
-            raise ConfigError(f"model = {self.model!r}: allowed 'none', 'constant', 'sinusoid', 'dryden'")
-        for name in ("velocity_m_s", "amplitude_m_s"):
-            for i, v in enumerate(getattr(self, name)):
-                check_range(f"{name}[{i}]", v, low=-30.0, high=30.0, unit="m/s")
-        for i, v in enumerate(self.frequency_hz):
-            check_range(f"frequency_hz[{i}]", v, low=0.0, high=100.0, unit="Hz")
-        for i, v in enumerate(self.phase_s):
-            check_range(f"phase_s[{i}]", v, low=-100.0, high=100.0, unit="s")
-        for i, v in enumerate(self.sigma_m_s):
-            check_range(f"sigma_m_s[{i}]", v, low=0.0, high=10.0, unit="m/s")
-        check_range("altitude_m", self.altitude_m, low=0.1, high=1000.0, unit="m")
+        validate(self)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -122,20 +116,16 @@ class RotorPySettings:
     quad_params: Mapping[str, Any] = field(default_factory=dict)
     adapt: bool = True
     aero: bool = True
-    integrator: Integrator = "rk3"
-    command_rate_hz: float = 800.0
-    supervisor_rate_hz: float = 100.0
+    integrator: Integrator = bounded("rk3", OneOf(Integrator))
+    command_rate_hz: float = bounded(800.0, Interval(50.0, 10000.0, unit="Hz"))
+    supervisor_rate_hz: float = bounded(100.0, Interval(70.0, "command_rate_hz", unit="Hz"))
     wind: WindSettings = field(default_factory=WindSettings)
     motion_capture: MotionCapture = field(default_factory=MotionCapture)
     volume: Volume = field(default_factory=Volume)
     supervisor: Supervisor = field(default_factory=Supervisor)
 
     def __post_init__(self) -> None:
-        if self.integrator not in _FIXED_STEP_METHODS + _SCIPY_METHODS:
-            raise ConfigError(f"integrator = {self.integrator!r}: allowed "
-                             f"{', '.join(map(repr, _FIXED_STEP_METHODS + _SCIPY_METHODS))}")
-        check_range("command_rate_hz", self.command_rate_hz, low=50.0, high=10000.0, unit="Hz")
-        check_range("supervisor_rate_hz", self.supervisor_rate_hz, low=70.0, high=self.command_rate_hz, unit="Hz")
+        validate(self)
         if not isinstance(self.quad_params, Mapping):
             raise ConfigError("quad_params must be a table of RotorPy parameters, "
                              f"got {type(self.quad_params).__name__}")

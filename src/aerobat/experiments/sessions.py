@@ -147,9 +147,12 @@ class StoredSession:
 
         try:
             # start_session refused a design that did not converge unless forced; a resumed session continues
-            session = learn(self.maneuver, self.design, self.plant, iterations=self.target - before,
-                            learner=self.learner, on_iteration=record, should_stop=should_stop, force=True)
-            status, message = session.status, session.message
+            if before >= self.target:  # killed after its last iteration was stored: nothing to fly, only closing
+                status, message = SessionStatus.COMPLETED, ""
+            else:
+                session = learn(self.maneuver, self.design, self.plant, iterations=self.target - before,
+                                learner=self.learner, on_iteration=record, should_stop=should_stop, force=True)
+                status, message = session.status, session.message
         except StoreError as exc:
             with contextlib.suppress(StoreError):
                 store.finish_session(sid, SessionStatus.FAILED, f"could not store an iteration: {exc}")

@@ -25,8 +25,8 @@ from pathlib import Path
 
 from .build import ensure_sitl
 from .errors import BetaflightError, ConfigureFailed, FirmwareNotResponding
+from .firmware_settings import BetaflightSettings, load_settings
 from .packets import SitlState
-from .settings import BetaflightSettings, load_settings
 from .sitl import SitlProcess
 
 __all__ = ["AT_REST_LEVEL", "AtRestStepper", "check_arms", "ensure_eeprom", "step_at_rest"]

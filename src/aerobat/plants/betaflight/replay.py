@@ -23,9 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from aerobat.errors import ConfigError
+from aerobat.plants.betaflight.firmware_settings import BetaflightSettings
 from aerobat.plants.betaflight.physics import airframe_plant
 from aerobat.plants.betaflight.rc import RC_MAX_US, RC_MID_US, RC_MIN_US
-from aerobat.plants.betaflight.settings import BetaflightSettings
 
 __all__ = ["MOTOR_LOG_ORDER", "ReplayTrace", "StickTrack", "channels_from_commands", "replay_sticks"]
 

@@ -179,7 +179,7 @@ def read_toml(path: str | Path, option: str | None = None) -> dict[str, Any]:
 
 def write_file(path: Any, text: str, name: str = "path") -> Path:
     """Write ``text`` to ``path`` atomically, never over a store: :class:`ConfigError` for a path that is not one
-    or must not be written, :class:`OutputError` if writing fails."""
+    or must not be written, :class:`~aerobat.errors.OutputError` if writing fails."""
     from aerobat.fileio import write_output
 
     path = as_path(path, name)

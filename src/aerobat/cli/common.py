@@ -422,7 +422,7 @@ def with_tune_from_args(args: argparse.Namespace, choice: Any) -> Any:
 
     tune = load_tune(tune_path, log_index=log_index)
     report = translate(tune)  # unknown settings raise here, naming the file and line
-    from aerobat.plants.betaflight.settings import load_settings
+    from aerobat.plants.betaflight.firmware_settings import load_settings
 
     tuned = load_settings().with_tune(report)
     rates = ", ".join(f"{axis} {tuned.rate_deg_s(axis, 1.0):.0f}" for axis in ("roll", "pitch", "yaw"))

@@ -3,7 +3,7 @@
 Every reader returns :class:`~aerobat.quadrotor.flightlog.FlightLog` objects, one per log in
 the file, in SI units and aerobat's frames (body FLU, world z up). This package is an edge
 (file formats, third-party readers); what is made of a log lives with the vehicle
-(:mod:`aerobat.quadrotor.identification.from_log`).
+(:mod:`aerobat.quadrotor.identification.logdata`, :mod:`aerobat.quadrotor.identification.logfit`).
 
 >>> from aerobat.logs import read_logs
 >>> logs = read_logs("diatone-roma-f5.bbl")          # doctest: +SKIP

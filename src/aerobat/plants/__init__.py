@@ -7,7 +7,7 @@
 ``rotorpy``           RotorPy's Hummingbird, supervised like the arena
                       (:class:`~aerobat.plants.rotorpy.RotorPyPlant`, ``--rotorpy FILE``)
 ``betaflight``        a 5-inch racer flown by Betaflight 4.6 (SITL in lockstep) in the arena
-                      (:class:`~aerobat.plants.betaflight.BetaflightPlant`, ``--betaflight FILE``)
+                      (:class:`~aerobat.plants.betaflight.plant.BetaflightPlant`, ``--betaflight FILE``)
 ====================  ===============================================================
 
 Each is a :class:`~aerobat.plants.spec.PlantSpec` in :data:`PLANTS`; a package adds its own

@@ -85,8 +85,8 @@ def initial_state_sensitivity(
 ) -> np.ndarray:
     """S = ∂e/∂δx₀ (n_err × 12) at parameters ``p`` by central differences of the model.
 
-    ``model`` is any :class:`~aerobat.design.FinalStateModel` (e.g.
-    ``aerobat.simulate.NominalModel(config)``); the 25 simulations run as one batch.
+    ``model`` is any :class:`~aerobat.core.design.FinalStateModel` (e.g.
+    ``aerobat.quadrotor.simulate.NominalModel(config)``); the 25 simulations run as one batch.
     """
     x0 = np.array(maneuver.initial_state() if initial_state is None else initial_state, dtype=float)
     h = DEVIATION_SCALES if steps is None else np.asarray(steps, dtype=float)
@@ -117,7 +117,7 @@ def quadrotor_isc(
     Parameters
     ----------
     maneuver : a maneuver with ``initial_state()`` and ``program(p)`` (e.g. a flip).
-    config : the design model's :class:`~aerobat.vehicle.VehicleConfig`.
+    config : the design model's :class:`~aerobat.quadrotor.vehicle.VehicleConfig`.
     p : parameters at which S is evaluated (normally the design's p⁰).
     source : where the start deviation comes from: ``"start_state"`` — the trial's
         measured start state (a few motion-capture samples; velocity and rates by

@@ -141,7 +141,7 @@ class Trajectory:
     Attributes
     ----------
     times_s : (N,) sample times [s].
-    states : (N, N_STATE) states (layout in :mod:`aerobat.dynamics`).
+    states : (N, N_STATE) states (layout in :mod:`aerobat.quadrotor.dynamics`).
     commands : (N, 4) commands at the samples: collective [m/s²], p̂, q̂, r̂ [rad/s].
     mode : playback mode that produced it.
     """
@@ -265,12 +265,12 @@ def simulate(
     ----------
     program : the command program (or its compiled form).
     config : vehicle constants and onboard controller.
-    initial_state : (N_STATE,) start state; default :func:`~aerobat.dynamics.hover_state`.
+    initial_state : (N_STATE,) start state; default :func:`~aerobat.quadrotor.dynamics.hover_state`.
     mode : ``"continuous"`` (design model) or ``"sampled"`` (800 Hz onboard ZOH).
     max_step_s : largest RK4 step in continuous mode [s].
     tick_s : command-generator period in sampled mode [s].
     substeps : RK4 steps per tick in sampled mode.
-    plant : optional flat plant vector (:func:`~aerobat.dynamics.plant_vector`) overriding
+    plant : optional flat plant vector (:func:`~aerobat.quadrotor.dynamics.plant_vector`) overriding
         ``config.vehicle`` and its effects — how testbeds with extra effects use this function
         (the rate-loop latency of ``config.effects`` still applies).
     record : keep every step (True) or only the start and final states (False).

@@ -59,7 +59,7 @@ class ManeuverRecord:
 
     Attributes
     ----------
-    spec : the specification table; :func:`aerobat.maneuvers.registry.from_spec` rebuilds the maneuver.
+    spec : the specification table; :func:`aerobat.core.registry.from_spec` rebuilds the maneuver.
     parameter_names, parameter_units : per parameter.
     error_names, error_units, error_scales : per error component.
     error_kinds : per error component, what it measures (``position``, ``velocity``, ``angle``…).

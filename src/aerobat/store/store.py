@@ -82,7 +82,10 @@ def _maneuver_columns(maneuver: Maneuver) -> dict[str, Any]:
         "digest": digest(spec_json)}
 
 class Store(Browsing):
-    """An aerobat experiment store: sessions, their iterations and studies (see :class:`Database` for opening)."""
+    """An aerobat experiment store: sessions, their iterations and studies.
+
+    Opening (and what is refused) is :class:`~aerobat.store.database.Database`'s.
+    """
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         self._position_masks: dict[int, np.ndarray] = {}

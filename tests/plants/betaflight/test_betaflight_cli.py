@@ -2,8 +2,8 @@ from __future__ import annotations
 
 import pytest
 
-from aerobat.plants.betaflight.cli import CliClient
 from aerobat.plants.betaflight.errors import ConfigureFailed, LinkClosed, LinkTimeout
+from aerobat.plants.betaflight.firmware_cli import CliClient
 
 
 class FakeCli:

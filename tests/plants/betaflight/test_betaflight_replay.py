@@ -15,8 +15,8 @@ import pytest
 from aerobat.cli import main
 from aerobat.experiments.log_replay import find_steps, replay_log
 from aerobat.logs import Channel, read_log
+from aerobat.plants.betaflight.firmware_settings import load_settings
 from aerobat.plants.betaflight.replay import StickTrack, channels_from_commands
-from aerobat.plants.betaflight.settings import load_settings
 from aerobat.plants.betaflight.translate import translate
 from aerobat.plants.betaflight.tune import load_tune
 

@@ -17,9 +17,9 @@ import pytest
 
 from aerobat.plants.betaflight.configure import AT_REST_LEVEL, step_at_rest
 from aerobat.plants.betaflight.errors import FirmwareExited, FirmwareNotResponding
+from aerobat.plants.betaflight.firmware_settings import load_settings
 from aerobat.plants.betaflight.packets import SitlState
 from aerobat.plants.betaflight.rc import RADIO_LOST_US, RcCommand
-from aerobat.plants.betaflight.settings import load_settings
 from aerobat.plants.betaflight.sitl import SitlProcess
 
 SETTINGS = load_settings()

@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 
 from aerobat.plants import PlantChoice
+from aerobat.plants.betaflight.firmware_settings import load_settings
 from aerobat.plants.betaflight.params import Airframe, BetaflightParams
 from aerobat.plants.betaflight.pilot import StickMap, stick_for_rate, throttle_for_collective
-from aerobat.plants.betaflight.settings import load_settings
 from aerobat.plants.betaflight.sitl_table import load_table
 from aerobat.plants.betaflight.translate import translate
 from aerobat.plants.betaflight.tune import (

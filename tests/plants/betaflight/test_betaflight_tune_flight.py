@@ -111,7 +111,7 @@ def test_settings_that_would_not_arm_get_a_clear_message(firmware: tuple[Path, P
 
     from aerobat.plants.betaflight.configure import check_arms
     from aerobat.plants.betaflight.errors import ConfigureFailed
-    from aerobat.plants.betaflight.settings import load_settings
+    from aerobat.plants.betaflight.firmware_settings import load_settings
 
     binary, eeprom = firmware
     settings = load_settings()

@@ -9,6 +9,7 @@ import pytest
 
 from aerobat.errors import ConfigError
 from aerobat.plants import PLANTS, PlantChoice
+from aerobat.plants.betaflight.firmware_settings import load_settings
 from aerobat.plants.betaflight.params import Airframe, BetaflightParams, load_betaflight, save_betaflight
 from aerobat.plants.betaflight.physics import (
     A_GROUND,
@@ -24,7 +25,6 @@ from aerobat.plants.betaflight.physics import (
     step,
 )
 from aerobat.plants.betaflight.pilot import StickMap, angle_sticks, program_sticks, throttle_for_collective
-from aerobat.plants.betaflight.settings import load_settings
 from aerobat.quadrotor.dynamics import N_STATE, quaternion_from_rotation_vector
 
 IDEAL = BetaflightParams().replace(sensors__gyro_scale_error=(0.0, 0.0, 0.0), sensors__gyro_bias_rad_s=(0.0, 0.0, 0.0),

@@ -37,7 +37,7 @@ class RegularizedRule:
 
     Step sizes: per direction by :class:`KestenGamma` (γ = 1 while the error keeps its
     sign, falling as it starts to oscillate, floor ``gamma_min``), or a fixed
-    ``schedule`` (e.g. :class:`~aerobat.learning.PaperSchedule`) for all directions.
+    ``schedule`` (e.g. :class:`~aerobat.core.rules.base.PaperSchedule`) for all directions.
 
     If the step would leave the parameter bounds, the bounded least-squares step that
     best achieves the same predicted error change is proposed instead.

@@ -25,8 +25,8 @@ from pathlib import Path
 
 from .build import ensure_sitl
 from .errors import BetaflightError, ConfigureFailed, FirmwareNotResponding
+from .firmware_settings import BetaflightSettings, load_settings
 from .packets import SitlState
-from .settings import BetaflightSettings, load_settings
 from .sitl import SitlProcess
 
 __all__ = [

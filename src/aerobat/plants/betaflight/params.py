@@ -7,7 +7,7 @@ omitted. Where the world around the vehicle is the same as the arena's, its sect
 Betaflight plant's own. Sources and reasons: ``docs/plants.md`` (Betaflight).
 
 The firmware's own configuration (PIDs, rates, modes) is not here: it is the
-versioned ``settings.toml`` applied through Betaflight's CLI (:mod:`.settings`).
+versioned ``settings.toml`` applied through Betaflight's CLI (:mod:`.firmware_settings`).
 """
 
 from __future__ import annotations

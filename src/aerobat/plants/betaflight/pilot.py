@@ -27,8 +27,8 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from aerobat.plants.betaflight.firmware_settings import BetaflightSettings
 from aerobat.plants.betaflight.params import Airframe
-from aerobat.plants.betaflight.settings import BetaflightSettings
 
 __all__ = [
     "L_ANGLE_LIMIT",

@@ -36,12 +36,12 @@ import numpy as np
 
 from aerobat.core.plant import Trial, TrialStatus
 from aerobat.plants.betaflight.errors import FirmwareNotResponding
+from aerobat.plants.betaflight.firmware_settings import BetaflightSettings, load_settings
 from aerobat.plants.betaflight.flight import Flight, NonFinite
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import airframe_plant
 from aerobat.plants.betaflight.pilot import L_CLIMB, StickMap, angle_sticks, program_sticks
 from aerobat.plants.betaflight.rc import RC_MIN_US, stick_to_us
-from aerobat.plants.betaflight.settings import BetaflightSettings, load_settings
 from aerobat.plants.mocap import estimate_final_state, measured_states
 from aerobat.plants.plant_state import StateLayout
 from aerobat.quadrotor.dynamics import N_STATE, quaternion_from_rotation_vector, quaternion_multiply

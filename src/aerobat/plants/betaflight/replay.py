@@ -10,7 +10,7 @@ each frame.
 The sticks come as Betaflight logs them (:func:`channels_from_commands`): ``rcCommand`` roll,
 pitch and yaw are ±500 after the deadband (yaw negated: a right stick is a negative
 ``rcCommand[2]``), so the pulse is 1500 ± (|rcCommand| + deadband); the throttle is the
-firmware's throttle after its curve, which :meth:`.settings.BetaflightSettings.throttle_us_for_motor`
+firmware's throttle after its curve, which :meth:`.firmware_settings.BetaflightSettings.throttle_us_for_motor`
 inverts to a pulse.
 """
 
@@ -23,9 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from aerobat.errors import ConfigError
+from aerobat.plants.betaflight.firmware_settings import BetaflightSettings
 from aerobat.plants.betaflight.physics import airframe_plant
 from aerobat.plants.betaflight.rc import RC_MAX_US, RC_MID_US, RC_MIN_US
-from aerobat.plants.betaflight.settings import BetaflightSettings
 
 __all__ = ["MOTOR_LOG_ORDER", "ReplayTrace", "StickTrack", "channels_from_commands", "replay_sticks"]
 

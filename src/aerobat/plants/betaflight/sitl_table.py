@@ -2,7 +2,7 @@
 
 Betaflight's setting table (``src/main/cli/settings.c``) depends on the build's ``#define``\\ s:
 the SITL has no OSD, VTX, ESC telemetry, ... so the authoritative list of what *this* binary
-accepts is what its CLI reports. :func:`read_table` starts a SITL from a blank eeprom, takes the
+accepts is what its CLI reports. :func:`.table_reader.read_table` starts a SITL from a blank eeprom, takes the
 names and their section (master, PID profile, rate profile) from ``dump all`` and each one's range
 or allowed values and default from ``get NAME``. The result is shipped as ``sitl_settings.json``
 (so parsing a tune needs no firmware); ``python -m aerobat.plants.betaflight.table_reader``

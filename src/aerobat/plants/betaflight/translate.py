@@ -29,7 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .settings import PINNED
+from .firmware_settings import PINNED
 from .sitl_table import SitlTable, load_table
 from .tune import Tune, TuneError
 

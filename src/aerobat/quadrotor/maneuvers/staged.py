@@ -27,7 +27,6 @@ lower bound of zero never makes two switches collide.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,99 +35,22 @@ from typing import Any
 import numpy as np
 
 from aerobat.config import as_path, dataclass_from_table, dataclass_to_table, read_toml
-from aerobat.core.expressions import Expression, parse_expression
-from aerobat.core.maneuver import ErrorKind, ErrorSpec, ParameterSpec, check_parameters
+from aerobat.core.maneuver import ErrorSpec, ParameterSpec, check_parameters
 from aerobat.errors import ConfigError
 from aerobat.quadrotor.dynamics import POS, QUAT, VEL, euler_zyx, hover_state, quaternion_from_rotation_vector
 from aerobat.quadrotor.dynamics import rotation_angles as unwrapped_angles
+from aerobat.quadrotor.maneuvers.staged_parser import (
+    CHANNEL_FIELDS,
+    ParsedManeuver,
+    check_keys,
+    expect_table,
+    parse_maneuver_table,
+    vehicle_names,
+)
 from aerobat.quadrotor.program import CHANNEL_LIMITS, Program, RampDown, Switch
 from aerobat.quadrotor.vehicle import VehicleParams
 
 __all__ = ["StagedManeuver", "load_maneuver_file", "staged_from_spec", "vehicle_names"]
-
-CHANNEL_FIELDS = {"collective_m_s2": "collective", "rate_p_rad_s": "rate_p", "rate_q_rad_s": "rate_q",
-                  "rate_r_rad_s": "rate_r", "accel_p_rad_s2": "accel_p", "accel_q_rad_s2": "accel_q",
-                  "accel_r_rad_s2": "accel_r"}
-QUANTITIES = {
-    **{f"position_{a}": ("m", ErrorKind.POSITION) for a in "xyz"},
-    **{f"velocity_{a}": ("m/s", ErrorKind.VELOCITY) for a in "xyz"},
-    **{f"rotation_{a}": ("rad", ErrorKind.ANGLE) for a in "xyz"},
-    **{name: ("rad", ErrorKind.ANGLE) for name in ("roll", "pitch", "yaw")},
-}
-_TOP = ("name", "description", "constants", "parameters", "derived", "stages", "ramp_down", "initial", "errors")
-_NAME_OK = "a letter or _ followed by letters, digits or _"
-
-
-def vehicle_names(vehicle: VehicleParams) -> dict[str, float]:
-    """The design vehicle's constants as expression names."""
-    return {"m": vehicle.mass_kg, "l": vehicle.arm_length_m, "Ixx": vehicle.inertia_xx_kg_m2,
-            "Iyy": vehicle.inertia_yy_kg_m2, "Izz": vehicle.inertia_zz_kg_m2, "g": vehicle.gravity_m_s2,
-            "beta_min": vehicle.collective_reduced_min_m_s2, "beta_max": vehicle.collective_reduced_max_m_s2,
-            "kappa": vehicle.drag_constant_m, "f_min": vehicle.rotor_thrust_min_n, "f_max": vehicle.rotor_thrust_max_n}
-
-
-def _table(value: Any, where: str) -> Mapping[str, Any]:
-    if not isinstance(value, Mapping):
-        raise ConfigError(f"{where}: expected a table, got {type(value).__name__}")
-    return value
-
-
-def _check_keys(table: Mapping[str, Any], allowed: tuple[str, ...], where: str) -> None:
-    unknown = sorted(set(table) - set(allowed))
-    if unknown:
-        raise ConfigError(f"{where}: unknown field(s) {', '.join(unknown)}; allowed: {', '.join(allowed)}")
-
-
-def _text(table: Mapping[str, Any], key: str, default: str, where: str) -> str:
-    """A string field (default if absent); :class:`ConfigError` naming the field if it is anything else."""
-    value = table.get(key, default)
-    if not isinstance(value, str):
-        raise ConfigError(f"{where}.{key}: expected a string in quotes, got {type(value).__name__} {value!r}")
-    return value
-
-
-def _identifier(name: Any, where: str) -> str:
-    if not isinstance(name, str) or not name.isidentifier() or name.startswith("__"):
-        raise ConfigError(f"{where}: {name!r} is not a valid name ({_NAME_OK})")
-    return name
-
-
-def _number(value: Any, where: str, *, low: float = -math.inf, high: float = math.inf) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise ConfigError(f"{where}: expected a finite number, got {value!r}")
-    if not low <= value <= high:
-        raise ConfigError(f"{where} = {value:g} is out of range: allowed [{low:g}, {high:g}]")
-    return float(value)
-
-
-def _topological(derived: Mapping[str, Expression], where: str) -> list[str]:
-    """Derived names in an order where each comes after those it reads; a cycle is an error."""
-    order: list[str] = []
-    state: dict[str, int] = {}
-
-    def visit(name: str, path: list[str]) -> None:
-        if state.get(name) == 2:
-            return
-        if state.get(name) == 1:
-            cycle = " → ".join([*path[path.index(name):], name])
-            raise ConfigError(f"{where}.derived: cyclic definition {cycle}")
-        state[name] = 1
-        for dep in sorted(derived[name].names):
-            if dep in derived:
-                visit(dep, [*path, name])
-        state[name] = 2
-        order.append(name)
-
-    for name in derived:
-        visit(name, [])
-    return order
-
-
-@dataclass(frozen=True)
-class _Stage:
-    name: str
-    duration: Expression
-    inputs: tuple[tuple[str, Expression], ...]
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -148,150 +70,40 @@ class StagedManeuver:
     name: str = field(init=False)
     parameters: tuple[ParameterSpec, ...] = field(init=False, repr=False, compare=False)
     errors: tuple[ErrorSpec, ...] = field(init=False, repr=False, compare=False)
+    _parsed: ParsedManeuver = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.vehicle, VehicleParams):
             raise ConfigError(f"{self.source}: vehicle must be a VehicleParams, got {type(self.vehicle).__name__}")
-        src, t = self.source, _table(self.table, self.source)
-        _check_keys(t, _TOP, src)
-        name = t.get("name")
-        if not isinstance(name, str) or not name.strip():
-            raise ConfigError(f"{src}: name: expected a non-empty string")
-        object.__setattr__(self, "name", name.strip())
-        fixed = vehicle_names(self.vehicle)
-        constants: dict[str, float] = {}
-        for key, value in _table(t.get("constants", {}), f"{src}.constants").items():
-            _identifier(key, f"{src}.constants")
-            if key in fixed:
-                raise ConfigError(f"{src}.constants.{key}: {key!r} is a vehicle constant and cannot be redefined")
-            expr = parse_expression(value, where=f"{src}.constants.{key}", known=frozenset({*fixed, *constants}))
-            constants[key] = expr.evaluate({**fixed, **constants}, where=f"{src}.constants.{key}")
-        base = {**fixed, **constants}
-        params_table = _table(t.get("parameters", {}), f"{src}.parameters")
-        if not params_table:
-            raise ConfigError(f"{src}: [parameters]: define at least one learned parameter")
-        specs, guesses = [], []
-        for key, entry in params_table.items():
-            where = f"{src}.parameters.{_identifier(key, f'{src}.parameters')}"
-            if key in base:
-                raise ConfigError(f"{where}: {key!r} is already a constant or vehicle name")
-            entry = _table(entry, where)
-            _check_keys(entry, ("description", "unit", "guess", "lower", "upper", "scale", "lower_name",
-                                "upper_name"), where)
-            bounds = [parse_expression(entry.get(b, inf), where=f"{where}.{b}", known=frozenset(base)).evaluate(
-                base, where=f"{where}.{b}") if b in entry else inf for b, inf in (("lower", -math.inf),
-                                                                                 ("upper", math.inf))]
-            texts = {k: _text(entry, k, key if k == "description" else "", where)
-                     for k in ("description", "unit", "lower_name", "upper_name")}
-            try:
-                specs.append(ParameterSpec(
-                    name=key, description=texts["description"], unit=texts["unit"],
-                    lower=bounds[0], upper=bounds[1],
-                    scale=_number(parse_expression(entry.get("scale", 1.0), where=f"{where}.scale",
-                                                   known=frozenset(base)).evaluate(base, where=f"{where}.scale"),
-                                  f"{where}.scale", low=1e-12),
-                    bound_names=(texts["lower_name"], texts["upper_name"])))
-            except ConfigError as exc:
-                raise ConfigError(f"{where}: {exc}") from None
-            if "guess" not in entry:
-                raise ConfigError(f"{where}: missing required field guess")
-            guesses.append(parse_expression(entry["guess"], where=f"{where}.guess", known=frozenset(base)))
-        object.__setattr__(self, "parameters", tuple(specs))
-        pnames = frozenset(params_table)
-        derived_raw = _table(t.get("derived", {}), f"{src}.derived")
-        names = frozenset({*base, *pnames, *derived_raw})
-        derived: dict[str, Expression] = {}
-        for key, value in derived_raw.items():
-            _identifier(key, f"{src}.derived")
-            if key in base or key in pnames:
-                raise ConfigError(f"{src}.derived.{key}: {key!r} is already a parameter, constant or vehicle name")
-            derived[key] = parse_expression(value, where=f"{src}.derived.{key}", known=names)
-        order = _topological(derived, src)
-        stages_raw = t.get("stages")
-        if not isinstance(stages_raw, list) or not stages_raw:
-            raise ConfigError(f"{src}: [[stages]]: define at least one stage")
-        stages = []
-        for k, entry in enumerate(stages_raw):
-            where = f"{src}.stages[{k}]"
-            entry = _table(entry, where)
-            _check_keys(entry, ("name", "duration_s", *CHANNEL_FIELDS), where)
-            if "duration_s" not in entry:
-                raise ConfigError(f"{where}: missing required field duration_s")
-            inputs = tuple((CHANNEL_FIELDS[f], parse_expression(entry[f], where=f"{where}.{f}", known=names))
-                           for f in CHANNEL_FIELDS if f in entry)
-            stages.append(_Stage(_text(entry, "name", f"stage {k + 1}", where),
-                                 parse_expression(entry["duration_s"], where=f"{where}.duration_s", known=names),
-                                 inputs))
-        ramp = _table(t.get("ramp_down", {}), f"{src}.ramp_down")
-        _check_keys(ramp, ("collective_s", "rates_s"), f"{src}.ramp_down")
-        ramps = {k: parse_expression(ramp.get(k, 0.0), where=f"{src}.ramp_down.{k}", known=names)
-                 for k in ("collective_s", "rates_s")}
-        initial = _table(t.get("initial", {}), f"{src}.initial")
-        _check_keys(initial, ("position_m", "velocity_m_s", "attitude_rad"), f"{src}.initial")
-        start = {k: self._vector(initial.get(k, [0.0, 0.0, 0.0]), f"{src}.initial.{k}")
-                 for k in ("position_m", "velocity_m_s", "attitude_rad")}
-        errors_raw = t.get("errors")
-        if not isinstance(errors_raw, list) or not errors_raw:
-            raise ConfigError(f"{src}: [[errors]]: name at least one final-state error")
-        errors, targets, quantities = [], [], []
-        for k, entry in enumerate(errors_raw):
-            where = f"{src}.errors[{k}]"
-            entry = _table(entry, where)
-            _check_keys(entry, ("name", "quantity", "target", "scale"), where)
-            quantity = entry.get("quantity")
-            if not isinstance(quantity, str):
-                raise ConfigError(f"{where}.quantity: expected one name in quotes, got {type(quantity).__name__} "
-                                  f"{quantity!r}; allowed: {', '.join(QUANTITIES)}")
-            if quantity not in QUANTITIES:
-                raise ConfigError(f"{where}.quantity: {quantity!r}; allowed: {', '.join(QUANTITIES)}")
-            unit, kind = QUANTITIES[quantity]
-            ename = entry.get("name", quantity)
-            if not isinstance(ename, str) or not ename:
-                raise ConfigError(f"{where}.name: expected a non-empty string")
-            scale = parse_expression(entry.get("scale", 0.1 if unit != "rad" else math.radians(5)),
-                                     where=f"{where}.scale", known=frozenset(base)).evaluate(base, where=where)
-            errors.append(ErrorSpec(name=ename, unit=unit, kind=kind,
-                                    scale=_number(scale, f"{where}.scale", low=1e-12)))
-            targets.append(parse_expression(entry.get("target", 0.0), where=f"{where}.target",
-                                            known=frozenset(base)).evaluate(base, where=f"{where}.target"))
-            quantities.append(quantity)
-        if len(errors) > len(specs):
-            raise ConfigError(f"{src}: {len(errors)} errors but only {len(specs)} parameters: each error needs a "
-                              f"parameter to correct it (Sect. 4.1)")
-        object.__setattr__(self, "errors", tuple(errors))
-        object.__setattr__(self, "_compiled", {
-            "base": base, "guesses": guesses, "derived": derived, "order": order, "stages": stages,
-            "ramps": ramps, "start": start, "targets": np.array(targets), "quantities": quantities})
+        parsed = parse_maneuver_table(self.table, self.vehicle, self.source)
+        object.__setattr__(self, "_parsed", parsed)
+        object.__setattr__(self, "name", parsed.name)
+        object.__setattr__(self, "parameters", parsed.parameters)
+        object.__setattr__(self, "errors", parsed.errors)
         guess = self.guess()
         problem = check_parameters(self.parameters, guess)
         if problem:
-            raise ConfigError(f"{src}: the guess violates the bounds: {problem}")
-        self._evaluate(guess, where=f"{src} (at the guess)")
-
-    @staticmethod
-    def _vector(value: Any, where: str) -> tuple[float, float, float]:
-        if not isinstance(value, list) or len(value) != 3:
-            raise ConfigError(f"{where}: expected an array of 3 numbers")
-        return (_number(value[0], f"{where}[0]"), _number(value[1], f"{where}[1]"), _number(value[2], f"{where}[2]"))
+            raise ConfigError(f"{self.source}: the guess violates the bounds: {problem}")
+        self._evaluate(guess, where=f"{self.source} (at the guess)")
 
     # ------------------------------------------------------------------ evaluation
     def _scope(self, params: np.ndarray, where: str) -> dict[str, float]:
-        c = self.__dict__["_compiled"]
-        scope = dict(c["base"])
+        c = self._parsed
+        scope = dict(c.base)
         scope.update(zip((p.name for p in self.parameters), (float(v) for v in params), strict=True))
-        for name in c["order"]:
-            scope[name] = c["derived"][name].evaluate(scope, where=f"{where}: derived.{name}")
+        for name in c.order:
+            scope[name] = c.derived[name].evaluate(scope, where=f"{where}: derived.{name}")
         return scope
 
     def _evaluate(self, params: np.ndarray, *, where: str) -> tuple[list[float], list[list[tuple[str, float]]],
                                                                      dict[str, float]]:
-        c = self.__dict__["_compiled"]
+        c = self._parsed
         scope = self._scope(params, where)
         durations, values = [], []
-        for k, stage in enumerate(c["stages"]):
+        for k, stage in enumerate(c.stages):
             durations.append(stage.duration.evaluate(scope, where=f"{where}: stages[{k}].duration_s"))
             values.append([(ch, e.evaluate(scope, where=f"{where}: stages[{k}].{ch}")) for ch, e in stage.inputs])
-        ramps = {k: e.evaluate(scope, where=f"{where}: ramp_down.{k}") for k, e in c["ramps"].items()}
+        ramps = {k: e.evaluate(scope, where=f"{where}: ramp_down.{k}") for k, e in c.ramps.items()}
         return durations, values, ramps
 
     def _problem(self, params: np.ndarray) -> str | None:
@@ -304,7 +116,7 @@ class StagedManeuver:
             return str(exc)
         for k, d in enumerate(durations):
             if d < 0:
-                return f"stage {k} ({self.__dict__['_compiled']['stages'][k].name}) has negative duration {d:.4g} s"
+                return f"stage {k} ({self._parsed.stages[k].name}) has negative duration {d:.4g} s"
         if sum(durations) <= 0.01:
             return f"total duration {sum(durations):.4g} s must exceed 0.01 s"
         for k, stage_values in enumerate(values):
@@ -318,9 +130,9 @@ class StagedManeuver:
 
     # ------------------------------------------------------------------ protocol
     def guess(self) -> np.ndarray:
-        c = self.__dict__["_compiled"]
-        return np.array([e.evaluate(c["base"], where=f"{self.source}.parameters.{p.name}.guess")
-                         for e, p in zip(c["guesses"], self.parameters, strict=True)])
+        c = self._parsed
+        return np.array([e.evaluate(c.base, where=f"{self.source}.parameters.{p.name}.guess")
+                         for e, p in zip(c.guesses, self.parameters, strict=True)])
 
     def is_valid(self, params: np.ndarray) -> bool:
         return self._problem(params) is None
@@ -354,7 +166,7 @@ class StagedManeuver:
                        hover_collective_m_s2=self.vehicle.gravity_m_s2, name=self.name)
 
     def initial_state(self) -> np.ndarray:
-        start = self.__dict__["_compiled"]["start"]
+        start = self._parsed.start
         x = hover_state(self.vehicle, start["position_m"])
         x[VEL] = start["velocity_m_s"]
         roll, pitch, yaw = start["attitude_rad"]
@@ -368,15 +180,15 @@ class StagedManeuver:
         return x
 
     def error(self, final_state: np.ndarray) -> np.ndarray:
-        c = self.__dict__["_compiled"]
+        c = self._parsed
         s = np.asarray(final_state, dtype=float)
         unwrapped, euler = unwrapped_angles(s), euler_zyx(s)
         values = []
-        for quantity in c["quantities"]:
+        for quantity in c.quantities:
             kind, _, axis = quantity.partition("_")
             index = "xyz".index(axis) if axis else ("roll", "pitch", "yaw").index(kind)
             values.append({"position": s[POS], "velocity": s[VEL], "rotation": unwrapped}.get(kind, euler)[index])
-        return np.array(values) - c["targets"]
+        return np.array(values) - c.targets
 
     def failure_hint(self, params: np.ndarray, error: np.ndarray) -> str | None:
         """Why a design from ``params`` (the guess) may fail: a target reached with the wrong sign.
@@ -385,12 +197,12 @@ class StagedManeuver:
         target) is what a rate or acceleration of the wrong sign does: a roll flip turned the other
         way, a step taken to the other side. None if nothing suggests it.
         """
-        c = self.__dict__["_compiled"]
+        c = self._parsed
         error = np.asarray(error, dtype=float)
-        if error.shape != c["targets"].shape or not np.all(np.isfinite(error)):
+        if error.shape != c.targets.shape or not np.all(np.isfinite(error)):
             return None
         wrong = []
-        for spec, target, e in zip(self.errors, c["targets"], error, strict=True):
+        for spec, target, e in zip(self.errors, c.targets, error, strict=True):
             reached = target + e
             if target != 0.0 and reached * target < 0.0 and abs(reached) > 0.5 * abs(target):
                 wrong.append((abs(e) / spec.scale, spec, target, reached))
@@ -427,8 +239,8 @@ def load_maneuver_file(path: str | Path, vehicle: VehicleParams) -> StagedManeuv
 
 def staged_from_spec(spec: Mapping[str, Any], source: str) -> StagedManeuver:
     """Rebuild a :class:`StagedManeuver` from its ``spec()`` (registered as maneuver kind ``staged``)."""
-    _check_keys(spec, ("kind", "source", "maneuver", "vehicle"), source)
-    vehicle = dataclass_from_table(VehicleParams, _table(spec.get("vehicle"), f"{source}.vehicle"),
+    check_keys(spec, ("kind", "source", "maneuver", "vehicle"), source)
+    vehicle = dataclass_from_table(VehicleParams, expect_table(spec.get("vehicle"), f"{source}.vehicle"),
                                    source=f"{source}.vehicle")
-    return StagedManeuver(vehicle=vehicle, table=_table(spec.get("maneuver"), f"{source}.maneuver"),
+    return StagedManeuver(vehicle=vehicle, table=expect_table(spec.get("maneuver"), f"{source}.maneuver"),
                           source=str(spec.get("source", source)))

@@ -1,6 +1,6 @@
 """Adaptive near-time-optimal translation (Sect. 9, Figs. 7 and 12).
 
-The time-optimal benchmark (:mod:`aerobat.timeoptimal`) gives bang-bang thrust and
+The time-optimal benchmark (:mod:`aerobat.quadrotor.timeoptimal`) gives bang-bang thrust and
 bang-singular rate inputs in the vertical Y–Z plane. As a maneuver, its switch
 times — and the end time — become the learnable parameters (Sect. 9), ramp-downs
 are added (Sect. 7.2), the benchmark's timing is p^g, and p⁰ comes from the full

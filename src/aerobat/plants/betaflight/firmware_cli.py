@@ -1,4 +1,4 @@
-"""Betaflight CLI client: enter with '#', send a command, read until the prompt.
+"""Client of the firmware's CLI (Betaflight's text console): enter with '#', send a command, read until the prompt.
 
 The CLI prompt is ``"\\r\\n# "`` (``cliPrompt`` in cli/cli.c); errors are
 printed as ``###ERROR IN <command>: <message>###``. The firmware echoes what

@@ -119,14 +119,16 @@ def test_radio_lost_fails_safe(firmware: tuple[Path, Path]) -> None:
 
 def test_watchdog_detects_a_killed_firmware(firmware: tuple[Path, Path]) -> None:
     binary, eeprom = firmware
-    with SitlProcess(binary, eeprom, step_timeout_s=1.0) as sitl:
+    # the exit is seen by polling the process between receive slices, long before the step timeout
+    # (a wide timeout, so a loaded machine cannot turn this into a timing test)
+    with SitlProcess(binary, eeprom, step_timeout_s=20.0) as sitl:
         step_at_rest(sitl, lambda: False, 100)
         assert sitl.pid is not None
         os.kill(sitl.pid, signal.SIGKILL)
         started = time.monotonic()
         with pytest.raises(FirmwareExited) as caught:
             step_at_rest(sitl, lambda: False, 100)
-        assert time.monotonic() - started < 0.5
+        assert time.monotonic() - started < 10.0
         assert caught.value.returncode == -signal.SIGKILL
         sitl.restart()
         assert step_at_rest(sitl, lambda: False, 100) == 100

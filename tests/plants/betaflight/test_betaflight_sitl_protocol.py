@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import os
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -39,12 +39,17 @@ def test_time_checks() -> None:
             sitl.step(at(300e-6))
 
 
-def test_start_failure_is_reported_and_cleaned_up(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_start_failure_is_reported_and_cleaned_up(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    # a private temporary folder: the shared /tmp sees other runs' firmware folders come and go
     monkeypatch.setenv("FAKE_SITL_MODE", "exit")
-    before = set(Path(os.environ.get("TMPDIR", "/tmp")).glob("aerobat-betaflight-*"))
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    made: list[str] = []
+    mkdtemp = tempfile.mkdtemp
+    monkeypatch.setattr(tempfile, "mkdtemp", lambda **kw: made.append(mkdtemp(**kw)) or made[-1])
     with pytest.raises(FirmwareNotResponding, match="exiting early"):
         SitlProcess(FAKE, None)
-    assert set(Path(os.environ.get("TMPDIR", "/tmp")).glob("aerobat-betaflight-*")) == before
+    assert len(made) == 1 and Path(made[0]).parent == tmp_path  # the firmware's folder was made here
+    assert list(tmp_path.iterdir()) == []  # and removed
 
 
 def test_mute_firmware_trips_the_watchdog(monkeypatch: pytest.MonkeyPatch) -> None:

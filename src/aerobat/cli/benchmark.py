@@ -69,7 +69,7 @@ def _cmd_translation(args: argparse.Namespace) -> int:
                 for col in ("kind", "start [s]", "end [s]", f"value [{unit}]"):
                     table.add_column(col)
                 for arc in arcs:
-                    table.add_row(arc.kind, f"{arc.start_s:.4f}", f"{arc.end_s:.4f}", f"{arc.value * scale:+.4f}")
+                    table.add_row(arc.kind.value, f"{arc.start_s:.4f}", f"{arc.end_s:.4f}", f"{arc.value * scale:+.4f}")
                 out.print(table)
         if figure is not None:
             where = f", solution to {folder / 'translation.json'}" if folder is not None else ""

@@ -60,10 +60,11 @@ holds to 1e-6 (typically 1e-12).  Otherwise a solution with
 plausible-looking wrong answer.
 """
 
-from aerobat.quadrotor.timeoptimal.solution import BenchmarkLimits, InputArc, SolveStatus, TimeOptimalSolution
+from aerobat.quadrotor.timeoptimal.solution import ArcKind, BenchmarkLimits, InputArc, SolveStatus, TimeOptimalSolution
 from aerobat.quadrotor.timeoptimal.solve import clear_caches, solve_translation, switch_times
 
 __all__ = [
+    "ArcKind",
     "BenchmarkLimits",
     "InputArc",
     "SolveStatus",

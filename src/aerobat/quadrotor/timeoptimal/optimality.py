@@ -6,7 +6,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from aerobat.quadrotor.timeoptimal.solution import BenchmarkLimits, InputArc, eval_arcs
+from aerobat.quadrotor.timeoptimal.solution import ArcKind, BenchmarkLimits, InputArc, eval_arcs
 
 
 def _theta_fn(rate_arcs: Sequence[InputArc]) -> Callable[[np.ndarray], np.ndarray]:
@@ -88,23 +88,23 @@ def pmp_residual(
     where: tuple[str, float, str] | None = None
     for arc in thrust_arcs:
         m = np.nonzero((t_all >= arc.start_s) & (t_all <= arc.end_s))[0]
-        sign = 1.0 if arc.kind == "max" else -1.0
+        sign = 1.0 if arc.kind == ArcKind.MAX else -1.0
         if m.size and float(np.max(sign * sigma_f[m])) > viol:
             k = m[np.argmax(sign * sigma_f[m])]
             viol = float(sign * sigma_f[k])
-            where = ("thrust", float(t_all[k]), "min" if arc.kind == "max" else "max")
+            where = ("thrust", float(t_all[k]), ArcKind.MIN if arc.kind == ArcKind.MAX else ArcKind.MAX)
     for arc in rate_arcs:
         m = np.nonzero((t_all >= arc.start_s) & (t_all <= arc.end_s))[0]
         if not m.size:
             continue
-        if arc.kind == "singular":
+        if arc.kind == ArcKind.SINGULAR:
             k = m[np.argmax(np.abs(lam_th[m]))]
             v = abs(float(lam_th[k]))
         else:
-            sign = 1.0 if arc.kind == "max" else -1.0
+            sign = 1.0 if arc.kind == ArcKind.MAX else -1.0
             k = m[np.argmax(sign * lam_th[m])]
             v = float(sign * lam_th[k])
         if v > viol:
             viol = v
-            where = ("rate", float(t_all[k]), "min" if lam_th[k] > 0 else "max")
+            where = ("rate", float(t_all[k]), ArcKind.MIN if lam_th[k] > 0 else ArcKind.MAX)
     return viol, where

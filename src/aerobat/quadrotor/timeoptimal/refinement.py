@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.quadrotor.timeoptimal.solution import BenchmarkLimits, StageFailure
+from aerobat.quadrotor.timeoptimal.solution import ArcKind, BenchmarkLimits, StageFailure
 from aerobat.quadrotor.timeoptimal.transcription import run_solver
 
 _PRUNE_TOL_S = 1e-7  # arcs shorter than this are removed and the refinement re-solved
@@ -62,7 +62,7 @@ class _Structure:
         self.lim = lim
         self.thrust_kinds = [a[0] for a in thrust]
         self.rate_kinds = [a[0] for a in rate]
-        self.has_singular = "singular" in self.rate_kinds
+        self.has_singular = ArcKind.SINGULAR in self.rate_kinds
         if self.has_singular and line is None:
             raise StageFailure("singular rate arc without a costate-line guess")
         self.line0 = None if not self.has_singular else np.asarray(line, dtype=float)
@@ -79,10 +79,10 @@ class _Structure:
         self.d0 = np.array(d0)
 
     def thrust_value(self, i: int) -> float:
-        return self.lim.f_max_m_s2 if self.thrust_kinds[i] == "max" else self.lim.f_min_m_s2
+        return self.lim.f_max_m_s2 if self.thrust_kinds[i] == ArcKind.MAX else self.lim.f_min_m_s2
 
     def rate_value(self, j: int) -> float:
-        return self.lim.max_rate_rad_s if self.rate_kinds[j] == "max" else -self.lim.max_rate_rad_s
+        return self.lim.max_rate_rad_s if self.rate_kinds[j] == ArcKind.MAX else -self.lim.max_rate_rad_s
 
 
 @functools.lru_cache(maxsize=1)
@@ -188,9 +188,9 @@ def refine_solver(signature: tuple[tuple[str, str, int], ...], limits_key: tuple
     ineq: list[Any] = []
     k_rate = v[1] * v[2] - v[0] * v[3] if has_singular else None
     for k, (fk, rk, sid) in enumerate(signature):
-        f = f_max if fk == "max" else f_min
+        f = f_max if fk == ArcKind.MAX else f_min
         if sid < 0:
-            xk = bang(xk, f, wmax if rk == "max" else -wmax, d[k], g)
+            xk = bang(xk, f, wmax if rk == ArcKind.MAX else -wmax, d[k], g)
         else:
             if sid not in entry:
                 entry[sid] = (xk[4], t_abs)
@@ -229,7 +229,7 @@ def _refine_once(
     adjoint ``lambda(T)`` normalised to ``lambda_0 = 1``.
     """
     signature = tuple(
-        (st.thrust_kinds[i], st.rate_kinds[j], j if st.rate_kinds[j] == "singular" else -1) for i, j in st.pieces
+        (st.thrust_kinds[i], st.rate_kinds[j], j if st.rate_kinds[j] == ArcKind.SINGULAR else -1) for i, j in st.pieces
     )
     solver, n_eq, n_in = refine_solver(signature, st.lim._key())
     npc = len(st.pieces)
@@ -325,7 +325,7 @@ def refine(
         thrust, ch1 = _prune(thrust)
         rate, ch2 = _prune(rate)
         if ch1 or ch2:
-            line = line_opt if "singular" in [a[0] for a in rate] else None
+            line = line_opt if ArcKind.SINGULAR in [a[0] for a in rate] else None
             continue
         t_opt = float(np.sum(d))
         if best is not None and t_opt > best[0] - 1e-10:

@@ -11,7 +11,7 @@ import numpy as np
 
 from aerobat.quadrotor.timeoptimal.optimality import pmp_residual
 from aerobat.quadrotor.timeoptimal.refinement import line_from_adjoint, refine
-from aerobat.quadrotor.timeoptimal.solution import BenchmarkLimits, InputArc, StageFailure
+from aerobat.quadrotor.timeoptimal.solution import ArcKind, BenchmarkLimits, InputArc, StageFailure
 
 _REFINE_T_TOL_S = 1e-9  # refined T may exceed the transcription's T by at most this
 _BOUNDARY_TOL = 1e-6
@@ -24,7 +24,7 @@ def _make_arcs(
 ) -> tuple[InputArc, ...]:
     out = []
     for kind, t0, t1, _ in raw:
-        if kind == "singular":
+        if kind == ArcKind.SINGULAR:
             if line is None:  # pragma: no cover - guarded by _Structure
                 raise StageFailure("singular arc without costate line")
             a, b, c, d = (float(x) for x in line)
@@ -45,9 +45,9 @@ def _make_arcs(
             )
         else:
             if is_rate:
-                value = lim.max_rate_rad_s if kind == "max" else -lim.max_rate_rad_s
+                value = lim.max_rate_rad_s if kind == ArcKind.MAX else -lim.max_rate_rad_s
             else:
-                value = lim.f_max_m_s2 if kind == "max" else lim.f_min_m_s2
+                value = lim.f_max_m_s2 if kind == ArcKind.MAX else lim.f_min_m_s2
             out.append(InputArc(kind=kind, start_s=float(t0), end_s=float(t1), value=float(value)))
     return tuple(out)
 
@@ -165,7 +165,7 @@ def _refine_candidate(
             if abs(rates[k]) >= wmax * (1 - 1e-4) and 0 < k < tt.size - 1:
                 # the singular rate saturates inside the arc: it must be split
                 # by a bang arc there (singular -> bang -> singular)
-                needle = ("rate", float(tt[k]), "max" if rates[k] > 0 else "min")
+                needle = ("rate", float(tt[k]), ArcKind.MAX if rates[k] > 0 else ArcKind.MIN)
                 break
     return _Candidate(
         thrust=thrust,
@@ -202,7 +202,7 @@ def _insert_arc(arcs: list[list[Any]], t: float, kind: str, width: float) -> lis
     out[k : k + 1] = pieces
     merged: list[list[Any]] = []
     for a in out:
-        if merged and merged[-1][0] == a[0] and a[0] != "singular":
+        if merged and merged[-1][0] == a[0] and a[0] != ArcKind.SINGULAR:
             merged[-1][2] = a[2]
         else:
             merged.append(a)
@@ -213,7 +213,7 @@ def _nearby_bang_bang_switch(arcs: list[list[Any]], t: float, radius: float) -> 
     """Index k of a switch between opposite bang arcs k-1 -> k within ``radius`` of ``t``."""
     best, best_dist = None, radius
     for k in range(1, len(arcs)):
-        if {arcs[k - 1][0], arcs[k][0]} == {"max", "min"}:
+        if {arcs[k - 1][0], arcs[k][0]} == {ArcKind.MAX, ArcKind.MIN}:
             dist = abs(arcs[k][1] - t)
             if dist <= best_dist:
                 best, best_dist = k, dist
@@ -226,7 +226,7 @@ def _insert_singular_at_switch(arcs: list[list[Any]], k: int, width: float) -> l
     half = min(width / 2, 0.5 * (out[k - 1][2] - out[k - 1][1]), 0.5 * (out[k][2] - out[k][1]))
     out[k - 1][2] = t_sw - half
     out[k][1] = t_sw + half
-    out.insert(k, ["singular", t_sw - half, t_sw + half, None])
+    out.insert(k, [ArcKind.SINGULAR, t_sw - half, t_sw + half, None])
     return out
 
 
@@ -239,14 +239,14 @@ def _edge_variants(rate: list[list[Any]], dt: float) -> list[list[list[Any]]]:
     the identified structure fails outright (no multipliers to guide it).
     """
     out = []
-    other = {"max": "min", "min": "max"}
+    other = {ArcKind.MAX: ArcKind.MIN, ArcKind.MIN: ArcKind.MAX}
     delta = 0.25 * dt
     for idx, arc in enumerate(rate):
-        if arc[0] != "singular" or arc[2] - arc[1] <= 4 * delta:
+        if arc[0] != ArcKind.SINGULAR or arc[2] - arc[1] <= 4 * delta:
             continue
         for side in ("start", "end"):
             nb = idx - 1 if side == "start" else idx + 1
-            kinds = ["max", "min"] if not 0 <= nb < len(rate) else [other[rate[nb][0]]]
+            kinds = [ArcKind.MAX, ArcKind.MIN] if not 0 <= nb < len(rate) else [other[rate[nb][0]]]
             for kind in kinds:
                 t = arc[1] + delta / 2 if side == "start" else arc[2] - delta / 2
                 out.append(_insert_arc(rate, t, kind, delta))
@@ -270,13 +270,13 @@ def vertical_candidate(
     a1, a2 = (a_up, a_down) if z > 0 else (a_down, a_up)  # accelerate, then brake
     t1 = math.sqrt(2.0 * abs(z) * a2 / (a1 * (a1 + a2)))
     t2 = a1 * t1 / a2
-    kinds = ["max", "min"] if z > 0 else ["min", "max"]
+    kinds = [ArcKind.MAX, ArcKind.MIN] if z > 0 else [ArcKind.MIN, ArcKind.MAX]
     if [a[0] for a in thrust] != kinds:
         raise StageFailure(f"vertical move: unexpected thrust structure {[a[0] for a in thrust]}")
     raw_thrust = [[kinds[0], 0.0, t1, None], [kinds[1], t1, t1 + t2, None]]
-    raw_rate = [["singular", 0.0, t1 + t2, None]]
+    raw_rate = [[ArcKind.SINGULAR, 0.0, t1 + t2, None]]
     thrust_arcs = _make_arcs(raw_thrust, False, limits)
-    rate_arcs = (InputArc(kind="singular", start_s=0.0, end_s=t1 + t2, value=0.0, tangent_law=(0.0, 0.0)),)
+    rate_arcs = (InputArc(kind=ArcKind.SINGULAR, start_s=0.0, end_s=t1 + t2, value=0.0, tangent_law=(0.0, 0.0)),)
     times, states = _simulate(thrust_arcs, rate_arcs, limits)
     return _Candidate(
         thrust=raw_thrust,
@@ -362,7 +362,7 @@ def refine_with_structure_search(
                     new_ra = _insert_singular_at_switch(ra_k, sw, 2.0 * width)
                 else:
                     new_ra = _insert_arc(ra_k, t, kind, width)
-            has_sing = "singular" in [a[0] for a in new_ra]
+            has_sing = ArcKind.SINGULAR in [a[0] for a in new_ra]
             adj_line = line_from_adjoint(cand.nu, cand.duration)
             # start from the transcription's costate line (or, without one,
             # the rejected candidate's adjoint line); the other is the fallback

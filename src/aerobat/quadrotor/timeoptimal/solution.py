@@ -77,15 +77,23 @@ class BenchmarkLimits:
         )
 
 
+class ArcKind(StrEnum):
+    """Where an input sits on an arc: at its upper bound, its lower bound, or inside (singular)."""
+
+    MAX = "max"
+    MIN = "min"
+    SINGULAR = "singular"
+
+
 @dataclass(frozen=True, kw_only=True)
 class InputArc:
     """One arc of an input program.
 
     Parameters
     ----------
-    kind : str
-        ``'max'`` (input at its upper bound), ``'min'`` (lower bound) or
-        ``'singular'`` (interior value).
+    kind : ArcKind
+        ``MAX`` (input at its upper bound), ``MIN`` (lower bound) or
+        ``SINGULAR`` (interior value); its text (``'max'``, ``'min'``, ``'singular'``) is accepted.
     start_s, end_s : float
         Arc start and end time, s.
     value : float
@@ -100,15 +108,17 @@ class InputArc:
         ``None`` for arcs on which the input is constant.
     """
 
-    kind: str
+    kind: ArcKind
     start_s: float
     end_s: float
     value: float
     tangent_law: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
-        if self.kind not in ("max", "min", "singular"):
-            raise ConfigError(f"kind={self.kind!r} is invalid: allowed 'max', 'min', 'singular'")
+        if self.kind not in tuple(ArcKind):
+            allowed = ", ".join(repr(kind.value) for kind in ArcKind)
+            raise ConfigError(f"kind={self.kind!r} is invalid: allowed {allowed}")
+        object.__setattr__(self, "kind", ArcKind(self.kind))
         if not self.end_s >= self.start_s:
             raise ConfigError(f"end_s={self.end_s!r} is invalid: must be >= start_s={self.start_s!r}")
 
@@ -140,7 +150,7 @@ class InputArc:
     def to_json_dict(self) -> dict[str, Any]:
         """JSON-serialisable dictionary of the arc."""
         return {
-            "kind": self.kind,
+            "kind": self.kind.value,
             "start_s": float(self.start_s),
             "end_s": float(self.end_s),
             "value": float(self.value),

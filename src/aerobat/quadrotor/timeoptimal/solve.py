@@ -10,7 +10,13 @@ import numpy as np
 from aerobat.errors import ConfigError
 from aerobat.quadrotor.timeoptimal.refinement import piece_functions, refine_solver
 from aerobat.quadrotor.timeoptimal.repair import refine_with_structure_search, vertical_candidate
-from aerobat.quadrotor.timeoptimal.solution import BenchmarkLimits, SolveStatus, StageFailure, TimeOptimalSolution
+from aerobat.quadrotor.timeoptimal.solution import (
+    ArcKind,
+    BenchmarkLimits,
+    SolveStatus,
+    StageFailure,
+    TimeOptimalSolution,
+)
 from aerobat.quadrotor.timeoptimal.structure import detect_structure
 from aerobat.quadrotor.timeoptimal.transcription import best_transcription, transcription_solver
 
@@ -133,7 +139,7 @@ def solve_translation(
     dt = t_trans / int(intervals)
     # one singular rate arc over the whole horizon: its rate has one sign, so
     # theta(0) = theta(T) = 0 forces theta == 0, i.e. a vertical move
-    vertical = y_t == 0.0 and angle == 0.0 and [a[0] for a in rate] == ["singular"]
+    vertical = y_t == 0.0 and angle == 0.0 and [a[0] for a in rate] == [ArcKind.SINGULAR]
     if vertical:
         try:
             cand = vertical_candidate(thrust, target, limits, np.array([y_t, z_t, 0.0, 0.0, angle]))
@@ -158,7 +164,7 @@ def solve_translation(
     pmp = best.pmp_residual
     times.setflags(write=False)
     states.setflags(write=False)
-    n_sing = sum(a.kind == "singular" for a in rate_arcs)
+    n_sing = sum(a.kind == ArcKind.SINGULAR for a in rate_arcs)
     msg = (
         f"T*={duration:.6f} s, transcription {t_trans:.6f} s on {intervals} intervals; "
         f"{len(thrust_arcs)} thrust arcs, {len(rate_arcs)} rate arcs of which {n_sing} singular; "

@@ -8,15 +8,15 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.quadrotor.timeoptimal.solution import BenchmarkLimits, StageFailure
+from aerobat.quadrotor.timeoptimal.solution import ArcKind, BenchmarkLimits, StageFailure
 
 _BANG_TOL_REL = 1e-4  # interval counts as "at the bound" within this fraction of the range
 _MIN_SINGULAR_INTERVALS = 3  # shorter non-bang runs are treated as switches inside an interval
 _EDGE_DEVIATION = 0.3  # edge interval of a singular run deviating by this * omega_max hides a bang arc
 
 
-def _runs(labels: Sequence[str]) -> list[tuple[str, int, int]]:
-    runs: list[tuple[str, int, int]] = []
+def _runs(labels: Sequence[ArcKind | None]) -> list[tuple[ArcKind | None, int, int]]:
+    runs: list[tuple[ArcKind | None, int, int]] = []
     start = 0
     for i in range(1, len(labels) + 1):
         if i == len(labels) or labels[i] != labels[start]:
@@ -25,14 +25,15 @@ def _runs(labels: Sequence[str]) -> list[tuple[str, int, int]]:
     return runs
 
 
-def _label(u: np.ndarray, lo: float, hi: float) -> list[str]:
+def _label(u: np.ndarray, lo: float, hi: float) -> list[ArcKind | None]:
+    """Each sample at its upper bound (MAX), lower bound (MIN) or inside (None)."""
     tol = _BANG_TOL_REL * (hi - lo)
-    return ["max" if v >= hi - tol else "min" if v <= lo + tol else "mid" for v in u]
+    return [ArcKind.MAX if v >= hi - tol else ArcKind.MIN if v <= lo + tol else None for v in u]
 
 
 def _bang_segments(
-    u: np.ndarray, lo: float, hi: float, dt: float, runs: list[tuple[str, int, int]], k: int
-) -> list[tuple[str, float]]:
+    u: np.ndarray, lo: float, hi: float, dt: float, runs: list[tuple[ArcKind | None, int, int]], k: int
+) -> list[tuple[ArcKind, float]]:
     """Split a short non-bang run into bang pieces ((kind, duration) list)."""
     label, i0, i1 = runs[k]
     t_max = float(np.sum((u[i0:i1] - lo) / (hi - lo))) * dt
@@ -40,8 +41,8 @@ def _bang_segments(
     t_min = (i1 - i0) * dt - t_max
     prev = runs[k - 1][0] if k > 0 else None
     nxt = runs[k + 1][0] if k + 1 < len(runs) else None
-    amount = {"max": t_max, "min": t_min}
-    other = {"max": "min", "min": "max"}
+    amount = {ArcKind.MAX: t_max, ArcKind.MIN: t_min}
+    other = {ArcKind.MAX: ArcKind.MIN, ArcKind.MIN: ArcKind.MAX}
     if prev in amount and nxt in amount and prev != nxt:
         return [(prev, amount[prev]), (nxt, amount[nxt])]
     if prev in amount and nxt in amount:  # same bang on both sides: short opposite arc
@@ -54,14 +55,14 @@ def _bang_segments(
     raise StageFailure("input never reaches a bound; cannot identify a bang structure")
 
 
-def _merge_segments(segs: list[tuple[str, float, Any]]) -> list[list[Any]]:
+def _merge_segments(segs: list[tuple[ArcKind, float, Any]]) -> list[list[Any]]:
     """Merge consecutive segments of equal bang kind; returns [kind, t0, t1, extra]."""
     out: list[list[Any]] = []
     t = 0.0
     for kind, dur, extra in segs:
         if dur <= 0.0:
             continue
-        if out and kind == out[-1][0] and kind != "singular":
+        if out and kind == out[-1][0] and kind != ArcKind.SINGULAR:
             out[-1][2] = t + dur
         else:
             out.append([kind, t, t + dur, extra])
@@ -102,9 +103,9 @@ def detect_structure(
     f = us[:, 0]
     lo, hi = lim.f_min_m_s2, lim.f_max_m_s2
     runs = _runs(_label(f, lo, hi))
-    segs: list[tuple[str, float, Any]] = []
+    segs: list[tuple[ArcKind, float, Any]] = []
     for k, (lab, i0, i1) in enumerate(runs):
-        if lab != "mid":
+        if lab is not None:
             segs.append((lab, (i1 - i0) * dt, None))
         elif i1 - i0 >= _MIN_SINGULAR_INTERVALS:
             raise StageFailure(
@@ -122,7 +123,7 @@ def detect_structure(
     fit_t: list[np.ndarray] = []
     fit_theta: list[np.ndarray] = []
     for k, (lab, i0, i1) in enumerate(runs):
-        if lab != "mid":
+        if lab is not None:
             segs.append((lab, (i1 - i0) * dt, None))
         elif i1 - i0 >= _MIN_SINGULAR_INTERVALS:
             # A singular run touching the start/end of the horizon may hide a
@@ -132,18 +133,18 @@ def detect_structure(
             core = float(np.median(w[i0:i1]))
             head = tail = None
             if i0 == 0 and abs(w[0] - core) > _EDGE_DEVIATION * wmax:
-                kind = "max" if w[0] > core else "min"
-                bound = wmax if kind == "max" else -wmax
+                kind = ArcKind.MAX if w[0] > core else ArcKind.MIN
+                bound = wmax if kind == ArcKind.MAX else -wmax
                 head = (kind, dt * min(1.0, abs((w[0] - core) / (bound - core))))
             if i1 == n and abs(w[-1] - core) > _EDGE_DEVIATION * wmax:
-                kind = "max" if w[-1] > core else "min"
-                bound = wmax if kind == "max" else -wmax
+                kind = ArcKind.MAX if w[-1] > core else ArcKind.MIN
+                bound = wmax if kind == ArcKind.MAX else -wmax
                 tail = (kind, dt * min(1.0, abs((w[-1] - core) / (bound - core))))
             length = (i1 - i0) * dt
             if head is not None:
                 segs.append((head[0], head[1], None))
                 length -= head[1]
-            segs.append(("singular", length - (tail[1] if tail else 0.0), None))
+            segs.append((ArcKind.SINGULAR, length - (tail[1] if tail else 0.0), None))
             if tail is not None:
                 segs.append((tail[0], tail[1], None))
             # interior nodes only: the transcription rings next to junctions

@@ -13,7 +13,7 @@ KERNEL_SOURCES := $(wildcard src/aerobat/quadrotor/*.py src/aerobat/plants/*.py 
 	src/aerobat/logs/blackbox_*.py)
 OUT ?= out
 # the extras make installs: every optional piece, the tests' and the docs'
-EXTRAS := test,dev,docs,rotorpy,dask,baselines,replay,logs,viewers
+EXTRAS := test,dev,docs,rotorpy,dask,baselines,replay,logs,viewers,fc
 
 .PHONY: demo test test-slow test-release docs bench lint clean setup betaflight
 

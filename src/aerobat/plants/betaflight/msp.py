@@ -19,6 +19,7 @@ from __future__ import annotations
 import enum
 import struct
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from .errors import LinkTimeout, MspError
@@ -28,12 +29,16 @@ __all__ = [
     "ARMING_DISABLE_FLAG_NAMES",
     "MSP_API_VERSION",
     "MSP_ATTITUDE",
+    "MSP_BATTERY_STATE",
     "MSP_MOTOR",
     "MSP_RC",
+    "MSP_SET_RAW_RC",
     "MSP_STATUS",
     "MSP_STATUS_EX",
     "ApiVersion",
     "Attitude",
+    "Battery",
+    "BatteryAlert",
     "MspClient",
     "MspVersion",
     "StatusEx",
@@ -47,7 +52,9 @@ MSP_STATUS = 101
 MSP_MOTOR = 104
 MSP_RC = 105
 MSP_ATTITUDE = 108
+MSP_BATTERY_STATE = 130
 MSP_STATUS_EX = 150
+MSP_SET_RAW_RC = 200
 
 ARMING_DISABLE_FLAG_NAMES: tuple[str, ...] = (
     "NOGYRO", "FAILSAFE", "RXLOSS", "NOT_DISARMED", "BOXFAILSAFE", "RUNAWAY", "CRASH", "THROTTLE",
@@ -168,6 +175,50 @@ class Attitude:
     yaw_deg: float
 
 
+class BatteryAlert(enum.IntEnum):
+    """The firmware's battery state (``batteryState_e`` in sensors/battery.h)."""
+
+    OK = 0
+    WARNING = 1
+    CRITICAL = 2
+    NOT_PRESENT = 3
+    INIT = 4
+
+
+@dataclass(frozen=True)
+class Battery:
+    """MSP_BATTERY_STATE: what the flight controller measures of its battery.
+
+    Attributes
+    ----------
+    cell_count : cells detected (0: no battery detected).
+    capacity_mah : the configured capacity.
+    voltage_v : the pack voltage (0.01 V resolution).
+    drawn_mah : charge drawn since power-up.
+    current_a : the current (0.01 A resolution; 0 without a current sensor).
+    alert : the firmware's own verdict (warning and critical come from its ``vbat_*_cell_voltage`` settings).
+    """
+
+    cell_count: int
+    capacity_mah: int
+    voltage_v: float
+    drawn_mah: int
+    current_a: float
+    alert: BatteryAlert
+
+    @classmethod
+    def decode(cls, payload: bytes) -> Battery:
+        """Decode the MSP_BATTERY_STATE payload (layout from msp.c, ``case MSP_BATTERY_STATE``)."""
+        cells, capacity, _legacy_decivolt, drawn, current_centiamp, alert, centivolt = struct.unpack_from(
+            "<BHBHhBH", payload, 0)
+        return cls(cells, capacity, centivolt / 100.0, drawn, current_centiamp / 100.0, BatteryAlert(alert))
+
+    @property
+    def cell_voltage_v(self) -> float:
+        """The mean cell voltage (NaN when no cell is detected)."""
+        return self.voltage_v / self.cell_count if self.cell_count else float("nan")
+
+
 def decode_arming_disable_flags(mask: int) -> tuple[str, ...]:
     """Names of the set bits of an arming-disable mask, lowest bit first."""
     return tuple(
@@ -280,6 +331,23 @@ class MspClient:
     def status_ex(self, timeout_s: float | None = None) -> StatusEx:
         """MSP_STATUS_EX: arming state and arming-disable flags (``timeout_s``: this request's, else the client's)."""
         return StatusEx.decode(self.request(MSP_STATUS_EX, timeout_s=timeout_s))
+
+    def battery(self, timeout_s: float | None = None) -> Battery:
+        """MSP_BATTERY_STATE: voltage, cells, charge drawn and the firmware's battery alert."""
+        return Battery.decode(self.request(MSP_BATTERY_STATE, timeout_s=timeout_s))
+
+    def set_raw_rc(self, channels_us: Sequence[int], timeout_s: float | None = None) -> None:
+        """MSP_SET_RAW_RC: one RC frame (AETR1234… order, microseconds) for a receiver set to MSP.
+
+        The firmware takes it only with ``serialrx_provider``/``receiver`` set to MSP (``RX_MSP``);
+        Betaflight acknowledges the frame with an empty answer, which this waits for, so a frame
+        is known to have arrived. Raises :class:`MspError` when the firmware refuses it (too many
+        channels) and :class:`ValueError` for a channel outside 0 … 65535 µs.
+        """
+        values = [int(c) for c in channels_us]
+        if any(not 0 <= v <= 0xFFFF for v in values):
+            raise ValueError(f"RC channels must be 0 … 65535 µs, got {values}")
+        self.request(MSP_SET_RAW_RC, struct.pack(f"<{len(values)}H", *values), timeout_s=timeout_s)
 
     def rc_us(self) -> tuple[int, ...]:
         """MSP_RC: the channels as the firmware sees them, in microseconds.

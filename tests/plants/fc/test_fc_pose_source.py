@@ -17,23 +17,27 @@ MOCK = {"rigid_bodies": "quad(0.5,-0.25,1.0,1,0,0,0)"}
 def test_poses_arrive_stamped_in_order_and_latency_corrected():
     with MotionCaptureSource("mock", "quad", latency_s=0.004, options=MOCK) as source:
         assert isinstance(source, PoseSource)
-        poses = [source.wait(1.0) for _ in range(10)]
-    assert all(p is not None for p in poses)
+        poses = []
+        while len(poses) < 10:
+            arrived = source.wait(1.0)
+            assert arrived, "no frame within 1 s"
+            poses += arrived
     frames = [p.frame for p in poses]
-    assert frames == sorted(frames) and len(set(frames)) == 10  # each wait hands out a newer frame
+    assert frames == sorted(frames) and len(set(frames)) == len(frames)  # each pose handed out once, in order
     first = poses[0]
     assert first.position_m == (0.5, -0.25, 1.0) and first.quaternion_wxyz == (1.0, 0.0, 0.0, 0.0)
+    assert first.true_position_m is None and first.on_floor is None  # a real system knows no truth
     assert all(p.received_s - p.measured_s == pytest.approx(0.004) for p in poses)
     assert all(p.received_s <= time.monotonic() for p in poses)
     rate_hz = (len(poses) - 1) / (poses[-1].received_s - poses[0].received_s)
     assert 20.0 < rate_hz < 500.0  # the mock system's ≈100 Hz (slower under load)
 
 
-def test_wait_returns_none_after_its_timeout_once_closed():
+def test_wait_returns_nothing_after_its_timeout_once_closed():
     source = MotionCaptureSource("mock", "quad", options=MOCK)
     source.close()
     started = time.monotonic()
-    assert source.wait(0.2) is None and time.monotonic() - started < 0.3
+    assert source.wait(0.2) == [] and time.monotonic() - started < 0.3
 
 
 @pytest.mark.parametrize("system, body, message", [

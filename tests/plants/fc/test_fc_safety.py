@@ -47,10 +47,13 @@ def test_motion_capture_dropout_stops_the_flight_after_its_timeout():
     assert monitor.check(0.11) is StopReason.MOCAP_LOST  # a stopped flight stays stopped
 
 
-def test_no_pose_at_all_is_a_motion_capture_loss():
+def test_a_vehicle_never_tracked_is_preflights_to_refuse_not_a_dropout():
     monitor = SafetyMonitor(LIMITS, 0.0)
-    monitor.link_answered(0.0)
-    assert monitor.check(0.0) is StopReason.MOCAP_LOST
+    monitor.link_answered(0.2)
+    assert monitor.check(0.2) is None  # preflight says "not tracked" before any take-off
+    monitor.pose((0.0, 0.0, 0.0), 0.2)
+    monitor.link_answered(0.3)
+    assert monitor.check(0.3) is StopReason.MOCAP_LOST
 
 
 def test_leaving_the_geofence_stops_the_flight():

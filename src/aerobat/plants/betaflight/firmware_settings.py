@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import math
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -112,6 +113,16 @@ class BetaflightSettings:
         features = tuple(c for c in report.commands if c.startswith("feature "))
         digest = hashlib.sha256("\n".join([self.sha256, *report.commands]).encode()).hexdigest()
         return replace(self, sha256=digest, commands=(*features, *self.commands), values=values, tune=report)
+
+    def with_values(self, extra: Mapping[str, str], why: str) -> BetaflightSettings:
+        """These settings with ``set`` values added or replaced (the eeprom's cache key changes with them).
+
+        ``why`` is kept in the hash's input and says what needs them (e.g. the serial task's rate for
+        RC frames over MSP).
+        """
+        values = tuple((n, v) for n, v in self.values if n not in extra) + tuple(extra.items())
+        lines = [self.sha256, why, *(f"set {n} = {v}" for n, v in extra.items())]
+        return replace(self, sha256=hashlib.sha256("\n".join(lines).encode()).hexdigest(), values=values)
 
     def cli_commands(self) -> list[str]:
         """All CLI commands, in the order they are applied (without ``save``)."""

@@ -159,6 +159,15 @@ class Flight:
             self._queue.append((self.tick + self.latency_steps, tuple(int(c) for c in channels_us)))
         self._advance(self.frame_steps)
 
+    def advance(self, steps: int) -> None:
+        """Fly ``steps`` gyro periods with no radio frame: the receiver gets its frames another way.
+
+        A real-time rehearsal sends its sticks as MSP over the firmware's UART
+        (:mod:`aerobat.plants.fc`); this keeps the UDP receiver silent, so the firmware's
+        receiver stays MSP, its default.
+        """
+        self._advance(steps)
+
     def release(self) -> None:
         """Take the floor away: from now on the vehicle flies free, as in the air (a replayed flight).
 

@@ -274,6 +274,13 @@ class StatusEx:
         )
 
 
+def _rc_payload(channels_us: Sequence[int]) -> bytes:
+    values = [int(c) for c in channels_us]
+    if any(not 0 <= v <= 0xFFFF for v in values):
+        raise ValueError(f"RC channels must be 0 … 65535 µs, got {values}")
+    return struct.pack(f"<{len(values)}H", *values)
+
+
 class MspClient:
     """Request/response MSP over a :class:`~.transport.Transport`.
 
@@ -323,6 +330,27 @@ class MspClient:
                 raise LinkTimeout(f"no answer to MSP command {command} within {timeout_s} s")
             self._buffer += self._transport.read(4096, remaining_s)
 
+    def post(self, command: int, payload: bytes = b"") -> None:
+        """Send a request without waiting for its answer (a stream of RC frames: the answers are collected later)."""
+        self._transport.write(encode_request(command, payload, self._version))
+
+    def collect(self, timeout_s: float = 0.0) -> list[tuple[int, bytes]]:
+        """Read what has arrived (waiting at most ``timeout_s`` for the first bytes) and return its answers.
+
+        The answers are ``(command, payload)`` pairs, oldest first (an error frame's payload is empty): the
+        acknowledgements of :meth:`post`-ed requests, a sign of life of the flight controller, and the
+        answers of requests posted to be read later. A :meth:`request` later is not confused by a partial
+        answer left over: it resynchronizes on the next frame.
+        """
+        self._buffer += self._transport.read(4096, timeout_s)
+        answers: list[tuple[int, bytes]] = []
+        while True:
+            frame, consumed = _parse_frame(self._buffer)
+            del self._buffer[:consumed]
+            if frame is None:
+                return answers
+            answers.append((frame.command, b"" if frame.is_error else frame.payload))
+
     def api_version(self) -> ApiVersion:
         """MSP_API_VERSION (Betaflight 4.6: protocol 0, API 1.47)."""
         protocol, major, minor = struct.unpack_from("<BBB", self.request(MSP_API_VERSION))
@@ -336,6 +364,10 @@ class MspClient:
         """MSP_BATTERY_STATE: voltage, cells, charge drawn and the firmware's battery alert."""
         return Battery.decode(self.request(MSP_BATTERY_STATE, timeout_s=timeout_s))
 
+    def post_raw_rc(self, channels_us: Sequence[int]) -> None:
+        """:meth:`set_raw_rc` without waiting for the acknowledgement (collect it with :meth:`collect`)."""
+        self.post(MSP_SET_RAW_RC, _rc_payload(channels_us))
+
     def set_raw_rc(self, channels_us: Sequence[int], timeout_s: float | None = None) -> None:
         """MSP_SET_RAW_RC: one RC frame (AETR1234… order, microseconds) for a receiver set to MSP.
 
@@ -344,10 +376,7 @@ class MspClient:
         is known to have arrived. Raises :class:`MspError` when the firmware refuses it (too many
         channels) and :class:`ValueError` for a channel outside 0 … 65535 µs.
         """
-        values = [int(c) for c in channels_us]
-        if any(not 0 <= v <= 0xFFFF for v in values):
-            raise ValueError(f"RC channels must be 0 … 65535 µs, got {values}")
-        self.request(MSP_SET_RAW_RC, struct.pack(f"<{len(values)}H", *values), timeout_s=timeout_s)
+        self.request(MSP_SET_RAW_RC, _rc_payload(channels_us), timeout_s=timeout_s)
 
     def rc_us(self) -> tuple[int, ...]:
         """MSP_RC: the channels as the firmware sees them, in microseconds.

@@ -17,6 +17,7 @@ OptiTrack report theirs in their own software, typically 3–10 ms.
 from __future__ import annotations
 
 import atexit
+import collections
 import threading
 import time
 from collections.abc import Mapping
@@ -31,6 +32,8 @@ MOTION_CAPTURE_SYSTEMS = ("vicon", "optitrack", "optitrack_closed_source", "qual
                           "fzmotion", "motionanalysis", "mock")
 """The ``type`` names libmotioncapture's ``connect`` knows (those compiled into the PyPI wheel may be fewer)."""
 
+_MAX_UNREAD = 10_000  # poses kept for a reader that falls behind (50 s at 200 Hz); older ones are dropped
+
 
 @dataclass(frozen=True)
 class Pose:
@@ -41,8 +44,10 @@ class Pose:
     position_m : (x, y, z) in the motion-capture frame.
     quaternion_wxyz : the body's attitude, scalar first.
     received_s : ``time.monotonic()`` when the frame reached the ground computer.
-    measured_s : when it was measured: ``received_s`` less the system's latency.
+    measured_s : when it was measured: ``received_s`` less the system's latency (a simulated source
+        knows it exactly).
     frame : the frame's number since the source opened (1, 2, …; a gap means frames were missed).
+    true_position_m, on_floor : the truth, from a simulated source only (None from a real system).
     """
 
     position_m: tuple[float, float, float]
@@ -50,17 +55,20 @@ class Pose:
     received_s: float
     measured_s: float
     frame: int
+    true_position_m: tuple[float, float, float] | None = None
+    on_floor: bool | None = None
 
 
 @runtime_checkable
 class PoseSource(Protocol):
     """Where the poses of the vehicle come from."""
 
-    def wait(self, timeout_s: float) -> Pose | None:
-        """The next pose newer than the last one returned, waiting at most ``timeout_s``; None if none came."""
+    def wait(self, timeout_s: float) -> list[Pose]:
+        """Every pose that arrived since the last call, oldest first.
 
-    def latest(self) -> Pose | None:
-        """The newest pose so far (None before the first), without waiting."""
+        When none is pending, waits at most ``timeout_s`` for the first; ``[]`` if none came (or the
+        source is closed).
+        """
 
     def close(self) -> None:
         """Stop listening."""
@@ -100,15 +108,14 @@ class MotionCaptureSource:
             raise ConfigError(f"--mocap {system}: cannot connect ({error})") from None
         self.system, self.body, self.latency_s = system, body, latency_s
         self._condition = threading.Condition()
-        self._latest: Pose | None = None
-        self._returned = 0
+        self._unread: collections.deque[Pose] = collections.deque(maxlen=_MAX_UNREAD)
         self._frames = 0
         self._closed = False
         self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._listen, name=f"mocap-{system}", daemon=True)
         self._thread.start()
         atexit.register(self.close)  # libmotioncapture aborts the process if it exits inside waitForNextFrame
-        if self.wait(first_frame_timeout_s) is None:
+        if not self.wait(first_frame_timeout_s):
             self.close()
             raise ConfigError(f"--mocap {system}: no frame with rigid body {body!r} within {first_frame_timeout_s:g} s"
                               + (f" ({self._error})" if self._error else ""))
@@ -125,32 +132,27 @@ class MotionCaptureSource:
                 p, q = rb.position, rb.rotation
                 with self._condition:
                     self._frames += 1
-                    self._latest = Pose((float(p[0]), float(p[1]), float(p[2])),
-                                        (float(q.w), float(q.x), float(q.y), float(q.z)),
-                                        received_s, received_s - self.latency_s, self._frames)
+                    self._unread.append(Pose((float(p[0]), float(p[1]), float(p[2])),
+                                             (float(q.w), float(q.x), float(q.y), float(q.z)),
+                                             received_s, received_s - self.latency_s, self._frames))
                     self._condition.notify_all()
         except Exception as error:  # the system went away: no more poses, and wait() says so by timing out
             self._error = error
 
-    def wait(self, timeout_s: float) -> Pose | None:
-        """The next pose newer than the last one returned, waiting at most ``timeout_s``.
-
-        None if none came within the timeout, or the source is closed.
-        """
+    def wait(self, timeout_s: float) -> list[Pose]:
+        """Every pose since the last call, oldest first; waits up to ``timeout_s`` when none is pending."""
         deadline = time.monotonic() + timeout_s
         with self._condition:
-            while self._closed or self._latest is None or self._latest.frame <= self._returned:
+            while not self._unread and not self._closed:
                 remaining_s = deadline - time.monotonic()
-                if remaining_s <= 0 or self._closed:
-                    return None
+                if remaining_s <= 0:
+                    return []
                 self._condition.wait(remaining_s)
-            self._returned = self._latest.frame
-            return self._latest
-
-    def latest(self) -> Pose | None:
-        """The newest pose so far, without waiting."""
-        with self._condition:
-            return self._latest
+            if self._closed:
+                return []
+            poses = list(self._unread)
+            self._unread.clear()
+            return poses
 
     def close(self, timeout_s: float = 1.0) -> None:
         """Stop handing out poses, and wait up to ``timeout_s`` for the listening thread to end (with the next frame).

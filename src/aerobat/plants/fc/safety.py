@@ -14,14 +14,19 @@ the firmware's RX-loss failsafe, ``failsafe_procedure`` DROP or LAND, takes over
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import Any
+
+import numpy as np
 
 from aerobat.core.bounds import Interval, Items, bounded, validate
 from aerobat.errors import ConfigError
 from aerobat.plants.betaflight.msp import Battery, BatteryAlert, StatusEx
+from aerobat.plants.world_params import Volume
 
 __all__ = ["Preflight", "SafetyLimits", "SafetyMonitor", "StopReason", "preflight"]
 
@@ -81,6 +86,18 @@ class SafetyLimits:
             low, high = getattr(self, f"fence_{axis}_m")
             if not low < high:
                 raise ConfigError(f"fence_{axis}_m = ({low:g}, {high:g}): low must be below high")
+
+    def with_fence_around(self, start_m: Sequence[float] | np.ndarray, volume: Volume,
+                          margin_m: float = 0.1) -> SafetyLimits:
+        """These limits with the geofence of the flight ``volume`` around ``start_m`` (widened by ``margin_m``).
+
+        The supervisor's volume check ends a trial as crashed at the volume's walls; the fence, a
+        little outside them, is the backstop that disarms.
+        """
+        sides: dict[str, Any] = {}
+        for axis, (low, high), centre in zip("xyz", (volume.x_m, volume.y_m, volume.z_m), start_m, strict=True):
+            sides[f"fence_{axis}_m"] = (centre + low - margin_m, centre + high + margin_m)
+        return dataclasses.replace(self, **sides)
 
     def inside_fence(self, position_m: Sequence[float]) -> bool:
         """True if ``position_m`` (x, y, z in the room) is inside the geofence."""
@@ -155,7 +172,9 @@ class SafetyMonitor:
     """The reasons to stop a flight, from what the ground side saw last (all times: ``time.monotonic()`` s).
 
     Feed it as things happen (:meth:`pose`, :meth:`link_answered`, :meth:`battery`, :meth:`kill`)
-    and ask :meth:`check` at every frame. A reason, once found, stays (``stopped``): a flight
+    and ask :meth:`check` at every frame. Motion capture counts as lost once poses have come and
+    stopped (a vehicle never tracked is :func:`preflight`'s to refuse); the link, once no answer
+    came for its timeout, counted from ``now_s`` until the first. A reason, once found, stays (``stopped``): a flight
     that was stopped is not resumed by a pose that comes back.
     """
 
@@ -202,7 +221,7 @@ class SafetyMonitor:
         if self._position_m is not None and not limits.inside_fence(self._position_m):
             return StopReason.GEOFENCE, f"at {_xyz(self._position_m)}"
         age_s = now_s - self._pose_at_s
-        if self._position_m is None or age_s > limits.mocap_timeout_s:
+        if self._position_m is not None and age_s > limits.mocap_timeout_s:
             return StopReason.MOCAP_LOST, (f"last pose {age_s * 1e3:.0f} ms ago "
                                            f"(mocap_timeout_s {limits.mocap_timeout_s:g} s)")
         silent_s = now_s - self._link_at_s

@@ -1,0 +1,271 @@
+"""``FlightControllerPlant``: the Fig. 8 supervisor flying a Betaflight board on the wall clock.
+
+The supervisor is the Betaflight plant's own (:class:`~aerobat.plants.betaflight.plant.BetaflightPlant`:
+power on and arm, take off and settle, hover, stream the program as sticks in ACRO, measure, fly
+back, land and disarm), the same code with the same pilot and stick map. What changes is the flight it
+drives: a :class:`~.wall_clock.WallClockFlight`, whose frames go out as ``MSP_SET_RAW_RC`` over a
+serial port at their deadlines and whose measurements are motion-capture poses as they arrive, with the
+:class:`~.safety.SafetyMonitor` asked at every frame.
+
+Two connections give it a flight controller (:class:`Connection`):
+
+* :class:`BoardConnection` — a real board: ``/dev/ttyACM0`` and a motion-capture system
+  (:class:`~.pose_source.MotionCaptureSource`).
+* :class:`RehearsalConnection` — the real firmware in real time: a :class:`~.world.RealTimeWorld`
+  (the SITL and aerobat's physics in a process of their own, paced to the wall clock), its UART as
+  a serial device (:class:`~.pty_bridge.PtyBridge`), its motion capture over UDP
+  (:class:`~.simulated_source.SimulatedSource`, 200 Hz with latency). A fresh world per trial.
+
+Before each trial the plant streams disarmed frames and runs :func:`~.safety.preflight`; a take-off it
+refuses is an aborted trial naming the problems. A safety stop during the flight disarms at once
+(kill, geofence, motion-capture loss, low battery) or, with the link gone, leaves the vehicle to the
+firmware's RX-loss failsafe; the trial ends ``crashed`` (geofence) or ``aborted`` (the others), which
+ends a learning session: a real vehicle is not flown again until a person has looked.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import math
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from aerobat.core.plant import Trial, TrialStatus
+from aerobat.plants.betaflight.errors import LinkClosed, LinkTimeout, MspError
+from aerobat.plants.betaflight.firmware_settings import BetaflightSettings, load_settings
+from aerobat.plants.betaflight.msp import Battery, MspClient, StatusEx
+from aerobat.plants.betaflight.params import BetaflightParams
+from aerobat.plants.betaflight.plant import BetaflightPlant
+from aerobat.plants.betaflight.rc import RC_MIN_US
+from aerobat.quadrotor.program import CompiledProgram, Program
+from aerobat.quadrotor.vehicle import VehicleConfig
+
+from .pose_source import PoseSource
+from .pty_bridge import PtyBridge
+from .safety import SafetyLimits, SafetyMonitor, StopReason, preflight
+from .serial_link import SerialTransport
+from .simulated_source import SimulatedSource
+from .wall_clock import SafetyStop, WallClockFlight
+from .world import RealTimeWorld, WorldReport
+
+__all__ = ["MSP_RC_SETTINGS", "REHEARSAL_TIMEOUTS", "BoardConnection", "Connection", "FlightControllerPlant", "Link",
+           "RehearsalConnection"]
+
+MSP_RC_SETTINGS = {"serial_update_rate_hz": "2000"}
+"""Firmware settings RC over MSP needs: the serial task reads MSP at 100 Hz by default, which would
+hold a frame up to 10 ms and merge frames sent faster; at 2000 Hz a frame waits at most 0.5 ms."""
+
+REHEARSAL_TIMEOUTS: dict[str, Any] = {"mocap_timeout_s": 0.25, "link_timeout_s": 0.5}
+"""A rehearsal's timeouts: its world can fall behind the wall clock on a loaded machine (it reports by
+how much, :class:`~.world.WorldReport`), which delays its poses as a real system's never are."""
+
+_STATUS_FOR = {StopReason.GEOFENCE: TrialStatus.CRASHED}
+_PREFLIGHT_FRAMES_S = 0.5  # disarmed frames before the checks: the receiver sees a live link
+_CALIBRATION_WAIT_S = 2.0  # beyond the pilot's calibration time, the longest the checks wait for the gyro
+_SAFE_FRAMES_S = 0.3  # disarmed frames sent after a stop
+_FAILSAFE_WAIT_S = 4.0  # after a link loss, how long the vehicle is watched coming down (failsafe DROP: ≈1.6 s)
+
+
+@dataclass
+class Link:
+    """An open connection to a flight controller for one trial."""
+
+    msp: MspClient
+    poses: PoseSource
+    time_zero_s: float
+    world: RealTimeWorld | None = None
+    bridge: PtyBridge | None = None
+    notes: dict[str, Any] = field(default_factory=dict)
+
+
+class Connection(Protocol):
+    """How the plant reaches a flight controller: one :class:`Link` per trial, closed after it."""
+
+    require_battery: bool
+
+    def open(self, seed: int) -> contextlib.AbstractContextManager[Link]:
+        """The link for one trial (``seed``: the trial's, for a simulated world)."""
+
+
+@dataclass
+class BoardConnection:
+    """A real board on ``port`` and a motion-capture source (the caller opens and closes the source)."""
+
+    port: str
+    poses: PoseSource
+    baudrate_bd: int = 115_200
+    require_battery: bool = True
+
+    @contextlib.contextmanager
+    def open(self, seed: int) -> Iterator[Link]:
+        del seed
+        with SerialTransport(self.port, self.baudrate_bd) as transport:
+            yield Link(MspClient(transport, timeout_s=0.5), self.poses, time.monotonic())
+
+
+@dataclass
+class RehearsalConnection:
+    """The real firmware and aerobat's physics on the wall clock, reached as a real board is.
+
+    ``plant_args`` build the world (:class:`~aerobat.plants.betaflight.plant.BetaflightPlant`'s
+    arguments); the seed of each trial is the plant's. The SITL has no battery sensor: the battery
+    check is off here, and its trigger is tested against MSP answers from a pseudo-terminal.
+    """
+
+    plant_args: dict[str, Any]
+    chunk_s: float = 1e-3
+    require_battery: bool = False
+    reports: list[WorldReport] = field(default_factory=list)
+    current: Link | None = None
+    """The link of the trial in progress (for drills: cut it, blind its motion capture)."""
+
+    @contextlib.contextmanager
+    def open(self, seed: int) -> Iterator[Link]:
+        with SimulatedSource() as source:
+            world = RealTimeWorld({**self.plant_args, "seed": seed}, source.port, chunk_s=self.chunk_s)
+            try:
+                with PtyBridge("127.0.0.1", world.uart1_port) as bridge, \
+                        SerialTransport(bridge.device) as transport:
+                    t0 = world.start()
+                    source.set_time_zero(t0)
+                    self.current = Link(MspClient(transport, timeout_s=1.0), source, t0, world, bridge)
+                    yield self.current
+            finally:
+                self.current = None
+                report = world.stop()
+                if report is not None:
+                    self.reports.append(report)
+
+
+class FlightControllerPlant(BetaflightPlant):
+    """``--plant fc``: the Fig. 8 supervisor on the wall clock, with a Betaflight flight controller.
+
+    Parameters
+    ----------
+    config : the nominal vehicle (the design model).
+    connection : how to reach the flight controller (:class:`BoardConnection`, :class:`RehearsalConnection`).
+    params : the Betaflight plant's settings; the pilot, radio rate and volume are used here (the
+        airframe, sensors and disturbances only by a rehearsal's world).
+    limits : the safety limits (geofence in the motion-capture frame; default: :class:`~.safety.SafetyLimits`'s,
+        for a rehearsal with the fence just outside the plant's flight volume).
+    seed : seeds the trials' worlds in a rehearsal.
+    settings : the firmware's settings (default: the packaged ones with :data:`MSP_RC_SETTINGS`).
+    feedback : the pilot's feedback (default ``none``: open loop, as the paper flies).
+    binary, eeprom : a rehearsal's firmware (built and configured on first use).
+    """
+
+    name = "fc"
+
+    def __init__(self, config: VehicleConfig, connection: Connection, params: BetaflightParams | None = None, *,
+                 limits: SafetyLimits | None = None, seed: int = 0, settings: BetaflightSettings | None = None,
+                 feedback: Any = "none", **firmware: Any) -> None:
+        settings = settings or load_settings().with_values(MSP_RC_SETTINGS, "RC frames over MSP")
+        super().__init__(config, params, seed=seed, settings=settings, feedback=feedback, **firmware)
+        self.connection = connection
+        if limits is None:  # a rehearsal's room is the plant's volume; a real room's fence is the user's to give
+            limits = SafetyLimits()
+            if isinstance(connection, RehearsalConnection):
+                limits = dataclasses.replace(limits.with_fence_around(self.start_m, self.params.volume),
+                                             **REHEARSAL_TIMEOUTS)
+        self.safety = limits
+        self.kill_requested = False
+        if isinstance(connection, RehearsalConnection):
+            connection.plant_args.update(config=config, params=self.params, binary=self.binary,
+                                         eeprom=self.eeprom, settings=self.settings)
+
+    def kill(self) -> None:
+        """The operator's kill: the flight in progress disarms at its next frame (callable from any thread)."""
+        self.kill_requested = True
+        flight = self.flight
+        if isinstance(flight, WallClockFlight):
+            flight.monitor.kill()
+
+    def fly(self, program: Program | CompiledProgram) -> Trial:
+        """One supervised trial on the wall clock; a failure or a safety stop is a trial status, never an exception."""
+        wall = time.perf_counter()
+        compiled = program.compile() if isinstance(program, Program) else program
+        seed = int(self.rng.integers(2**31))
+        self.trials_flown += 1
+        info: dict[str, Any] = {"firmware": "Betaflight over MSP on a serial port, wall clock"}
+        with self.connection.open(seed) as link:
+            monitor = SafetyMonitor(self.safety, time.monotonic())
+            if self.kill_requested:
+                monitor.kill()
+            floor = float(self.start_m[2] + self.params.volume.z_m[0])
+            flight = WallClockFlight(link.msp, link.poses, monitor, rate_hz=self.params.radio.rate_hz,
+                                     time_zero_s=link.time_zero_s, start_m=self.start_m, floor_z_m=floor,
+                                     command_latency_s=self.params.radio.latency_s)
+            self.flight = flight  # type: ignore[assignment]
+            try:
+                problems = self._preflight(flight, link.msp)
+                if problems:
+                    info["preflight"] = list(problems)
+                    return self._failed(TrialStatus.ABORTED, "pre-flight refused: " + "; ".join(problems), info)
+                trial = self._fly(flight, compiled, info, wall)  # type: ignore[arg-type]
+            except SafetyStop as stop:
+                info["safety_stop"] = stop.reason.value
+                self._make_safe(flight, stop.reason)
+                trial = self._failed(_STATUS_FOR.get(stop.reason, TrialStatus.ABORTED), str(stop), info)
+            finally:
+                self.flight = None
+            start = trial.info.get("start_time_s")
+            if start is not None:
+                trial.info["maneuver_frames"] = flight.jitter(start, start + compiled.duration_s)
+            trial.info["frames"] = flight.jitter()
+        if link.world is not None and link.world.report is not None:
+            trial.info["world"] = link.world.report.__dict__
+        return trial
+
+    def _preflight(self, flight: WallClockFlight, msp: MspClient) -> tuple[str, ...]:
+        idle = self.channels(np.array([0.0, 0.0, 0.0, float(RC_MIN_US)]), arm=False, angle=True)
+        status: StatusEx | None = None
+        battery: Battery | None = None
+        # disarmed frames until the receiver sees a live link and the gyro has calibrated (a board
+        # just powered on calibrates for a second or two), then the checks
+        deadline_s = flight.time_s + self.params.pilot.calibration_s + _CALIBRATION_WAIT_S
+        while True:
+            for _ in range(flight.frames_for(_PREFLIGHT_FRAMES_S)):
+                flight.frame(idle)
+            try:
+                status, battery = msp.status_ex(), msp.battery()
+            except (LinkClosed, LinkTimeout, MspError):
+                status = battery = None
+            if status is None or not status.arming_disable_flags or flight.time_s > deadline_s:
+                break
+        rows = flight.mocap()
+        recent = rows[rows[:, 0] > flight.time_s - _PREFLIGHT_FRAMES_S] if rows.shape[0] else rows
+        rate_hz = recent.shape[0] / _PREFLIGHT_FRAMES_S
+        position = tuple(rows[-1, 1:4]) if rows.shape[0] else None
+        floor = self.start_m + np.array([0.0, 0.0, self.params.volume.z_m[0]])
+        check = preflight(self.safety, status=status, battery=battery, mocap_rate_hz=rate_hz,
+                          position_m=position, start_m=floor)
+        problems = check.problems
+        if not self.connection.require_battery:
+            problems = tuple(p for p in problems if not p.startswith("battery:"))
+        return problems
+
+    def _make_safe(self, flight: WallClockFlight, reason: StopReason) -> None:
+        """Disarm at once; with the link gone, send nothing and watch the firmware's RX-loss failsafe bring it down."""
+        if reason is StopReason.LINK_LOST:
+            deadline_s = flight.time_s + _FAILSAFE_WAIT_S
+            while flight.time_s < deadline_s:
+                with contextlib.suppress(SafetyStop):
+                    flight.watch(0.05)
+                if flight.on_floor and np.linalg.norm(flight.x[3:6]) < 0.05:
+                    break
+            return
+        low = self.channels(np.array([0.0, 0.0, 0.0, float(RC_MIN_US)]), arm=False, angle=True)
+        for _ in range(flight.frames_for(_SAFE_FRAMES_S)):
+            with contextlib.suppress(SafetyStop):
+                flight.frame(low)
+
+    def _timing(self, flight: Any, wall: float) -> dict[str, Any]:
+        elapsed = time.perf_counter() - wall
+        return {"wall_s": elapsed, "simulated_s": flight.time_s if flight is not None else 0.0,
+                "steps": flight.tick if flight is not None else 0, "real_time_factor": 1.0,
+                "firmware_cpu_s": math.nan, "wall_per_firmware_cpu": math.nan}

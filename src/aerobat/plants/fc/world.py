@@ -1,0 +1,239 @@
+"""The rehearsal's world: the Betaflight SITL and aerobat's physics in a process of their own, on the wall clock.
+
+A real flight controller runs on its own clock while the ground station talks to it over a serial
+port and watches it through motion capture. :class:`RealTimeWorld` gives the ground station exactly
+that, with the real firmware: a separate process owns a :class:`~aerobat.plants.betaflight.flight.Flight`
+(the lockstep SITL and the physics around it) and advances it in chunks paced to the wall clock, so
+the firmware's time is the wall's time since :meth:`RealTimeWorld.start`. It sends no radio frame:
+the ground's sticks reach the firmware as ``MSP_SET_RAW_RC`` over its UART (the firmware's default
+receiver is MSP), through a serial device (:class:`~.pty_bridge.PtyBridge`).
+
+Motion capture leaves the world as UDP datagrams, one per sample of the flight's motion-capture log
+(its rate and noise), each sent once its latency has passed on the wall clock, to the ground's
+:class:`~.simulated_source.SimulatedSource`. Each carries the true position and floor contact for the
+rehearsal's reports (a real system has neither).
+
+When the world falls behind the wall clock (a loaded machine), it does not skip: it counts the chunk
+as late and keeps the largest lag, which :meth:`RealTimeWorld.stop` reports (:class:`WorldReport`).
+The world process dies with its owner (``PR_SET_PDEATHSIG``), and the firmware with the world.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from typing import Any
+
+__all__ = ["POSE_DATAGRAM", "RealTimeWorld", "WorldReport"]
+
+POSE_DATAGRAM = struct.Struct("<Id3d4d?3d")
+"""One motion-capture sample: frame number, measurement time [s since start], position (3) [m],
+quaternion (w, x, y, z), then the rehearsal's truth: on the floor, true position (3) [m]."""
+
+_PR_SET_PDEATHSIG = 1
+_READY_TIMEOUT_S = 120.0  # the firmware is built and configured on first use
+
+
+@dataclass(frozen=True)
+class WorldReport:
+    """How well the world kept to the wall clock.
+
+    Attributes
+    ----------
+    simulated_s : the flight's time when stopped.
+    wall_s : wall time from start to stop.
+    chunks, late_chunks : chunks flown, and those that ended after their wall-clock deadline.
+    max_lag_s : the most the world fell behind the wall clock.
+    poses_sent : motion-capture datagrams sent.
+    gyro_rate_hz, chunk_s : the firmware's loop rate and the pacing chunk.
+    motors : the firmware's last motor commands (0: stopped; ``motor_idle`` and up: armed).
+    firmware_pid : the firmware process's id (it ends with the world).
+    error : what ended the world early ("" when it was stopped).
+    """
+
+    simulated_s: float
+    wall_s: float
+    chunks: int
+    late_chunks: int
+    max_lag_s: float
+    poses_sent: int
+    gyro_rate_hz: int
+    chunk_s: float
+    motors: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    firmware_pid: int | None = None
+    error: str = ""
+
+    @property
+    def disarmed(self) -> bool:
+        """The firmware's motors were stopped when the world stopped (disarmed, or failsafe's DROP)."""
+        return max(self.motors) == 0.0
+
+
+def _die_with(parent_pid: int) -> None:
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):
+        pass
+    if os.getppid() != parent_pid:
+        os._exit(1)
+
+
+def _world_main(conn: Any, parent_pid: int, plant_args: dict[str, Any], pose_port: int, chunk_s: float) -> None:
+    """The world process: build the flight, report its UART port, fly paced until told to stop."""
+    _die_with(parent_pid)
+    from aerobat.plants.betaflight.plant import BetaflightPlant
+
+    plant = BetaflightPlant(**plant_args)
+    flight = plant.open_flight()
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        conn.send(("ready", flight.sitl.ports.uart1_port, flight.sitl.gyro_period_us))
+        if not conn.poll(_READY_TIMEOUT_S) or conn.recv() != "start":
+            return
+        latency_s = plant.params.motion_capture.latency_s
+        steps = max(1, round(chunk_s / flight.step_s))
+        t0 = time.monotonic()
+        conn.send(("started", t0))
+        chunks = late = published = 0
+        max_lag_s = 0.0
+        error = ""
+        try:
+            while not conn.poll():
+                flight.advance(steps)
+                chunks += 1
+                now_s = time.monotonic() - t0
+                rows = flight.log[: flight.log_count]
+                while published < rows.shape[0] and rows[published, 0] + latency_s <= now_s:
+                    r = rows[published]
+                    truth = flight.x
+                    sock.sendto(POSE_DATAGRAM.pack(published + 1, r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7],
+                                                   flight.on_floor, truth[0], truth[1], truth[2]),
+                                ("127.0.0.1", pose_port))
+                    published += 1
+                lag_s = now_s - flight.time_s
+                if lag_s > steps * flight.step_s:
+                    late += 1
+                max_lag_s = max(max_lag_s, lag_s)
+                if lag_s < 0:
+                    time.sleep(-lag_s)
+            conn.recv()
+        except EOFError:  # the owner closed the pipe: stop
+            error = "the owner closed the world"
+        except Exception as failure:  # the firmware died or hung: the ground sees the link go silent
+            error = f"{type(failure).__name__}: {str(failure).splitlines()[0] if str(failure) else ''}"
+        report = WorldReport(flight.time_s, time.monotonic() - t0, chunks, late, max_lag_s, published,
+                             round(1e6 / flight.sitl.gyro_period_us), steps * flight.step_s,
+                             flight.motor_commands(), flight.sitl.pid, error)
+        try:
+            conn.send(("stopped", report))
+        except OSError:  # the owner closed the pipe: nobody to tell
+            pass
+    finally:
+        sock.close()
+        flight.close()
+
+
+class RealTimeWorld:
+    """A Betaflight SITL and the physics of its vehicle, flying on the wall clock in a process of their own.
+
+    Parameters
+    ----------
+    plant_args : the arguments of :class:`~aerobat.plants.betaflight.plant.BetaflightPlant` that build
+        the world (``config``, ``params``, ``seed``, ``binary``, ``eeprom``, ``settings``): the vehicle, its
+        disturbances, motion capture (rate, noise, latency) and the firmware's settings.
+    pose_port : the UDP port on 127.0.0.1 the motion-capture datagrams go to.
+    chunk_s : the pacing chunk: the world checks the wall clock after each (default 1 ms).
+
+    Attributes
+    ----------
+    uart1_port : the firmware's UART1 (MSP) TCP port.
+    gyro_period_us : the firmware's loop period.
+    started_at_s : ``time.monotonic()`` at the world's time zero (after :meth:`start`).
+    """
+
+    def __init__(self, plant_args: dict[str, Any], pose_port: int, *, chunk_s: float = 1e-3) -> None:
+        ours, theirs = socket.socketpair()
+        # a process of its own (not multiprocessing's spawn, which re-runs the caller's main script)
+        self._process = subprocess.Popen([sys.executable, "-m", "aerobat.plants.fc.world", str(theirs.fileno())],
+                                         pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL)
+        theirs.close()
+        self._conn = Connection(ours.detach())
+        self._conn.send((os.getpid(), plant_args, pose_port, chunk_s))
+        self.started_at_s: float | None = None
+        self.report: WorldReport | None = None
+        message = self._receive(_READY_TIMEOUT_S, "start the firmware")
+        _, self.uart1_port, self.gyro_period_us = message
+
+    def _receive(self, timeout_s: float, what: str) -> Any:
+        if not self._conn.poll(timeout_s):
+            self.close()
+            raise TimeoutError(f"the rehearsal's world did not {what} within {timeout_s:g} s")
+        try:
+            return self._conn.recv()
+        except EOFError:
+            self.close()
+            raise RuntimeError(f"the rehearsal's world process ended before it could {what} "
+                               f"(exit code {self._process.poll()})") from None
+
+    def start(self) -> float:
+        """Start the clock: the firmware's time zero is now; returns ``time.monotonic()`` then."""
+        self._conn.send("start")
+        _, self.started_at_s = self._receive(10.0, "start its clock")
+        return self.started_at_s
+
+    @property
+    def alive(self) -> bool:
+        """The world process is running."""
+        return self._process.poll() is None
+
+    @property
+    def pid(self) -> int:
+        """The world process's id."""
+        return self._process.pid
+
+    def stop(self, timeout_s: float = 10.0) -> WorldReport | None:
+        """Stop flying and return how the world kept time (None if it was never started or is gone)."""
+        if self.report is None and self.started_at_s is not None and self.alive:
+            try:
+                self._conn.send("stop")
+                if self._conn.poll(timeout_s):
+                    _, self.report = self._conn.recv()
+            except (OSError, EOFError):
+                pass
+        self.close()
+        return self.report
+
+    def close(self) -> None:
+        """End the world process and with it the firmware (idempotent).
+
+        Closing the pipe ends the process cleanly (it closes the firmware and its files); one that
+        does not end within 5 s is killed, and the firmware with it (its parent-death signal).
+        """
+        self._conn.close()
+        try:
+            self._process.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            self._process.kill()
+            self._process.wait(timeout=5.0)
+
+    def __enter__(self) -> RealTimeWorld:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.stop()
+
+
+if __name__ == "__main__":  # the world process: python -m aerobat.plants.fc.world FD
+    from aerobat.plants.fc import world as _module  # its classes, not this __main__'s copies, cross the pipe
+
+    _connection = Connection(int(sys.argv[1]))
+    _owner, _plant_args, _pose_port, _chunk_s = _connection.recv()
+    _module._world_main(_connection, _owner, _plant_args, _pose_port, _chunk_s)

@@ -1,0 +1,116 @@
+"""Frames on the wall clock to a board on a serial port, and the safety stops only the board can cause.
+
+The board is the far end of a pseudo-terminal answering MSP as Betaflight does (:mod:`fake_board`):
+the real serial and MSP code paths, with answers the SITL cannot give (its build has no battery
+sensor, so a low battery reported by MSP is tested here).
+"""
+
+from __future__ import annotations
+
+import struct
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("serial", reason="pyserial is not installed (pip install 'aerobat[fc]')")
+
+from fake_board import FakeBoard  # noqa: E402
+
+from aerobat.plants.betaflight.msp import MSP_BATTERY_STATE, MSP_SET_RAW_RC, BatteryAlert, MspClient  # noqa: E402
+from aerobat.plants.fc import Pose, SafetyLimits, SafetyMonitor, SerialTransport, StopReason  # noqa: E402
+from aerobat.plants.fc.wall_clock import SafetyStop, WallClockFlight  # noqa: E402
+
+CHANNELS = [1500, 1500, 1000, 1500] + [1000] * 12
+
+
+def _battery(volts: float, alert: BatteryAlert = BatteryAlert.OK) -> bytes:
+    return struct.pack("<BHBHhBH", 4, 1500, round(volts * 10), 100, 800, int(alert), round(volts * 100))
+
+
+class StillVehicle:
+    """A motion-capture source that sees the vehicle standing still, a fresh pose at every call."""
+
+    def __init__(self) -> None:
+        self.frame = 0
+
+    def wait(self, timeout_s: float) -> list[Pose]:
+        self.frame += 1
+        now = time.monotonic()
+        return [Pose((0.0, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0), now, now - 0.005, self.frame)]
+
+    def close(self) -> None:
+        pass
+
+
+def _flight(port: SerialTransport, limits: SafetyLimits | None = None, battery_period_s: float = 0.05):
+    now = time.monotonic()
+    monitor = SafetyMonitor(limits or SafetyLimits(), now)
+    return WallClockFlight(MspClient(port, timeout_s=1.0), StillVehicle(), monitor, rate_hz=100.0, time_zero_s=now,
+                           start_m=np.zeros(3), floor_z_m=0.0, command_latency_s=0.005,
+                           battery_period_s=battery_period_s)
+
+
+def test_frames_keep_their_deadlines_and_reach_the_board():
+    board = FakeBoard({MSP_SET_RAW_RC: b"", MSP_BATTERY_STATE: _battery(16.2)})
+    try:
+        with SerialTransport(board.device) as port:
+            flight = _flight(port)
+            started = time.monotonic()
+            for _ in range(50):
+                flight.frame(CHANNELS)
+            elapsed = time.monotonic() - started
+            jitter = flight.jitter()
+        assert 0.45 < elapsed < 1.5  # 50 frames at 100 Hz (the first is sent at once)
+        assert jitter["frames"] == 50 and jitter["lateness_median_ms"] < 5.0
+        deadlines = np.array([d for d, _ in flight.deadlines])
+        assert np.allclose(np.diff(deadlines), 0.01)  # the schedule does not drift
+        assert sum(1 for c, _ in board.received if c == MSP_SET_RAW_RC) == 50
+        assert flight.battery is not None and flight.battery.voltage_v == pytest.approx(16.2)
+    finally:
+        board.unplug()
+
+
+@pytest.mark.parametrize("battery", [_battery(13.4), _battery(15.0, BatteryAlert.CRITICAL)], ids=["volts", "alert"])
+def test_a_low_battery_reported_over_msp_stops_the_flight(battery):
+    board = FakeBoard({MSP_SET_RAW_RC: b"", MSP_BATTERY_STATE: battery})
+    try:
+        with SerialTransport(board.device) as port:
+            flight = _flight(port)
+            with pytest.raises(SafetyStop) as stop:
+                for _ in range(100):
+                    flight.frame(CHANNELS)
+        assert stop.value.reason is StopReason.LOW_BATTERY
+    finally:
+        board.unplug()
+
+
+def test_a_board_unplugged_mid_flight_is_a_link_loss():
+    board = FakeBoard({MSP_SET_RAW_RC: b""})
+    with SerialTransport(board.device) as port:
+        flight = _flight(port)
+        for _ in range(5):
+            flight.frame(CHANNELS)
+        board.unplug()
+        with pytest.raises(SafetyStop) as stop:
+            for _ in range(20):
+                flight.frame(CHANNELS)
+    assert stop.value.reason is StopReason.LINK_LOST
+
+
+def test_a_board_that_stops_answering_is_a_link_loss_after_the_timeout():
+    board = FakeBoard({MSP_SET_RAW_RC: b""})
+    try:
+        with SerialTransport(board.device) as port:
+            flight = _flight(port, SafetyLimits(link_timeout_s=0.1))
+            for _ in range(5):
+                flight.frame(CHANNELS)
+            board.answers.clear()  # alive but silent: a hung flight controller
+            silent_at = time.monotonic()
+            with pytest.raises(SafetyStop) as stop:
+                for _ in range(100):
+                    flight.frame(CHANNELS)
+        assert stop.value.reason is StopReason.LINK_LOST
+        assert 0.1 <= time.monotonic() - silent_at < 0.5
+    finally:
+        board.unplug()

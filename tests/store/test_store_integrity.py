@@ -128,7 +128,7 @@ def test_resume_and_export_refuse_a_flipped_bit_in_an_iteration(db):
 
 
 def test_the_bitflip_campaign_finds_no_silent_change(tmp_path):
-    sys.path.insert(0, str(Path(__file__).parents[1] / "scripts"))
+    sys.path.insert(0, str(Path(__file__).parents[2] / "scripts"))
     try:
         from fuzz_store_bitflips import bitflip_campaign
     finally:
@@ -175,7 +175,7 @@ def test_a_version_4_store_is_migrated_with_every_record_checksummed(tmp_path):
 
 
 def test_docs_state_the_real_schema_version():
-    text = (Path(__file__).parents[1] / "docs" / "store.md").read_text()
+    text = (Path(__file__).parents[2] / "docs" / "store.md").read_text()
     from aerobat.store.migrations import SCHEMA_VERSION
 
     assert f"(currently {SCHEMA_VERSION})" in text and f"Version {SCHEMA_VERSION} adds" in text

@@ -26,7 +26,7 @@ from aerobat.store import Store
 
 pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="POSIX signals and /proc")
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 AEROBAT = ROOT / ".venv" / "bin" / "aerobat"
 SMALL = ["flip", "--dims", "2", "--flips", "1", "--max-rate-deg-s", "800"]
 ITERATION = re.compile(r"^\s+(\d+)\s+(ok|rejected|no_trigger|crashed|aborted)\b")

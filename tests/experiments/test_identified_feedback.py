@@ -26,7 +26,7 @@ from aerobat.quadrotor.simulate import NominalModel, simulate
 from aerobat.quadrotor.vehicle import hummingbird
 from aerobat.store import Store
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 H = hummingbird()
 
 

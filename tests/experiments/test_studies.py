@@ -147,7 +147,7 @@ def test_a_median_never_reached_reads_never_in_the_study_tables():
 def test_a_refused_scheduler_leaves_no_client_for_the_garbage_collector(address):
     """A Client that failed to connect was left in a reference cycle; collected later inside the next
     Client's loop thread, its __del__ took distributed's loop-runner lock and deadlocked that Client
-    (tests/test_cli_fuzz.py hung 20 min on a fresh clone). The executor collects it at once."""
+    (tests/cli/test_cli_fuzz.py hung 20 min on a fresh clone). The executor collects it at once."""
     import gc
 
     distributed = pytest.importorskip("distributed")

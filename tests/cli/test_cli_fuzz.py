@@ -31,7 +31,7 @@ from aerobat import hummingbird, save_vehicle
 from aerobat.cli import main
 from aerobat.plants.arena.params import ArenaParams, save_arena
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "examples"
 SMALL = ["flip", "--dims", "2", "--flips", "1", "--max-rate-deg-s", "800"]
 FUZZ = settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow],

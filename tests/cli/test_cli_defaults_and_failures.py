@@ -1,7 +1,10 @@
-"""The five defects that issue 12 ("The house") found, each reproduced as a new user meets it.
+"""The command line's defaults and failures as a new user meets them.
 
-Every test here failed on the code before the restructuring (checked by running this file
-against the old tree) and passes after it.
+Store commands work without ``--db``; a rules study refuses before any job when a baseline
+package is missing and takes the RotorPy settings on RotorPy; a missing optional package gives
+its install hint; a library's ValueError and a full disk are failures (exit 1), not bad input.
+These are the five defects issue 12 ("The house") found: every test failed on the code before
+that restructuring and passes after it.
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ import pytest
 
 from aerobat.cli import main
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SMALL_FLIP = ["flip", "--flips", "1", "--dims", "2", "--max-rate-deg-s", "800"]
 
 

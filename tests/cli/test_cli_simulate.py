@@ -20,7 +20,7 @@ from aerobat.quadrotor.vehicle import (
     save_vehicle,
 )
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 SINGLE = str(EXAMPLES / "single_flip.toml")
 TRIPLE = str(EXAMPLES / "triple_flip_1800.toml")
 

@@ -25,7 +25,7 @@ from aerobat.quadrotor.vehicle import hummingbird
 CONFIG = hummingbird()
 FLIP = MultiFlip(vehicle=CONFIG.vehicle, flips=1, max_rate_rad_s=math.radians(800), dims=2)
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "maneuvers"
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples" / "maneuvers"
 MANEUVERS = {
     "flip": lambda: MultiFlip(vehicle=CONFIG.vehicle, flips=3, dims=3),
     "staged": lambda: load_maneuver_file(EXAMPLES / "flip_sideways.toml", CONFIG.vehicle),

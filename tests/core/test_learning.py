@@ -152,7 +152,7 @@ def test_learn_refuses_a_design_that_did_not_converge_unless_forced():
     from aerobat.errors import DesignFailed
     from aerobat.quadrotor.maneuvers import StagedManeuver
 
-    table = read_toml(Path(__file__).resolve().parents[1] / "examples" / "maneuvers" / "climb_pitch_flip.toml")
+    table = read_toml(Path(__file__).resolve().parents[2] / "examples" / "maneuvers" / "climb_pitch_flip.toml")
     table["errors"][2]["target"] = 3.0  # 3 m higher with one flip: the design does not get there
     flip = StagedManeuver(vehicle=CONFIG.vehicle, table=table, source="far.toml")
     failed = design(flip, NominalModel(CONFIG))

@@ -42,7 +42,7 @@ from aerobat.quadrotor.simulate import (
 )
 from aerobat.quadrotor.vehicle import ControllerParams, ModelEffects, VehicleConfig, VehicleParams, hummingbird
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 CFG = hummingbird()
 SIX_PI = 6.0 * math.pi
 

@@ -1,4 +1,4 @@
-"""A maneuver written in Python by a user: a vertical hop (used by tests/test_maneuver_files.py).
+"""A maneuver written in Python by a user: a vertical hop (used by tests/quadrotor/test_maneuver_files.py).
 
 It shows the plugin contract: a class called with ``vehicle=``, a ``spec()`` that names its
 ``module`` (so any process can rebuild it), and ``from_spec`` registered for its kind.

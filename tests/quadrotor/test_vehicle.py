@@ -82,7 +82,7 @@ def test_the_example_flip_uses_the_eq_27_acceleration():
     """The shipped flip programs use the eq 27 bound: their peak accel_p equals it."""
     from aerobat.quadrotor.program import load_program
 
-    root = Path(__file__).resolve().parents[1] / "examples"
+    root = Path(__file__).resolve().parents[2] / "examples"
     for name in ("single_flip.toml", "triple_flip_1800.toml"):
         prog = load_program(root / name)
         peak = max(abs(s.value) for s in prog.switches if s.channel == "accel_p")

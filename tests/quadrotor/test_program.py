@@ -11,7 +11,7 @@ import pytest
 from aerobat.config import ConfigError
 from aerobat.quadrotor.program import CHANNELS, Program, RampDown, Switch, load_program, save_program
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 G = 9.81
 
 

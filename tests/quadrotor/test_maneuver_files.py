@@ -27,7 +27,7 @@ from aerobat.errors import ConfigError
 from aerobat.quadrotor.maneuvers import StagedManeuver, load_maneuver_file
 from aerobat.store import Store
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "examples" / "maneuvers"
 PLUGINS = Path(__file__).resolve().parent / "plugins"
 CONFIG = hummingbird()

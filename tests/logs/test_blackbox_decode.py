@@ -16,7 +16,7 @@ from aerobat.logs import Channel, read_logs
 from aerobat.logs.betaflight import quiet_orangebox, raw_headers
 from aerobat.logs.blackbox_decode import decode_blackbox, header_end, log_starts
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "flight-logs" / "betaflight"
+DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "flight-logs" / "betaflight"
 pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"the real flight logs are not here ({DATA} is absent)")
 LOGS = [("diatone-roma-f5.bbl", 1), ("diatone-roma-f5.bbl", 2), ("diatone-roma-f5.bbl", 3),
         ("zeezf7-short.bbl", 1), ("zeezf7-short.bbl", 2), ("aikonf7-gecko.bbl", 1)]

@@ -19,7 +19,7 @@ from aerobat.cli import main
 from aerobat.errors import ConfigError
 from aerobat.logs import Channel, LogSource, read_log, read_logs
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "flight-logs"
+DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "flight-logs"
 pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"the real flight logs are not here ({DATA} is absent)")
 ROMA = DATA / "betaflight" / "diatone-roma-f5.bbl"
 GECKO = DATA / "betaflight" / "aikonf7-gecko.bbl"
@@ -42,7 +42,7 @@ def test_roma_f5_holds_three_flights_the_first_about_66_s():
 def test_gecko_is_one_log_of_133_8_s_at_500_frames_a_second():
     # The data README's "≈ 151 s, ≈ 440 frames/s" came from orangebox 0.4.0, which decoded 14 frames
     # at the start wrongly (times near 0 µs, before the log's 17.43 s since power-on); see
-    # tests/test_blackbox_decode.py. The log runs from 17.43 s to 151.3 s since power-on.
+    # tests/logs/test_blackbox_decode.py. The log runs from 17.43 s to 151.3 s since power-on.
     (log,) = read_logs(GECKO)
     assert log.duration_s == pytest.approx(133.8, abs=0.2)
     assert log.metadata.parameters["rates_type"] == "3" and log.metadata.craft_name == "Gecko"

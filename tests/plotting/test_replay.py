@@ -68,6 +68,6 @@ def test_replay_screenshot_for_the_docs(tmp_path, monkeypatch):
     assert call(["learn", "flip", "--flips", "3", "--dims", "3", "--plant", "arena", "--seed", "1",
                  "--iterations", "30"])[0] == 0
     assert call(["replay", "1"])[0] == 0
-    target = Path(__file__).resolve().parents[1] / "docs" / "figures" / "replay.png"
+    target = Path(__file__).resolve().parents[2] / "docs" / "figures" / "replay.png"
     render(next((tmp_path / "out").glob("aerobat-*/session-1")) / "replay.html", tmp_path, screenshot=target)
     assert target.stat().st_size > 10_000

@@ -38,7 +38,7 @@ NOT_RUN = {
     "make bench": "benchmarks rewrite docs/performance.md; run by hand",
     "make test-release": "builds and installs the wheel in a new venv (minutes); CI runs it (.ci/run)",
     "make docs": "tests/test_docs_site.py builds the site with mkdocs --strict; CI runs it too",
-    "make lint": "ruff, mypy and the import contracts: tests/test_architecture.py runs the contracts",
+    "make lint": "ruff, mypy and the import contracts: tests/house/test_architecture.py runs the contracts",
     "pip install": "installs packages; `make setup` installs the same extras on every machine",
 }
 

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SRC = ROOT / "src"
 DOTTED = re.compile(r"(?<![\w./-])aerobat(?:\.[A-Za-z_]\w*)+")
 ROLE = re.compile(r":(?:py:)?(mod|class|func|meth|data|attr|exc|obj|const):`~?([^`<>]+?)`")

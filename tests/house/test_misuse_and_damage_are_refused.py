@@ -1,6 +1,9 @@
-"""Issue 19: nothing lost, nothing silent — the store's last gaps and the messages that were unclear.
+"""Misuse and damage are refused with one clear line, and nothing is lost or silent.
 
-Each test reproduces what an adversarial pass found, and failed on the code before the fix.
+The store is never an output, ``--db`` is always a path, a damaged or re-identified store is not
+written, losing it mid-session is a failure; bad command lines and wrong-typed library arguments
+get one line naming the option (``ConfigError`` from the API). Each test reproduces what an
+adversarial pass of issue 19 found, and failed on the code before the fix.
 """
 
 from __future__ import annotations
@@ -334,7 +337,7 @@ def test_file_functions_refuse_what_cannot_be_a_file(tmp_path, bad):
     _refused(save_vehicle, config, bad)
     _refused(save_arena, ArenaParams(), bad)
     _refused(Store, bad)
-    program = load_program(Path(__file__).resolve().parents[1] / "examples" / "hover.toml")
+    program = load_program(Path(__file__).resolve().parents[2] / "examples" / "hover.toml")
     _refused(save_program, program, bad)
 
 
@@ -356,7 +359,7 @@ def test_store_busy_timeout_must_be_a_number(tmp_path, timeout):
     _refused(Store, tmp_path / "s.sqlite", busy_timeout_s=timeout, fragment="busy_timeout_s")
 
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
 
 @pytest.mark.parametrize("changes, fragment", [

@@ -21,7 +21,7 @@ import pytest
 
 from aerobat.cli import main
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PROGRAM = ROOT / "src" / "aerobat" / "examples" / "single_flip.toml"
 SMALL = ["flip", "--flips", "1", "--dims", "2", "--max-rate-deg-s", "800"]
 

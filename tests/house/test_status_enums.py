@@ -20,7 +20,7 @@ from aerobat.core.learning import Iteration, IterationStatus, SessionStatus
 from aerobat.core.notes import IterationNote, NoteKind, message_with_notes
 from aerobat.store.codec import notes_from_message
 
-PACKAGE = Path(__file__).resolve().parents[1] / "src" / "aerobat"
+PACKAGE = Path(__file__).resolve().parents[2] / "src" / "aerobat"
 EDGES = ("cli/", "browse/", "store/codec.py")
 """Where text becomes an enum: the command line, the browser's pages, the store's codec."""
 STATUS_NAMES = {"status", "state", "display_state"}

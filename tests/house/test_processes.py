@@ -23,7 +23,7 @@ from aerobat.store import Store
 
 pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="POSIX signals and /proc")
 
-SRC = Path(__file__).resolve().parents[1] / "src"
+SRC = Path(__file__).resolve().parents[2] / "src"
 PROGRESS = re.compile(r"^\s+\[(\d+)/(\d+)\] ")
 # 2 × 20 envelope designs (a few tenths of a second each): the study runs for seconds after its first result
 ENVELOPE = ["study", "envelope", "--flips", "1,2", "--rates-deg-s", "600:2000:20", "--workers", "2"]

@@ -23,7 +23,7 @@ from aerobat.store import Store
 
 pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="POSIX signals")
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 AEROBAT = ROOT / ".venv" / "bin" / "aerobat"
 LEARN = ["learn", "flip", "--dims", "2", "--flips", "1", "--max-rate-deg-s", "800", "--plant", "arena",
          "--seed", "3"]

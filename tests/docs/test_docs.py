@@ -27,7 +27,7 @@ import pytest
 
 from aerobat.cli import main
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DOCUMENTS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 VENV_BIN = Path(sys.executable).parent
 SHARED = ROOT.parent / "shared"  # real data recorded by others, beside the clone (../shared/data)
@@ -37,7 +37,7 @@ NOT_RUN = {
     "make test-slow": "the slow suite (it contains this test's slow variant)",
     "make bench": "benchmarks rewrite docs/performance.md; run by hand",
     "make test-release": "builds and installs the wheel in a new venv (minutes); CI runs it (.ci/run)",
-    "make docs": "tests/test_docs_site.py builds the site with mkdocs --strict; CI runs it too",
+    "make docs": "tests/docs/test_docs_site.py builds the site with mkdocs --strict; CI runs it too",
     "make lint": "ruff, mypy and the import contracts: tests/house/test_architecture.py runs the contracts",
     "pip install": "installs packages; `make setup` installs the same extras on every machine",
 }

@@ -52,7 +52,7 @@ from aerobat.quadrotor.simulate import NominalModel, _run_batch, _steps, batch_t
 CONFIG = hummingbird()
 OTHER_MARKER = "<!-- other benchmarks: kept by make bench -->"
 MAX_STEP_S = 5e-4
-# p⁰ of the 3D triple flip (tests/test_design.py pins it): the kernel workload
+# p⁰ of the 3D triple flip (tests/core/test_design.py pins it): the kernel workload
 P0_3D = np.array([21.147414905322183, 0.2489405172107463, 0.40965469406191607, 21.281144061832844,
                   0.2944397583640787, 8.21327673052149e-05, 0.005610005735469527, -0.0021228918136138486,
                   -0.009274212359579277])
@@ -394,7 +394,7 @@ def report(r: dict, betaflight: list[str] | None = None) -> str:
          f"**{b['batch_vs_reference']:.2f}**"),
         (f"batch of {b['vehicles']} vehicles, {n} threads ÷ 1 thread", "≥ 1.85",
          f"**{b['batch_speedup_threads']:.2f}** (medians: {b['batch_speedup_threads_median']:.2f})"),
-        ("design of the 3D triple flip (p⁰, J, C), warm; its p⁰ against the one pinned in tests/test_design.py",
+        ("design of the 3D triple flip (p⁰, J, C), warm; its p⁰ against the one pinned in tests/core/test_design.py",
          "≤ 100 ms; 1e-9",
          f"**{d['3']['median_s'] * 1e3:.0f} ms** median, {d['3']['min_s'] * 1e3:.0f} ms best "
          f"({d['3']['evaluations']} simulations); p⁰ within {d['p0_3d_max_abs_diff']:.1e}"),

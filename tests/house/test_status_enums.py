@@ -1,0 +1,148 @@
+"""Statuses and notes travel as enums and values, not as text (issue #29, item 1).
+
+* no status or state is compared with a string literal outside the command line, the
+  browser's pages and the store's codec (the edges where text becomes an enum);
+* no message is split on ``";"`` to get its notes back: an iteration carries them
+  (:class:`~aerobat.core.notes.IterationNote`), and only the store's codec reads them
+  out of a stored message;
+* the store hands back enums, and the notes of a stored iteration.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from aerobat.core.learning import Iteration, IterationStatus, SessionStatus
+from aerobat.core.notes import IterationNote, NoteKind, message_with_notes
+from aerobat.store.codec import notes_from_message
+
+PACKAGE = Path(__file__).resolve().parents[2] / "src" / "aerobat"
+EDGES = ("cli/", "browse/", "store/codec.py")
+"""Where text becomes an enum: the command line, the browser's pages, the store's codec."""
+STATUS_NAMES = {"status", "state", "display_state"}
+
+
+def _is_status(node: ast.expr) -> bool:
+    """``x.status``, ``status``, ``x.status.value``, ``row["status"]`` (and the same for ``state``)."""
+    if isinstance(node, ast.Attribute) and node.attr == "value":
+        node = node.value
+    if isinstance(node, ast.Attribute):
+        return node.attr in STATUS_NAMES
+    if isinstance(node, ast.Name):
+        return node.id in STATUS_NAMES
+    if isinstance(node, ast.Subscript) and isinstance(node.slice, ast.Constant):
+        return node.slice.value in STATUS_NAMES
+    return False
+
+
+def _is_text(node: ast.expr) -> bool:
+    if isinstance(node, ast.Constant):
+        return isinstance(node.value, str)
+    if isinstance(node, ast.Tuple | ast.List | ast.Set):
+        return any(_is_text(e) for e in node.elts)
+    return False
+
+
+def _sources(*, edges: bool) -> list[tuple[str, ast.AST]]:
+    out = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        where = path.relative_to(PACKAGE).as_posix()
+        if edges or not where.startswith(EDGES):
+            out.append((where, ast.parse(path.read_text())))
+    return out
+
+
+def test_no_status_is_compared_with_a_string_outside_the_edges():
+    found = []
+    for where, tree in _sources(edges=False):
+        for node in ast.walk(tree):
+            if not isinstance(node, ast.Compare):
+                continue
+            operands = [node.left, *node.comparators]
+            for left, op, right in zip(operands, node.ops, operands[1:], strict=False):
+                key_lookup = isinstance(op, ast.In | ast.NotIn) and _is_status(right)  # "gamma" in state: a key
+                if not key_lookup and ((_is_status(left) and _is_text(right)) or
+                                       (_is_text(left) and _is_status(right))):
+                    found.append(f"{where}:{node.lineno}: {ast.unparse(node)}")
+    assert not found, "compare the enum (IterationStatus, SessionStatus, JobStatus…), not its text:\n" + \
+        "\n".join(found)
+
+
+def test_no_text_is_split_on_semicolons():
+    found = []
+    for where, tree in _sources(edges=True):
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and \
+                    node.func.attr in ("split", "rsplit", "partition", "rpartition") and \
+                    any(isinstance(a, ast.Constant) and isinstance(a.value, str) and ";" in a.value
+                        for a in node.args):
+                found.append(f"{where}:{node.lineno}: {ast.unparse(node)}")
+    assert not found, "an iteration's notes are Iteration.notes; SQL is split by sqlite3.complete_statement:\n" + \
+        "\n".join(found)
+
+
+@pytest.mark.parametrize("notes", [
+    (),
+    (IterationNote.held("t1"),),
+    (IterationNote.held("t1"), IterationNote.held("phi")),
+    (IterationNote(NoteKind.PINNED_AT_BOUND, "t2", "t2 (coast) pinned at a bound for 8 corrections: infeasible"),),
+    (IterationNote.held("a"), IterationNote(NoteKind.PINNED_AT_BOUND, "b", "b (x) pinned: one"),
+     IterationNote(NoteKind.PINNED_AT_BOUND, "c", "c (y) pinned: two")),
+])
+def test_the_codec_reads_back_the_notes_a_message_says(notes):
+    message = message_with_notes("measured (latency 3 ms)", notes)
+    assert notes_from_message(message) == notes
+
+
+def test_a_message_says_its_notes_as_it_always_did():
+    notes = (IterationNote.held("a"), IterationNote.held("b"),
+             IterationNote(NoteKind.PINNED_AT_BOUND, "b", "b (x) pinned at a bound for 8 corrections: bad"))
+    assert message_with_notes("ok", notes) == \
+        "ok; held at a bound: a, b; warning: b (x) pinned at a bound for 8 corrections: bad"
+    it = Iteration(1, 1, IterationStatus.OK, np.zeros(2), np.zeros(1), 1.0, 1.0, np.zeros(2),
+                   message_with_notes("ok", notes), None, notes)
+    assert it.warnings == ("b (x) pinned at a bound for 8 corrections: bad",)
+
+
+def test_status_properties_say_what_strings_used_to():
+    assert [s for s in IterationStatus if s.retry] == [IterationStatus.NO_TRIGGER, IterationStatus.LOST]
+    assert [s for s in IterationStatus if s.measured] == [IterationStatus.OK]
+    assert SessionStatus("completed") is SessionStatus.COMPLETED
+
+
+def test_the_store_takes_an_iteration_and_hands_back_its_notes_and_enums(tmp_path):
+    from aerobat.core.design import DesignStatus
+    from aerobat.store import Store
+    from aerobat.store.records import JobStatus
+    from browse_fixtures import DESIGN, FLIP, VEHICLE
+
+    notes = (IterationNote.held("t1"),
+             IterationNote(NoteKind.PINNED_AT_BOUND, "t2", "t2 (coast) pinned at a bound for 8 corrections: bad"))
+    params = DESIGN.p_nominal.copy()
+    step = np.full(params.shape, 1e-3)
+    sent = Iteration(1, 1, IterationStatus.OK, params, np.linspace(0.1, 0.2, len(FLIP.errors)), 0.5, 1.0, step,
+                     message_with_notes("measured", notes), None, notes)
+    with Store(tmp_path / "s.sqlite") as store:
+        sid = store.create_session(vehicle=VEHICLE, plant_kind="nominal", plant_config={}, maneuver=FLIP,
+                                   design=DESIGN, seed=None, rule={"name": "paper"}, target_iterations=1,
+                                   start_params=params)
+        store.append_iteration(sid, sent)
+        store.finish_session(sid, SessionStatus.COMPLETED, "1 measured iteration")
+        study = store.create_study("robustness", {})
+        store.record_study_job(study, "a", {}, {}, status=JobStatus.FAILED, error="x")
+        got = store.iterations(sid)[0]
+        assert got.status is IterationStatus.OK and got.notes == notes and got.message == sent.message
+        assert np.array_equal(got.next_params, sent.next_params)
+        back = got.iteration()
+        assert np.array_equal(back.next_params, sent.next_params) and back.warnings == sent.warnings
+        assert store.session(sid).state is SessionStatus.COMPLETED
+        assert store.list_sessions()[0].state is SessionStatus.COMPLETED
+        drec = store.design(store.session(sid).design_id)
+        assert drec.status is DesignStatus(DESIGN.status)
+        rebuilt = drec.design(FLIP)
+        assert all(np.array_equal(getattr(rebuilt, k), getattr(DESIGN, k)) for k in ("jacobian", "correction"))
+        assert store.study_jobs(study)[0].status is JobStatus.FAILED

@@ -8,9 +8,12 @@ without a line here.
 
 from __future__ import annotations
 
+import ast
 import dataclasses
 import importlib
+import inspect
 import pkgutil
+import textwrap
 
 import pytest
 
@@ -115,3 +118,53 @@ def test_choices_come_from_the_enum_or_the_literal():
     with pytest.raises(ConfigError, match=r"^correction = 'svd': allowed 'inverse', 'tsvd', 'damped'$"):
         OneOf(CorrectionKind).check("correction", "svd")
 
+
+RANGE_CHECKS = {"check_range", "check_int", "check_number"}
+"""The :mod:`aerobat.config` checks a field's range is declared with instead (``Interval``, ``Integer``)."""
+
+UNDECLARED = {
+    # "module.Class": "why its __post_init__ checks a field's range by hand instead of declaring it",
+    # (none now: cross-field limits are declared with a limit naming the other field, e.g.
+    # Interval("rotor_thrust_min_n", ...), and a check across sections, as ArenaParams's radio
+    # latency against its rate and tick, raises its own ConfigError without these helpers)
+}
+"""Dataclasses allowed to call :data:`RANGE_CHECKS` on their own fields in ``__post_init__``, each with its reason."""
+
+
+def _range_checks_by_hand(cls: type) -> list[str]:
+    """The :data:`RANGE_CHECKS` calls in ``cls.__post_init__`` (what it checks is its own fields), as source text."""
+    post_init = vars(cls).get("__post_init__")
+    if post_init is None:
+        return []
+    calls = []
+    for node in ast.walk(ast.parse(textwrap.dedent(inspect.getsource(post_init)))):
+        if isinstance(node, ast.Call):
+            func = node.func
+            name = func.id if isinstance(func, ast.Name) else func.attr if isinstance(func, ast.Attribute) else None
+            if name in RANGE_CHECKS:
+                calls.append(ast.unparse(node))
+    return calls
+
+
+def test_no_parameter_class_checks_its_own_ranges_by_hand():
+    by_hand = {key: calls for key, cls in DATACLASSES.items() if (calls := _range_checks_by_hand(cls))}
+    undeclared = {key: calls for key, calls in by_hand.items() if key not in UNDECLARED}
+    assert not undeclared, ("declare these bounds next to the field (bounded(default, Interval(...)) and "
+                            f"validate(self)), or allow-list the class with its reason: {undeclared}")
+    assert set(UNDECLARED) <= set(by_hand), f"allowed but checks nothing by hand now: {set(UNDECLARED) - set(by_hand)}"
+
+
+def test_the_scan_sees_a_range_checked_by_hand():
+    from aerobat import config
+
+    @dataclasses.dataclass(frozen=True)
+    class ByHand:
+        gain: float = 1.0
+        rates: tuple[float, float] = (1.0, 2.0)
+
+        def __post_init__(self) -> None:
+            for i, value in enumerate(self.rates):
+                config.check_range(f"rates[{i}]", value, low=0.0)
+
+    assert _range_checks_by_hand(ByHand) == ["config.check_range(f'rates[{i}]', value, low=0.0)"]
+    assert _range_checks_by_hand(CLASSES[0]) == []

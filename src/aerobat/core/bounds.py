@@ -290,15 +290,19 @@ class Items(Constraint):
 
 @dataclass(frozen=True)
 class Span(Constraint):
-    """A range ``(low, high)`` of two numbers: ``low`` within :attr:`start`, ``high`` at least ``low``.
+    """A range ``(low, high)`` of two numbers: ``low`` within :attr:`start`, ``high`` at least ``low``
+    (above it, with :attr:`strict`).
 
-    Messages name ``field[0]`` and ``field[1]``; ``high`` below ``low`` is told ``allowed >= low``.
+    Messages name ``field[0]`` and ``field[1]``; ``high`` below ``low`` is told ``allowed >= low``
+    (``> low``).
     """
 
     start: Interval = Interval()
+    strict: bool = False
 
     def _items(self, low: Any) -> Items:
-        return Items((self.start, Interval(low=low, unit=self.start.unit)), what="two numbers (low, high)")
+        end = Interval(low=low, closed="neither" if self.strict else "both", unit=self.start.unit)
+        return Items((self.start, end), what="two numbers (low, high)")
 
     def check(self, name: str, value: Any, owner: Any = None) -> Any:
         """``value`` (as a tuple) if a range starting within :attr:`start`; :class:`ConfigError` otherwise."""
@@ -309,7 +313,7 @@ class Span(Constraint):
 
     def describe(self, owner: Any = None) -> str:
         """The range of the low end; the high end is at least the low one."""
-        return f"[0] {self.start.describe(owner)}; [1] >= [0]"
+        return f"[0] {self.start.describe(owner)}; [1] {'>' if self.strict else '>='} [0]"
 
     def outside(self, owner: Any = None) -> list[Any]:
         """Not used for ranges: see :meth:`outside_items`."""

@@ -139,3 +139,14 @@ def test_invalid_maneuver_arguments():
     m = flip(dims=2)
     with pytest.raises(ValueError, match="p1"):
         m.program(np.array([20.0, -0.1, 0.3, 20.0, 0.2]))
+
+
+def test_the_declared_design_options_have_the_signatures_defaults():
+    import dataclasses
+    import inspect
+
+    from aerobat.core.design import _DesignArguments
+
+    signature = inspect.signature(design).parameters
+    for f in dataclasses.fields(_DesignArguments):
+        assert signature[f.name].default == f.default, f.name

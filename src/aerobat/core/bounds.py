@@ -44,9 +44,11 @@ __all__ = [
     "Interval",
     "Items",
     "OneOf",
+    "Span",
     "bounded",
     "choices_of",
     "constraints",
+    "required",
     "validate",
 ]
 
@@ -200,9 +202,11 @@ class OneOf(Constraint):
     """One of the values of an enum or a ``Literal`` (the enum's members pass as themselves).
 
     With an enum, a value given as text becomes the member (``"none"`` → ``FeedbackScheme.NONE``).
+    ``unit`` is said after the choices in messages (``1000, 2000 (Hz)``).
     """
 
     kind: Any
+    unit: str = ""
 
     @property
     def choices(self) -> tuple[Any, ...]:
@@ -223,8 +227,9 @@ class OneOf(Constraint):
         return self.kind(value) if is_enum else value
 
     def describe(self, owner: Any = None) -> str:
-        """The choices, quoted: ``'inverse', 'tsvd', 'damped'``."""
-        return ", ".join(map(repr, self.choices))
+        """The choices, quoted, then the unit if any: ``'inverse', 'tsvd', 'damped'``, ``1000, 2000 (Hz)``."""
+        text = ", ".join(map(repr, self.choices))
+        return f"{text} ({self.unit})" if self.unit else text
 
     def outside(self, owner: Any = None) -> list[Any]:
         """A string that is none of the choices."""
@@ -283,10 +288,52 @@ class Items(Constraint):
         return out
 
 
+@dataclass(frozen=True)
+class Span(Constraint):
+    """A range ``(low, high)`` of two numbers: ``low`` within :attr:`start`, ``high`` at least ``low``
+    (above it, with :attr:`strict`).
+
+    Messages name ``field[0]`` and ``field[1]``; ``high`` below ``low`` is told ``allowed >= low``
+    (``> low``).
+    """
+
+    start: Interval = Interval()
+    strict: bool = False
+
+    def _items(self, low: Any) -> Items:
+        end = Interval(low=low, closed="neither" if self.strict else "both", unit=self.start.unit)
+        return Items((self.start, end), what="two numbers (low, high)")
+
+    def check(self, name: str, value: Any, owner: Any = None) -> Any:
+        """``value`` (as a tuple) if a range starting within :attr:`start`; :class:`ConfigError` otherwise."""
+        if not isinstance(value, tuple | list) or len(value) != 2:
+            raise ConfigError(f"{name} = {short_repr(value)}: expected two numbers (low, high)")
+        low = self.start.check(f"{name}[0]", value[0], owner)
+        return self._items(low).check(name, value, owner)
+
+    def describe(self, owner: Any = None) -> str:
+        """The range of the low end; the high end is at least the low one."""
+        return f"[0] {self.start.describe(owner)}; [1] {'>' if self.strict else '>='} [0]"
+
+    def outside(self, owner: Any = None) -> list[Any]:
+        """Not used for ranges: see :meth:`outside_items`."""
+        return []
+
+    def outside_items(self, default: Sequence[Any], owner: Any = None) -> list[tuple[str, tuple[Any, ...], str]]:
+        """``(label, tuple, allowed)``: ``default`` with its low end outside :attr:`start`, or its high end below it."""
+        return self._items(default[0]).outside_items(default, owner)
+
+
 def bounded(default: T, constraint: Constraint, **field_options: Any) -> T:
     """A dataclass field with a default and its declared constraint (``dataclasses.field`` options too)."""
     metadata = {**field_options.pop("metadata", {}), BOUNDS: constraint}
     return dataclasses.field(default=default, metadata=metadata, **field_options)  # type: ignore[no-any-return]
+
+
+def required(constraint: Constraint, **field_options: Any) -> Any:
+    """A dataclass field without a default, with its declared constraint (``dataclasses.field`` options too)."""
+    metadata = {**field_options.pop("metadata", {}), BOUNDS: constraint}
+    return dataclasses.field(metadata=metadata, **field_options)
 
 
 @cache

@@ -15,8 +15,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from aerobat.config import as_float_array, check_int, check_number, check_type, short_repr
-from aerobat.core.bounds import OneOf
+from aerobat.config import as_float_array, check_type, short_repr
+from aerobat.core.bounds import Integer, Interval, OneOf, bounded, validate
 from aerobat.core.correction import CorrectionKind, correction_matrix, svd_info
 from aerobat.core.maneuver import Maneuver, batch_errors, bounds_arrays, check_maneuver, error_scales, parameter_scales
 from aerobat.errors import ConfigError, DesignFailed
@@ -241,6 +241,20 @@ def _jacobian(evaluate: _Evaluations, p: np.ndarray) -> tuple[np.ndarray, np.nda
     return _jacobian_from(evaluate(batch), steps)
 
 
+@dataclass(frozen=True, kw_only=True)
+class _DesignArguments:
+    """The numeric options of :func:`design`, with their bounds (the same defaults as its signature)."""
+
+    correction: CorrectionKind = bounded("tsvd", OneOf(CorrectionKind))
+    tolerance: float = bounded(1e-6, Interval(low=0.0, closed="neither", as_float=True))
+    tsvd_rtol: float = bounded(1e-3, Interval(low=0.0, as_float=True))
+    damping: float = bounded(1e-3, Interval(low=0.0, as_float=True))
+    max_iterations: int = bounded(100, Integer(1, 1_000_000))
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
 def design(
     maneuver: Maneuver,
     model: FinalStateModel,
@@ -264,11 +278,10 @@ def design(
     if not callable(getattr(model, "final_states", None)):
         raise ConfigError(f"model: expected a final-state model (e.g. NominalModel(config)), got "
                           f"{type(model).__name__} {short_repr(model)}")
-    OneOf(CorrectionKind).check("correction", correction)
-    tolerance = check_number("tolerance", tolerance, low=0.0, low_inclusive=False)
-    tsvd_rtol = check_number("tsvd_rtol", tsvd_rtol, low=0.0)
-    damping = check_number("damping", damping, low=0.0)
-    max_iterations = check_int("max_iterations", max_iterations, low=1, high=1_000_000)
+    options = _DesignArguments(correction=correction, tolerance=tolerance, tsvd_rtol=tsvd_rtol, damping=damping,
+                               max_iterations=max_iterations)
+    tolerance, tsvd_rtol, damping = options.tolerance, options.tsvd_rtol, options.damping
+    max_iterations = options.max_iterations
     check_type("raise_on_failure", raise_on_failure, (bool, np.bool_), "True or False")
     model = _CountingModel(model)
     guess = (np.array(maneuver.guess(), dtype=float) if p_guess is None

@@ -44,6 +44,7 @@ from typing import Any
 import numba as nb
 import numpy as np
 
+from aerobat.core.bounds import Interval, OneOf, Span, bounded, validate
 from aerobat.errors import ConfigError
 
 __all__ = [
@@ -85,38 +86,31 @@ DEFAULT_SCHEME = FeedbackScheme.TRACKING
 """The scheme measured best (docs/results.md, 'Feedback'); ``none`` is the paper's open loop."""
 
 
+_GAIN = Interval(low=0.0)
+"""A gain or a limit of the onboard feedback: a finite number >= 0."""
+
+
 @dataclass(frozen=True, kw_only=True)
 class FeedbackGains:
     """Gains and limits of the onboard feedback (units in the names)."""
 
-    attitude_gain_per_s: float = 10.0
-    attitude_gain_spinning_per_s: float = 20.0
-    yaw_gain_per_s: float = 8.0
-    position_gain_per_s2: float = 10.0
-    velocity_gain_per_s: float = 5.0
-    max_acceleration_m_s2: float = 5.0
-    max_tilt_rad: float = 0.25
-    tilt_fade_collective_m_s2: tuple[float, float] = (3.0, 7.0)
-    max_rate_correction_rad_s: float = 6.0
-    attitude_fusion_gain: float = 0.4
-    max_estimate_age_s: float = 0.06
-    reference_rate_hz: float = 100.0
+    attitude_gain_per_s: float = bounded(10.0, _GAIN)
+    attitude_gain_spinning_per_s: float = bounded(20.0, _GAIN)
+    yaw_gain_per_s: float = bounded(8.0, _GAIN)
+    position_gain_per_s2: float = bounded(10.0, _GAIN)
+    velocity_gain_per_s: float = bounded(5.0, _GAIN)
+    max_acceleration_m_s2: float = bounded(5.0, _GAIN)
+    max_tilt_rad: float = bounded(0.25, _GAIN)
+    tilt_fade_collective_m_s2: tuple[float, float] = bounded(
+        (3.0, 7.0), Span(Interval(low=0.0, unit="m/s²"), strict=True))
+    """(low, high) with 0 <= low < high [m/s²]."""
+    max_rate_correction_rad_s: float = bounded(6.0, _GAIN)
+    attitude_fusion_gain: float = bounded(0.4, Interval(0.0, 1.0, closed="right"))
+    max_estimate_age_s: float = bounded(0.06, _GAIN)
+    reference_rate_hz: float = bounded(100.0, Interval(10.0, 2000.0, unit="Hz"))
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            items = value if isinstance(value, tuple) else (value,)
-            for v in items:
-                if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) or v < 0:
-                    raise ConfigError(f"feedback.{f.name} = {value!r}: expected finite numbers >= 0")
-        lo, hi = self.tilt_fade_collective_m_s2
-        if not hi > lo:
-            raise ConfigError(f"feedback.tilt_fade_collective_m_s2 = {self.tilt_fade_collective_m_s2!r}: "
-                              "expected (low, high) with high > low [m/s²]")
-        if not 0.0 < self.attitude_fusion_gain <= 1.0:
-            raise ConfigError(f"feedback.attitude_fusion_gain = {self.attitude_fusion_gain!r}: expected (0, 1]")
-        if not 10.0 <= self.reference_rate_hz <= 2000.0:
-            raise ConfigError(f"feedback.reference_rate_hz = {self.reference_rate_hz!r}: expected [10, 2000] Hz")
+        validate(self)
 
     def to_table(self) -> dict[str, Any]:
         return {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v) for f in fields(self)}
@@ -126,15 +120,14 @@ class FeedbackGains:
 class Feedback:
     """A feedback scheme with its gains: what a plant's onboard loop mixes into the program."""
 
-    scheme: FeedbackScheme = DEFAULT_SCHEME
+    scheme: FeedbackScheme = bounded(DEFAULT_SCHEME, OneOf(FeedbackScheme))
+    """A member, or its value as text (any case, spaces around it allowed)."""
     gains: FeedbackGains = field(default_factory=FeedbackGains)
 
     def __post_init__(self) -> None:
         if isinstance(self.scheme, str) and not isinstance(self.scheme, FeedbackScheme):
-            object.__setattr__(self, "scheme", FeedbackScheme.parse(self.scheme, where="feedback.scheme"))
-        if not isinstance(self.scheme, FeedbackScheme):
-            raise ConfigError(f"feedback.scheme = {self.scheme!r}: expected one of "
-                              f"{', '.join(s.value for s in FeedbackScheme)}")
+            object.__setattr__(self, "scheme", self.scheme.strip().lower())
+        validate(self)
         if not isinstance(self.gains, FeedbackGains):
             raise ConfigError(f"feedback.gains: expected FeedbackGains, got {type(self.gains).__name__}")
 

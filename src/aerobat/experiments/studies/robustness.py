@@ -16,7 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.config import check_range, dataclass_from_table, dataclass_to_table, read_toml
+from aerobat.config import dataclass_from_table, dataclass_to_table, read_toml
+from aerobat.core.bounds import Interval, Span, bounded, validate
 from aerobat.core.design import Design
 from aerobat.core.maneuver import Maneuver
 from aerobat.core.rules import RuleChoice
@@ -41,6 +42,12 @@ __all__ = [
 ]
 
 
+_RANGE = Span(Interval(low=0.0))
+"""A uniform range (low, high) with 0 <= low <= high."""
+_SPREAD = Interval(0.0, 0.5)
+"""A "± x" spread, relative or in metres, in [0, 0.5]."""
+
+
 @dataclass(frozen=True, kw_only=True)
 class RobustnessRanges:
     """Uniform ranges from which each sampled vehicle's arena is drawn.
@@ -51,30 +58,23 @@ class RobustnessRanges:
     instead (and the arena ignores it).
     """
 
-    mass_scale: tuple[float, float] = (0.98, 1.08)
-    inertia_scale: tuple[float, float] = (1.00, 1.25)
-    inertia_zz_scale: tuple[float, float] = (1.05, 1.35)
-    drag_constant_scale: tuple[float, float] = (1.00, 1.30)
-    motor_rate_up_per_s: tuple[float, float] = (62.0, 80.0)
-    motor_rate_down_per_s: tuple[float, float] = (40.0, 55.0)
-    thrust_gain_spread: float = 0.04
-    com_offset_m: float = 0.006
-    aerodynamics_scale: tuple[float, float] = (0.7, 1.3)
-    noise_scale: tuple[float, float] = (0.7, 1.3)
-    motor_tau_scale: tuple[float, float] = (0.85, 1.25)
-    pilot_mass_scale: tuple[float, float] = (0.85, 1.15)
+    mass_scale: tuple[float, float] = bounded((0.98, 1.08), _RANGE)
+    inertia_scale: tuple[float, float] = bounded((1.00, 1.25), _RANGE)
+    inertia_zz_scale: tuple[float, float] = bounded((1.05, 1.35), _RANGE)
+    drag_constant_scale: tuple[float, float] = bounded((1.00, 1.30), _RANGE)
+    motor_rate_up_per_s: tuple[float, float] = bounded((62.0, 80.0), _RANGE)
+    motor_rate_down_per_s: tuple[float, float] = bounded((40.0, 55.0), _RANGE)
+    thrust_gain_spread: float = bounded(0.04, _SPREAD)
+    com_offset_m: float = bounded(0.006, _SPREAD)
+    aerodynamics_scale: tuple[float, float] = bounded((0.7, 1.3), _RANGE)
+    noise_scale: tuple[float, float] = bounded((0.7, 1.3), _RANGE)
+    motor_tau_scale: tuple[float, float] = bounded((0.85, 1.25), _RANGE)
+    pilot_mass_scale: tuple[float, float] = bounded((0.85, 1.15), _RANGE)
     """Betaflight only: the mass the offboard pilot believes, relative to the published one (issue 31 B1: its
     take-off, hover and return must hold with its model off by ±15 %); drawn after every other property."""
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, tuple):
-                lo, hi = value
-                check_range(f"{f.name}[0]", lo, low=0.0)
-                check_range(f"{f.name}[1]", hi, low=lo)
-            else:
-                check_range(f.name, value, low=0.0, high=0.5)
+        validate(self)
 
 
 def load_ranges(path: str | Path) -> RobustnessRanges:

@@ -18,7 +18,6 @@ import tomli_w
 from aerobat.config import (
     ConfigError,
     as_path,
-    check_range,
     check_type,
     dataclass_from_table,
     dataclass_to_table,
@@ -26,6 +25,7 @@ from aerobat.config import (
     replace_sections,
     write_file,
 )
+from aerobat.core.bounds import Interval, Items, bounded, validate
 from aerobat.plants.world_params import Aerodynamics, Disturbances, Drift, MotionCapture, Supervisor, Volume
 
 __all__ = [
@@ -43,74 +43,65 @@ __all__ = [
     "save_arena",
 ]
 
+_XYZ = "three numbers (x, y, z)"
+_SCALE = Interval(0.2, 5.0)
+"""A scale factor of a true constant relative to the nominal one."""
+_MOTOR_RATE = Interval(1.0, 1e4, unit="1/s")
+_PROBABILITY = Interval(0.0, 0.95)
+"""A drop probability of a radio link."""
+_COUNT = Interval(1, 1000)
+"""A count of attempts or of items per packet (an int; checked as a number, as before)."""
+
 
 @dataclass(frozen=True, kw_only=True)
 class TrueVehicle:
     """The real vehicle's constants relative to the nominal Table 1 model."""
 
     enabled: bool = True
-    mass_scale: float = 1.03
-    inertia_scale: tuple[float, float, float] = (1.12, 1.12, 1.20)
-    drag_constant_scale: float = 1.15
-    motor_rate_up_per_s: float = 70.0
-    motor_rate_down_per_s: float = 45.0
-    thrust_gains: tuple[float, float, float, float] = (1.00, 0.97, 1.02, 0.95)
-    com_offset_m: tuple[float, float, float] = (0.005, -0.003, 0.0)
+    mass_scale: float = bounded(1.03, Interval(0.5, 2.0))
+    inertia_scale: tuple[float, float, float] = bounded((1.12, 1.12, 1.20), Items.each(_SCALE, 3, _XYZ))
+    drag_constant_scale: float = bounded(1.15, _SCALE)
+    motor_rate_up_per_s: float = bounded(70.0, _MOTOR_RATE)
+    motor_rate_down_per_s: float = bounded(45.0, _MOTOR_RATE)
+    thrust_gains: tuple[float, float, float, float] = bounded(
+        (1.00, 0.97, 1.02, 0.95), Items.each(Interval(0.5, 1.5), 4, "four numbers (motors 1-4)"))
+    com_offset_m: tuple[float, float, float] = bounded(
+        (0.005, -0.003, 0.0), Items.each(Interval(-0.05, 0.05, unit="m"), 3, _XYZ))
 
     def __post_init__(self) -> None:
-        check_range("mass_scale", self.mass_scale, low=0.5, high=2.0)
-        for i, s in enumerate(self.inertia_scale):
-            check_range(f"inertia_scale[{i}]", s, low=0.2, high=5.0)
-        check_range("drag_constant_scale", self.drag_constant_scale, low=0.2, high=5.0)
-        check_range("motor_rate_up_per_s", self.motor_rate_up_per_s, low=1.0, high=1e4, unit="1/s")
-        check_range("motor_rate_down_per_s", self.motor_rate_down_per_s, low=1.0, high=1e4, unit="1/s")
-        for i, g in enumerate(self.thrust_gains):
-            check_range(f"thrust_gains[{i}]", g, low=0.5, high=1.5)
-        for i, c in enumerate(self.com_offset_m):
-            check_range(f"com_offset_m[{i}]", c, low=-0.05, high=0.05, unit="m")
+        validate(self)
 
 
 @dataclass(frozen=True, kw_only=True)
 class Onboard:
     """The onboard loop: rate, gyro latency and gyro errors."""
 
-    rate_hz: float = 800.0
-    gyro_latency_samples: int = 1
-    gyro_scale_error: tuple[float, float, float] = (0.01, -0.008, 0.005)
-    gyro_bias_rad_s: tuple[float, float, float] = (0.004, -0.003, 0.002)
+    rate_hz: float = bounded(800.0, Interval(50.0, 10000.0, unit="Hz"))
+    gyro_latency_samples: int = bounded(1, Interval(0, 10))
+    gyro_scale_error: tuple[float, float, float] = bounded(
+        (0.01, -0.008, 0.005), Items.each(Interval(-0.2, 0.2), 3, _XYZ))
+    gyro_bias_rad_s: tuple[float, float, float] = bounded(
+        (0.004, -0.003, 0.002), Items.each(Interval(-0.5, 0.5, unit="rad/s"), 3, _XYZ))
 
     def __post_init__(self) -> None:
-        check_range("rate_hz", self.rate_hz, low=50.0, high=10000.0, unit="Hz")
-        check_range("gyro_latency_samples", self.gyro_latency_samples, low=0, high=10)
-        for i, s in enumerate(self.gyro_scale_error):
-            check_range(f"gyro_scale_error[{i}]", s, low=-0.2, high=0.2)
-        for i, b in enumerate(self.gyro_bias_rad_s):
-            check_range(f"gyro_bias_rad_s[{i}]", b, low=-0.5, high=0.5, unit="rad/s")
+        validate(self)
 
 
 @dataclass(frozen=True, kw_only=True)
 class Links:
     """Radio links: 70 Hz command broadcast with drops; acknowledged program upload."""
 
-    command_rate_hz: float = 70.0
-    command_drop_probability: float = 0.05
-    command_latency_s: float = 0.010
-    upload_drop_probability: float = 0.05
-    upload_timeout_s: float = 0.02
-    upload_max_attempts: int = 10
-    upload_switches_per_packet: int = 8
-    upload_reference_samples_per_packet: int = 2
+    command_rate_hz: float = bounded(70.0, Interval(5.0, 1000.0, unit="Hz"))
+    command_drop_probability: float = bounded(0.05, _PROBABILITY)
+    command_latency_s: float = bounded(0.010, Interval(0.0, 0.2, unit="s"))
+    upload_drop_probability: float = bounded(0.05, _PROBABILITY)
+    upload_timeout_s: float = bounded(0.02, Interval(0.001, 1.0, unit="s"))
+    upload_max_attempts: int = bounded(10, _COUNT)
+    upload_switches_per_packet: int = bounded(8, _COUNT)
+    upload_reference_samples_per_packet: int = bounded(2, _COUNT)
 
     def __post_init__(self) -> None:
-        check_range("command_rate_hz", self.command_rate_hz, low=5.0, high=1000.0, unit="Hz")
-        check_range("command_drop_probability", self.command_drop_probability, low=0.0, high=0.95)
-        check_range("command_latency_s", self.command_latency_s, low=0.0, high=0.2, unit="s")
-        check_range("upload_drop_probability", self.upload_drop_probability, low=0.0, high=0.95)
-        check_range("upload_timeout_s", self.upload_timeout_s, low=0.001, high=1.0, unit="s")
-        check_range("upload_max_attempts", self.upload_max_attempts, low=1, high=1000)
-        check_range("upload_switches_per_packet", self.upload_switches_per_packet, low=1, high=1000)
-        check_range("upload_reference_samples_per_packet", self.upload_reference_samples_per_packet, low=1,
-                    high=1000)
+        validate(self)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -21,7 +21,6 @@ import tomli_w
 
 from aerobat.config import (
     as_path,
-    check_range,
     check_type,
     dataclass_from_table,
     dataclass_to_table,
@@ -29,11 +28,12 @@ from aerobat.config import (
     replace_sections,
     write_file,
 )
-from aerobat.errors import ConfigError
+from aerobat.core.bounds import Interval, Items, OneOf, bounded, validate
 from aerobat.plants.betaflight.tune import Tune
 from aerobat.plants.world_params import Aerodynamics, Disturbances, Drift, MotionCapture, Volume
 
 __all__ = [
+    "GYRO_RATES_HZ",
     "Airframe",
     "BetaflightParams",
     "Firmware",
@@ -44,6 +44,14 @@ __all__ = [
     "params_to_table",
     "save_betaflight",
 ]
+
+GYRO_RATES_HZ = (1000, 2000, 4000, 8000)
+"""The virtual gyro rates the SITL runs at [Hz] (:attr:`Firmware.gyro_rate_hz`)."""
+
+_XYZ = "three numbers (x, y, z)"
+_MASS = Interval(0.05, 20.0, unit="kg")
+_GAIN = Interval(0.0, 100.0, closed="right")
+"""A position-loop gain of the pilot, in (0, 100]."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -70,41 +78,27 @@ class Airframe:
         (DShot frame and ESC processing; lockstep computes the loop in zero time).
     """
 
-    mass_kg: float = 0.752
-    inertia_kg_m2: tuple[float, float, float] = (2.5e-3, 2.1e-3, 4.3e-3)
-    motor_x_m: float = 0.075
-    motor_y_m: float = 0.10
-    com_offset_m: tuple[float, float, float] = (0.003, -0.002, 0.0)
-    thrust_max_n: float = 8.5
-    curve_min_speed_ratio: float = 341.75 / 3100.0
-    curve_shape: float = 0.5
-    motor_tau_up_s: float = 0.033
-    motor_tau_down_s: float = 0.033
-    thrust_gains: tuple[float, float, float, float] = (1.00, 0.98, 1.01, 0.97)
-    kappa_m: float = 0.022
-    rotor_inertia_kg_m2: float = 8e-6
-    thrust_coefficient_n_s2: float = 1.562522e-6
-    output_delay_s: float = 125e-6
+    mass_kg: float = bounded(0.752, _MASS)
+    inertia_kg_m2: tuple[float, float, float] = bounded(
+        (2.5e-3, 2.1e-3, 4.3e-3), Items.each(Interval(1e-6, 10.0, unit="kg m²"), 3, _XYZ))
+    motor_x_m: float = bounded(0.075, Interval(0.01, 2.0, unit="m"))
+    motor_y_m: float = bounded(0.10, Interval(0.01, 2.0, unit="m"))
+    com_offset_m: tuple[float, float, float] = bounded(
+        (0.003, -0.002, 0.0), Items.each(Interval(-0.05, 0.05, unit="m"), 3, _XYZ))
+    thrust_max_n: float = bounded(8.5, Interval(0.1, 1000.0, unit="N"))
+    curve_min_speed_ratio: float = bounded(341.75 / 3100.0, Interval(0.0, 0.9))
+    curve_shape: float = bounded(0.5, Interval(0.0, 1.0))
+    motor_tau_up_s: float = bounded(0.033, Interval(1e-3, 1.0, unit="s"))
+    motor_tau_down_s: float = bounded(0.033, Interval(1e-3, 1.0, unit="s"))
+    thrust_gains: tuple[float, float, float, float] = bounded(
+        (1.00, 0.98, 1.01, 0.97), Items.each(Interval(0.5, 1.5), 4, "four numbers (motors 1-4)"))
+    kappa_m: float = bounded(0.022, Interval(1e-4, 0.5, unit="m"))
+    rotor_inertia_kg_m2: float = bounded(8e-6, Interval(0.0, 1e-2, unit="kg m²"))
+    thrust_coefficient_n_s2: float = bounded(1.562522e-6, Interval(1e-9, 1e-2, unit="N s²"))
+    output_delay_s: float = bounded(125e-6, Interval(0.0, 0.05, unit="s"))
 
     def __post_init__(self) -> None:
-        check_range("mass_kg", self.mass_kg, low=0.05, high=20.0, unit="kg")
-        for i, value in enumerate(self.inertia_kg_m2):
-            check_range(f"inertia_kg_m2[{i}]", value, low=1e-6, high=10.0, unit="kg m²")
-        check_range("motor_x_m", self.motor_x_m, low=0.01, high=2.0, unit="m")
-        check_range("motor_y_m", self.motor_y_m, low=0.01, high=2.0, unit="m")
-        for i, value in enumerate(self.com_offset_m):
-            check_range(f"com_offset_m[{i}]", value, low=-0.05, high=0.05, unit="m")
-        check_range("thrust_max_n", self.thrust_max_n, low=0.1, high=1000.0, unit="N")
-        check_range("curve_min_speed_ratio", self.curve_min_speed_ratio, low=0.0, high=0.9)
-        check_range("curve_shape", self.curve_shape, low=0.0, high=1.0)
-        check_range("motor_tau_up_s", self.motor_tau_up_s, low=1e-3, high=1.0, unit="s")
-        check_range("motor_tau_down_s", self.motor_tau_down_s, low=1e-3, high=1.0, unit="s")
-        for i, value in enumerate(self.thrust_gains):
-            check_range(f"thrust_gains[{i}]", value, low=0.5, high=1.5)
-        check_range("kappa_m", self.kappa_m, low=1e-4, high=0.5, unit="m")
-        check_range("rotor_inertia_kg_m2", self.rotor_inertia_kg_m2, low=0.0, high=1e-2, unit="kg m²")
-        check_range("thrust_coefficient_n_s2", self.thrust_coefficient_n_s2, low=1e-9, high=1e-2, unit="N s²")
-        check_range("output_delay_s", self.output_delay_s, low=0.0, high=0.05, unit="s")
+        validate(self)
 
     def thrust_n(self, command: float) -> float:
         """Steady-state thrust of one rotor at motor command ``command`` (0 = stopped)."""
@@ -139,21 +133,17 @@ class Sensors:
         (an accelerometer mounted slightly off level).
     """
 
-    gyro_noise_rad_s: float = 0.005
-    gyro_scale_error: tuple[float, float, float] = (0.01, -0.008, 0.005)
-    gyro_bias_rad_s: tuple[float, float, float] = (0.004, -0.003, 0.002)
-    accel_noise_m_s2: float = 0.05
-    attitude_error_rad: tuple[float, float] = (0.004, -0.003)
+    gyro_noise_rad_s: float = bounded(0.005, Interval(0.0, 0.5, unit="rad/s"))
+    gyro_scale_error: tuple[float, float, float] = bounded(
+        (0.01, -0.008, 0.005), Items.each(Interval(-0.2, 0.2), 3, _XYZ))
+    gyro_bias_rad_s: tuple[float, float, float] = bounded(
+        (0.004, -0.003, 0.002), Items.each(Interval(-0.5, 0.5, unit="rad/s"), 3, _XYZ))
+    accel_noise_m_s2: float = bounded(0.05, Interval(0.0, 5.0, unit="m/s²"))
+    attitude_error_rad: tuple[float, float] = bounded(
+        (0.004, -0.003), Items.each(Interval(-0.1, 0.1, unit="rad"), 2, "two numbers (roll, pitch)"))
 
     def __post_init__(self) -> None:
-        check_range("gyro_noise_rad_s", self.gyro_noise_rad_s, low=0.0, high=0.5, unit="rad/s")
-        for i, value in enumerate(self.gyro_scale_error):
-            check_range(f"gyro_scale_error[{i}]", value, low=-0.2, high=0.2)
-        for i, value in enumerate(self.gyro_bias_rad_s):
-            check_range(f"gyro_bias_rad_s[{i}]", value, low=-0.5, high=0.5, unit="rad/s")
-        check_range("accel_noise_m_s2", self.accel_noise_m_s2, low=0.0, high=5.0, unit="m/s²")
-        for i, value in enumerate(self.attitude_error_rad):
-            check_range(f"attitude_error_rad[{i}]", value, low=-0.1, high=0.1, unit="rad")
+        validate(self)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -165,14 +155,12 @@ class Radio:
     tested separately (out-of-range channels, Betaflight's failsafe).
     """
 
-    rate_hz: float = 250.0
-    drop_probability: float = 0.02
-    latency_s: float = 0.004
+    rate_hz: float = bounded(250.0, Interval(25.0, 1000.0, unit="Hz"))
+    drop_probability: float = bounded(0.02, Interval(0.0, 0.5))
+    latency_s: float = bounded(0.004, Interval(0.0, 0.1, unit="s"))
 
     def __post_init__(self) -> None:
-        check_range("rate_hz", self.rate_hz, low=25.0, high=1000.0, unit="Hz")
-        check_range("drop_probability", self.drop_probability, low=0.0, high=0.5)
-        check_range("latency_s", self.latency_s, low=0.0, high=0.1, unit="s")
+        validate(self)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -196,39 +184,25 @@ class Pilot:
         it with the airframe's published thrust curve, whatever the true airframe weighs.
     """
 
-    position_gain_per_s2: float = 4.0
-    velocity_gain_per_s: float = 3.5
-    integral_gain_per_s3: float = 2.0
-    max_tilt_deg: float = 35.0
-    max_climb_m_s: float = 2.5
-    yaw_gain_per_s: float = 3.0
-    calibration_s: float = 1.5
-    settle_position_m: float = 0.02
-    settle_velocity_m_s: float = 0.05
-    settle_tilt_rad: float = 0.03
-    settle_hold_s: float = 0.1
-    settle_timeout_s: float = 10.0
-    hover_s: float = 0.5
-    return_time_s: float = 2.5
-    landing_timeout_s: float = 6.0
-    vehicle_mass_kg: float = 0.752
+    position_gain_per_s2: float = bounded(4.0, _GAIN)
+    velocity_gain_per_s: float = bounded(3.5, _GAIN)
+    integral_gain_per_s3: float = bounded(2.0, Interval(0.0, 100.0))
+    max_tilt_deg: float = bounded(35.0, Interval(1.0, 60.0, unit="deg"))
+    max_climb_m_s: float = bounded(2.5, Interval(0.1, 10.0, unit="m/s"))
+    yaw_gain_per_s: float = bounded(3.0, _GAIN)
+    calibration_s: float = bounded(1.5, Interval(1.3, 10.0, unit="s"))
+    settle_position_m: float = bounded(0.02, Interval(0.001, 1.0, unit="m"))
+    settle_velocity_m_s: float = bounded(0.05, Interval(0.001, 1.0, unit="m/s"))
+    settle_tilt_rad: float = bounded(0.03, Interval(0.001, 0.5, unit="rad"))
+    settle_hold_s: float = bounded(0.1, Interval(0.0, 10.0, unit="s"))
+    settle_timeout_s: float = bounded(10.0, Interval(1.0, 120.0, unit="s"))
+    hover_s: float = bounded(0.5, Interval(0.0, 60.0, unit="s"))
+    return_time_s: float = bounded(2.5, Interval(0.5, 60.0, unit="s"))
+    landing_timeout_s: float = bounded(6.0, Interval(1.0, 60.0, unit="s"))
+    vehicle_mass_kg: float = bounded(0.752, _MASS)
 
     def __post_init__(self) -> None:
-        check_range("vehicle_mass_kg", self.vehicle_mass_kg, low=0.05, high=20.0, unit="kg")
-        for name in ("position_gain_per_s2", "velocity_gain_per_s", "yaw_gain_per_s"):
-            check_range(name, getattr(self, name), low=0.0, high=100.0, low_inclusive=False)
-        check_range("integral_gain_per_s3", self.integral_gain_per_s3, low=0.0, high=100.0)
-        check_range("max_tilt_deg", self.max_tilt_deg, low=1.0, high=60.0, unit="deg")
-        check_range("max_climb_m_s", self.max_climb_m_s, low=0.1, high=10.0, unit="m/s")
-        check_range("calibration_s", self.calibration_s, low=1.3, high=10.0, unit="s")
-        check_range("settle_position_m", self.settle_position_m, low=0.001, high=1.0, unit="m")
-        check_range("settle_velocity_m_s", self.settle_velocity_m_s, low=0.001, high=1.0, unit="m/s")
-        check_range("settle_tilt_rad", self.settle_tilt_rad, low=0.001, high=0.5, unit="rad")
-        check_range("settle_hold_s", self.settle_hold_s, low=0.0, high=10.0, unit="s")
-        check_range("settle_timeout_s", self.settle_timeout_s, low=1.0, high=120.0, unit="s")
-        check_range("hover_s", self.hover_s, low=0.0, high=60.0, unit="s")
-        check_range("return_time_s", self.return_time_s, low=0.5, high=60.0, unit="s")
-        check_range("landing_timeout_s", self.landing_timeout_s, low=1.0, high=60.0, unit="s")
+        validate(self)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -243,13 +217,11 @@ class Firmware:
         hung (killed; the trial is lost, the next one starts a fresh firmware).
     """
 
-    gyro_rate_hz: int = 8000
-    step_timeout_s: float = 2.0
+    gyro_rate_hz: int = bounded(8000, OneOf(GYRO_RATES_HZ, unit="Hz"))
+    step_timeout_s: float = bounded(2.0, Interval(0.05, 60.0, unit="s"))
 
     def __post_init__(self) -> None:
-        if self.gyro_rate_hz not in (1000, 2000, 4000, 8000):
-            raise ConfigError(f"gyro_rate_hz = {self.gyro_rate_hz}: allowed 1000, 2000, 4000 or 8000 (Hz)")
-        check_range("step_timeout_s", self.step_timeout_s, low=0.05, high=60.0, unit="s")
+        validate(self)
 
 
 def _aerodynamics() -> Aerodynamics:

@@ -28,6 +28,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
 
+from aerobat.core.bounds import Integer, Interval, bounded, validate
 from aerobat.core.plant import Trial
 from aerobat.errors import ConfigError, IdentificationFailed
 from aerobat.quadrotor.dynamics import N_STATE, RATE_INT, hover_state, quaternion_from_rotation_vector
@@ -62,24 +63,16 @@ class FitOptions:
     fixed : parameters held at the prior's value (names from :data:`~.parameters.PARAMETERS`).
     """
 
-    position_scale_m: float = 0.003
-    angle_scale_rad: float = 0.005
-    max_step_s: float = 1e-3
-    max_evaluations: int = 80
-    max_position_rms_m: float = 0.02
-    max_angle_rms_rad: float = math.radians(3.0)
+    position_scale_m: float = bounded(0.003, Interval(1e-5, 1.0, unit="m"))
+    angle_scale_rad: float = bounded(0.005, Interval(1e-5, 1.0, unit="rad"))
+    max_step_s: float = bounded(1e-3, Interval(1e-5, 5e-3, unit="s"))
+    max_evaluations: int = bounded(80, Integer(1, 10000))
+    max_position_rms_m: float = bounded(0.02, Interval(1e-5, 10.0, unit="m"))
+    max_angle_rms_rad: float = bounded(math.radians(3.0), Interval(1e-5, 3.0, unit="rad"))
     fixed: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
-        for name, low, high in (("position_scale_m", 1e-5, 1.0), ("angle_scale_rad", 1e-5, 1.0),
-                                ("max_step_s", 1e-5, 5e-3), ("max_position_rms_m", 1e-5, 10.0),
-                                ("max_angle_rms_rad", 1e-5, 3.0)):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and math.isfinite(value) and low <= value <= high):
-                raise ConfigError(f"fit option {name} = {value!r} is out of range: allowed [{low:g}, {high:g}]")
-        if isinstance(self.max_evaluations, bool) or not isinstance(self.max_evaluations, int) \
-                or not 1 <= self.max_evaluations <= 10000:
-            raise ConfigError(f"fit option max_evaluations = {self.max_evaluations!r}: allowed integers 1 … 10000")
+        validate(self)
         for name in self.fixed:
             parameter_index(name)
 

@@ -25,7 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.config import check_number, check_real, check_type, dataclass_from_table, dataclass_to_table, short_repr
+from aerobat.config import check_real, check_type, dataclass_from_table, dataclass_to_table, short_repr
+from aerobat.core.bounds import Interval, bounded, constraints, required, validate
 from aerobat.core.maneuver import ErrorKind, ErrorSpec, ParameterSpec, check_parameters
 from aerobat.errors import ConfigError, SolveFailed
 from aerobat.quadrotor.dynamics import POS, VEL, hover_state, rotation_angles
@@ -60,10 +61,10 @@ class Translation:
 
     vehicle: VehicleParams
     target_yz: tuple[float, float]
-    final_angle_rad: float
+    final_angle_rad: float = required(Interval(unit="rad", as_float=True))
     interval_inputs: tuple[tuple[float, float], ...]
     guess_times_s: tuple[float, ...]
-    ramp_s: float = 0.1
+    ramp_s: float = bounded(0.1, Interval(0.0, 1.0, unit="s", as_float=True))
     name: str = ""
     parameters: tuple[ParameterSpec, ...] = field(init=False, repr=False, compare=False)
     errors: tuple[ErrorSpec, ...] = field(init=False, repr=False, compare=False)
@@ -71,8 +72,7 @@ class Translation:
     def __post_init__(self) -> None:
         check_type("vehicle", self.vehicle, VehicleParams, "a VehicleParams (a VehicleConfig's .vehicle)")
         _pair("target_yz", self.target_yz)
-        check_real("final_angle_rad", self.final_angle_rad)
-        check_real("ramp_s", self.ramp_s)
+        validate(self)
         check_type("name", self.name, str, "a string")
         for field_name in ("guess_times_s", "interval_inputs"):
             value = getattr(self, field_name)
@@ -87,8 +87,6 @@ class Translation:
             raise ConfigError(f"need one input pair per interval: {len(self.interval_inputs)} inputs, {n} times")
         if not all(math.isfinite(t) for t in self.guess_times_s) or np.any(np.diff(self.guess_times_s) < 0):
             raise ConfigError("guess_times_s must be finite and non-decreasing")
-        if not (math.isfinite(self.ramp_s) and 0.0 <= self.ramp_s <= 1.0):
-            raise ConfigError(f"ramp_s = {self.ramp_s} is out of range: allowed [0, 1] s")
         if not self.name:
             object.__setattr__(self, "name", f"translation to ({self.target_yz[0]:g}, {self.target_yz[1]:g}) m")
         params = [
@@ -204,8 +202,9 @@ def translation_maneuver(
 
     check_type("config", config, VehicleConfig, "a VehicleConfig (e.g. aerobat.hummingbird())")
     _pair("target_yz", target_yz)
-    check_number("final_angle_rad", final_angle_rad, unit="rad")
-    check_number("ramp_s", ramp_s, low=0.0, high=1.0, unit="s")
+    bounds = constraints(Translation)  # checked before the solve, as the maneuver will check them
+    bounds["final_angle_rad"].check("final_angle_rad", final_angle_rad)
+    bounds["ramp_s"].check("ramp_s", ramp_s)
     v = config.vehicle
     if math.hypot(float(target_yz[0]), float(target_yz[1])) < 1e-3 and abs(final_angle_rad) < 1e-6:
         raise ConfigError(f"translation to {tuple(target_yz)}: the target is the start; a translation needs a "

@@ -8,6 +8,9 @@
                       (:class:`~aerobat.plants.rotorpy.RotorPyPlant`, ``--rotorpy FILE``)
 ``betaflight``        a 5-inch racer flown by Betaflight 4.6 (SITL in lockstep) in the arena
                       (:class:`~aerobat.plants.betaflight.plant.BetaflightPlant`, ``--betaflight FILE``)
+``fc``                a Betaflight flight controller over MSP on the wall clock: a board on a
+                      serial port, or the real firmware rehearsed in real time
+                      (:class:`~aerobat.plants.fc.plant.FlightControllerPlant`, ``--fc FILE``)
 ====================  ===============================================================
 
 Each is a :class:`~aerobat.plants.spec.PlantSpec` in :data:`PLANTS`; a package adds its own
@@ -103,6 +106,36 @@ def _betaflight_default() -> Any:
     return BetaflightParams()
 
 
+def _fc(config: VehicleConfig, settings: Any, seed: int, feedback: Any = None) -> Plant:
+    from aerobat.plants.fc.plant import build_fc_plant
+
+    return build_fc_plant(config, settings, seed=seed, feedback=feedback)
+
+
+def _fc_load(path: str | Path) -> Any:
+    from aerobat.plants.fc.settings import load_fc
+
+    return load_fc(path)
+
+
+def _fc_from_table(table: Any, source: str) -> Any:
+    from aerobat.plants.fc.settings import fc_settings_from_table
+
+    return fc_settings_from_table(table, source)
+
+
+def _fc_to_table(settings: Any) -> dict[str, Any]:
+    from aerobat.plants.fc.settings import fc_settings_to_table
+
+    return fc_settings_to_table(settings)
+
+
+def _fc_default() -> Any:
+    from aerobat.plants.fc.settings import FcSettings
+
+    return FcSettings()
+
+
 _ALL_SCHEMES = tuple(FeedbackScheme)
 
 
@@ -138,3 +171,10 @@ PLANTS.register("betaflight", PlantSpec(
     _betaflight, load_settings=_betaflight_load, settings_from_table=_betaflight_from_table,
     settings_to_table=_betaflight_to_table, default_settings=_betaflight_default, option="--betaflight",
     feedback=_ALL_SCHEMES, default_feedback=DEFAULT_SCHEME))
+PLANTS.register("fc", PlantSpec(
+    "fc", "a Betaflight flight controller over MSP on the wall clock: a board on a serial port with motion "
+          "capture, or the real firmware rehearsed in real time",
+    _fc, load_settings=_fc_load, settings_from_table=_fc_from_table, settings_to_table=_fc_to_table,
+    default_settings=_fc_default, requires=(("serial", "fc"),), option="--fc", feedback=_ALL_SCHEMES,
+    # the paper flies open loop; the pilot-side feedback runs at the radio rate on motion capture
+    default_feedback=FeedbackScheme.NONE))

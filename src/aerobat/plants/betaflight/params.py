@@ -260,7 +260,7 @@ class BetaflightParams:
 
 
 def load_betaflight(path: str | Path) -> BetaflightParams:
-    """Read a Betaflight plant TOML file; :class:`ConfigError` names the file, field and range."""
+    """Read a Betaflight plant TOML file; :class:`~aerobat.errors.ConfigError` names the file, field and range."""
     path = as_path(path)
     return dataclass_from_table(BetaflightParams, read_toml(path), source=str(path))
 

@@ -28,9 +28,11 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import math
+import os
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
@@ -45,16 +47,17 @@ from aerobat.plants.betaflight.rc import RC_MIN_US
 from aerobat.quadrotor.program import CompiledProgram, Program
 from aerobat.quadrotor.vehicle import VehicleConfig
 
-from .pose_source import PoseSource
+from .pose_source import MotionCaptureSource, PoseSource
 from .pty_bridge import PtyBridge
 from .safety import SafetyLimits, SafetyMonitor, StopReason, preflight
 from .serial_link import SerialTransport
+from .settings import FcSettings, LinkKind
 from .simulated_source import SimulatedSource
 from .wall_clock import SafetyStop, WallClockFlight
 from .world import RealTimeWorld, WorldReport
 
 __all__ = ["MSP_RC_SETTINGS", "REHEARSAL_TIMEOUTS", "BoardConnection", "Connection", "FlightControllerPlant", "Link",
-           "RehearsalConnection"]
+           "RehearsalConnection", "build_fc_plant"]
 
 MSP_RC_SETTINGS = {"serial_update_rate_hz": "2000"}
 """Firmware settings RC over MSP needs: the serial task reads MSP at 100 Hz by default, which would
@@ -269,3 +272,19 @@ class FlightControllerPlant(BetaflightPlant):
         return {"wall_s": elapsed, "simulated_s": flight.time_s if flight is not None else 0.0,
                 "steps": flight.tick if flight is not None else 0, "real_time_factor": 1.0,
                 "firmware_cpu_s": math.nan, "wall_per_firmware_cpu": math.nan}
+
+
+def build_fc_plant(config: VehicleConfig, settings: FcSettings, *, seed: int = 0,
+                   feedback: Any = None) -> FlightControllerPlant:
+    """The plant ``--plant fc --fc FILE`` flies: a rehearsal, or a board and the room's motion capture."""
+    feedback = "none" if feedback is None else feedback
+    if settings.link.kind is LinkKind.REHEARSAL:
+        return FlightControllerPlant(config, RehearsalConnection({}), settings.betaflight, seed=seed,
+                                     feedback=feedback)
+    mocap = settings.mocap
+    poses = MotionCaptureSource(mocap.system, mocap.body, latency_s=mocap.latency_s,
+                                options={"hostname": mocap.hostname} if mocap.hostname else None)
+    connection = BoardConnection(settings.link.port, poses, settings.link.baudrate_bd)
+    # a board runs its own firmware: no SITL is built or configured for it
+    return FlightControllerPlant(config, connection, settings.betaflight, limits=settings.limits, seed=seed,
+                                 feedback=feedback, binary=Path(os.devnull), eeprom=Path(os.devnull))

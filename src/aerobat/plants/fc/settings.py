@@ -1,0 +1,106 @@
+"""``--plant fc``'s settings file: which flight controller, which motion capture, which limits.
+
+::
+
+    [link]
+    kind = "rehearsal"        # or "serial": a real board
+    port = "/dev/ttyACM0"     # kind = "serial"
+    baudrate_bd = 115200      # ignored over USB
+
+    [mocap]                   # kind = "serial": the room's motion-capture system (libmotioncapture)
+    system = "vicon"
+    hostname = "192.168.1.10"
+    body = "aerobat"
+    latency_s = 0.005
+
+    [limits]                  # kind = "serial": the room (a rehearsal's fence is its flight volume)
+    fence_x_m = [-2.0, 2.0]
+    ...
+
+    [betaflight.pilot]        # the Betaflight plant's sections: the supervisor, the pilot, the radio
+    settle_timeout_s = 15.0   # rate; a rehearsal's world also takes its airframe, sensors, disturbances
+
+A rehearsal flies the real firmware in real time (:class:`~.plant.RehearsalConnection`) with the
+fence just outside ``[betaflight.volume]`` and :data:`~.plant.REHEARSAL_TIMEOUTS`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import StrEnum
+from pathlib import Path
+from typing import Any
+
+from aerobat.config import as_path, dataclass_from_table, dataclass_to_table, read_toml
+from aerobat.core.bounds import Integer, Interval, OneOf, bounded, validate
+from aerobat.errors import ConfigError
+from aerobat.plants.betaflight.params import BetaflightParams, params_to_table
+
+from .pose_source import MOTION_CAPTURE_SYSTEMS
+from .safety import SafetyLimits
+
+__all__ = ["FcSettings", "LinkKind", "LinkSettings", "MocapSettings", "fc_settings_from_table", "fc_settings_to_table",
+           "load_fc"]
+
+
+class LinkKind(StrEnum):
+    """What the plant flies: the real firmware rehearsed in real time, or a board on a serial port."""
+
+    REHEARSAL = "rehearsal"
+    SERIAL = "serial"
+
+
+@dataclass(frozen=True, kw_only=True)
+class LinkSettings:
+    """``[link]``: the flight controller's MSP port."""
+
+    kind: LinkKind = bounded(LinkKind.REHEARSAL, OneOf(LinkKind))
+    port: str = ""
+    baudrate_bd: int = bounded(115_200, Integer(9_600, 4_000_000))
+
+    def __post_init__(self) -> None:
+        validate(self)
+        if self.kind is LinkKind.SERIAL and not self.port.strip():
+            raise ConfigError("port = '': required with kind = 'serial' (the board's device, e.g. /dev/ttyACM0)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class MocapSettings:
+    """``[mocap]``: the room's motion-capture system (a real board only)."""
+
+    system: str = bounded("vicon", OneOf(MOTION_CAPTURE_SYSTEMS))
+    hostname: str = ""
+    body: str = "aerobat"
+    latency_s: float = bounded(0.005, Interval(0.0, 0.2, unit="s"))
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+@dataclass(frozen=True, kw_only=True)
+class FcSettings:
+    """``--fc FILE``: the link, the motion capture, the safety limits and the Betaflight plant's settings."""
+
+    link: LinkSettings = field(default_factory=LinkSettings)
+    mocap: MocapSettings = field(default_factory=MocapSettings)
+    limits: SafetyLimits = field(default_factory=SafetyLimits)
+    betaflight: BetaflightParams = field(default_factory=BetaflightParams)
+
+
+def fc_settings_from_table(table: Any, source: str) -> FcSettings:
+    """The settings from a TOML table (errors name ``source``, the table and the field)."""
+    return dataclass_from_table(FcSettings, table, source=source)
+
+
+def fc_settings_to_table(settings: FcSettings) -> dict[str, Any]:
+    """The settings' stored form (what a stored session keeps to rebuild the plant)."""
+    table = {name: dataclass_to_table(getattr(settings, name)) for name in ("link", "mocap", "limits")}
+    table["betaflight"] = params_to_table(settings.betaflight)
+    return table
+
+
+def load_fc(path: str | Path) -> FcSettings:
+    """Read a ``--fc`` TOML file; :class:`ConfigError` names the file, field and range."""
+    path = as_path(path)
+    return fc_settings_from_table(read_toml(path), str(path))
+

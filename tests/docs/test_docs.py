@@ -124,6 +124,7 @@ def run_document(path: Path, tmp: Path, *, small: bool) -> list[str]:
     """Run every command of ``path`` in ``tmp``; returns the commands run (as run)."""
     (tmp / "examples").symlink_to(ROOT / "examples")
     (tmp / "benchmarks").symlink_to(ROOT / "benchmarks")
+    (tmp / "scripts").symlink_to(ROOT / "scripts")
     (tmp / "out").mkdir()
     env = dict(os.environ)  # as written: no test plugin on the path (docs/maneuvers.md names a file instead)
     env.pop("AEROBAT_DB", None)

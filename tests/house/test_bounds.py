@@ -49,9 +49,17 @@ def _translation():
                        interval_inputs=((10.0, 0.0),), guess_times_s=(0.5,))
 
 
+def _multiflip():
+    from aerobat.quadrotor.maneuvers import MultiFlip
+    from aerobat.quadrotor.vehicle import VehicleParams
+
+    return MultiFlip(vehicle=VehicleParams())
+
+
 EXAMPLES = {
     # classes with required fields: one valid instance each (the others are built with their defaults)
     "aerobat.quadrotor.maneuvers.translation.Translation": _translation,
+    "aerobat.quadrotor.maneuvers.flip.MultiFlip": _multiflip,
 }
 
 

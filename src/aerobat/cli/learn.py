@@ -46,9 +46,14 @@ __all__ = ["register"]
 
 
 class Interrupts:
-    """SIGINT/SIGTERM while learning: the first lets the trial in flight finish, then stops; a second aborts it."""
+    """SIGINT/SIGTERM while learning: the first lets the trial in flight finish, then stops; a second aborts it.
 
-    def __init__(self) -> None:
+    With a plant that has a ``kill()`` (a real flight controller, ``--plant fc``), the first is the
+    operator's kill: the flight in progress disarms at its next frame, and learning stops.
+    """
+
+    def __init__(self, kill: Any = None) -> None:
+        self.kill = kill
         self.signum: int | None = None
         self._critical = 0
         self._pending = False
@@ -70,6 +75,10 @@ class Interrupts:
     def _handle(self, signum: int, frame: Any) -> None:
         if self.signum is None:
             self.signum = signum
+            if self.kill is not None:
+                self.kill()
+                os.write(2, b"aerobat: kill: the flight in progress disarms now; then learning stops\n")
+                return
             os.write(2, b"aerobat: stopping after the trial in flight (interrupt again to abort it)\n")
             return
         if self._stopping:  # learning has already stopped: nothing is in flight, the session is being closed
@@ -212,7 +221,7 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
     # the folder and every file written at the end are checked before the first flight (issue 31 D4)
     out = session_folder(args, store, sid, explicit=args.out if args.out is not None else _stored_out(store, sid))
     check_outputs({out / name: "--out" for name in _WRITTEN}, stores=(store.path,))
-    interrupts = Interrupts()
+    interrupts = Interrupts(kill=getattr(run.plant, "kill", None))
     interrupts.install()
     try:
         outcome = run.run(on_iteration=on_iteration, critical=interrupts.critical,

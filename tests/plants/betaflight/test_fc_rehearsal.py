@@ -10,8 +10,11 @@ The drills fly the firmware at 2 kHz to spare the machine; the full trial at 8 k
 
 from __future__ import annotations
 
+import _thread
 import dataclasses
 import math
+import os
+import signal
 import threading
 import time
 from collections.abc import Callable
@@ -104,6 +107,15 @@ def test_the_operators_kill_disarms_in_flight(firmware: tuple[Path, Path]) -> No
     _ended_disarmed(trial)
 
 
+def test_ctrl_c_in_flight_disarms_before_it_stops_the_program(firmware: tuple[Path, Path]) -> None:
+    plant, connection = _plant(firmware)
+    _when_airborne(plant, _thread.interrupt_main)  # what Ctrl-C does to the main thread
+    with pytest.raises(KeyboardInterrupt):
+        plant.fly(FLIP.program(P0))
+    assert connection.reports and connection.reports[-1].disarmed, connection.reports
+    _no_process_left(connection)
+
+
 def test_leaving_the_geofence_disarms(firmware: tuple[Path, Path]) -> None:
     plant, _ = _plant(firmware)
     floor = plant.params.volume.z_m[0]
@@ -128,4 +140,18 @@ def test_a_link_loss_leaves_the_vehicle_to_the_firmwares_failsafe_which_disarms_
     trial = plant.fly(FLIP.program(P0))
     assert trial.status is TrialStatus.ABORTED and trial.info["safety_stop"] == "link_lost", trial.message
     _ended_disarmed(trial)  # nobody disarmed it over the link: Betaflight's RX-loss failsafe (DROP) did
+    _no_process_left(connection)
+
+
+def test_a_firmware_killed_in_flight_is_a_lost_trial_and_the_next_trial_flies_a_new_one(
+        firmware: tuple[Path, Path]) -> None:
+    plant, connection = _plant(firmware)
+    _when_airborne(plant, lambda: os.kill(connection.current.world.firmware_pid, signal.SIGKILL))  # type: ignore[union-attr]
+    lost = plant.fly(FLIP.program(P0))
+    assert lost.status is TrialStatus.LOST and "firmware lost" in lost.message, lost.message
+    _when_airborne(plant, plant.kill)  # the next trial: a fresh world takes off (then the drill ends it)
+    after = plant.fly(FLIP.program(P0))
+    assert after.info.get("airborne_at_s") is not None or after.info["safety_stop"] == "kill", after.message
+    assert after.status is TrialStatus.ABORTED and after.info["world"]["error"] == ""
+    _ended_disarmed(after)
     _no_process_left(connection)

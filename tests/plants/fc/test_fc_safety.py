@@ -120,3 +120,14 @@ def test_preflight_names_what_forbids_a_take_off(change, problem):
 def test_a_geofence_whose_sides_cross_is_refused():
     with pytest.raises(ConfigError, match=r"^fence_z_m = \(2, 1\): low must be below high$"):
         SafetyLimits(fence_z_m=(2.0, 1.0))
+
+
+def test_a_flight_that_took_time_to_set_up_starts_its_safety_clocks_when_it_starts():
+    monitor = SafetyMonitor(LIMITS, 0.0)
+    monitor.start(1.0)  # e.g. a compiled estimate loaded for 1 s after the monitor was made
+    for i in range(1, 60):
+        t = 1.0 + i * 0.005
+        monitor.pose((0.0, 0.0, 1.0), t)
+        if t < 1.0 + LIMITS.link_timeout_s:
+            assert monitor.check(t) is None, t  # no answer yet, but the link's clock started at 1.0
+    assert monitor.check(1.0 + LIMITS.link_timeout_s + 0.01) is StopReason.LINK_LOST

@@ -11,7 +11,7 @@ from aerobat.core.rules.base import ConstantSchedule, PaperRule, PaperSchedule, 
 from aerobat.core.rules.broyden import BroydenJacobian
 from aerobat.core.rules.isc import DeviationFn, InitialStateCompensation
 from aerobat.core.rules.kalman import KalmanRule
-from aerobat.core.rules.registry import RULES, IscModel, RuleChoice, RuleSpec, ScheduleChoice, make_rule
+from aerobat.core.rules.registry import RULES, IscModel, RuleChoice, RuleSpec, ScheduleChoice, ScheduleKind, make_rule
 from aerobat.core.rules.regularized import BroydenRule, RegularizedRule
 from aerobat.core.rules.scaled import KestenGamma, NoiseEstimator, filter_factors
 
@@ -33,6 +33,7 @@ __all__ = [
     "RuleSpec",
     "Schedule",
     "ScheduleChoice",
+    "ScheduleKind",
     "UpdateRule",
     "filter_factors",
     "make_rule",

@@ -21,11 +21,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
 
-from aerobat.config import check_finite, check_type, short_repr
+from aerobat.config import check_type
+from aerobat.core.bounds import Interval, OneOf, bounded, validate
 from aerobat.core.design import Design
 from aerobat.core.registry import Registry
 from aerobat.core.rules.base import ConstantSchedule, PaperRule, PaperSchedule, Schedule, UpdateRule
@@ -34,7 +36,7 @@ from aerobat.core.rules.kalman import KalmanRule
 from aerobat.core.rules.regularized import BroydenRule, RegularizedRule
 from aerobat.errors import ConfigError
 
-__all__ = ["RULES", "IscModel", "RuleChoice", "RuleSpec", "ScheduleChoice", "make_rule"]
+__all__ = ["RULES", "IscModel", "RuleChoice", "RuleSpec", "ScheduleChoice", "ScheduleKind", "make_rule"]
 
 
 @dataclass(frozen=True)
@@ -83,29 +85,32 @@ RULES.register("broyden", RuleSpec("broyden", "tsvd with a safeguarded Broyden u
                                    lambda d, s, o: BroydenRule(d, schedule=s, **o)))
 
 
+class ScheduleKind(StrEnum):
+    """A fixed step-size schedule's kind."""
+
+    PAPER = "paper"
+    CONSTANT = "constant"
+
+
+_STEP = Interval(0.0, 1.0, closed="right", as_float=True)
+
+
 @dataclass(frozen=True)
 class ScheduleChoice:
-    """A fixed step-size schedule: the paper's γ_i = max(1/i, minimum), or a constant."""
+    """A fixed step-size schedule: the paper's γ_i = max(1/i, minimum), or a constant ``value``."""
 
-    kind: str = "paper"
-    minimum: float = 0.1
-    value: float = 1.0
+    kind: ScheduleKind = bounded(ScheduleKind.PAPER, OneOf(ScheduleKind))
+    minimum: float = bounded(0.1, _STEP)
+    value: float = bounded(1.0, _STEP)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.kind, str) or self.kind not in ("paper", "constant"):
-            raise ConfigError(f"schedule kind {short_repr(self.kind)}: allowed 'paper' or 'constant'")
-        check_finite("constant step size", self.value)
-        check_finite("schedule minimum", self.minimum)
-        if not 0.0 < self.value <= 1.0:
-            raise ConfigError(f"constant step size {self.value}: allowed (0, 1]")
-        if not 0.0 < self.minimum <= 1.0:
-            raise ConfigError(f"schedule minimum {self.minimum}: allowed (0, 1]")
+        validate(self)
 
     def schedule(self) -> Schedule:
-        return PaperSchedule(self.minimum) if self.kind == "paper" else ConstantSchedule(self.value)
+        return PaperSchedule(self.minimum) if self.kind is ScheduleKind.PAPER else ConstantSchedule(self.value)
 
     def to_table(self) -> dict[str, Any]:
-        return {"kind": "paper", "minimum": self.minimum} if self.kind == "paper" else {
+        return {"kind": "paper", "minimum": self.minimum} if self.kind is ScheduleKind.PAPER else {
             "kind": "constant", "value": self.value}
 
 

@@ -5,23 +5,12 @@ whatever arrived within a timeout, close. :class:`TcpTransport` reaches the
 SITL's UART1, which Betaflight serves over TCP (5761 by default, per instance
 in the lockstep build).
 
-A serial transport for a real flight controller (not implemented here; it
-would use pyserial) needs:
-
-* ``serial.Serial(port, baudrate=115200, timeout=0, exclusive=True)``; over
-  USB VCP the baud rate is ignored, on a hardware UART it must match the
-  port's MSP baud rate (``serial`` CLI command).
-* ``read(max_bytes, timeout_s)`` as a loop on ``in_waiting``/``read`` with a
-  deadline (or ``Serial.timeout`` set per call), returning ``b""`` on timeout.
-* ``reset_input_buffer()`` after opening, to drop stale bytes (a flight
-  controller may be streaming MSP replies or CLI output from a previous owner).
-* Reconnection: ``save``, ``exit`` and ``reboot`` in the CLI reset the MCU,
-  the USB device disappears and re-enumerates (possibly under another
-  /dev/ttyACM* name); the transport must raise :class:`LinkClosed` and the
-  caller re-open it after a delay.
-* No DTR/RTS toggling: on some boards a DTR edge resets the MCU.
-* Write pacing is not needed for MSP; long CLI pastes may need small chunks on
-  hardware UARTs without flow control.
+The serial transport of a real flight controller is
+:class:`aerobat.plants.fc.serial_link.SerialTransport` (pyserial): exclusive, no DTR/RTS edge
+(some boards reset on one), stale input dropped after opening, ``read`` returning what arrived
+within its timeout, and :class:`LinkClosed` when the port disappears (``save``, ``exit`` and
+``reboot`` reset the MCU, and the USB device re-enumerates, possibly under another name: the
+owner re-opens it). Long CLI pastes may need small chunks on a hardware UART without flow control.
 """
 
 from __future__ import annotations

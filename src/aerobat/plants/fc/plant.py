@@ -38,6 +38,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from aerobat.core.plant import Trial, TrialStatus
+from aerobat.errors import ConfigError
 from aerobat.plants.betaflight.errors import LinkClosed, LinkTimeout, MspError
 from aerobat.plants.betaflight.firmware_settings import BetaflightSettings, load_settings
 from aerobat.plants.betaflight.msp import Battery, MspClient, StatusEx
@@ -54,7 +55,7 @@ from .serial_link import SerialTransport
 from .settings import FcSettings, LinkKind
 from .simulated_source import SimulatedSource
 from .wall_clock import SafetyStop, WallClockFlight
-from .world import RealTimeWorld, WorldReport
+from .world import SET_POINT_JUMP_DEG_S, RealTimeWorld, WorldReport
 
 __all__ = ["MSP_RC_SETTINGS", "REHEARSAL_TIMEOUTS", "BoardConnection", "Connection", "FlightControllerPlant", "Link",
            "RehearsalConnection", "build_fc_plant"]
@@ -100,13 +101,19 @@ class BoardConnection:
     """A real board on ``port`` and a motion-capture source (the caller opens and closes the source)."""
 
     port: str
-    poses: PoseSource
+    poses: PoseSource | None
     baudrate_bd: int = 115_200
     require_battery: bool = True
+
+    def check(self) -> None:
+        """Open the port once and close it (:class:`ConfigError` naming it if it cannot be opened)."""
+        SerialTransport(self.port, self.baudrate_bd).close()
 
     @contextlib.contextmanager
     def open(self, seed: int) -> Iterator[Link]:
         del seed
+        if self.poses is None:
+            raise ConfigError("the board's motion capture is not connected (BoardConnection.poses is None)")
         with SerialTransport(self.port, self.baudrate_bd) as transport:
             yield Link(MspClient(transport, timeout_s=0.5), self.poses, time.monotonic())
 
@@ -195,34 +202,63 @@ class FlightControllerPlant(BetaflightPlant):
         seed = int(self.rng.integers(2**31))
         self.trials_flown += 1
         info: dict[str, Any] = {"firmware": "Betaflight over MSP on a serial port, wall clock"}
-        with self.connection.open(seed) as link:
-            monitor = SafetyMonitor(self.safety, time.monotonic())
-            if self.kill_requested:
-                monitor.kill()
-            floor = float(self.start_m[2] + self.params.volume.z_m[0])
-            flight = WallClockFlight(link.msp, link.poses, monitor, rate_hz=self.params.radio.rate_hz,
-                                     time_zero_s=link.time_zero_s, start_m=self.start_m, floor_z_m=floor,
-                                     command_latency_s=self.params.radio.latency_s)
-            self.flight = flight  # type: ignore[assignment]
+        rehearsal = isinstance(self.connection, RehearsalConnection)
+        with contextlib.ExitStack() as stack:
             try:
-                problems = self._preflight(flight, link.msp)
-                if problems:
-                    info["preflight"] = list(problems)
-                    return self._failed(TrialStatus.ABORTED, "pre-flight refused: " + "; ".join(problems), info)
-                trial = self._fly(flight, compiled, info, wall)  # type: ignore[arg-type]
-            except SafetyStop as stop:
-                info["safety_stop"] = stop.reason.value
-                self._make_safe(flight, stop.reason)
-                trial = self._failed(_STATUS_FOR.get(stop.reason, TrialStatus.ABORTED), str(stop), info)
-            finally:
-                self.flight = None
-            start = trial.info.get("start_time_s")
-            if start is not None:
-                trial.info["maneuver_frames"] = flight.jitter(start, start + compiled.duration_s)
-            trial.info["frames"] = flight.jitter()
-        if link.world is not None and link.world.report is not None:
-            trial.info["world"] = link.world.report.__dict__
+                link = stack.enter_context(self.connection.open(seed))
+            except (TimeoutError, RuntimeError, OSError, LinkTimeout, LinkClosed) as error:
+                # a rehearsal's firmware that does not start is a lost trial (flown again); a board that
+                # cannot be reached is a person's to look at
+                return self._failed(TrialStatus.LOST if rehearsal else TrialStatus.ABORTED,
+                                    f"could not reach the flight controller: {error}", info)
+            trial, flight = self._supervise(link, compiled, info, wall)
+        report = link.world.report if link.world is not None else None
+        if report is not None:
+            trial.info["world"] = dataclasses.asdict(report)
+            if report.error and trial.status is not TrialStatus.OK:  # the firmware died or hung in flight
+                trial = self._failed(TrialStatus.LOST, f"firmware lost: {report.error}; the next trial starts a "
+                                                       f"new one", trial.info)
+        start = trial.info.get("start_time_s")
+        if start is not None:
+            trial.info["maneuver_frames"] = flight.jitter(start, start + compiled.duration_s)
+            if report is not None:
+                trial.info["command_latency_s"] = _command_latency(flight, report, start)
+        trial.info["frames"] = flight.jitter()
         return trial
+
+    def _supervise(self, link: Link, compiled: CompiledProgram, info: dict[str, Any],
+                   wall: float) -> tuple[Trial, WallClockFlight]:
+        """Pre-flight, then the supervisor's phases; a safety stop makes the vehicle safe and ends the trial."""
+        monitor = SafetyMonitor(self.safety, time.monotonic())
+        if self.kill_requested:
+            monitor.kill()
+        floor = float(self.start_m[2] + self.params.volume.z_m[0])
+        flight = WallClockFlight(link.msp, link.poses, monitor, rate_hz=self.params.radio.rate_hz,
+                                 time_zero_s=link.time_zero_s, start_m=self.start_m, floor_z_m=floor,
+                                 command_latency_s=self.params.radio.latency_s,
+                                 rotation_stick_us=self._rotation_stick_us())
+        self.flight = flight  # type: ignore[assignment]
+        try:
+            problems = self._preflight(flight, link.msp)
+            if problems:
+                info["preflight"] = list(problems)
+                return self._failed(TrialStatus.ABORTED, "pre-flight refused: " + "; ".join(problems), info), flight
+            return self._fly(flight, compiled, info, wall), flight  # type: ignore[arg-type]
+        except SafetyStop as stop:
+            info["safety_stop"] = stop.reason.value
+            self._make_safe(flight, stop.reason)
+            return self._failed(_STATUS_FOR.get(stop.reason, TrialStatus.ABORTED), str(stop), info), flight
+        except KeyboardInterrupt:  # Ctrl-C is the operator's kill: disarm, then let the session stop
+            flight.monitor.kill()
+            self._make_safe(flight, StopReason.KILL)
+            raise
+        finally:
+            self.flight = None
+
+    def _rotation_stick_us(self) -> float:
+        """The stick deflection [µs] asking for :data:`~.world.SET_POINT_JUMP_DEG_S` on the most sensitive axis."""
+        sticks = (abs(self.settings.stick_for_rate(axis, SET_POINT_JUMP_DEG_S)) for axis in ("roll", "pitch", "yaw"))
+        return min(sticks) * 500.0
 
     def _preflight(self, flight: WallClockFlight, msp: MspClient) -> tuple[str, ...]:
         idle = self.channels(np.array([0.0, 0.0, 0.0, float(RC_MIN_US)]), arm=False, angle=True)
@@ -281,10 +317,27 @@ def build_fc_plant(config: VehicleConfig, settings: FcSettings, *, seed: int = 0
     if settings.link.kind is LinkKind.REHEARSAL:
         return FlightControllerPlant(config, RehearsalConnection({}), settings.betaflight, seed=seed,
                                      feedback=feedback)
+    connection = BoardConnection(settings.link.port, None, settings.link.baudrate_bd)
+    connection.check()  # the port first: a missing board is refused before the motion capture is asked
     mocap = settings.mocap
-    poses = MotionCaptureSource(mocap.system, mocap.body, latency_s=mocap.latency_s,
-                                options={"hostname": mocap.hostname} if mocap.hostname else None)
-    connection = BoardConnection(settings.link.port, poses, settings.link.baudrate_bd)
+    connection.poses = MotionCaptureSource(mocap.system, mocap.body, latency_s=mocap.latency_s,
+                                           options={"hostname": mocap.hostname} if mocap.hostname else None)
     # a board runs its own firmware: no SITL is built or configured for it
-    return FlightControllerPlant(config, connection, settings.betaflight, limits=settings.limits, seed=seed,
-                                 feedback=feedback, binary=Path(os.devnull), eeprom=Path(os.devnull))
+    plant = FlightControllerPlant(config, connection, settings.betaflight, limits=settings.limits, seed=seed,
+                                  feedback=feedback, binary=Path(os.devnull), eeprom=Path(os.devnull))
+    plant.start_m = np.array(settings.start_m, dtype=float)
+    return plant
+
+
+def _command_latency(flight: WallClockFlight, report: WorldReport, start_s: float) -> float:
+    """From sending the maneuver's first rotation frame to the firmware's rate set point jumping [s].
+
+    The ground notes when a frame first deflects a roll, pitch or yaw stick (the program's first rate
+    command: a step), the rehearsal's world when the firmware's rate set point rises above 200 °/s (to
+    its 1 ms chunk); NaN when either moment is unknown.
+    """
+    sent = [t for t in flight.deflections_s if t >= start_s - 0.1]
+    if not sent:
+        return math.nan
+    jumps = [t for t in report.set_point_jumps_s if t >= sent[0]]
+    return jumps[0] - sent[0] if jumps else math.nan

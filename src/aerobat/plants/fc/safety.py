@@ -188,6 +188,12 @@ class SafetyMonitor:
         self.stopped: StopReason | None = None
         self.detail = ""
 
+    def start(self, now_s: float) -> None:
+        """Start the clocks of the first pose and the first answer now (a flight that took time to set up)."""
+        if self._position_m is None:
+            self._pose_at_s = now_s
+        self._link_at_s = max(self._link_at_s, now_s)
+
     def pose(self, position_m: Sequence[float], received_s: float) -> None:
         """A pose of the vehicle arrived at ``received_s``."""
         self._position_m = (float(position_m[0]), float(position_m[1]), float(position_m[2]))

@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from aerobat.config import as_path, dataclass_from_table, dataclass_to_table, read_toml
-from aerobat.core.bounds import Integer, Interval, OneOf, bounded, validate
+from aerobat.core.bounds import Integer, Interval, Items, OneOf, bounded, validate
 from aerobat.errors import ConfigError
 from aerobat.plants.betaflight.params import BetaflightParams, params_to_table
 
@@ -79,12 +79,22 @@ class MocapSettings:
 
 @dataclass(frozen=True, kw_only=True)
 class FcSettings:
-    """``--fc FILE``: the link, the motion capture, the safety limits and the Betaflight plant's settings."""
+    """``--fc FILE``: the link, the motion capture, the safety limits and the Betaflight plant's settings.
 
+    ``start_m`` is where the maneuver starts, in the motion-capture frame (a real board only; the
+    vehicle stands on the floor below it, ``[betaflight.volume] z_m``'s low side below it: with the
+    default volume, 2.5 m above a floor at z = 0).
+    """
+
+    start_m: tuple[float, float, float] = bounded((0.0, 0.0, 2.5), Items.each(
+        Interval(-50.0, 50.0, unit="m"), ("x", "y", "z"), "(x, y, z) in metres"))
     link: LinkSettings = field(default_factory=LinkSettings)
     mocap: MocapSettings = field(default_factory=MocapSettings)
     limits: SafetyLimits = field(default_factory=SafetyLimits)
     betaflight: BetaflightParams = field(default_factory=BetaflightParams)
+
+    def __post_init__(self) -> None:
+        validate(self)
 
 
 def fc_settings_from_table(table: Any, source: str) -> FcSettings:
@@ -94,7 +104,8 @@ def fc_settings_from_table(table: Any, source: str) -> FcSettings:
 
 def fc_settings_to_table(settings: FcSettings) -> dict[str, Any]:
     """The settings' stored form (what a stored session keeps to rebuild the plant)."""
-    table = {name: dataclass_to_table(getattr(settings, name)) for name in ("link", "mocap", "limits")}
+    table: dict[str, Any] = {"start_m": list(settings.start_m)}
+    table.update({name: dataclass_to_table(getattr(settings, name)) for name in ("link", "mocap", "limits")})
     table["betaflight"] = params_to_table(settings.betaflight)
     return table
 

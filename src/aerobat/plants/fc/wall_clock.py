@@ -17,6 +17,7 @@ frame jitter and the deadlines it missed.
 
 from __future__ import annotations
 
+import collections
 import math
 import time
 from collections.abc import Sequence
@@ -24,7 +25,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from aerobat.plants.betaflight.errors import LinkClosed, LinkTimeout
-from aerobat.plants.betaflight.msp import MSP_BATTERY_STATE, Battery, MspClient
+from aerobat.plants.betaflight.msp import MSP_BATTERY_STATE, MSP_SET_RAW_RC, Battery, MspClient
 from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose
 from aerobat.quadrotor.dynamics import N_STATE
 
@@ -34,6 +35,7 @@ from .safety import SafetyMonitor, StopReason
 __all__ = ["SafetyStop", "WallClockFlight"]
 
 _LATE_FRAME_FRACTION = 0.5  # a frame sent more than half a period after its deadline missed it
+_CENTRE_US = 1500
 _RESOLUTION_S = 1e-3  # the step the supervisor's latency arithmetic counts in (latency_steps × step_s)
 
 
@@ -61,11 +63,13 @@ class WallClockFlight:
     command_latency_s : from sending a frame to the firmware acting on it (the supervisor dates the
         maneuver's start with it).
     battery_period_s : how often the battery is asked for (MSP_BATTERY_STATE) during the flight.
+    rotation_stick_us : a roll, pitch or yaw stick this far from the centre asks for a rotation (in ACRO,
+        the rehearsal's set-point threshold): the frames that first do are noted (``deflections_s``).
     """
 
     def __init__(self, msp: MspClient, poses: PoseSource, monitor: SafetyMonitor, *, rate_hz: float,
                  time_zero_s: float, start_m: np.ndarray, floor_z_m: float, command_latency_s: float,
-                 battery_period_s: float = 1.0) -> None:
+                 battery_period_s: float = 1.0, rotation_stick_us: float = 100.0) -> None:
         self.msp = msp
         self.poses = poses
         self.monitor = monitor
@@ -83,6 +87,11 @@ class WallClockFlight:
         self.frames_late = 0
         self.deadlines: list[tuple[float, float]] = []  # (deadline, sent) in flight time [s]
         self.answers = 0
+        self._posted: collections.deque[float] = collections.deque()  # frames not yet acknowledged
+        self.acks: list[tuple[float, float]] = []  # (frame sent, its acknowledgement) in flight time [s]
+        self.rotation_stick_us = rotation_stick_us
+        self.deflections_s: list[float] = []  # frames whose roll, pitch or yaw stick left the centre [s]
+        self._deflected = False
         self.battery: Battery | None = None
         self.battery_period_s = battery_period_s
         self._battery_due_s = -math.inf
@@ -92,8 +101,10 @@ class WallClockFlight:
         self.x = np.zeros(N_STATE)
         self.x[6] = 1.0
         self.tick = 0
-        # the compiled estimate loads now, not inside the first frame's deadline (≈0.5 s from its cache)
+        # the compiled estimate loads now, not inside the first frame's deadline (≈0.5 s from its cache),
+        # and the safety clocks start after it
         estimate_pose(self.log, 0, np.zeros(3), np.zeros(3), np.zeros(4))
+        monitor.start(time.monotonic())
 
     # ------------------------------------------------------------------ time
     @property
@@ -120,7 +131,12 @@ class WallClockFlight:
         except (LinkClosed, LinkTimeout) as error:
             self._stop(StopReason.LINK_LOST, str(error))
         sent = self.time_s
+        self._posted.append(sent)
         self.deadlines.append((deadline, sent))
+        deflected = max(abs(int(channels_us[i]) - _CENTRE_US) for i in (0, 1, 3)) > self.rotation_stick_us
+        if deflected and not self._deflected:
+            self.deflections_s.append(sent)
+        self._deflected = deflected
         if sent - deadline > _LATE_FRAME_FRACTION * self.period_s:
             self.frames_late += 1
         # the schedule holds (no drift); a frame that is a whole period late starts a new schedule
@@ -163,7 +179,9 @@ class WallClockFlight:
             self.answers += len(answers)
             self.monitor.link_answered(wall)
         for command, payload in answers:
-            if command == MSP_BATTERY_STATE and payload:
+            if command == MSP_SET_RAW_RC and self._posted:  # answered in order: the oldest frame's
+                self.acks.append((self._posted.popleft(), wall - self.time_zero_s))
+            elif command == MSP_BATTERY_STATE and payload:
                 self.battery = Battery.decode(payload)
                 self.monitor.battery(self.battery)
         for pose in self.poses.wait(0.0):
@@ -219,19 +237,27 @@ class WallClockFlight:
         """Frame timing between ``start_s`` and ``end_s`` [flight time]: lateness after the deadline and intervals.
 
         Keys: ``frames``, ``late_frames`` (sent more than half a period late), ``lateness_median_ms``,
-        ``lateness_max_ms``, ``interval_std_ms`` (the spread of the time between frames).
+        ``lateness_max_ms``, ``interval_std_ms`` (the spread of the time between frames), ``acknowledged``
+        and ``ack_round_trip_median_ms``/``_max_ms``: from sending a frame to reading the firmware's
+        acknowledgement, an upper bound of the command-to-firmware latency (the firmware takes the frame
+        when it parses it, then answers at once).
         """
         rows = np.array([(d, s) for d, s in self.deadlines if start_s <= d <= end_s]).reshape(-1, 2)
-        if rows.shape[0] == 0:
-            return {"frames": 0, "late_frames": 0, "lateness_median_ms": math.nan, "lateness_max_ms": math.nan,
-                    "interval_std_ms": math.nan}
-        lateness = rows[:, 1] - rows[:, 0]
-        intervals = np.diff(rows[:, 1])
-        return {"frames": int(rows.shape[0]),
-                "late_frames": int(np.sum(lateness > _LATE_FRAME_FRACTION * self.period_s)),
-                "lateness_median_ms": float(np.median(lateness) * 1e3),
-                "lateness_max_ms": float(np.max(lateness) * 1e3),
-                "interval_std_ms": float(np.std(intervals) * 1e3) if intervals.size else math.nan}
+        acks = np.array([(s, a) for s, a in self.acks if start_s <= s <= end_s]).reshape(-1, 2)
+        rtt = acks[:, 1] - acks[:, 0]
+        out = {"frames": int(rows.shape[0]), "late_frames": 0, "lateness_median_ms": math.nan,
+               "lateness_max_ms": math.nan, "interval_std_ms": math.nan,
+               "acknowledged": int(acks.shape[0]),
+               "ack_round_trip_median_ms": float(np.median(rtt) * 1e3) if rtt.size else math.nan,
+               "ack_round_trip_max_ms": float(np.max(rtt) * 1e3) if rtt.size else math.nan}
+        if rows.shape[0]:
+            lateness = rows[:, 1] - rows[:, 0]
+            intervals = np.diff(rows[:, 1])
+            out.update(late_frames=int(np.sum(lateness > _LATE_FRAME_FRACTION * self.period_s)),
+                       lateness_median_ms=float(np.median(lateness) * 1e3),
+                       lateness_max_ms=float(np.max(lateness) * 1e3),
+                       interval_std_ms=float(np.std(intervals) * 1e3) if intervals.size else math.nan)
+        return out
 
     def close(self) -> None:
         """Nothing to release: the plant owns the link and the source."""

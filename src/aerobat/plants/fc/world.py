@@ -15,11 +15,14 @@ rehearsal's reports (a real system has neither).
 
 When the world falls behind the wall clock (a loaded machine), it does not skip: it counts the chunk
 as late and keeps the largest lag, which :meth:`RealTimeWorld.stop` reports (:class:`WorldReport`).
+Where it may (as root), the world raises its priority (:data:`WORLD_NICENESS`), as a real vehicle
+never waits for a CPU.
 The world process dies with its owner (``PR_SET_PDEATHSIG``), and the firmware with the world.
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import os
 import signal
@@ -32,12 +35,19 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from typing import Any
 
-__all__ = ["POSE_DATAGRAM", "RealTimeWorld", "WorldReport"]
+__all__ = ["POSE_DATAGRAM", "SET_POINT_JUMP_DEG_S", "WORLD_NICENESS", "RealTimeWorld", "WorldReport"]
 
 POSE_DATAGRAM = struct.Struct("<Id3d4d?3d")
 """One motion-capture sample: frame number, measurement time [s since start], position (3) [m],
 quaternion (w, x, y, z), then the rehearsal's truth: on the floor, true position (3) [m]."""
 
+WORLD_NICENESS = -10
+"""How much ahead of other processes the world and its firmware run, where the user may raise priority."""
+
+SET_POINT_JUMP_DEG_S = 200.0
+"""A rate set point no hover asks for: the world notes when the firmware's rises above it (a maneuver's
+first rotation frame has taken effect)."""
+_MAX_EVENTS = 1000
 _PR_SET_PDEATHSIG = 1
 _READY_TIMEOUT_S = 120.0  # the firmware is built and configured on first use
 
@@ -56,6 +66,8 @@ class WorldReport:
     gyro_rate_hz, chunk_s : the firmware's loop rate and the pacing chunk.
     motors : the firmware's last motor commands (0: stopped; ``motor_idle`` and up: armed).
     firmware_pid : the firmware process's id (it ends with the world).
+    set_point_jumps_s : world times at which the firmware's rate set point rose above 200 °/s after
+        being below it (a maneuver's first frames taking effect), to 1 chunk.
     error : what ended the world early ("" when it was stopped).
     """
 
@@ -69,6 +81,7 @@ class WorldReport:
     chunk_s: float
     motors: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     firmware_pid: int | None = None
+    set_point_jumps_s: tuple[float, ...] = ()
     error: str = ""
 
     @property
@@ -89,13 +102,17 @@ def _die_with(parent_pid: int) -> None:
 def _world_main(conn: Any, parent_pid: int, plant_args: dict[str, Any], pose_port: int, chunk_s: float) -> None:
     """The world process: build the flight, report its UART port, fly paced until told to stop."""
     _die_with(parent_pid)
+    # a real vehicle never waits for a CPU: ahead of the machine's other work where allowed (root),
+    # and the firmware, started from here, inherits it; elsewhere the lag is measured and reported
+    with contextlib.suppress(PermissionError):
+        os.nice(WORLD_NICENESS)
     from aerobat.plants.betaflight.plant import BetaflightPlant
 
     plant = BetaflightPlant(**plant_args)
     flight = plant.open_flight()
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
-        conn.send(("ready", flight.sitl.ports.uart1_port, flight.sitl.gyro_period_us))
+        conn.send(("ready", flight.sitl.ports.uart1_port, flight.sitl.gyro_period_us, flight.sitl.pid))
         if not conn.poll(_READY_TIMEOUT_S) or conn.recv() != "start":
             return
         latency_s = plant.params.motion_capture.latency_s
@@ -105,11 +122,19 @@ def _world_main(conn: Any, parent_pid: int, plant_args: dict[str, Any], pose_por
         chunks = late = published = 0
         max_lag_s = 0.0
         error = ""
+        moved: list[float] = []  # when the firmware's rate set point first jumped, after each quiet spell
+        quiet = True
         try:
             while not conn.poll():
                 flight.advance(steps)
                 chunks += 1
                 now_s = time.monotonic() - t0
+                # the set point the firmware's rate loop flies (its RC input through the rates): the moment
+                # a program's first frame took effect, for the command-to-firmware latency
+                jumped = max(abs(float(v)) for v in flight.motors[4:7]) > SET_POINT_JUMP_DEG_S
+                if jumped and quiet and len(moved) < _MAX_EVENTS:
+                    moved.append(flight.time_s)
+                quiet = not jumped
                 rows = flight.log[: flight.log_count]
                 while published < rows.shape[0] and rows[published, 0] + latency_s <= now_s:
                     r = rows[published]
@@ -131,7 +156,7 @@ def _world_main(conn: Any, parent_pid: int, plant_args: dict[str, Any], pose_por
             error = f"{type(failure).__name__}: {str(failure).splitlines()[0] if str(failure) else ''}"
         report = WorldReport(flight.time_s, time.monotonic() - t0, chunks, late, max_lag_s, published,
                              round(1e6 / flight.sitl.gyro_period_us), steps * flight.step_s,
-                             flight.motor_commands(), flight.sitl.pid, error)
+                             flight.motor_commands(), flight.sitl.pid, tuple(moved), error)
         try:
             conn.send(("stopped", report))
         except OSError:  # the owner closed the pipe: nobody to tell
@@ -156,6 +181,7 @@ class RealTimeWorld:
     ----------
     uart1_port : the firmware's UART1 (MSP) TCP port.
     gyro_period_us : the firmware's loop period.
+    firmware_pid : the firmware process's id.
     started_at_s : ``time.monotonic()`` at the world's time zero (after :meth:`start`).
     """
 
@@ -170,7 +196,7 @@ class RealTimeWorld:
         self.started_at_s: float | None = None
         self.report: WorldReport | None = None
         message = self._receive(_READY_TIMEOUT_S, "start the firmware")
-        _, self.uart1_port, self.gyro_period_us = message
+        _, self.uart1_port, self.gyro_period_us, self.firmware_pid = message
 
     def _receive(self, timeout_s: float, what: str) -> Any:
         if not self._conn.poll(timeout_s):

@@ -29,7 +29,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from aerobat.config import check_real, check_type, dataclass_from_table, dataclass_to_table, short_repr, table_field
+from aerobat.config import check_type, dataclass_from_table, dataclass_to_table, table_field
+from aerobat.core.bounds import Integer, Interval, OneOf, bounded, validate
 from aerobat.core.maneuver import ErrorKind, ErrorSpec, ParameterSpec, check_parameters
 from aerobat.errors import ConfigError
 from aerobat.quadrotor.dynamics import POS, VEL, euler_zyx, hover_state, rotation_angles
@@ -75,42 +76,21 @@ class MultiFlip:
     """
 
     vehicle: VehicleParams
-    flips: int = 3
-    max_rate_rad_s: float = math.radians(1800.0)
-    axis: Axis = "roll"
-    dims: int = 3
-    coast_collective: Literal["min", "max"] = "min"
-    ramp_collective_s: float = 0.1
+    flips: int = bounded(3, Integer(1, 10))
+    max_rate_rad_s: float = bounded(math.radians(1800.0), Interval(
+        0.5, 100.0, unit=f"rad/s, {math.degrees(0.5):.0f}–{math.degrees(100):.0f} °/s", as_float=True))
+    axis: Axis = bounded("roll", OneOf(Axis))
+    dims: int = bounded(3, Integer(2, 3))
+    coast_collective: Literal["min", "max"] = bounded("min", OneOf(Literal["min", "max"]))
+    ramp_collective_s: float = bounded(0.1, Interval(0.0, 1.0, unit="s", as_float=True))
     name: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.vehicle, VehicleParams):
             hint = " (a VehicleConfig: pass its .vehicle)" if hasattr(self.vehicle, "vehicle") else ""
             raise ConfigError(f"MultiFlip: vehicle must be a VehicleParams, got {type(self.vehicle).__name__}{hint}")
-        if isinstance(self.flips, bool) or not isinstance(self.flips, int) or not 1 <= self.flips <= 10:
-            raise ConfigError(f"flips = {self.flips!r} is out of range: allowed integer in [1, 10]")
-        for option in ("max_rate_rad_s", "ramp_collective_s"):
-            check_real(option, getattr(self, option))
+        validate(self)
         check_type("name", self.name, str, "a string")
-        for option, allowed in (("axis", ("roll", "pitch")), ("coast_collective", ("min", "max"))):
-            if not isinstance(getattr(self, option), str):
-                raise ConfigError(f"{option} = {short_repr(getattr(self, option))}: allowed "
-                                  f"{' or '.join(map(repr, allowed))}")
-        if isinstance(self.dims, bool) or not isinstance(self.dims, int | np.integer):
-            raise ConfigError(f"dims = {short_repr(self.dims)}: allowed 2 or 3")
-        if not (math.isfinite(self.max_rate_rad_s) and 0.5 <= self.max_rate_rad_s <= 100.0):
-            raise ConfigError(
-                f"max_rate_rad_s = {self.max_rate_rad_s} is out of range: allowed [0.5, 100] rad/s "
-                f"({math.degrees(0.5):.0f}–{math.degrees(100):.0f} °/s)"
-            )
-        if self.axis not in ("roll", "pitch"):
-            raise ConfigError(f"axis = {self.axis!r}: allowed 'roll' or 'pitch'")
-        if self.dims not in (2, 3):
-            raise ConfigError(f"dims = {self.dims!r}: allowed 2 or 3")
-        if self.coast_collective not in ("min", "max"):
-            raise ConfigError(f"coast_collective = {self.coast_collective!r}: allowed 'min' or 'max'")
-        if not (math.isfinite(self.ramp_collective_s) and 0.0 <= self.ramp_collective_s <= 1.0):
-            raise ConfigError(f"ramp_collective_s = {self.ramp_collective_s} is out of range: allowed [0, 1] s")
         if not self.name:
             object.__setattr__(
                 self, "name",

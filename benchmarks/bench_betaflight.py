@@ -103,13 +103,18 @@ def bench_firmware_alone(binary: Path, eeprom: Path, steps: int = 40000) -> floa
         return steps / (time.perf_counter() - started)
 
 
-def bench_compiled_at_rest(seconds: float = 5.0) -> dict[str, Any]:
+def _params(rate_hz: int = 8000, exchange: str = "udp") -> BetaflightParams:
+    return BetaflightParams().replace(firmware__gyro_rate_hz=rate_hz, firmware__exchange=exchange)
+
+
+def bench_compiled_at_rest(seconds: float = 5.0, exchange: str = "udp") -> dict[str, Any]:
     """The compiled loop (exchange + physics, one Python call per radio frame) on the floor, disarmed.
 
     Wall time of the stepping ÷ the firmware's CPU time over it is the driver's overhead
-    without boot and supervisor; both processes' CPU times are measured.
+    without boot and supervisor; both processes' CPU times are measured. ``exchange``: "udp" or
+    "shm" (shared memory; its waits spin first, and the spinning counts as CPU time).
     """
-    plant = BetaflightPlant(CONFIG, seed=1)
+    plant = BetaflightPlant(CONFIG, _params(exchange=exchange), seed=1)
     idle = plant.channels(np.array([0.0, 0.0, 0.0, 1000.0]), arm=False, angle=True)
     with plant.open_flight() as flight:
         for _ in range(flight.frames_for(0.5)):
@@ -131,15 +136,15 @@ def _triple_program() -> Any:
     return TRIPLE.program(design(TRIPLE, NominalModel(CONFIG)).p_nominal)
 
 
-def _fly_trial(rate_hz: int, seed: int) -> dict[str, Any]:
+def _fly_trial(rate_hz: int, seed: int, exchange: str = "udp") -> dict[str, Any]:
     """One trial in this (worker) process: steps, wall time, digest."""
     program = _triple_program()
-    trial = BetaflightPlant(CONFIG, BetaflightParams().replace(firmware__gyro_rate_hz=rate_hz), seed=seed).fly(program)
+    trial = BetaflightPlant(CONFIG, _params(rate_hz, exchange), seed=seed).fly(program)
     return {"status": trial.status.value, "steps": trial.info["steps"], "wall_s": trial.info["wall_s"],
             "digest": _trial_digest(trial)}
 
 
-def bench_parallel(rounds: int = 2, rate_hz: int = 8000) -> dict[str, Any]:
+def bench_parallel(rounds: int = 2, rate_hz: int = 8000, exchange: str = "udp") -> dict[str, Any]:
     """Steps per second of 2 firmware instances side by side ÷ 1, in spawned worker processes.
 
     Rounds alternate one trial alone and two trials at once (seeds 1 and 2), so both suffer the
@@ -151,13 +156,13 @@ def bench_parallel(rounds: int = 2, rate_hz: int = 8000) -> dict[str, Any]:
 
     ratios, single_rates, pair_rates, identical = [], [], [], []
     with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:
-        list(pool.map(_fly_trial, [rate_hz, rate_hz], [1, 2]))
+        list(pool.map(_fly_trial, [rate_hz, rate_hz], [1, 2], [exchange, exchange]))
         for _ in range(rounds):
             started = time.perf_counter()
-            alone = pool.submit(_fly_trial, rate_hz, 1).result()
+            alone = pool.submit(_fly_trial, rate_hz, 1, exchange).result()
             single = alone["steps"] / (time.perf_counter() - started)
             started = time.perf_counter()
-            pair = list(pool.map(_fly_trial, [rate_hz, rate_hz], [1, 2]))
+            pair = list(pool.map(_fly_trial, [rate_hz, rate_hz], [1, 2], [exchange, exchange]))
             both = sum(r["steps"] for r in pair) / (time.perf_counter() - started)
             single_rates.append(single)
             pair_rates.append(both)
@@ -167,10 +172,10 @@ def bench_parallel(rounds: int = 2, rate_hz: int = 8000) -> dict[str, Any]:
             "pair_steps_s": pair_rates, "seed_identical_in_parallel": all(identical)}
 
 
-def bench_trials(rate_hz: int, seeds: tuple[int, ...] = (1, 2, 3)) -> dict[str, Any]:
+def bench_trials(rate_hz: int, seeds: tuple[int, ...] = (1, 2, 3), exchange: str = "udp") -> dict[str, Any]:
     nominal = design(TRIPLE, NominalModel(CONFIG))
     program = TRIPLE.program(nominal.p_nominal)
-    params = BetaflightParams().replace(firmware__gyro_rate_hz=rate_hz)
+    params = _params(rate_hz, exchange)
     rows = []
     for seed in seeds:
         trial = BetaflightPlant(CONFIG, params, seed=seed).fly(program)

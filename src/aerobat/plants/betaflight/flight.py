@@ -9,8 +9,9 @@ samples the true state at its rate with seeded noise into a log the supervisor r
 latency. Nothing here decides what to fly: that is the plant's supervisor.
 
 The steps of a frame run in one compiled loop (:mod:`.lockstep`: motion capture, the exchange
-through the C library's ``send``/``recv`` on the process's sockets, the physics), split only where
-an RC frame is due; the process's watchdog takes over whenever an answer is late.
+through the C library's ``send``/``recv`` on the process's sockets, the physics; or
+:mod:`.lockstep_shm`, the same over shared memory with ``firmware.exchange = "shm"``), split only
+where an RC frame is due; the process's watchdog takes over whenever an answer is late.
 
 Everything random comes from the generator passed in, so a seed repeats a flight bit for bit;
 the firmware is deterministic in lockstep.
@@ -35,7 +36,7 @@ from aerobat.plants.betaflight.lockstep import (
     SEND_FAILED,
     run_steps,
 )
-from aerobat.plants.betaflight.packets import MOTOR_STRUCT
+from aerobat.plants.betaflight.packets import MOTOR_STRUCT, Exchange
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import (
     A_GROUND,
@@ -53,6 +54,8 @@ from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose
 from aerobat.quadrotor.dynamics import N_STATE
 
 __all__ = ["Flight", "NonFinite"]
+
+_SLICE_S = 0.05  # the compiled shared-memory wait's timeout: then the watchdog takes the step
 
 
 class NonFinite(Exception):
@@ -110,7 +113,19 @@ class Flight:
         self.frames_dropped = 0
         prime(self.x, self.plant, self.aux, self.counters, self._noise(1)[0], self.packet, self.scratch)
         self.firmware_cpu_s: float | None = None
-        self.sitl = SitlProcess(binary, eeprom, gyro_rate_hz=fw.gyro_rate_hz, step_timeout_s=fw.step_timeout_s)
+        self.sitl = SitlProcess(binary, eeprom, gyro_rate_hz=fw.gyro_rate_hz, step_timeout_s=fw.step_timeout_s,
+                                exchange=fw.exchange)
+        self._run_steps = run_steps
+        if fw.exchange is Exchange.SHM:
+            from aerobat.plants.betaflight.lockstep_shm import run_steps_shm
+            from aerobat.plants.betaflight.shm import SPIN_S
+
+            address, spin_ns, wait_ns = self.sitl.shm_address, int(SPIN_S * 1e9), int(_SLICE_S * 1e9)
+
+            def run_shm(_state_fd: int, _motor_fd: int, *args: object) -> tuple[int, int]:
+                return run_steps_shm(address, spin_ns, wait_ns, *args)  # type: ignore[no-any-return]
+
+            self._run_steps = run_shm  # type: ignore[assignment]
 
     # ------------------------------------------------------------------ lifetime
     def close(self) -> None:
@@ -213,9 +228,10 @@ class Flight:
                     while queue and queue[0][0] <= tick0 + i:  # RC frames reach the receiver first
                         sitl.send_rc(queue.pop(0)[1])
                 stop = min(n, queue[0][0] - tick0) if queue else n
-                status, i = run_steps(state_fd, motor_fd, i, stop, resume, tick0, self.mocap_every, self.step_s,
-                                      self.x, self.block, self.motors, self.plant, self.aux, self.pending,
-                                      self.counters, noise, mocap_noise, self.log, io, self.packet, self.scratch)
+                status, i = self._run_steps(state_fd, motor_fd, i, stop, resume, tick0, self.mocap_every,
+                                            self.step_s, self.x, self.block, self.motors, self.plant, self.aux,
+                                            self.pending, self.counters, noise, mocap_noise, self.log, io,
+                                            self.packet, self.scratch)
                 resume = False
                 if status == NO_ANSWER:  # the watchdog finishes the exchange (or raises)
                     sitl.receive_into(self.block)

@@ -30,6 +30,7 @@ from aerobat.config import (
     write_file,
 )
 from aerobat.errors import ConfigError
+from aerobat.plants.betaflight.packets import Exchange
 from aerobat.plants.betaflight.tune import Tune
 from aerobat.plants.world_params import Aerodynamics, Disturbances, Drift, MotionCapture, Volume
 
@@ -241,12 +242,19 @@ class Firmware:
         fast in wall time (docs/plants.md compares both).
     step_timeout_s : wall time a lockstep step may wait for the firmware before it is declared
         hung (killed; the trial is lost, the next one starts a fresh firmware).
+    exchange : how the per-step packets travel: ``"udp"`` (loopback sockets) or ``"shm"``
+        (shared memory, :mod:`aerobat.plants.betaflight.shm`); the same flight bit for bit.
     """
 
     gyro_rate_hz: int = 8000
     step_timeout_s: float = 2.0
+    exchange: Exchange = Exchange.UDP
 
     def __post_init__(self) -> None:
+        try:
+            object.__setattr__(self, "exchange", Exchange(self.exchange))
+        except ValueError:
+            raise ConfigError(f"exchange = {self.exchange!r}: allowed 'udp' or 'shm'") from None
         if self.gyro_rate_hz not in (1000, 2000, 4000, 8000):
             raise ConfigError(f"gyro_rate_hz = {self.gyro_rate_hz}: allowed 1000, 2000, 4000 or 8000 (Hz)")
         check_range("step_timeout_s", self.step_timeout_s, low=0.05, high=60.0, unit="s")

@@ -120,15 +120,20 @@ def bench_compiled_at_rest(seconds: float = 5.0, exchange: str = "udp") -> dict[
         for _ in range(flight.frames_for(0.5)):
             flight.frame(idle)
         cpu0, own0, tick0 = flight.firmware_cpu_time_s(), time.thread_time(), flight.tick
+        spun0 = flight.spun_s()
         started = time.perf_counter()
         for _ in range(flight.frames_for(seconds)):
             flight.frame(idle)
         wall = time.perf_counter() - started
         cpu = (flight.firmware_cpu_time_s() or math.nan) - (cpu0 or math.nan)
+        driver = time.thread_time() - own0
+        spun, driver_spun = (b - a for a, b in zip(spun0, flight.spun_s(), strict=True))
         steps = flight.tick - tick0
-    return {"steps": steps, "steps_s": steps / wall, "wall_s": wall, "firmware_cpu_s": cpu,
-            "driver_cpu_s": time.thread_time() - own0, "wall_per_firmware_cpu": wall / cpu,
-            "firmware_us_per_step": 1e6 * cpu / steps}
+    return {"exchange": exchange, "steps": steps, "steps_s": steps / wall, "wall_s": wall, "firmware_cpu_s": cpu,
+            "driver_cpu_s": driver, "wall_per_firmware_cpu": wall / cpu,
+            "firmware_us_per_step": 1e6 * cpu / steps, "firmware_spin_s": spun, "driver_spin_s": driver_spun,
+            "wall_per_firmware_work": wall / (cpu - spun), "firmware_work_us_per_step": 1e6 * (cpu - spun) / steps,
+            "driver_work_us_per_step": 1e6 * (driver - driver_spun) / steps, "load_1min": os.getloadavg()[0]}
 
 
 @functools.cache
@@ -182,6 +187,9 @@ def bench_trials(rate_hz: int, seeds: tuple[int, ...] = (1, 2, 3), exchange: str
         error = TRIPLE.error(trial.final_state)
         rows.append({"status": trial.status.value, "factor": trial.info["real_time_factor"],
                      "wall_per_firmware_cpu": trial.info["wall_per_firmware_cpu"],
+                     "wall_per_firmware_work": trial.info["wall_per_firmware_work"],
+                     "firmware_cpu_s": trial.info["firmware_cpu_s"], "firmware_spin_s": trial.info["firmware_spin_s"],
+                     "load_1min": os.getloadavg()[0], "digest": _trial_digest(trial),
                      "wall_s": trial.info["wall_s"], "simulated_s": trial.info["simulated_s"],
                      "position_error_m": float(np.linalg.norm(error[[0, 2, 5]])),
                      "flip_angle_error_deg": math.degrees(error[4])})
@@ -190,6 +198,7 @@ def bench_trials(rate_hz: int, seeds: tuple[int, ...] = (1, 2, 3), exchange: str
     return {"trials": rows, "factor_median": statistics.median(r["factor"] for r in rows),
             "wall_median_s": statistics.median(r["wall_s"] for r in rows),
             "overhead_median": statistics.median(r["wall_per_firmware_cpu"] for r in rows),
+            "overhead_work_median": statistics.median(r["wall_per_firmware_work"] for r in rows),
             "bit_identical": _trial_digest(first) == _trial_digest(again)}
 
 

@@ -113,14 +113,16 @@ class Flight:
         self.frames_dropped = 0
         prime(self.x, self.plant, self.aux, self.counters, self._noise(1)[0], self.packet, self.scratch)
         self.firmware_cpu_s: float | None = None
+        self.spun = (0.0, 0.0)
         self.sitl = SitlProcess(binary, eeprom, gyro_rate_hz=fw.gyro_rate_hz, step_timeout_s=fw.step_timeout_s,
                                 exchange=fw.exchange)
         self._run_steps = run_steps
         if fw.exchange is Exchange.SHM:
+            from aerobat.plants.betaflight import shm
             from aerobat.plants.betaflight.lockstep_shm import run_steps_shm
-            from aerobat.plants.betaflight.shm import SPIN_S
 
-            address, spin_ns, wait_ns = self.sitl.shm_address, int(SPIN_S * 1e9), int(_SLICE_S * 1e9)
+            address, wait_ns = self.sitl.shm_address, int(_SLICE_S * 1e9)
+            spin_ns = int(shm.SPIN_S * 1e9)
 
             def run_shm(_state_fd: int, _motor_fd: int, *args: object) -> tuple[int, int]:
                 return run_steps_shm(address, spin_ns, wait_ns, *args)  # type: ignore[no-any-return]
@@ -131,12 +133,21 @@ class Flight:
     def close(self) -> None:
         """Kill the firmware and release its ports and files (idempotent)."""
         self.firmware_cpu_s = self.firmware_cpu_time_s()
+        self.spun = self.spun_s()
         self.sitl.close()
 
     def firmware_cpu_time_s(self) -> float | None:
         """CPU time the firmware process has used so far [s] (after :meth:`close`: at its end; None if unknown)."""
         now = self.sitl.cpu_time_s()
         return now if now is not None else self.firmware_cpu_s
+
+    def spun_s(self) -> tuple[float, float]:
+        """(firmware, driver) time spent spinning in the shared-memory waits so far [s] (zeros over UDP).
+
+        After :meth:`close`: at its end.
+        """
+        now = self.sitl.spun_s()
+        return self.spun if math.isnan(now[0]) else now
 
     def __enter__(self) -> Flight:
         return self

@@ -37,9 +37,10 @@ _wait_motor = types.ExternalFunction(
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
-def run_steps_shm(shm, spin_ns, wait_ns, first, stop, resume, tick0, every, step_s, x, block, motors, plant, aux,
-                  pending, counters, noise, mocap_noise, log, io, packet, scratch):  # pragma: no cover - compiled
-    """:func:`.lockstep.run_steps` over the region at address ``shm`` (spin ``spin_ns``, wait up to ``wait_ns``)."""
+def run_steps_shm(shm, spin_ns, wait_ns, first, stop, resume, tick0, every, step_s, x, block, motors,
+                  plant, aux, pending, counters, noise, mocap_noise, log, io, packet,
+                  scratch):  # pragma: no cover - compiled
+    """:func:`.lockstep.run_steps` over the region at ``shm`` (spin at most ``spin_ns``, wait up to ``wait_ns``)."""
     size = block.shape[0]
     for i in range(first, stop):
         tick = tick0 + i

@@ -14,9 +14,11 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
+import math
 import mmap
 import os
 import shutil
+import struct
 import subprocess
 import tempfile
 from pathlib import Path
@@ -32,7 +34,10 @@ SHM_SIZE = 4096
 LIBRARY_NAME = "libaerobat_shm.so"
 _SOURCE = Path(__file__).with_name("shm_exchange.c")
 SPIN_S = 20e-6
-"""How long the driver spins for the firmware's answer before it sleeps on the futex [s]."""
+"""The longest the driver spins for the firmware's answer before it sleeps on the futex [s] (adaptive below it)."""
+
+_OFF_DRIVER_SPIN_NS = 80  # shm_exchange.c's SHM_OFF_DRIVER_SPIN_NS
+_OFF_FIRMWARE_SPIN_NS = 136  # SHM_OFF_SPIN_NS
 
 _loaded: ctypes.CDLL | None = None
 
@@ -131,6 +136,14 @@ class ShmRegion:
     def closed(self) -> bool:
         return self._map is None
 
+    def spun_s(self) -> tuple[float, float]:
+        """(firmware, driver): the time each has spun so far waiting for the other [s] (part of its CPU time)."""
+        if self._map is None:
+            return (math.nan, math.nan)
+        firmware_ns = struct.unpack_from("<Q", self._map, _OFF_FIRMWARE_SPIN_NS)[0]
+        driver_ns = struct.unpack_from("<Q", self._map, _OFF_DRIVER_SPIN_NS)[0]
+        return (firmware_ns * 1e-9, driver_ns * 1e-9)
+
     def publish_state(self, packet: Any) -> None:
         """Publish a state packet (a buffer of 144 bytes)."""
         self._lib.aerobat_shm_publish_state(self.address, *_pointer(packet))
@@ -139,10 +152,10 @@ class ShmRegion:
         """Publish an RC packet (40 bytes); the firmware takes the latest with the next state packet."""
         self._lib.aerobat_shm_publish_rc(self.address, *_pointer(packet))
 
-    def wait_motor(self, block: Any, timeout_s: float, spin_s: float = SPIN_S) -> bool:
+    def wait_motor(self, block: Any, timeout_s: float) -> bool:
         """Wait up to ``timeout_s`` for the answer to the last state packet, into ``block`` (writable, its size)."""
         pointer, size = _pointer(block)
-        return bool(self._lib.aerobat_shm_wait_motor(self.address, pointer, size, int(spin_s * 1e9),
+        return bool(self._lib.aerobat_shm_wait_motor(self.address, pointer, size, int(SPIN_S * 1e9),
                                                      int(timeout_s * 1e9)) == size)
 
 

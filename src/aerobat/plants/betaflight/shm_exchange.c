@@ -8,8 +8,11 @@
  * Protocol: one 4096-byte region. A sequence word per direction counts the packets published;
  * the writer copies its packet, stores the sequence word (sequentially consistent: a full
  * barrier on x86), then wakes the reader's futex only if the reader's sleeping flag is set. The
- * reader spins for a bounded time with a pause instruction, then sets its sleeping flag,
- * re-checks the word and futex-waits on it with a timeout. No wait here is without a timeout:
+ * reader spins with a pause instruction for an adaptive budget, then sets its sleeping flag,
+ * re-checks the word and futex-waits on it with a timeout. After a wait that ended while
+ * spinning the budget is twice that wait plus 2 us (at most the maximum); after one that had to
+ * sleep it halves (the peer was not running: spinning on only takes a core from it); every 32nd
+ * wait spins the maximum. No wait here is without a timeout:
  * a timeout returns 0 and the caller (Python's watchdog) decides.
  *
  * The last three functions are the firmware's side, for the tests' stand-in firmware.
@@ -27,8 +30,12 @@
 #define SHM_OFF_STATE_SEQ 64  /* driver: state packets published */
 #define SHM_OFF_RC_SEQ 68     /* driver: RC packets published */
 #define SHM_OFF_MOTOR_WAIT 72 /* driver: 1 while it sleeps on MOTOR_SEQ */
+#define SHM_OFF_DRIVER_SPIN_NS 80 /* driver: uint64, ns it spun waiting for motor packets */
+#define SHM_OFF_DRIVER_ADAPT 88 /* driver: uint64 spin budget [ns], uint32 waits */
 #define SHM_OFF_MOTOR_SEQ 128 /* firmware: the STATE_SEQ its motor packet answers */
 #define SHM_OFF_STATE_WAIT 132 /* firmware: 1 while it sleeps on STATE_SEQ */
+#define SHM_OFF_SPIN_NS 136   /* firmware: uint64, ns it spun waiting for state packets */
+#define SHM_OFF_FIRMWARE_ADAPT 144 /* the stand-in firmware: uint64 spin budget [ns], uint32 waits */
 #define SHM_OFF_STATE 256     /* state packet, 144 bytes */
 #define SHM_OFF_RC 448        /* RC packet, 40 bytes */
 #define SHM_OFF_MOTOR 512     /* motor packet, 76 bytes */
@@ -61,26 +68,51 @@ static void wake(uint32_t *word, const uint32_t *sleeping)
     }
 }
 
-/* Wait until *word differs from (differ != 0) or equals (differ == 0) value; 1 if so, 0 after timeout_ns. */
-static int wait_word(uint32_t *word, uint32_t *sleeping, uint32_t value, int differ, int64_t spin_ns,
-                     int64_t timeout_ns)
+static void add_ns(uint64_t *counter, int64_t ns)
 {
+    __atomic_store_n(counter, *counter + (uint64_t)ns, __ATOMIC_RELAXED); /* one writer */
+}
+
+/* Wait until *word differs from (differ != 0) or equals (differ == 0) value; 1 if so, 0 after timeout_ns.
+ * Spin up to the adaptive budget at adapt (at most max_spin_ns), then sleep; the time spent spinning is
+ * added to *spun. */
+static int wait_word(uint32_t *word, uint32_t *sleeping, uint64_t *spun, uint8_t *adapt, uint32_t value, int differ,
+                     int64_t max_spin_ns, int64_t timeout_ns)
+{
+    uint64_t *budget = (uint64_t *)adapt;
+    uint32_t *waits = (uint32_t *)(adapt + 8);
     const int64_t start = monotonic_ns();
+    const int64_t spin_ns = ++*waits % 32 == 0 ? max_spin_ns : (int64_t)*budget;
     int64_t now = start;
+    int spinning = 1;
     for (;;) {
         for (int i = 0; i < 16; i++) {
             const uint32_t seen = __atomic_load_n(word, __ATOMIC_ACQUIRE);
             if ((seen != value) == (differ != 0)) {
+                if (spinning) {
+                    const int64_t waited = monotonic_ns() - start;
+                    add_ns(spun, waited);
+                    *budget = (uint64_t)(2 * waited + 2000 < max_spin_ns ? 2 * waited + 2000 : max_spin_ns);
+                }
                 return 1;
             }
             cpu_relax();
         }
         now = monotonic_ns();
         if (now - start >= timeout_ns) {
+            if (spinning) {
+                add_ns(spun, now - start);
+                *budget /= 2;
+            }
             return 0;
         }
-        if (now - start < spin_ns) {
+        if (spinning && now - start < spin_ns) {
             continue;
+        }
+        if (spinning) {
+            add_ns(spun, now - start);
+            *budget /= 2;
+            spinning = 0;
         }
         __atomic_store_n(sleeping, 1, __ATOMIC_SEQ_CST);
         const uint32_t seen = __atomic_load_n(word, __ATOMIC_SEQ_CST);
@@ -128,14 +160,16 @@ int64_t aerobat_shm_publish_rc(void *shm, const void *rc, int64_t n)
 }
 
 /* Wait for the motor packet answering the last state packet and copy its n bytes into motor.
- * Returns n, or 0 when none came within timeout_ns (spinning the first spin_ns). */
+ * Returns n, or 0 when none came within timeout_ns (spinning at most spin_ns, then asleep). */
 int64_t aerobat_shm_wait_motor(void *shm, void *motor, int64_t n, int64_t spin_ns, int64_t timeout_ns)
 {
     if (n < 0 || n > SHM_MOTOR_MAX) {
         return -1;
     }
     const uint32_t target = __atomic_load_n(WORD(shm, SHM_OFF_STATE_SEQ), __ATOMIC_RELAXED);
-    if (!wait_word(WORD(shm, SHM_OFF_MOTOR_SEQ), WORD(shm, SHM_OFF_MOTOR_WAIT), target, 0, spin_ns, timeout_ns)) {
+    if (!wait_word(WORD(shm, SHM_OFF_MOTOR_SEQ), WORD(shm, SHM_OFF_MOTOR_WAIT),
+                   (uint64_t *)((uint8_t *)shm + SHM_OFF_DRIVER_SPIN_NS), (uint8_t *)shm + SHM_OFF_DRIVER_ADAPT,
+                   target, 0, spin_ns, timeout_ns)) {
         return 0;
     }
     memcpy(motor, (uint8_t *)shm + SHM_OFF_MOTOR, (size_t)n);
@@ -148,7 +182,8 @@ int64_t aerobat_shm_wait_state(void *shm, void *state, int64_t n, int64_t seen, 
 {
     uint32_t *seq = WORD(shm, SHM_OFF_STATE_SEQ);
     if (n < 0 || n > SHM_STATE_MAX
-        || !wait_word(seq, WORD(shm, SHM_OFF_STATE_WAIT), (uint32_t)seen, 1, spin_ns, timeout_ns)) {
+        || !wait_word(seq, WORD(shm, SHM_OFF_STATE_WAIT), (uint64_t *)((uint8_t *)shm + SHM_OFF_SPIN_NS),
+                      (uint8_t *)shm + SHM_OFF_FIRMWARE_ADAPT, (uint32_t)seen, 1, spin_ns, timeout_ns)) {
         return -1;
     }
     const uint32_t now = __atomic_load_n(seq, __ATOMIC_ACQUIRE);

@@ -573,6 +573,16 @@ class SitlProcess:
         """
         return self._state_socket.fileno(), self._motor_socket.fileno()
 
+    def spun_s(self) -> tuple[float, float]:
+        """(firmware, driver): time each side has spun so far waiting for the other [s]; zeros over UDP.
+
+        The shared-memory waits spin before they sleep, and the spinning is CPU time: the
+        firmware's work is :meth:`cpu_time_s` minus its part here. NaN once closed.
+        """
+        if self._shm is None:
+            return (0.0, 0.0)
+        return self._shm.spun_s()
+
     def cpu_time_s(self) -> float | None:
         """CPU time the firmware process has used so far [s] (``/proc/<pid>/schedstat``); None if unknown."""
         process = self._resources.process

@@ -187,7 +187,6 @@ def bench_trials(rate_hz: int, seeds: tuple[int, ...] = (1, 2, 3), exchange: str
         error = TRIPLE.error(trial.final_state)
         rows.append({"status": trial.status.value, "factor": trial.info["real_time_factor"],
                      "wall_per_firmware_cpu": trial.info["wall_per_firmware_cpu"],
-                     "wall_per_firmware_work": trial.info["wall_per_firmware_work"],
                      "firmware_cpu_s": trial.info["firmware_cpu_s"], "firmware_spin_s": trial.info["firmware_spin_s"],
                      "load_1min": os.getloadavg()[0], "digest": _trial_digest(trial),
                      "wall_s": trial.info["wall_s"], "simulated_s": trial.info["simulated_s"],
@@ -198,7 +197,6 @@ def bench_trials(rate_hz: int, seeds: tuple[int, ...] = (1, 2, 3), exchange: str
     return {"trials": rows, "factor_median": statistics.median(r["factor"] for r in rows),
             "wall_median_s": statistics.median(r["wall_s"] for r in rows),
             "overhead_median": statistics.median(r["wall_per_firmware_cpu"] for r in rows),
-            "overhead_work_median": statistics.median(r["wall_per_firmware_work"] for r in rows),
             "bit_identical": _trial_digest(first) == _trial_digest(again)}
 
 
@@ -239,6 +237,9 @@ def run() -> tuple[list[tuple[str, str, str]], dict[str, Any]]:
     t8 = bench_trials(8000)
     t4 = bench_trials(4000)
     parallel = bench_parallel()
+    shm_rest = bench_compiled_at_rest(exchange="shm")
+    shm8 = bench_trials(8000, exchange="shm")
+    shm_parallel = bench_parallel(exchange="shm")
     dog = bench_watchdog()
     tasks = ", ".join(f"{k} {v} Hz" for k, v in lock["tasks_hz"].items())
     stages = ", ".join(f"{k} {v} s" for k, v in info["stage_wall_time_s"].items())
@@ -265,7 +266,21 @@ def run() -> tuple[list[tuple[str, str, str]], dict[str, Any]]:
          f"{parallel['ratio_median']:.2f}× (median of {len(parallel['ratios'])} interleaved rounds: "
          + ", ".join(f"{r:.2f}" for r in parallel["ratios"])
          + f"); seed 1 bit-identical alone and in parallel: {parallel['seed_identical_in_parallel']}"),
-        ("same seed, same trial", "bit for bit", f"8 kHz: {t8['bit_identical']}, 4 kHz: {t4['bit_identical']}"),
+        ("shared-memory exchange (`firmware.exchange = \"shm\"`), on the floor: wall ÷ firmware CPU "
+         "(its spinning counts as CPU)", "≤ 1.5×",
+         f"{shm_rest['wall_per_firmware_cpu']:.2f}× ({shm_rest['steps_s']:,.0f} steps/s, "
+         f"{shm_rest['steps_s'] / 8000:.1f}× real time; firmware {shm_rest['firmware_us_per_step']:.1f} µs CPU "
+         f"per step of which spinning {1e6 * shm_rest['firmware_spin_s'] / shm_rest['steps']:.1f} µs)"),
+        ("shared memory: one trial (3D triple flip, 8 kHz), wall ÷ firmware CPU; real-time factor", "≤ 1.5×; ≥ 8×",
+         f"{shm8['overhead_median']:.2f}×; {shm8['factor_median']:.1f}× (median of 3; "
+         f"{shm8['wall_median_s']:.2f} s wall)"),
+        ("shared memory: 2 trials side by side ÷ 1 alone", "≥ 1.8×",
+         f"{shm_parallel['ratio_median']:.2f}× ("
+         + ", ".join(f"{r:.2f}" for r in shm_parallel["ratios"])
+         + f"); seed 1 bit-identical alone and in parallel: {shm_parallel['seed_identical_in_parallel']}"),
+        ("same seed, same trial", "bit for bit", f"8 kHz: {t8['bit_identical']}, 4 kHz: {t4['bit_identical']}, "
+         f"shared memory: {shm8['bit_identical']}; UDP and shared memory alike (seeds 1–3): "
+         f"{[r['digest'] for r in t8['trials']] == [r['digest'] for r in shm8['trials']]}"),
         ("watchdog: firmware stopped (SIGSTOP) → trial lost", "≤ step timeout + 0.1 s",
          f"{dog['detected_after_s']:.2f} s with a 1 s step timeout ({dog['lost_status']}); next trial "
          f"{dog['next_trial']} on a fresh firmware in {dog['next_trial_wall_s']:.2f} s"),
@@ -275,7 +290,8 @@ def run() -> tuple[list[tuple[str, str, str]], dict[str, Any]]:
                  f"{load_before:.1f} / {load_after:.1f}"))
     return rows, {"load_average": (load_before, load_after), "lockstep": lock, "firmware_alone_steps_s": alone,
                   "compiled_at_rest": at_rest, "parallel": parallel,
-                  "trials_8khz": t8, "trials_4khz": t4,
+                  "trials_8khz": t8, "trials_4khz": t4, "shm_at_rest": shm_rest, "shm_trials_8khz": shm8,
+                  "shm_parallel": shm_parallel,
                   "watchdog": dog, "build": info}
 
 

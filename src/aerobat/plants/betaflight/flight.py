@@ -114,20 +114,22 @@ class Flight:
         prime(self.x, self.plant, self.aux, self.counters, self._noise(1)[0], self.packet, self.scratch)
         self.firmware_cpu_s: float | None = None
         self.spun = (0.0, 0.0)
-        self.sitl = SitlProcess(binary, eeprom, gyro_rate_hz=fw.gyro_rate_hz, step_timeout_s=fw.step_timeout_s,
-                                exchange=fw.exchange)
         self._run_steps = run_steps
-        if fw.exchange is Exchange.SHM:
+        if fw.exchange is Exchange.SHM:  # loaded (and its C helper built) before a firmware starts
             from aerobat.plants.betaflight import shm
             from aerobat.plants.betaflight.lockstep_shm import run_steps_shm
 
-            address, wait_ns = self.sitl.shm_address, int(_SLICE_S * 1e9)
-            spin_ns = int(shm.SPIN_S * 1e9)
+            wait_ns, spin_ns = int(_SLICE_S * 1e9), int(shm.SPIN_S * 1e9)
 
-            def run_shm(_state_fd: int, _motor_fd: int, *args: object) -> tuple[int, int]:
-                return run_steps_shm(address, spin_ns, wait_ns, *args)  # type: ignore[no-any-return]
+            def run_shm(_state_fd: int, _motor_fd: int, first: int, *args: object) -> tuple[int, int]:
+                address = self.sitl.shm_address
+                if address is None:  # closed: the Python exchange raises
+                    return SEND_FAILED, first
+                return run_steps_shm(address, spin_ns, wait_ns, first, *args)  # type: ignore[no-any-return]
 
             self._run_steps = run_shm  # type: ignore[assignment]
+        self.sitl = SitlProcess(binary, eeprom, gyro_rate_hz=fw.gyro_rate_hz, step_timeout_s=fw.step_timeout_s,
+                                exchange=fw.exchange)
 
     # ------------------------------------------------------------------ lifetime
     def close(self) -> None:

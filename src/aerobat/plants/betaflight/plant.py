@@ -223,16 +223,15 @@ class BetaflightPlant:
         simulated = flight.time_s if flight is not None else 0.0
         cpu = flight.firmware_cpu_time_s() if flight is not None else None
         spun, driver_spun = flight.spun_s() if flight is not None else (0.0, 0.0)
-        work = cpu - spun if cpu is not None else None
         return {"wall_s": elapsed, "simulated_s": simulated,
                 "steps": flight.tick if flight is not None else 0,
                 "real_time_factor": simulated / elapsed if elapsed > 0 else math.nan,
                 # the driver's overhead: wall time per second of the firmware's own CPU time
                 "firmware_cpu_s": cpu if cpu is not None else math.nan,
                 "wall_per_firmware_cpu": elapsed / cpu if cpu else math.nan,
-                # over shared memory the waits spin first: that CPU time is waiting, not the firmware's work
-                "firmware_spin_s": spun, "driver_spin_s": driver_spun,
-                "wall_per_firmware_work": elapsed / work if work else math.nan}
+                # over shared memory the waits spin first: CPU time spent waiting, not working (wall
+                # time spinning: under load it includes preemption)
+                "firmware_spin_s": spun, "driver_spin_s": driver_spun}
 
     @staticmethod
     def _failed(status: TrialStatus, message: str, info: dict[str, Any],

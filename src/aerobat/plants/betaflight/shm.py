@@ -13,6 +13,7 @@ called through ctypes here and from the compiled loop (:mod:`.lockstep_shm`).
 from __future__ import annotations
 
 import ctypes
+import fcntl
 import hashlib
 import math
 import mmap
@@ -24,7 +25,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from .build import _exclusive_lock, default_cache_dir
+from .build import default_cache_dir
 from .errors import FirmwareUnavailable
 
 __all__ = ["SHM_SIZE", "ShmRegion", "ensure_library", "library"]
@@ -53,10 +54,11 @@ def ensure_library(cache_dir: Path | None = None) -> Path:
     if compiler is None:
         raise FirmwareUnavailable("no C compiler found (gcc or cc) to build the shared-memory exchange "
                                   "(Debian: apt-get install build-essential)")
-    with _exclusive_lock(target_dir.with_name(target_dir.name + ".lock")):
+    target_dir.mkdir(parents=True, exist_ok=True)
+    with open(target_dir.with_name(target_dir.name + ".lock"), "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # one compile at a time; released when the file closes
         if library_path.is_file():
             return library_path
-        target_dir.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryDirectory(dir=target_dir) as scratch:
             staged = Path(scratch) / LIBRARY_NAME
             result = subprocess.run([compiler, "-O2", "-shared", "-fPIC", "-Wall", "-o", str(staged), str(_SOURCE)],

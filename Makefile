@@ -30,7 +30,8 @@ $(STAMP): pyproject.toml
 betaflight: $(STAMP)
 	$(VENV)/bin/aerobat setup --no-kernels
 
-$(COMPILED): $(STAMP) $(KERNEL_SOURCES) src/aerobat/plants/betaflight/lockstep.patch
+$(COMPILED): $(STAMP) $(KERNEL_SOURCES) src/aerobat/plants/betaflight/lockstep.patch \
+		src/aerobat/plants/betaflight/shm_exchange.c
 	find src/aerobat -name '*.nbi' -delete -o -name '*.nbc' -delete
 	$(VENV)/bin/aerobat setup
 	touch $(COMPILED)

@@ -103,27 +103,37 @@ def bench_firmware_alone(binary: Path, eeprom: Path, steps: int = 40000) -> floa
         return steps / (time.perf_counter() - started)
 
 
-def bench_compiled_at_rest(seconds: float = 5.0) -> dict[str, Any]:
+def _params(rate_hz: int = 8000, exchange: str = "udp") -> BetaflightParams:
+    return BetaflightParams().replace(firmware__gyro_rate_hz=rate_hz, firmware__exchange=exchange)
+
+
+def bench_compiled_at_rest(seconds: float = 5.0, exchange: str = "udp") -> dict[str, Any]:
     """The compiled loop (exchange + physics, one Python call per radio frame) on the floor, disarmed.
 
     Wall time of the stepping ÷ the firmware's CPU time over it is the driver's overhead
-    without boot and supervisor; both processes' CPU times are measured.
+    without boot and supervisor; both processes' CPU times are measured. ``exchange``: "udp" or
+    "shm" (shared memory; its waits spin first, and the spinning counts as CPU time).
     """
-    plant = BetaflightPlant(CONFIG, seed=1)
+    plant = BetaflightPlant(CONFIG, _params(exchange=exchange), seed=1)
     idle = plant.channels(np.array([0.0, 0.0, 0.0, 1000.0]), arm=False, angle=True)
     with plant.open_flight() as flight:
         for _ in range(flight.frames_for(0.5)):
             flight.frame(idle)
         cpu0, own0, tick0 = flight.firmware_cpu_time_s(), time.thread_time(), flight.tick
+        spun0 = flight.spun_s()
         started = time.perf_counter()
         for _ in range(flight.frames_for(seconds)):
             flight.frame(idle)
         wall = time.perf_counter() - started
         cpu = (flight.firmware_cpu_time_s() or math.nan) - (cpu0 or math.nan)
+        driver = time.thread_time() - own0
+        spun, driver_spun = (b - a for a, b in zip(spun0, flight.spun_s(), strict=True))
         steps = flight.tick - tick0
-    return {"steps": steps, "steps_s": steps / wall, "wall_s": wall, "firmware_cpu_s": cpu,
-            "driver_cpu_s": time.thread_time() - own0, "wall_per_firmware_cpu": wall / cpu,
-            "firmware_us_per_step": 1e6 * cpu / steps}
+    return {"exchange": exchange, "steps": steps, "steps_s": steps / wall, "wall_s": wall, "firmware_cpu_s": cpu,
+            "driver_cpu_s": driver, "wall_per_firmware_cpu": wall / cpu,
+            "firmware_us_per_step": 1e6 * cpu / steps, "firmware_spin_s": spun, "driver_spin_s": driver_spun,
+            "wall_per_firmware_work": wall / (cpu - spun), "firmware_work_us_per_step": 1e6 * (cpu - spun) / steps,
+            "driver_work_us_per_step": 1e6 * (driver - driver_spun) / steps, "load_1min": os.getloadavg()[0]}
 
 
 @functools.cache
@@ -131,15 +141,15 @@ def _triple_program() -> Any:
     return TRIPLE.program(design(TRIPLE, NominalModel(CONFIG)).p_nominal)
 
 
-def _fly_trial(rate_hz: int, seed: int) -> dict[str, Any]:
+def _fly_trial(rate_hz: int, seed: int, exchange: str = "udp") -> dict[str, Any]:
     """One trial in this (worker) process: steps, wall time, digest."""
     program = _triple_program()
-    trial = BetaflightPlant(CONFIG, BetaflightParams().replace(firmware__gyro_rate_hz=rate_hz), seed=seed).fly(program)
+    trial = BetaflightPlant(CONFIG, _params(rate_hz, exchange), seed=seed).fly(program)
     return {"status": trial.status.value, "steps": trial.info["steps"], "wall_s": trial.info["wall_s"],
             "digest": _trial_digest(trial)}
 
 
-def bench_parallel(rounds: int = 2, rate_hz: int = 8000) -> dict[str, Any]:
+def bench_parallel(rounds: int = 2, rate_hz: int = 8000, exchange: str = "udp") -> dict[str, Any]:
     """Steps per second of 2 firmware instances side by side ÷ 1, in spawned worker processes.
 
     Rounds alternate one trial alone and two trials at once (seeds 1 and 2), so both suffer the
@@ -151,13 +161,13 @@ def bench_parallel(rounds: int = 2, rate_hz: int = 8000) -> dict[str, Any]:
 
     ratios, single_rates, pair_rates, identical = [], [], [], []
     with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:
-        list(pool.map(_fly_trial, [rate_hz, rate_hz], [1, 2]))
+        list(pool.map(_fly_trial, [rate_hz, rate_hz], [1, 2], [exchange, exchange]))
         for _ in range(rounds):
             started = time.perf_counter()
-            alone = pool.submit(_fly_trial, rate_hz, 1).result()
+            alone = pool.submit(_fly_trial, rate_hz, 1, exchange).result()
             single = alone["steps"] / (time.perf_counter() - started)
             started = time.perf_counter()
-            pair = list(pool.map(_fly_trial, [rate_hz, rate_hz], [1, 2]))
+            pair = list(pool.map(_fly_trial, [rate_hz, rate_hz], [1, 2], [exchange, exchange]))
             both = sum(r["steps"] for r in pair) / (time.perf_counter() - started)
             single_rates.append(single)
             pair_rates.append(both)
@@ -167,16 +177,18 @@ def bench_parallel(rounds: int = 2, rate_hz: int = 8000) -> dict[str, Any]:
             "pair_steps_s": pair_rates, "seed_identical_in_parallel": all(identical)}
 
 
-def bench_trials(rate_hz: int, seeds: tuple[int, ...] = (1, 2, 3)) -> dict[str, Any]:
+def bench_trials(rate_hz: int, seeds: tuple[int, ...] = (1, 2, 3), exchange: str = "udp") -> dict[str, Any]:
     nominal = design(TRIPLE, NominalModel(CONFIG))
     program = TRIPLE.program(nominal.p_nominal)
-    params = BetaflightParams().replace(firmware__gyro_rate_hz=rate_hz)
+    params = _params(rate_hz, exchange)
     rows = []
     for seed in seeds:
         trial = BetaflightPlant(CONFIG, params, seed=seed).fly(program)
         error = TRIPLE.error(trial.final_state)
         rows.append({"status": trial.status.value, "factor": trial.info["real_time_factor"],
                      "wall_per_firmware_cpu": trial.info["wall_per_firmware_cpu"],
+                     "firmware_cpu_s": trial.info["firmware_cpu_s"], "firmware_spin_s": trial.info["firmware_spin_s"],
+                     "load_1min": os.getloadavg()[0], "digest": _trial_digest(trial),
                      "wall_s": trial.info["wall_s"], "simulated_s": trial.info["simulated_s"],
                      "position_error_m": float(np.linalg.norm(error[[0, 2, 5]])),
                      "flip_angle_error_deg": math.degrees(error[4])})
@@ -225,6 +237,9 @@ def run() -> tuple[list[tuple[str, str, str]], dict[str, Any]]:
     t8 = bench_trials(8000)
     t4 = bench_trials(4000)
     parallel = bench_parallel()
+    shm_rest = bench_compiled_at_rest(exchange="shm")
+    shm8 = bench_trials(8000, exchange="shm")
+    shm_parallel = bench_parallel(exchange="shm")
     dog = bench_watchdog()
     tasks = ", ".join(f"{k} {v} Hz" for k, v in lock["tasks_hz"].items())
     stages = ", ".join(f"{k} {v} s" for k, v in info["stage_wall_time_s"].items())
@@ -251,7 +266,21 @@ def run() -> tuple[list[tuple[str, str, str]], dict[str, Any]]:
          f"{parallel['ratio_median']:.2f}× (median of {len(parallel['ratios'])} interleaved rounds: "
          + ", ".join(f"{r:.2f}" for r in parallel["ratios"])
          + f"); seed 1 bit-identical alone and in parallel: {parallel['seed_identical_in_parallel']}"),
-        ("same seed, same trial", "bit for bit", f"8 kHz: {t8['bit_identical']}, 4 kHz: {t4['bit_identical']}"),
+        ("shared-memory exchange (`firmware.exchange = \"shm\"`), on the floor: wall ÷ firmware CPU "
+         "(its spinning counts as CPU)", "≤ 1.5×",
+         f"{shm_rest['wall_per_firmware_cpu']:.2f}× ({shm_rest['steps_s']:,.0f} steps/s, "
+         f"{shm_rest['steps_s'] / 8000:.1f}× real time; firmware {shm_rest['firmware_us_per_step']:.1f} µs CPU "
+         f"per step of which spinning {1e6 * shm_rest['firmware_spin_s'] / shm_rest['steps']:.1f} µs)"),
+        ("shared memory: one trial (3D triple flip, 8 kHz), wall ÷ firmware CPU; real-time factor", "≤ 1.5×; ≥ 8×",
+         f"{shm8['overhead_median']:.2f}×; {shm8['factor_median']:.1f}× (median of 3; "
+         f"{shm8['wall_median_s']:.2f} s wall)"),
+        ("shared memory: 2 trials side by side ÷ 1 alone", "≥ 1.8×",
+         f"{shm_parallel['ratio_median']:.2f}× ("
+         + ", ".join(f"{r:.2f}" for r in shm_parallel["ratios"])
+         + f"); seed 1 bit-identical alone and in parallel: {shm_parallel['seed_identical_in_parallel']}"),
+        ("same seed, same trial", "bit for bit", f"8 kHz: {t8['bit_identical']}, 4 kHz: {t4['bit_identical']}, "
+         f"shared memory: {shm8['bit_identical']}; UDP and shared memory alike (seeds 1–3): "
+         f"{[r['digest'] for r in t8['trials']] == [r['digest'] for r in shm8['trials']]}"),
         ("watchdog: firmware stopped (SIGSTOP) → trial lost", "≤ step timeout + 0.1 s",
          f"{dog['detected_after_s']:.2f} s with a 1 s step timeout ({dog['lost_status']}); next trial "
          f"{dog['next_trial']} on a fresh firmware in {dog['next_trial_wall_s']:.2f} s"),
@@ -261,7 +290,8 @@ def run() -> tuple[list[tuple[str, str, str]], dict[str, Any]]:
                  f"{load_before:.1f} / {load_after:.1f}"))
     return rows, {"load_average": (load_before, load_after), "lockstep": lock, "firmware_alone_steps_s": alone,
                   "compiled_at_rest": at_rest, "parallel": parallel,
-                  "trials_8khz": t8, "trials_4khz": t4,
+                  "trials_8khz": t8, "trials_4khz": t4, "shm_at_rest": shm_rest, "shm_trials_8khz": shm8,
+                  "shm_parallel": shm_parallel,
                   "watchdog": dog, "build": info}
 
 

@@ -433,7 +433,7 @@ def with_tune_from_args(args: argparse.Namespace, choice: Any) -> Any:
 
 def rule_choice_from_args(args: argparse.Namespace) -> Any:
     """``--rule`` and ``--gamma`` as a :class:`~aerobat.core.rules.RuleChoice`."""
-    from aerobat.core.rules import RuleChoice, ScheduleChoice
+    from aerobat.core.rules import RuleChoice, ScheduleChoice, ScheduleKind
 
     schedule = None
     if args.gamma != "paper":
@@ -443,7 +443,7 @@ def rule_choice_from_args(args: argparse.Namespace) -> Any:
             raise ConfigError(f"--gamma {args.gamma!r}: use 'paper' or a number in (0, 1]") from None
         if not 0.0 < value <= 1.0:
             raise ConfigError(f"--gamma {args.gamma}: allowed (0, 1]")
-        schedule = ScheduleChoice("constant", value=value)
+        schedule = ScheduleChoice(ScheduleKind.CONSTANT, value=value)
     return RuleChoice.parse(args.rule, schedule=schedule, source="--rule")
 
 

@@ -235,6 +235,7 @@ def _build_sitl(say: Progress) -> tuple[str, SetupStep, str]:
     from aerobat.plants.betaflight.errors import FirmwareUnavailable
 
     if _sitl_piece().present:
+        _build_shm_helper()
         return ("betaflight", SetupStep.DONE, f"already built: {_sitl_path()}")
     compiler = _compiler_piece()
     if not compiler.present:
@@ -244,4 +245,16 @@ def _build_sitl(say: Progress) -> tuple[str, SetupStep, str]:
         binary = ensure_sitl(progress=say)
     except FirmwareUnavailable as exc:
         return ("betaflight", SetupStep.FAILED, " ".join(str(exc).splitlines()[:2]))
+    _build_shm_helper()
     return ("betaflight", SetupStep.DONE, f"built: {binary}")
+
+
+def _build_shm_helper() -> None:
+    """The shared-memory exchange's C helper (a second, cached; a failure shows when ``exchange = "shm"`` is used)."""
+    from aerobat.plants.betaflight.errors import FirmwareUnavailable
+    from aerobat.plants.betaflight.shm import ensure_library
+
+    try:
+        ensure_library()
+    except FirmwareUnavailable:
+        pass

@@ -149,6 +149,17 @@ def _betaflight_kernels(x: np.ndarray, cmd: np.ndarray) -> None:
     run_steps(-1, -1, 0, 0, False, 0, 8, step_s, world, block, block[:16].view(np.float32), plant, aux,
               np.zeros((2, 4)), counters, noise, np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)),
               np.zeros(N_IO, dtype=np.int64), packet, scratch)
+    # and its shared-memory twin, where the exchange's C helper can be compiled (no compiler: skipped)
+    from aerobat.plants.betaflight.errors import FirmwareUnavailable
+
+    try:
+        from aerobat.plants.betaflight.lockstep_shm import run_steps_shm
+    except FirmwareUnavailable:
+        pass
+    else:
+        run_steps_shm(0, 0, 0, 0, 0, False, 0, 8, step_s, world, block, block[:16].view(np.float32), plant, aux,
+                      np.zeros((2, 4)), counters, noise, np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)),
+                      np.zeros(N_IO, dtype=np.int64), packet, scratch)
     limits = np.zeros(N_LIMITS)
     limits[:] = 1.0
     sticks = np.zeros(4)

@@ -185,9 +185,9 @@ class RuleChoice:
             if kind == "rule":
                 fixed = None
             elif kind == "paper":
-                fixed = ScheduleChoice("paper", minimum=float(schedule.get("minimum", 0.1)))
+                fixed = ScheduleChoice(ScheduleKind.PAPER, minimum=float(schedule.get("minimum", 0.1)))
             elif kind == "constant":
-                fixed = ScheduleChoice("constant", value=float(schedule["value"]))
+                fixed = ScheduleChoice(ScheduleKind.CONSTANT, value=float(schedule["value"]))
             else:
                 raise ConfigError(f"step-size schedule {dict(schedule)!r}: expected kind 'paper', 'constant' or "
                                   f"'rule'")

@@ -9,6 +9,7 @@ The plant (``--plant betaflight``)
 * :mod:`.flight` — one flight: a firmware process, the physical world, the radio and motion capture.
 * :mod:`.physics` — the world around the firmware: one compiled step of rigid body and rotors.
 * :mod:`.lockstep` — the lockstep exchange and the physics in one compiled loop (many steps per call).
+* :mod:`.lockstep_shm` — the same loop over the shared-memory exchange (``firmware.exchange = "shm"``).
 * :mod:`.pilot` — the sticks a pilot gives: ANGLE-mode position hold, ACRO rates for a maneuver.
 * :mod:`.replay` — a recorded flight's sticks replayed into the SITL (``aerobat log replay``).
 
@@ -18,6 +19,8 @@ The firmware process
 * :mod:`.configure` — applies ``settings.toml`` through the firmware's CLI once and keeps the
   eeprom (``ensure_eeprom``).
 * :mod:`.sitl` — runs one SITL process and steps it in lockstep (``SitlProcess``, ``SitlPorts``).
+* :mod:`.ports` — the ports of one instance (``SitlPorts``, ``allocate_ports``).
+* :mod:`.shm` — the shared-memory exchange's region and its C helper (``ShmRegion``).
 * :mod:`.packets` — the SITL's UDP packet formats (``SitlState``, the motor layout).
 * :mod:`.rc` — RC channels as a receiver hands them to the firmware (``RcCommand``).
 

@@ -9,8 +9,9 @@ samples the true state at its rate with seeded noise into a log the supervisor r
 latency. Nothing here decides what to fly: that is the plant's supervisor.
 
 The steps of a frame run in one compiled loop (:mod:`.lockstep`: motion capture, the exchange
-through the C library's ``send``/``recv`` on the process's sockets, the physics), split only where
-an RC frame is due; the process's watchdog takes over whenever an answer is late.
+through the C library's ``send``/``recv`` on the process's sockets, the physics; or
+:mod:`.lockstep_shm`, the same over shared memory with ``firmware.exchange = "shm"``), split only
+where an RC frame is due; the process's watchdog takes over whenever an answer is late.
 
 Everything random comes from the generator passed in, so a seed repeats a flight bit for bit;
 the firmware is deterministic in lockstep.
@@ -35,7 +36,7 @@ from aerobat.plants.betaflight.lockstep import (
     SEND_FAILED,
     run_steps,
 )
-from aerobat.plants.betaflight.packets import MOTOR_STRUCT
+from aerobat.plants.betaflight.packets import MOTOR_STRUCT, Exchange
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import (
     A_GROUND,
@@ -53,6 +54,8 @@ from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose
 from aerobat.quadrotor.dynamics import N_STATE
 
 __all__ = ["Flight", "NonFinite"]
+
+_SLICE_S = 0.05  # the compiled shared-memory wait's timeout: then the watchdog takes the step
 
 
 class NonFinite(Exception):
@@ -110,18 +113,43 @@ class Flight:
         self.frames_dropped = 0
         prime(self.x, self.plant, self.aux, self.counters, self._noise(1)[0], self.packet, self.scratch)
         self.firmware_cpu_s: float | None = None
-        self.sitl = SitlProcess(binary, eeprom, gyro_rate_hz=fw.gyro_rate_hz, step_timeout_s=fw.step_timeout_s)
+        self.spun = (0.0, 0.0)
+        self._run_steps = run_steps
+        if fw.exchange is Exchange.SHM:  # loaded (and its C helper built) before a firmware starts
+            from aerobat.plants.betaflight import shm
+            from aerobat.plants.betaflight.lockstep_shm import run_steps_shm
+
+            wait_ns, spin_ns = int(_SLICE_S * 1e9), int(shm.SPIN_S * 1e9)
+
+            def run_shm(_state_fd: int, _motor_fd: int, first: int, *args: object) -> tuple[int, int]:
+                address = self.sitl.shm_address
+                if address is None:  # closed: the Python exchange raises
+                    return SEND_FAILED, first
+                return run_steps_shm(address, spin_ns, wait_ns, first, *args)  # type: ignore[no-any-return]
+
+            self._run_steps = run_shm  # type: ignore[assignment]
+        self.sitl = SitlProcess(binary, eeprom, gyro_rate_hz=fw.gyro_rate_hz, step_timeout_s=fw.step_timeout_s,
+                                exchange=fw.exchange)
 
     # ------------------------------------------------------------------ lifetime
     def close(self) -> None:
         """Kill the firmware and release its ports and files (idempotent)."""
         self.firmware_cpu_s = self.firmware_cpu_time_s()
+        self.spun = self.spun_s()
         self.sitl.close()
 
     def firmware_cpu_time_s(self) -> float | None:
         """CPU time the firmware process has used so far [s] (after :meth:`close`: at its end; None if unknown)."""
         now = self.sitl.cpu_time_s()
         return now if now is not None else self.firmware_cpu_s
+
+    def spun_s(self) -> tuple[float, float]:
+        """(firmware, driver) time spent spinning in the shared-memory waits so far [s] (zeros over UDP).
+
+        After :meth:`close`: at its end.
+        """
+        now = self.sitl.spun_s()
+        return self.spun if math.isnan(now[0]) else now
 
     def __enter__(self) -> Flight:
         return self
@@ -222,9 +250,10 @@ class Flight:
                     while queue and queue[0][0] <= tick0 + i:  # RC frames reach the receiver first
                         sitl.send_rc(queue.pop(0)[1])
                 stop = min(n, queue[0][0] - tick0) if queue else n
-                status, i = run_steps(state_fd, motor_fd, i, stop, resume, tick0, self.mocap_every, self.step_s,
-                                      self.x, self.block, self.motors, self.plant, self.aux, self.pending,
-                                      self.counters, noise, mocap_noise, self.log, io, self.packet, self.scratch)
+                status, i = self._run_steps(state_fd, motor_fd, i, stop, resume, tick0, self.mocap_every,
+                                            self.step_s, self.x, self.block, self.motors, self.plant, self.aux,
+                                            self.pending, self.counters, noise, mocap_noise, self.log, io,
+                                            self.packet, self.scratch)
                 resume = False
                 if status == NO_ANSWER:  # the watchdog finishes the exchange (or raises)
                     sitl.receive_into(self.block)

@@ -31,9 +31,11 @@ slot  Betaflight   position  spin (seen from top)  raised by
 from __future__ import annotations
 
 import struct
+from enum import StrEnum
 from typing import NamedTuple
 
 __all__ = [
+    "Exchange",
     "MOTOR_COUNT",
     "MOTOR_POSITIONS_FRD",
     "MOTOR_SPIN_CCW",
@@ -45,6 +47,17 @@ __all__ = [
     "pack_rc",
     "pack_state",
 ]
+
+
+
+class Exchange(StrEnum):
+    """How the per-step state, RC and motor packets travel between the driver and the lockstep firmware."""
+
+    UDP = "udp"
+    """Datagrams on loopback sockets (two system calls per packet on each side)."""
+    SHM = "shm"
+    """A shared memory region (:mod:`.shm`): a spin, then a futex sleep; no system call while both run."""
+
 
 STATE_STRUCT = struct.Struct("<18d")
 RC_STRUCT = struct.Struct("<d16H")

@@ -29,6 +29,7 @@ from aerobat.config import (
     write_file,
 )
 from aerobat.core.bounds import Interval, Items, OneOf, bounded, validate
+from aerobat.plants.betaflight.packets import Exchange
 from aerobat.plants.betaflight.tune import Tune
 from aerobat.plants.world_params import Aerodynamics, Disturbances, Drift, MotionCapture, Volume
 
@@ -215,10 +216,13 @@ class Firmware:
         fast in wall time (docs/plants.md compares both).
     step_timeout_s : wall time a lockstep step may wait for the firmware before it is declared
         hung (killed; the trial is lost, the next one starts a fresh firmware).
+    exchange : how the per-step packets travel: ``"udp"`` (loopback sockets) or ``"shm"``
+        (shared memory, :mod:`aerobat.plants.betaflight.shm`); the same flight bit for bit.
     """
 
     gyro_rate_hz: int = bounded(8000, OneOf(GYRO_RATES_HZ, unit="Hz"))
     step_timeout_s: float = bounded(2.0, Interval(0.05, 60.0, unit="s"))
+    exchange: Exchange = bounded(Exchange.UDP, OneOf(Exchange))
 
     def __post_init__(self) -> None:
         validate(self)

@@ -222,12 +222,16 @@ class BetaflightPlant:
         elapsed = time.perf_counter() - wall
         simulated = flight.time_s if flight is not None else 0.0
         cpu = flight.firmware_cpu_time_s() if flight is not None else None
+        spun, driver_spun = flight.spun_s() if flight is not None else (0.0, 0.0)
         return {"wall_s": elapsed, "simulated_s": simulated,
                 "steps": flight.tick if flight is not None else 0,
                 "real_time_factor": simulated / elapsed if elapsed > 0 else math.nan,
                 # the driver's overhead: wall time per second of the firmware's own CPU time
                 "firmware_cpu_s": cpu if cpu is not None else math.nan,
-                "wall_per_firmware_cpu": elapsed / cpu if cpu else math.nan}
+                "wall_per_firmware_cpu": elapsed / cpu if cpu else math.nan,
+                # over shared memory the waits spin first: CPU time spent waiting, not working (wall
+                # time spinning: under load it includes preemption)
+                "firmware_spin_s": spun, "driver_spin_s": driver_spun}
 
     @staticmethod
     def _failed(status: TrialStatus, message: str, info: dict[str, Any],

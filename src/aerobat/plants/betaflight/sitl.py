@@ -4,7 +4,10 @@
 ``lockstep.patch`` in this package) in a private temporary directory with a
 copy of a configured ``eeprom.bin``, on ports of its own, and drives it in
 lockstep: every :meth:`SitlProcess.step` sends one state packet (preceded by an
-RC packet when one is due) and waits for exactly one motor packet.
+RC packet when one is due) and waits for exactly one motor packet. The packets
+travel over UDP or, with ``exchange=Exchange.SHM``, through a shared memory
+region (:mod:`.shm`, a memfd the firmware inherits: ``BF_SITL_SHM_FD``); the
+watchdog is the same for both.
 
 Lifetime: the firmware never outlives its owner. It runs in its own process
 group (so a kill reaches it alone), gets SIGKILL when the thread that started
@@ -31,13 +34,13 @@ import tempfile
 import time
 import weakref
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from .errors import FirmwareExited, FirmwareNotResponding, FirmwareUnavailable
 from .link import FirmwareLink
-from .packets import MOTOR_STRUCT, SitlState, pack_rc, pack_state
+from .packets import MOTOR_STRUCT, Exchange, SitlState, pack_rc, pack_state
+from .ports import SitlPorts, allocate_ports
 from .rc import RADIO_LOST_US, RC_CHANNEL_COUNT
 
 __all__ = ["SitlPorts", "SitlProcess", "allocate_ports"]
@@ -49,84 +52,6 @@ _BIND_FAILURE_MARKS = ("cannot bind", "failed!!")
 _PR_SET_PDEATHSIG = 1
 _START_ATTEMPTS = 3
 _WATCHDOG_SLICE_S = 0.05
-
-
-@dataclass(frozen=True)
-class SitlPorts:
-    """The ports of one SITL instance, all on 127.0.0.1.
-
-    Attributes
-    ----------
-    udp_base : int
-        Motors go to ``udp_base + 2`` (bound by us), state to ``udp_base + 3``
-        and RC to ``udp_base + 4`` (bound by the firmware). Stock: 9000.
-    tcp_base : int
-        UART n is served on ``tcp_base + n`` (UART1: MSP and CLI). Stock: 5760.
-    """
-
-    udp_base: int
-    tcp_base: int
-
-    @property
-    def motor_port(self) -> int:
-        """UDP port the firmware sends motor packets to."""
-        return self.udp_base + 2
-
-    @property
-    def state_port(self) -> int:
-        """UDP port the firmware receives state packets on."""
-        return self.udp_base + 3
-
-    @property
-    def rc_port(self) -> int:
-        """UDP port the firmware receives RC packets on."""
-        return self.udp_base + 4
-
-    @property
-    def uart1_port(self) -> int:
-        """TCP port of UART1 (MSP, CLI)."""
-        return self.tcp_base + 1
-
-
-def _port_is_free(kind: int, port: int) -> bool:
-    with socket.socket(socket.AF_INET, kind) as probe:
-        try:
-            probe.bind(("127.0.0.1", port))
-        except OSError:
-            return False
-    return True
-
-
-def allocate_ports(max_tries: int = 50) -> tuple[SitlPorts, socket.socket]:
-    """Pick free ports for one instance and bind its motor socket.
-
-    The kernel chooses the motor port; the state, RC and UART1 ports next to
-    it are checked free. There is a short race until the firmware binds them;
-    the firmware exits when a bind fails and :class:`SitlProcess` retries.
-
-    Returns
-    -------
-    ports : SitlPorts
-    motor_socket : socket.socket
-        UDP socket bound to ``ports.motor_port``.
-    """
-    for _ in range(max_tries):
-        motor_socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        motor_socket.bind(("127.0.0.1", 0))
-        udp_base = motor_socket.getsockname()[1] - 2
-        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-            probe.bind(("127.0.0.1", 0))
-            tcp_base = probe.getsockname()[1] - 1
-        ports = SitlPorts(udp_base, tcp_base)
-        if (
-            ports.rc_port <= 65535
-            and _port_is_free(socket.SOCK_DGRAM, ports.state_port)
-            and _port_is_free(socket.SOCK_DGRAM, ports.rc_port)
-            and _port_is_free(socket.SOCK_STREAM, ports.uart1_port)
-        ):
-            return ports, motor_socket
-        motor_socket.close()
-    raise FirmwareNotResponding(f"no free ports for a SITL instance after {max_tries} tries")
 
 
 def _load_prctl() -> Callable[..., int] | None:
@@ -190,6 +115,7 @@ class _Resources:
         self.owner_pid = os.getpid()
         self.process: subprocess.Popen[bytes] | None = None
         self.sockets: list[socket.socket] = []
+        self.shm: Any = None  # the shm.ShmRegion of a shared-memory exchange
         self.workdir: Path | None = None
         self.keep_workdir = False
 
@@ -215,6 +141,9 @@ class _Resources:
         for sock in self.sockets:
             sock.close()
         self.sockets.clear()
+        if self.shm is not None:  # after the kill: the firmware no longer touches it
+            self.shm.close()
+            self.shm = None
         if self.workdir is not None and not self.keep_workdir:
             shutil.rmtree(self.workdir, ignore_errors=True)
         self.workdir = None
@@ -243,6 +172,8 @@ class SitlProcess:
         Wall-clock time to wait for the firmware to boot.
     keep_workdir : bool
         Keep the temporary directory (log, eeprom) after :meth:`close`.
+    exchange : Exchange or str
+        How the per-step packets travel: ``"udp"`` (sockets) or ``"shm"`` (shared memory).
     """
 
     def __init__(
@@ -255,6 +186,7 @@ class SitlProcess:
         step_timeout_s: float = 2.0,
         start_timeout_s: float = 10.0,
         keep_workdir: bool = False,
+        exchange: Exchange | str = Exchange.UDP,
     ) -> None:
         if 1_000_000 % gyro_rate_hz != 0 or not 500 <= gyro_rate_hz <= 8000:
             raise ValueError(f"gyro_rate_hz must divide 1e6 and be in 500..8000, got {gyro_rate_hz}")
@@ -268,6 +200,10 @@ class SitlProcess:
         self.step_timeout_s = step_timeout_s
         self.start_timeout_s = start_timeout_s
         self.keep_workdir = keep_workdir
+        try:
+            self.exchange_kind = Exchange(exchange)
+        except ValueError:
+            raise ValueError(f"exchange = {exchange!r}: allowed 'udp' or 'shm'") from None
         self._resources = _Resources()
         self._finalizer = weakref.finalize(self, self._resources.release)
         self._finalizer.atexit = True
@@ -302,6 +238,14 @@ class SitlProcess:
                 BF_SITL_TCP_BASE_PORT=str(ports.tcp_base),
                 BF_SITL_GYRO_RATE_HZ=str(self.gyro_rate_hz),
             )
+            env.pop("BF_SITL_SHM_FD", None)
+            pass_fds: tuple[int, ...] = ()
+            if self.exchange_kind is Exchange.SHM:
+                from .shm import ShmRegion
+
+                resources.shm = ShmRegion()
+                pass_fds = (resources.shm.fd,)
+                env["BF_SITL_SHM_FD"] = str(resources.shm.fd)
             with open(self.log_path, "wb") as log:
                 resources.process = subprocess.Popen(
                     [str(self.binary), "127.0.0.1"],
@@ -312,11 +256,17 @@ class SitlProcess:
                     stderr=subprocess.STDOUT,
                     start_new_session=True,
                     preexec_fn=_child_setup(os.getpid()),
+                    pass_fds=pass_fds,
                 )
+            if resources.shm is not None:
+                resources.shm.handed_over()
             if self._wait_ready():
                 break
             resources.kill()
             motor_socket.close()
+            if resources.shm is not None:
+                resources.shm.close()
+                resources.shm = None
             log_tail = _tail(self.log_path)
             if attempt + 1 == _START_ATTEMPTS or not any(mark in log_tail for mark in _BIND_FAILURE_MARKS):
                 raise FirmwareNotResponding("the SITL firmware did not start", log_tail, str(self.log_path))
@@ -332,6 +282,7 @@ class SitlProcess:
         self._rc_socket.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO, struct.pack("ll", 1, 0))
         self._rc_socket.connect(("127.0.0.1", ports.rc_port))
         resources.sockets += [self._state_socket, self._rc_socket]
+        self._shm = resources.shm
         self._rc_channels_us: tuple[int, ...] = RADIO_LOST_US
         self._rc_set = False
         self._next_rc_us: int | None = None
@@ -439,9 +390,9 @@ class SitlProcess:
         self._last_time_us = time_us
         try:
             if self._rc_set and (self._next_rc_us is None or time_us >= self._next_rc_us):
-                self._rc_socket.send(pack_rc(time_s, self._rc_channels_us))
+                self._send_rc_packet(pack_rc(time_s, self._rc_channels_us))
                 self._next_rc_us = time_us + self.rc_period_us
-            self._state_socket.send(state_packet)
+            self._send_state(state_packet)
         except OSError as error:  # refused (firmware gone) or send timeout
             self._check_alive()
             raise FirmwareNotResponding(f"cannot send to the firmware: {error}", _tail(self.log_path)) from error
@@ -456,7 +407,7 @@ class SitlProcess:
         :meth:`set_rc`, which sends periodically from :meth:`step`.
         """
         try:
-            self._rc_socket.send(pack_rc(0.0, tuple(int(value) for value in channels_us)))
+            self._send_rc_packet(pack_rc(0.0, tuple(int(value) for value in channels_us)))
         except OSError as error:
             self._check_alive()
             raise FirmwareNotResponding(f"cannot send to the firmware: {error}", _tail(self.log_path)) from error
@@ -470,11 +421,29 @@ class SitlProcess:
         set point and the PID terms). Same watchdog and errors as :meth:`step`.
         """
         try:
-            self._state_socket.send(state_packet)
+            self._send_state(state_packet)
         except OSError as error:
             self._check_alive()
             raise FirmwareNotResponding(f"cannot send to the firmware: {error}", _tail(self.log_path)) from error
         self.receive_into(motors)
+
+    def _send_state(self, state_packet: Any) -> None:
+        if self._shm is not None:
+            self._check_open()
+            self._shm.publish_state(state_packet)
+        else:
+            self._state_socket.send(state_packet)
+
+    def _send_rc_packet(self, rc_packet: bytes) -> None:
+        if self._shm is not None:
+            self._check_open()
+            self._shm.publish_rc(rc_packet)
+        else:
+            self._rc_socket.send(rc_packet)
+
+    def _check_open(self) -> None:
+        if self._shm.closed:
+            self._raise_dead()
 
     def receive_into(self, block: Any) -> None:
         """Receive the firmware packet answering the state packet just sent into ``block`` (its size).
@@ -490,16 +459,31 @@ class SitlProcess:
             No packet within ``step_timeout_s``.
         """
         view = memoryview(block).cast("B")
-        try:
-            if self._motor_socket.recv_into(view, view.nbytes, socket.MSG_TRUNC) == view.nbytes:
+        if self._shm is not None:
+            self._check_open()
+            if self._shm.wait_motor(block, _WATCHDOG_SLICE_S):
                 self.steps += 1
                 return
-        except (BlockingIOError, TimeoutError):
-            pass
+        else:
+            try:
+                if self._motor_socket.recv_into(view, view.nbytes, socket.MSG_TRUNC) == view.nbytes:
+                    self.steps += 1
+                    return
+            except (BlockingIOError, TimeoutError):
+                pass
         # slow path: the watchdog (and any stray datagram)
         size = self._wait_for_packet()
         view[:] = self._motor_buffer[:size]
         self.steps += 1
+
+    @property
+    def shm_address(self) -> int | None:
+        """Address of the shared-memory region in this process (None for the UDP exchange), for :mod:`.lockstep_shm`.
+
+        Valid until :meth:`close`. After a failed exchange, finish it with :meth:`exchange` or
+        :meth:`receive_into`, which apply the watchdog.
+        """
+        return None if self._shm is None or self._shm.closed else int(self._shm.address)
 
     @property
     def socket_fds(self) -> tuple[int, int]:
@@ -510,6 +494,16 @@ class SitlProcess:
         :meth:`exchange` or :meth:`receive_into`, which apply the watchdog.
         """
         return self._state_socket.fileno(), self._motor_socket.fileno()
+
+    def spun_s(self) -> tuple[float, float]:
+        """(firmware, driver): time each side has spun so far waiting for the other [s]; zeros over UDP.
+
+        The shared-memory waits spin before they sleep, and the spinning is CPU time: the
+        firmware's work is :meth:`cpu_time_s` minus its part here. NaN once closed.
+        """
+        if self._shm is None:
+            return (0.0, 0.0)
+        return self._shm.spun_s()
 
     def cpu_time_s(self) -> float | None:
         """CPU time the firmware process has used so far [s] (``/proc/<pid>/schedstat``); None if unknown."""
@@ -530,8 +524,14 @@ class SitlProcess:
         """Receive the next firmware packet into ``_motor_buffer`` (watchdog); returns its size."""
         buffer = self._motor_buffer
         deadline: float | None = None
+        shm_block = memoryview(buffer)[: MOTOR_STRUCT.size]
         while True:
             try:
+                if self._shm is not None:
+                    self._check_open()
+                    if not self._shm.wait_motor(shm_block, _WATCHDOG_SLICE_S):
+                        raise TimeoutError
+                    return MOTOR_STRUCT.size
                 size = self._motor_socket.recv_into(buffer, len(buffer), socket.MSG_TRUNC)
             except (BlockingIOError, TimeoutError):
                 self._check_alive()

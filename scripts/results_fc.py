@@ -47,8 +47,11 @@ def summarize(db: Path, session_id: int) -> dict[str, Any]:
     worlds = [r.info.get("world", {}) for r in records if r.info.get("world")]
 
     def values(rows: list[dict[str, Any]], key: str) -> np.ndarray:
-        return np.array([row[key] for row in rows if key in row and math.isfinite(row[key])], dtype=float)
+        return np.array([row[key] for row in rows if row.get(key) is not None and math.isfinite(row[key])],
+                        dtype=float)
 
+    latencies = [r.info.get("command_latency_s") for r in records]
+    latency_ms = np.array([t * 1e3 for t in latencies if t is not None and math.isfinite(t)])
     late_chunks = sum(w.get("late_chunks", 0) for w in worlds)
     chunks = sum(w.get("chunks", 0) for w in worlds)
     return {
@@ -66,12 +69,8 @@ def summarize(db: Path, session_id: int) -> dict[str, Any]:
         "frame_interval_std_ms": _agg(values(frames, "interval_std_ms"), np.median),
         "ack_round_trip_median_ms": _agg(values(frames, "ack_round_trip_median_ms"), np.median),
         "ack_round_trip_max_ms": _agg(values(frames, "ack_round_trip_max_ms"), np.max),
-        "command_latency_median_ms": _agg(np.array([r.info["command_latency_s"] for r in records
-                                                     if math.isfinite(r.info.get("command_latency_s", math.nan))])
-                                           * 1e3, np.median),
-        "command_latency_max_ms": _agg(np.array([r.info["command_latency_s"] for r in records
-                                                  if math.isfinite(r.info.get("command_latency_s", math.nan))])
-                                        * 1e3, np.max),
+        "command_latency_median_ms": _agg(latency_ms, np.median),
+        "command_latency_max_ms": _agg(latency_ms, np.max),
         "world_late_chunk_fraction": late_chunks / chunks if chunks else math.nan,
         "world_max_lag_ms": float(max((w.get("max_lag_s", 0.0) for w in worlds), default=math.nan) * 1e3),
         "all_disarmed": all(max(w.get("motors", [0.0])) == 0.0 for w in worlds),
@@ -90,7 +89,7 @@ def table(s: dict[str, Any]) -> str:
         ("frame lateness after its deadline: median, max", f"{s['frame_lateness_median_ms']:.2f} ms, "
                                                              f"{s['frame_lateness_max_ms']:.1f} ms"),
         ("frame interval spread (std, median over trials)", f"{s['frame_interval_std_ms']:.2f} ms"),
-        ("command to firmware (first ACRO frame sent → rate set point jumps): median, max",
+        ("command to firmware (first rotation frame sent → rate set point jumps): median, max",
          f"{s['command_latency_median_ms']:.1f} ms, {s['command_latency_max_ms']:.1f} ms"),
         ("frame → its acknowledgement read back (the SITL's TCP reply path included): median, max",
          f"{s['ack_round_trip_median_ms']:.1f} ms, {s['ack_round_trip_max_ms']:.1f} ms"),

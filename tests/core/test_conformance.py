@@ -48,10 +48,10 @@ def test_maneuver_conforms(kind):
 
 
 def test_every_plant_has_a_check():
-    assert set(PLANTS.names()) == {"nominal", "arena", "rotorpy", "betaflight"}
+    assert set(PLANTS.names()) == {"nominal", "arena", "rotorpy", "betaflight", "fc"}
 
 
-@pytest.mark.parametrize("kind", ["nominal", "arena", "rotorpy", "betaflight"])
+@pytest.mark.parametrize("kind", ["nominal", "arena", "rotorpy", "betaflight", "fc"])  # fc: its real-time rehearsal
 def test_plant_conforms(kind):
     choice = PlantChoice(kind, seed=4)
     try:

@@ -14,7 +14,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["Plant", "StatefulPlant", "Trial", "TrialStatus"]
+__all__ = ["Plant", "StatefulPlant", "Trial", "TrialStatus", "repeats_exactly"]
 
 
 class TrialStatus(StrEnum):
@@ -106,3 +106,13 @@ class StatefulPlant(Plant, Protocol):
     def get_state(self) -> dict[str, Any]: ...
 
     def set_state(self, state: dict[str, Any]) -> None: ...
+
+
+def repeats_exactly(plant: Any) -> bool:
+    """True unless the plant says its trials never repeat bit for bit (``repeatable = False``).
+
+    A plant on the wall clock (a real flight controller, or the real firmware rehearsed in real
+    time) sets it: its saved state still resumes its generators and counters, but timing decides
+    every trial, so a resumed session is not exact and the conformance kit does not ask for a repeat.
+    """
+    return bool(getattr(plant, "repeatable", True))

@@ -27,7 +27,7 @@ import numpy as np
 
 from aerobat.core.design import Design, FinalStateModel, design
 from aerobat.core.maneuver import ErrorKind, ErrorSpec, Maneuver, ParameterSpec, batch_errors, check_parameters
-from aerobat.core.plant import Plant, StatefulPlant, Trial, TrialStatus
+from aerobat.core.plant import Plant, StatefulPlant, Trial, TrialStatus, repeats_exactly
 from aerobat.core.rules.base import UpdateRule
 from aerobat.errors import ConfigError
 
@@ -258,7 +258,8 @@ def check_plant(plant: Plant, maneuver: Maneuver, *, params: np.ndarray | None =
     Flies the maneuver's guess (or ``params``): the trial must be a :class:`Trial` with a
     :class:`TrialStatus`, consistent array shapes and JSON-ready ``info``. A
     :class:`~aerobat.core.plant.StatefulPlant` must also repeat a trial exactly after
-    ``set_state(get_state())``, with a JSON-ready state. Returns the first trial.
+    ``set_state(get_state())``, with a JSON-ready state, unless it flies on the wall clock
+    (:func:`~aerobat.core.plant.repeats_exactly`: its state must only restore). Returns the first trial.
     """
     what = f"plant {getattr(plant, 'name', type(plant).__name__)!r}"
     _require(isinstance(getattr(plant, "name", None), str), what, "has no string 'name'")
@@ -285,6 +286,8 @@ def check_plant(plant: Plant, maneuver: Maneuver, *, params: np.ndarray | None =
     if saved is not None:
         assert isinstance(plant, StatefulPlant)
         plant.set_state(saved)
+        if not repeats_exactly(plant):  # on the wall clock: the state restores, no trial repeats bit for bit
+            return trial
         again = plant.fly(program)
         _require(again.status == trial.status and bool(np.array_equal(np.asarray(again.final_state),
                                                                  np.asarray(trial.final_state), equal_nan=True)),

@@ -34,7 +34,7 @@ from aerobat.core.bounds import ITERATIONS
 from aerobat.core.design import Design, design
 from aerobat.core.learning import Iteration, IterationStatus, Learner, SessionStatus, learn
 from aerobat.core.maneuver import Maneuver, check_maneuver, position_indices
-from aerobat.core.plant import Plant, StatefulPlant
+from aerobat.core.plant import Plant, StatefulPlant, repeats_exactly
 from aerobat.core.registry import from_spec
 from aerobat.core.rules import RuleChoice
 from aerobat.errors import ConfigError, DesignFailed, StoreError
@@ -316,6 +316,9 @@ def resume_session(store: Store, ref: int | str, *, iterations: int | None = Non
         elif prec.kind != "nominal":
             exact = False  # the plant continues from a fresh random state
             because = f"the {prec.kind} plant's state was not stored"
+    if exact and not repeats_exactly(plant):
+        exact = False
+        because = f"the {prec.kind} plant flies on the wall clock: no trial repeats bit for bit"
     if exact and _rounds_differently(rec.aerobat_version):
         exact = False
         because = (f"it was recorded by aerobat {rec.aerobat_version}, whose simulation rounds differently in the "

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import math
 import os
 import time
 from collections.abc import Iterator
@@ -170,6 +169,7 @@ class FlightControllerPlant(BetaflightPlant):
     """
 
     name = "fc"
+    repeatable = False  # on the wall clock: timing decides every trial (aerobat.core.plant.repeats_exactly)
 
     def __init__(self, config: VehicleConfig, connection: Connection, params: BetaflightParams | None = None, *,
                  limits: SafetyLimits | None = None, seed: int = 0, settings: BetaflightSettings | None = None,
@@ -224,6 +224,9 @@ class FlightControllerPlant(BetaflightPlant):
             if report is not None:
                 trial.info["command_latency_s"] = _command_latency(flight, report, start)
         trial.info["frames"] = flight.jitter()
+        if trial.ok:
+            trial = dataclasses.replace(trial, message=f"maneuver flown over MSP on the wall clock "
+                                                       f"({flight.frames_sent} radio frames)")
         return trial
 
     def _supervise(self, link: Link, compiled: CompiledProgram, info: dict[str, Any],
@@ -305,9 +308,9 @@ class FlightControllerPlant(BetaflightPlant):
 
     def _timing(self, flight: Any, wall: float) -> dict[str, Any]:
         elapsed = time.perf_counter() - wall
-        return {"wall_s": elapsed, "simulated_s": flight.time_s if flight is not None else 0.0,
-                "steps": flight.tick if flight is not None else 0, "real_time_factor": 1.0,
-                "firmware_cpu_s": math.nan, "wall_per_firmware_cpu": math.nan}
+        # the flight is the wall clock's: no simulated time of its own, no firmware CPU time to compare with
+        return {"wall_s": elapsed, "flight_s": flight.time_s if flight is not None else 0.0,
+                "steps": flight.tick if flight is not None else 0}  # radio frames: the wall clock has no steps
 
 
 def build_fc_plant(config: VehicleConfig, settings: FcSettings, *, seed: int = 0,
@@ -329,15 +332,13 @@ def build_fc_plant(config: VehicleConfig, settings: FcSettings, *, seed: int = 0
     return plant
 
 
-def _command_latency(flight: WallClockFlight, report: WorldReport, start_s: float) -> float:
+def _command_latency(flight: WallClockFlight, report: WorldReport, start_s: float) -> float | None:
     """From sending the maneuver's first rotation frame to the firmware's rate set point jumping [s].
 
     The ground notes when a frame first deflects a roll, pitch or yaw stick (the program's first rate
     command: a step), the rehearsal's world when the firmware's rate set point rises above 200 °/s (to
-    its 1 ms chunk); NaN when either moment is unknown.
+    its 1 ms chunk); None when either moment is unknown.
     """
     sent = [t for t in flight.deflections_s if t >= start_s - 0.1]
-    if not sent:
-        return math.nan
-    jumps = [t for t in report.set_point_jumps_s if t >= sent[0]]
-    return jumps[0] - sent[0] if jumps else math.nan
+    jumps = [t for t in report.set_point_jumps_s if sent and t >= sent[0]]
+    return jumps[0] - sent[0] if jumps else None

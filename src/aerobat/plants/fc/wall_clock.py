@@ -21,6 +21,7 @@ import collections
 import math
 import time
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -233,7 +234,7 @@ class WallClockFlight:
         """Unknown for a flight controller of its own."""
         return None
 
-    def jitter(self, start_s: float = -math.inf, end_s: float = math.inf) -> dict[str, float]:
+    def jitter(self, start_s: float = -math.inf, end_s: float = math.inf) -> dict[str, Any]:
         """Frame timing between ``start_s`` and ``end_s`` [flight time]: lateness after the deadline and intervals.
 
         Keys: ``frames``, ``late_frames`` (sent more than half a period late), ``lateness_median_ms``,
@@ -245,19 +246,17 @@ class WallClockFlight:
         rows = np.array([(d, s) for d, s in self.deadlines if start_s <= d <= end_s]).reshape(-1, 2)
         acks = np.array([(s, a) for s, a in self.acks if start_s <= s <= end_s]).reshape(-1, 2)
         rtt = acks[:, 1] - acks[:, 0]
-        out = {"frames": int(rows.shape[0]), "late_frames": 0, "lateness_median_ms": math.nan,
-               "lateness_max_ms": math.nan, "interval_std_ms": math.nan,
-               "acknowledged": int(acks.shape[0]),
-               "ack_round_trip_median_ms": float(np.median(rtt) * 1e3) if rtt.size else math.nan,
-               "ack_round_trip_max_ms": float(np.max(rtt) * 1e3) if rtt.size else math.nan}
-        if rows.shape[0]:
-            lateness = rows[:, 1] - rows[:, 0]
-            intervals = np.diff(rows[:, 1])
-            out.update(late_frames=int(np.sum(lateness > _LATE_FRAME_FRACTION * self.period_s)),
-                       lateness_median_ms=float(np.median(lateness) * 1e3),
-                       lateness_max_ms=float(np.max(lateness) * 1e3),
-                       interval_std_ms=float(np.std(intervals) * 1e3) if intervals.size else math.nan)
-        return out
+        lateness = rows[:, 1] - rows[:, 0]
+        intervals = np.diff(rows[:, 1])
+
+        def ms(values: np.ndarray, how: Any) -> float | None:  # None, not NaN, for none: the info is JSON
+            return float(how(values) * 1e3) if values.size else None
+
+        return {"frames": int(rows.shape[0]),
+                "late_frames": int(np.sum(lateness > _LATE_FRAME_FRACTION * self.period_s)),
+                "lateness_median_ms": ms(lateness, np.median), "lateness_max_ms": ms(lateness, np.max),
+                "interval_std_ms": ms(intervals, np.std), "acknowledged": int(acks.shape[0]),
+                "ack_round_trip_median_ms": ms(rtt, np.median), "ack_round_trip_max_ms": ms(rtt, np.max)}
 
     def close(self) -> None:
         """Nothing to release: the plant owns the link and the source."""

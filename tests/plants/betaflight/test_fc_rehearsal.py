@@ -155,3 +155,13 @@ def test_a_firmware_killed_in_flight_is_a_lost_trial_and_the_next_trial_flies_a_
     assert after.status is TrialStatus.ABORTED and after.info["world"]["error"] == ""
     _ended_disarmed(after)
     _no_process_left(connection)
+
+
+def test_a_dry_run_with_the_firmware_never_spins_a_motor(firmware: tuple[Path, Path]) -> None:
+    connection = RehearsalConnection({})
+    plant = FlightControllerPlant(FPV, connection, DRILL, seed=1, binary=firmware[0], dry_run=True)
+    trial = plant.fly(FLIP.program(P0))
+    assert trial.status is TrialStatus.ABORTED and trial.message.startswith("dry run: pre-flight passed"), trial.message
+    assert trial.info["world"]["peak_motor"] == 0.0  # not one motor command above zero, the whole run
+    assert trial.info["dry_run"]["frames"] >= 0.9 * FLIP.program(P0).compile().duration_s * 100.0
+    _no_process_left(connection)

@@ -5,8 +5,16 @@ from __future__ import annotations
 import pytest
 
 from aerobat.errors import ConfigError
-from aerobat.plants.betaflight.msp import Battery, BatteryAlert, StatusEx, decode_arming_disable_flags
-from aerobat.plants.fc import SafetyLimits, SafetyMonitor, StopReason, preflight
+from aerobat.plants.betaflight.firmware_settings import ModeRange
+from aerobat.plants.betaflight.msp import (
+    FEATURE_RX_MSP,
+    Battery,
+    BatteryAlert,
+    MspModeRange,
+    StatusEx,
+    decode_arming_disable_flags,
+)
+from aerobat.plants.fc import SafetyLimits, SafetyMonitor, StopReason, configuration_problems, preflight
 
 LIMITS = SafetyLimits()
 HOME = (0.0, 0.0, 0.0)
@@ -131,3 +139,24 @@ def test_a_flight_that_took_time_to_set_up_starts_its_safety_clocks_when_it_star
         if t < 1.0 + LIMITS.link_timeout_s:
             assert monitor.check(t) is None, t  # no answer yet, but the link's clock started at 1.0
     assert monitor.check(1.0 + LIMITS.link_timeout_s + 0.01) is StopReason.LINK_LOST
+
+
+SETTINGS_MODES = {  # aerobat's settings.toml: ARM on AUX1, ANGLE on AUX2, both 1700–2100 µs
+    "ARM": ModeRange("ARM", 0, 1, 1700, 2100), "ANGLE": ModeRange("ANGLE", 1, 2, 1700, 2100)}
+RIGHT = (MspModeRange(0, 1, 1700, 2100), MspModeRange(1, 2, 1700, 2100))
+
+
+def test_a_board_configured_as_aerobat_flies_it_passes():
+    assert configuration_problems(FEATURE_RX_MSP | (1 << 22), RIGHT, SETTINGS_MODES) == ()
+
+
+@pytest.mark.parametrize("features, ranges, problem", [
+    (1 << 3, RIGHT, "firmware: the receiver is not MSP (feature RX_MSP is off"),
+    (FEATURE_RX_MSP, (MspModeRange(0, 3, 1300, 1700), RIGHT[1]),
+     "firmware: ARM is not on AUX1 1700–2100 µs as aerobat sends it (found: AUX3 1300–1700 µs"),
+    (FEATURE_RX_MSP, (RIGHT[0],), "firmware: ANGLE is not on AUX2 1700–2100 µs as aerobat sends it (found: no range"),
+    (None, None, "firmware: the flight controller does not report its features and mode ranges over MSP"),
+])
+def test_a_board_configured_otherwise_is_refused_naming_what_differs(features, ranges, problem):
+    problems = configuration_problems(features, ranges, SETTINGS_MODES)
+    assert any(p.startswith(problem) for p in problems), problems

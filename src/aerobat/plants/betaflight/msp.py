@@ -27,9 +27,12 @@ from .transport import Transport
 
 __all__ = [
     "ARMING_DISABLE_FLAG_NAMES",
+    "FEATURE_RX_MSP",
     "MSP_API_VERSION",
     "MSP_ATTITUDE",
     "MSP_BATTERY_STATE",
+    "MSP_FEATURE_CONFIG",
+    "MSP_MODE_RANGES",
     "MSP_MOTOR",
     "MSP_RC",
     "MSP_SET_RAW_RC",
@@ -40,6 +43,7 @@ __all__ = [
     "Battery",
     "BatteryAlert",
     "MspClient",
+    "MspModeRange",
     "MspVersion",
     "StatusEx",
     "crc8_dvb_s2",
@@ -48,6 +52,8 @@ __all__ = [
 ]
 
 MSP_API_VERSION = 1
+MSP_MODE_RANGES = 34
+MSP_FEATURE_CONFIG = 36
 MSP_STATUS = 101
 MSP_MOTOR = 104
 MSP_RC = 105
@@ -173,6 +179,29 @@ class Attitude:
     roll_deg: float
     pitch_deg: float
     yaw_deg: float
+
+
+FEATURE_RX_MSP = 1 << 14
+"""The feature bit of an MSP receiver (``featureConfig()->enabledFeatures``, config/feature.h)."""
+
+_MODE_STEP_US, _MODE_RANGE_MIN_US = 25, 900  # fc/rc_modes.h: MODE_STEP_TO_CHANNEL_VALUE
+
+
+@dataclass(frozen=True)
+class MspModeRange:
+    """One mode activation range as MSP_MODE_RANGES reports it.
+
+    Attributes
+    ----------
+    permanent_id : the box's permanent id (msp/msp_box.c: ARM 0, ANGLE 1, …).
+    aux : the AUX channel, counting from 1 (AUX1 is RC channel 5).
+    low_us, high_us : the active range in microseconds (25 µs steps from 900).
+    """
+
+    permanent_id: int
+    aux: int
+    low_us: int
+    high_us: int
 
 
 class BatteryAlert(enum.IntEnum):
@@ -359,6 +388,22 @@ class MspClient:
     def status_ex(self, timeout_s: float | None = None) -> StatusEx:
         """MSP_STATUS_EX: arming state and arming-disable flags (``timeout_s``: this request's, else the client's)."""
         return StatusEx.decode(self.request(MSP_STATUS_EX, timeout_s=timeout_s))
+
+    def features(self, timeout_s: float | None = None) -> int:
+        """MSP_FEATURE_CONFIG: the enabled feature bits (e.g. :data:`FEATURE_RX_MSP`)."""
+        (mask,) = struct.unpack_from("<I", self.request(MSP_FEATURE_CONFIG, timeout_s=timeout_s))
+        return int(mask)
+
+    def mode_ranges(self, timeout_s: float | None = None) -> tuple[MspModeRange, ...]:
+        """MSP_MODE_RANGES: the configured mode ranges (unused slots, whose range is empty, left out)."""
+        payload = self.request(MSP_MODE_RANGES, timeout_s=timeout_s)
+        out = []
+        for offset in range(0, len(payload) - 3, 4):
+            box, aux_index, start, end = payload[offset:offset + 4]
+            if end > start:
+                out.append(MspModeRange(box, aux_index + 1, _MODE_RANGE_MIN_US + _MODE_STEP_US * start,
+                                        _MODE_RANGE_MIN_US + _MODE_STEP_US * end))
+        return tuple(out)
 
     def battery(self, timeout_s: float | None = None) -> Battery:
         """MSP_BATTERY_STATE: voltage, cells, charge drawn and the firmware's battery alert."""

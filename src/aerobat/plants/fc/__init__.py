@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from .pose_source import MOTION_CAPTURE_SYSTEMS, MotionCaptureSource, Pose, PoseSource
 from .pty_bridge import PtyBridge
-from .safety import Preflight, SafetyLimits, SafetyMonitor, StopReason, preflight
+from .safety import Preflight, SafetyLimits, SafetyMonitor, StopReason, configuration_problems, preflight
 from .serial_link import DEFAULT_BAUDRATE_BD, SerialTransport
 
 __all__ = [
@@ -34,5 +34,6 @@ __all__ = [
     "SafetyMonitor",
     "SerialTransport",
     "StopReason",
+    "configuration_problems",
     "preflight",
 ]

@@ -40,8 +40,9 @@ from aerobat.core.plant import Trial, TrialStatus
 from aerobat.errors import ConfigError
 from aerobat.plants.betaflight.errors import LinkClosed, LinkTimeout, MspError
 from aerobat.plants.betaflight.firmware_settings import BetaflightSettings, load_settings
-from aerobat.plants.betaflight.msp import Battery, MspClient, StatusEx
+from aerobat.plants.betaflight.msp import Battery, MspClient, MspModeRange, StatusEx
 from aerobat.plants.betaflight.params import BetaflightParams
+from aerobat.plants.betaflight.pilot import program_sticks
 from aerobat.plants.betaflight.plant import BetaflightPlant
 from aerobat.plants.betaflight.rc import RC_MIN_US
 from aerobat.quadrotor.program import CompiledProgram, Program
@@ -49,7 +50,7 @@ from aerobat.quadrotor.vehicle import VehicleConfig
 
 from .pose_source import MotionCaptureSource, PoseSource
 from .pty_bridge import PtyBridge
-from .safety import SafetyLimits, SafetyMonitor, StopReason, preflight
+from .safety import SafetyLimits, SafetyMonitor, StopReason, configuration_problems, preflight
 from .serial_link import SerialTransport
 from .settings import FcSettings, LinkKind
 from .simulated_source import SimulatedSource
@@ -165,6 +166,11 @@ class FlightControllerPlant(BetaflightPlant):
     seed : seeds the trials' worlds in a rehearsal.
     settings : the firmware's settings (default: the packaged ones with :data:`MSP_RC_SETTINGS`).
     feedback : the pilot's feedback (default ``none``: open loop, as the paper flies).
+    start_m : the maneuver start in the motion-capture frame (default: a rehearsal's origin; for a board,
+        above the room's origin by the volume's floor distance, so that the floor is at z = 0).
+    dry_run : everything but spinning motors: each trial connects, runs the pre-flight checks and streams
+        the program's frames disarmed at the radio rate (their timing reported), then ends ``aborted``
+        ("dry run"): nothing is measured.
     binary, eeprom : a rehearsal's firmware (built and configured on first use).
     """
 
@@ -173,10 +179,15 @@ class FlightControllerPlant(BetaflightPlant):
 
     def __init__(self, config: VehicleConfig, connection: Connection, params: BetaflightParams | None = None, *,
                  limits: SafetyLimits | None = None, seed: int = 0, settings: BetaflightSettings | None = None,
-                 feedback: Any = "none", **firmware: Any) -> None:
+                 feedback: Any = "none", dry_run: bool = False, start_m: Any = None, **firmware: Any) -> None:
         settings = settings or load_settings().with_values(MSP_RC_SETTINGS, "RC frames over MSP")
         super().__init__(config, params, seed=seed, settings=settings, feedback=feedback, **firmware)
         self.connection = connection
+        self.dry_run = dry_run
+        if start_m is not None:
+            self.start_m = np.array(start_m, dtype=float)
+        elif not isinstance(connection, RehearsalConnection):  # a room: its floor at z = 0 below the start
+            self.start_m = np.array([0.0, 0.0, -self.params.volume.z_m[0]])
         if limits is None:  # a rehearsal's room is the plant's volume; a real room's fence is the user's to give
             limits = SafetyLimits()
             if isinstance(connection, RehearsalConnection):
@@ -246,6 +257,8 @@ class FlightControllerPlant(BetaflightPlant):
             if problems:
                 info["preflight"] = list(problems)
                 return self._failed(TrialStatus.ABORTED, "pre-flight refused: " + "; ".join(problems), info), flight
+            if self.dry_run:
+                return self._dry_run(flight, compiled, info), flight
             return self._fly(flight, compiled, info, wall), flight  # type: ignore[arg-type]
         except SafetyStop as stop:
             info["safety_stop"] = stop.reason.value
@@ -257,6 +270,20 @@ class FlightControllerPlant(BetaflightPlant):
             raise
         finally:
             self.flight = None
+
+    def _dry_run(self, flight: WallClockFlight, compiled: CompiledProgram, info: dict[str, Any]) -> Trial:
+        """The program's frames at the radio rate with ARM off (ACRO, as the maneuver streams them)."""
+        period = 1.0 / self.params.radio.rate_hz
+        n = flight.frames_for(compiled.duration_s)
+        commands = compiled.evaluate(np.arange(n) * period)
+        sticks = np.zeros(4)
+        start = flight.time_s
+        for k in range(n):
+            program_sticks(commands[k], self.limits, sticks)
+            flight.frame(self.channels(sticks, arm=False, angle=False))
+        info["dry_run"] = flight.jitter(start)
+        return self._failed(TrialStatus.ABORTED, f"dry run: pre-flight passed; the program's {n} frames streamed "
+                                                 f"disarmed; nothing flew, nothing measured", info)
 
     def _rotation_stick_us(self) -> float:
         """The stick deflection [µs] asking for :data:`~.world.SET_POINT_JUMP_DEG_S` on the most sensitive axis."""
@@ -270,6 +297,7 @@ class FlightControllerPlant(BetaflightPlant):
         # disarmed frames until the receiver sees a live link and the gyro has calibrated (a board
         # just powered on calibrates for a second or two), then the checks
         deadline_s = flight.time_s + self.params.pilot.calibration_s + _CALIBRATION_WAIT_S
+        flight.battery_stops = False  # a low battery on the ground is the pre-flight's to name, not a stop
         while True:
             for _ in range(flight.frames_for(_PREFLIGHT_FRAMES_S)):
                 flight.frame(idle)
@@ -279,6 +307,10 @@ class FlightControllerPlant(BetaflightPlant):
                 status = battery = None
             if status is None or not status.arming_disable_flags or flight.time_s > deadline_s:
                 break
+        features: int | None = None
+        ranges: tuple[MspModeRange, ...] | None = None
+        with contextlib.suppress(LinkClosed, LinkTimeout, MspError):  # no answer: the check says so
+            features, ranges = msp.features(), msp.mode_ranges()
         rows = flight.mocap()
         recent = rows[rows[:, 0] > flight.time_s - _PREFLIGHT_FRAMES_S] if rows.shape[0] else rows
         rate_hz = recent.shape[0] / _PREFLIGHT_FRAMES_S
@@ -286,7 +318,8 @@ class FlightControllerPlant(BetaflightPlant):
         floor = self.start_m + np.array([0.0, 0.0, self.params.volume.z_m[0]])
         check = preflight(self.safety, status=status, battery=battery, mocap_rate_hz=rate_hz,
                           position_m=position, start_m=floor)
-        problems = check.problems
+        flight.battery_stops = True
+        problems = configuration_problems(features, ranges, self.settings.modes) + check.problems
         if not self.connection.require_battery:
             problems = tuple(p for p in problems if not p.startswith("battery:"))
         return problems
@@ -319,17 +352,16 @@ def build_fc_plant(config: VehicleConfig, settings: FcSettings, *, seed: int = 0
     feedback = "none" if feedback is None else feedback
     if settings.link.kind is LinkKind.REHEARSAL:
         return FlightControllerPlant(config, RehearsalConnection({}), settings.betaflight, seed=seed,
-                                     feedback=feedback)
+                                     feedback=feedback, dry_run=settings.link.dry_run)
     connection = BoardConnection(settings.link.port, None, settings.link.baudrate_bd)
     connection.check()  # the port first: a missing board is refused before the motion capture is asked
     mocap = settings.mocap
     connection.poses = MotionCaptureSource(mocap.system, mocap.body, latency_s=mocap.latency_s,
                                            options={"hostname": mocap.hostname} if mocap.hostname else None)
     # a board runs its own firmware: no SITL is built or configured for it
-    plant = FlightControllerPlant(config, connection, settings.betaflight, limits=settings.limits, seed=seed,
-                                  feedback=feedback, binary=Path(os.devnull), eeprom=Path(os.devnull))
-    plant.start_m = np.array(settings.start_m, dtype=float)
-    return plant
+    return FlightControllerPlant(config, connection, settings.betaflight, limits=settings.limits, seed=seed,
+                                 feedback=feedback, dry_run=settings.link.dry_run, start_m=settings.start_m,
+                                 binary=Path(os.devnull), eeprom=Path(os.devnull))
 
 
 def _command_latency(flight: WallClockFlight, report: WorldReport, start_s: float) -> float | None:

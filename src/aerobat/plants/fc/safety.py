@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
@@ -25,10 +25,11 @@ import numpy as np
 
 from aerobat.core.bounds import Interval, Items, bounded, validate
 from aerobat.errors import ConfigError
-from aerobat.plants.betaflight.msp import Battery, BatteryAlert, StatusEx
+from aerobat.plants.betaflight.firmware_settings import ModeRange
+from aerobat.plants.betaflight.msp import FEATURE_RX_MSP, Battery, BatteryAlert, MspModeRange, StatusEx
 from aerobat.plants.world_params import Volume
 
-__all__ = ["Preflight", "SafetyLimits", "SafetyMonitor", "StopReason", "preflight"]
+__all__ = ["Preflight", "SafetyLimits", "SafetyMonitor", "StopReason", "configuration_problems", "preflight"]
 
 
 class StopReason(StrEnum):
@@ -162,6 +163,29 @@ def preflight(limits: SafetyLimits, *, status: StatusEx | None, battery: Battery
             problems.append(f"start: the vehicle is {off_m:.2f} m from the start {_xyz(start_m)} "
                             f"(start_tolerance_m {limits.start_tolerance_m:g} m)")
     return Preflight(tuple(problems), ("link", "arming flags", "battery", "motion-capture rate", "geofence", "start"))
+
+
+def configuration_problems(features: int | None, ranges: Sequence[MspModeRange] | None,
+                           modes: Mapping[str, ModeRange]) -> tuple[str, ...]:
+    """What in the flight controller's configuration (as MSP reports it) is not what the plant flies with.
+
+    The sticks go out as MSP_SET_RAW_RC, so the receiver must be MSP; the mode switches the plant sends
+    (ARM, ANGLE/ACRO) must be where aerobat's ``settings.toml`` puts them, or a frame meant to arm or to
+    switch to ACRO would do something else. ``None``: the board did not answer.
+    """
+    problems = []
+    if features is None or ranges is None:
+        return ("firmware: the flight controller does not report its features and mode ranges over MSP",)
+    if not features & FEATURE_RX_MSP:
+        problems.append("firmware: the receiver is not MSP (feature RX_MSP is off; in the configurator's "
+                        "Receiver tab choose 'MSP RX input')")
+    for name, mode in modes.items():
+        if not any(r.permanent_id == mode.permanent_id and r.aux == mode.aux and r.low_us == mode.low_us
+                   and r.high_us == mode.high_us for r in ranges):
+            found = [f"AUX{r.aux} {r.low_us}–{r.high_us} µs" for r in ranges if r.permanent_id == mode.permanent_id]
+            problems.append(f"firmware: {name} is not on AUX{mode.aux} {mode.low_us}–{mode.high_us} µs as aerobat "
+                            f"sends it (found: {', '.join(found) or 'no range'}; `aux` in the CLI)")
+    return tuple(problems)
 
 
 def _xyz(p: Sequence[float]) -> str:

@@ -6,6 +6,8 @@
     kind = "rehearsal"        # or "serial": a real board
     port = "/dev/ttyACM0"     # kind = "serial"
     baudrate_bd = 115200      # ignored over USB
+    dry_run = false           # true: everything but spinning motors (each trial ends after the pre-flight
+                              # and the program's frames streamed disarmed)
 
     [mocap]                   # kind = "serial": the room's motion-capture system (libmotioncapture)
     system = "vicon"
@@ -57,6 +59,8 @@ class LinkSettings:
     kind: LinkKind = bounded(LinkKind.REHEARSAL, OneOf(LinkKind))
     port: str = ""
     baudrate_bd: int = bounded(115_200, Integer(9_600, 4_000_000))
+    dry_run: bool = False
+    """Everything but spinning motors: connect, pre-flight, then the program's frames streamed disarmed."""
 
     def __post_init__(self) -> None:
         validate(self)

@@ -95,6 +95,7 @@ class WallClockFlight:
         self._deflected = False
         self.battery: Battery | None = None
         self.battery_period_s = battery_period_s
+        self.battery_stops = True  # off while the pre-flight checks the battery itself
         self._battery_due_s = -math.inf
         self._next_s: float | None = None
         self._true_position: tuple[float, float, float] | None = None
@@ -184,7 +185,8 @@ class WallClockFlight:
                 self.acks.append((self._posted.popleft(), wall - self.time_zero_s))
             elif command == MSP_BATTERY_STATE and payload:
                 self.battery = Battery.decode(payload)
-                self.monitor.battery(self.battery)
+                if self.battery_stops:
+                    self.monitor.battery(self.battery)
         for pose in self.poses.wait(0.0):
             self._log(pose)
         self._update_x()

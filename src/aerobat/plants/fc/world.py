@@ -68,6 +68,7 @@ class WorldReport:
     firmware_pid : the firmware process's id (it ends with the world).
     set_point_jumps_s : world times at which the firmware's rate set point rose above 200 °/s after
         being below it (a maneuver's first frames taking effect), to 1 chunk.
+    peak_motor : the highest motor command of the run (0: the motors never spun, e.g. a dry run).
     error : what ended the world early ("" when it was stopped).
     """
 
@@ -82,6 +83,7 @@ class WorldReport:
     motors: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     firmware_pid: int | None = None
     set_point_jumps_s: tuple[float, ...] = ()
+    peak_motor: float = 0.0
     error: str = ""
 
     @property
@@ -123,6 +125,7 @@ def _world_main(conn: Any, parent_pid: int, plant_args: dict[str, Any], pose_por
         max_lag_s = 0.0
         error = ""
         moved: list[float] = []  # when the firmware's rate set point first jumped, after each quiet spell
+        peak = 0.0  # the highest motor command of the whole run (0: the motors never spun)
         quiet = True
         try:
             while not conn.poll():
@@ -131,6 +134,8 @@ def _world_main(conn: Any, parent_pid: int, plant_args: dict[str, Any], pose_por
                 now_s = time.monotonic() - t0
                 # the set point the firmware's rate loop flies (its RC input through the rates): the moment
                 # a program's first frame took effect, for the command-to-firmware latency
+                peak = max(peak, float(flight.motors[0]), float(flight.motors[1]), float(flight.motors[2]),
+                           float(flight.motors[3]))
                 jumped = max(abs(float(v)) for v in flight.motors[4:7]) > SET_POINT_JUMP_DEG_S
                 if jumped and quiet and len(moved) < _MAX_EVENTS:
                     moved.append(flight.time_s)
@@ -156,7 +161,7 @@ def _world_main(conn: Any, parent_pid: int, plant_args: dict[str, Any], pose_por
             error = f"{type(failure).__name__}: {str(failure).splitlines()[0] if str(failure) else ''}"
         report = WorldReport(flight.time_s, time.monotonic() - t0, chunks, late, max_lag_s, published,
                              round(1e6 / flight.sitl.gyro_period_us), steps * flight.step_s,
-                             flight.motor_commands(), flight.sitl.pid, tuple(moved), error)
+                             flight.motor_commands(), flight.sitl.pid, tuple(moved), peak, error)
         try:
             conn.send(("stopped", report))
         except OSError:  # the owner closed the pipe: nobody to tell
@@ -227,13 +232,15 @@ class RealTimeWorld:
 
     def stop(self, timeout_s: float = 10.0) -> WorldReport | None:
         """Stop flying and return how the world kept time (None if it was never started or is gone)."""
-        if self.report is None and self.started_at_s is not None and self.alive:
-            try:
-                self._conn.send("stop")
-                if self._conn.poll(timeout_s):
+        if self.report is None and self.started_at_s is not None:
+            alive = self.alive
+            if alive:
+                with contextlib.suppress(OSError):  # it may be ending on its own just now
+                    self._conn.send("stop")
+            # a world whose firmware died has sent its report already and ended: it waits in the pipe
+            with contextlib.suppress(OSError, EOFError):
+                if self._conn.poll(timeout_s if alive else 0.5):
                     _, self.report = self._conn.recv()
-            except (OSError, EOFError):
-                pass
         self.close()
         return self.report
 

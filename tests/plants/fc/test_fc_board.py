@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 import os
 import struct
+import threading
 import time
 from pathlib import Path
 
@@ -23,6 +24,7 @@ from aerobat.plants.betaflight.msp import (  # noqa: E402
     MSP_BATTERY_STATE,
     MSP_FEATURE_CONFIG,
     MSP_MODE_RANGES,
+    MSP_MOTOR,
     MSP_SET_RAW_RC,
     MSP_STATUS_EX,
     BatteryAlert,
@@ -124,3 +126,26 @@ def test_a_board_that_is_not_there_is_refused_when_the_plant_is_built():
 def test_a_serial_link_without_a_port_is_refused_in_the_settings():
     with pytest.raises(ConfigError, match=r"port = '': required with kind = 'serial'"):
         LinkSettings(kind="serial")
+
+
+def test_a_battery_going_critical_in_flight_stops_the_flight_and_disarms():
+    board = FakeBoard({**_answers(), MSP_MOTOR: struct.pack("<8H", *([1100] * 4 + [0] * 4))})  # armed at idle
+    plant = _plant(board)
+
+    def critical_once_armed() -> None:
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline and not any(
+                c == MSP_SET_RAW_RC and struct.unpack_from("<5H", p)[4] >= 1700 for c, p in board.received):
+            time.sleep(0.01)
+        board.answers[MSP_BATTERY_STATE] = _battery(15.0, alert=BatteryAlert.CRITICAL)
+
+    watcher = threading.Thread(target=critical_once_armed, daemon=True)
+    watcher.start()
+    try:
+        trial = plant.fly(FLIP.program(P0))
+        assert trial.status is TrialStatus.ABORTED and trial.info["safety_stop"] == "low_battery", trial.message
+        frames = [p for c, p in board.received if c == MSP_SET_RAW_RC]
+        assert any(struct.unpack_from("<5H", p)[4] >= 1700 for p in frames)  # it had armed
+        assert struct.unpack_from("<5H", frames[-1])[4] < 1700  # and the last frame it sent disarms
+    finally:
+        board.unplug()

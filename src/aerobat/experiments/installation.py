@@ -77,6 +77,8 @@ class InstallationReport:
 #: pyproject's extras: the import names each brings, and what they enable
 EXTRAS: dict[str, tuple[tuple[str, ...], str]] = {
     "rotorpy": (("rotorpy",), "--plant rotorpy (RotorPy's Hummingbird as the vehicle)"),
+    "fc": (("serial", "motioncapture"), "--plant fc (a Betaflight board on a serial port with motion capture, "
+                                        "and its real-time rehearsal)"),
     "dask": (("distributed",), "studies on a Dask cluster (--scheduler tcp://HOST:PORT)"),
     "baselines": (("cma", "bayes_opt"), "the rules study's CMA-ES and Bayesian-optimisation baselines"),
     "replay": (("plotly",), "aerobat replay: the 3D replay page"),

@@ -196,7 +196,8 @@ def test_browse_follows_a_learn_that_writes_the_same_store(tmp_path):
 
 
 def chromium(url: str, tmp: Path, *, screenshot: Path | None = None) -> str:
-    assert CHROMIUM, "Debian's chromium is needed (make setup installs it)"
+    if not CHROMIUM:  # CI installs it (.ci/run, as root); elsewhere: apt-get install chromium
+        pytest.skip("Debian's chromium is not on PATH: the page is not rendered in a browser here")
     command = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                "--disable-component-update", "--disable-sync", "--no-first-run", f"--user-data-dir={tmp / 'profile'}",
                "--virtual-time-budget=10000", "--window-size=1200,900"]

@@ -220,7 +220,7 @@ class OneOf(Constraint):
             return value
         try:
             allowed = not isinstance(value, bool) and value in self.choices
-        except TypeError:  # an unhashable value compares with nothing
+        except (TypeError, ValueError):  # an unhashable value, or an array (whose == is elementwise), is none
             allowed = False
         if not allowed:
             raise ConfigError(f"{name} = {short_repr(value)}: allowed {self.describe()}")

@@ -59,7 +59,7 @@ def _dev_shm() -> set[str]:
 def test_exchange_is_checked() -> None:
     assert BetaflightParams().firmware.exchange is Exchange.UDP
     assert SHM.firmware.exchange is Exchange.SHM
-    with pytest.raises(ConfigError, match="exchange = 'pipe': allowed 'udp' or 'shm'"):
+    with pytest.raises(ConfigError, match="^exchange = 'pipe': allowed 'udp', 'shm'$"):
         BetaflightParams().replace(firmware__exchange="pipe")
     with pytest.raises(ValueError, match="exchange = 'pipe'"):
         SitlProcess(FAKE, None, exchange="pipe")

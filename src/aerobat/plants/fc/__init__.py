@@ -1,18 +1,28 @@
-"""A Betaflight flight controller on a serial port: the parts a real vehicle needs (issue 30, in progress).
+"""``--plant fc``: a Betaflight flight controller over MSP on the wall clock (docs/real-vehicle.md).
 
-The plant itself (``--plant fc``: the Fig. 8 supervisor on the wall clock) is not here yet; these
-are the parts it stands on, each usable and tested on its own:
+The modules, from the plant down:
 
-* :mod:`.serial_link` — :class:`SerialTransport`, the flight controller's MSP port with pyserial
-  (exclusive, no DTR/RTS edge, stale input dropped, a vanished port raises ``LinkClosed``).
+* :mod:`.plant` — :class:`~.plant.FlightControllerPlant`, the Betaflight plant's Fig. 8 supervisor
+  flying a :class:`~.wall_clock.WallClockFlight`, over a :class:`~.plant.BoardConnection` (a board
+  and the room's motion capture) or a :class:`~.plant.RehearsalConnection` (the real firmware in real
+  time); :func:`~.plant.build_fc_plant` from a ``--fc`` file (:mod:`.settings`).
+* :mod:`.wall_clock` — RC frames as MSP at their deadlines, poses as they arrive, the safety
+  monitor at every frame; frame timing and acknowledgements kept for the trial's report.
+* :mod:`.world`, :mod:`.simulated_source` — the rehearsal: the SITL and the physics in a process
+  of their own paced to the wall clock, and its motion capture over UDP.
+* :mod:`.serial_link` — :class:`SerialTransport`, the board's MSP port with pyserial (exclusive, no
+  DTR/RTS edge, stale input dropped, a vanished port raises ``LinkClosed``).
 * :mod:`.pty_bridge` — :class:`PtyBridge`, the SITL's TCP UART as a pseudo-terminal, so the
-  rehearsal against the firmware runs the serial code path.
+  rehearsal runs the serial code path.
 * :mod:`.pose_source` — :class:`PoseSource` and :class:`MotionCaptureSource` (libmotioncapture:
   Vicon, OptiTrack, Qualisys, VRPN, ...), every pose stamped on arrival and latency-corrected.
-* :mod:`.safety` — :class:`SafetyLimits`, :func:`preflight` and :class:`SafetyMonitor`: kill,
-  geofence, motion-capture loss, link loss and low battery, each a :class:`StopReason`.
+* :mod:`.safety` — :class:`SafetyLimits`, :func:`preflight`, :func:`configuration_problems` and
+  :class:`SafetyMonitor`: kill, geofence, motion-capture loss, link loss and low battery, each a
+  :class:`StopReason`.
 
-MSP's battery state and ``MSP_SET_RAW_RC`` are in :mod:`aerobat.plants.betaflight.msp`.
+MSP's battery state, feature and mode-range queries and ``MSP_SET_RAW_RC`` are in
+:mod:`aerobat.plants.betaflight.msp`. This package imports no plant at import time (the world
+process starts from :mod:`.world`); ``from aerobat.plants.fc.plant import FlightControllerPlant``.
 """
 
 from __future__ import annotations

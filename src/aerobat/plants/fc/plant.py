@@ -84,7 +84,6 @@ class Link:
     time_zero_s: float
     world: RealTimeWorld | None = None
     bridge: PtyBridge | None = None
-    notes: dict[str, Any] = field(default_factory=dict)
 
 
 class Connection(Protocol):

@@ -28,6 +28,7 @@ from aerobat.core.design import design  # noqa: E402
 from aerobat.core.plant import TrialStatus  # noqa: E402
 from aerobat.plants.betaflight.params import BetaflightParams, Firmware, Radio  # noqa: E402
 from aerobat.plants.fc.plant import FlightControllerPlant, RehearsalConnection  # noqa: E402
+from aerobat.plants.fc.settings import fc_params  # noqa: E402
 from aerobat.plants.fc.wall_clock import WallClockFlight  # noqa: E402
 from aerobat.quadrotor.maneuvers import MultiFlip  # noqa: E402
 from aerobat.quadrotor.simulate import NominalModel  # noqa: E402
@@ -36,7 +37,7 @@ from aerobat.quadrotor.vehicle import fpv5  # noqa: E402
 FPV = fpv5()
 FLIP = MultiFlip(vehicle=FPV.vehicle, flips=1, max_rate_rad_s=math.radians(800.0), dims=2)
 P0 = design(FLIP, NominalModel(FPV)).p_nominal
-DRILL = BetaflightParams(firmware=Firmware(gyro_rate_hz=2000), radio=Radio(rate_hz=100.0))
+DRILL = fc_params(firmware=Firmware(gyro_rate_hz=2000), radio=Radio(rate_hz=100.0))
 
 
 def _plant(firmware: tuple[Path, Path], params: BetaflightParams = DRILL) -> tuple[FlightControllerPlant,
@@ -83,7 +84,7 @@ def _running(pid: int) -> bool:
 
 
 def test_a_trial_flies_in_real_time_over_the_serial_path_and_reports_its_timing(firmware: tuple[Path, Path]) -> None:
-    plant, connection = _plant(firmware, BetaflightParams(radio=Radio(rate_hz=100.0)))  # 8 kHz, as in lockstep
+    plant, connection = _plant(firmware, fc_params(radio=Radio(rate_hz=100.0)))  # 8 kHz, as in lockstep
     trial = plant.fly(FLIP.program(P0))
     assert trial.status is TrialStatus.OK, trial.message
     info = trial.info

@@ -52,7 +52,7 @@ from .pose_source import MotionCaptureSource, PoseSource
 from .pty_bridge import PtyBridge
 from .safety import SafetyLimits, SafetyMonitor, StopReason, configuration_problems, preflight
 from .serial_link import SerialTransport
-from .settings import FcSettings, LinkKind
+from .settings import FcSettings, LinkKind, fc_params
 from .simulated_source import SimulatedSource
 from .wall_clock import SafetyStop, WallClockFlight
 from .world import SET_POINT_JUMP_DEG_S, RealTimeWorld, WorldReport
@@ -159,7 +159,8 @@ class FlightControllerPlant(BetaflightPlant):
     config : the nominal vehicle (the design model).
     connection : how to reach the flight controller (:class:`BoardConnection`, :class:`RehearsalConnection`).
     params : the Betaflight plant's settings; the pilot, radio rate and volume are used here (the
-        airframe, sensors and disturbances only by a rehearsal's world).
+        airframe, sensors and disturbances only by a rehearsal's world). Default: :func:`~.settings.fc_params`
+        (lockstep's, with more time to settle on the wall clock).
     limits : the safety limits (geofence in the motion-capture frame; default: :class:`~.safety.SafetyLimits`'s,
         for a rehearsal with the fence just outside the plant's flight volume).
     seed : seeds the trials' worlds in a rehearsal.
@@ -180,7 +181,8 @@ class FlightControllerPlant(BetaflightPlant):
                  limits: SafetyLimits | None = None, seed: int = 0, settings: BetaflightSettings | None = None,
                  feedback: Any = "none", dry_run: bool = False, start_m: Any = None, **firmware: Any) -> None:
         settings = settings or load_settings().with_values(MSP_RC_SETTINGS, "RC frames over MSP")
-        super().__init__(config, params, seed=seed, settings=settings, feedback=feedback, **firmware)
+        super().__init__(config, params if params is not None else fc_params(), seed=seed, settings=settings,
+                         feedback=feedback, **firmware)
         self.connection = connection
         self.dry_run = dry_run
         if start_m is not None:

@@ -28,7 +28,7 @@ fence just outside ``[betaflight.volume]`` and :data:`~.plant.REHEARSAL_TIMEOUTS
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from pathlib import Path
 from typing import Any
@@ -36,13 +36,35 @@ from typing import Any
 from aerobat.config import as_path, dataclass_from_table, dataclass_to_table, read_toml
 from aerobat.core.bounds import Integer, Interval, Items, OneOf, bounded, validate
 from aerobat.errors import ConfigError
-from aerobat.plants.betaflight.params import BetaflightParams, params_to_table
+from aerobat.plants.betaflight.params import BetaflightParams, Pilot, params_to_table
 
 from .pose_source import MOTION_CAPTURE_SYSTEMS
 from .safety import SafetyLimits
 
-__all__ = ["FcSettings", "LinkKind", "LinkSettings", "MocapSettings", "fc_settings_from_table", "fc_settings_to_table",
-           "load_fc"]
+__all__ = [
+    "FC_SETTLE_TIMEOUT_S",
+    "FcSettings",
+    "LinkKind",
+    "LinkSettings",
+    "MocapSettings",
+    "fc_params",
+    "fc_settings_from_table",
+    "fc_settings_to_table",
+    "load_fc",
+]
+
+
+FC_SETTLE_TIMEOUT_S = 20.0
+"""How long the pilot may take to settle at the start on the wall clock (lockstep's default: 10 s). In
+real time the hover settles more slowly than in lockstep (measured in the rehearsal: 6–7 s after arming on
+a quiet machine, beyond 10 s at times under load), and a settle that times out ends the session."""
+
+
+def fc_params(**sections: Any) -> BetaflightParams:
+    """The Betaflight plant's settings as ``--plant fc`` flies them: lockstep's, with the pilot given
+    :data:`FC_SETTLE_TIMEOUT_S` to settle; ``sections`` replace whole sections (``radio=Radio(...)``)."""
+    params = BetaflightParams(pilot=replace(Pilot(), settle_timeout_s=FC_SETTLE_TIMEOUT_S))
+    return replace(params, **sections)
 
 
 class LinkKind(StrEnum):
@@ -95,7 +117,7 @@ class FcSettings:
     link: LinkSettings = field(default_factory=LinkSettings)
     mocap: MocapSettings = field(default_factory=MocapSettings)
     limits: SafetyLimits = field(default_factory=SafetyLimits)
-    betaflight: BetaflightParams = field(default_factory=BetaflightParams)
+    betaflight: BetaflightParams = field(default_factory=lambda: fc_params())
 
     def __post_init__(self) -> None:
         validate(self)

@@ -22,6 +22,7 @@ from aerobat.errors import ConfigError  # noqa: E402
 from aerobat.plants.betaflight.msp import (  # noqa: E402
     FEATURE_RX_MSP,
     MSP_BATTERY_STATE,
+    MSP_FAILSAFE_CONFIG,
     MSP_FEATURE_CONFIG,
     MSP_MODE_RANGES,
     MSP_MOTOR,
@@ -41,8 +42,8 @@ FLIP = MultiFlip(vehicle=FPV.vehicle, flips=1, max_rate_rad_s=math.radians(800.0
 P0 = design(FLIP, NominalModel(FPV)).p_nominal
 
 
-def _status(mask: int = 0) -> bytes:
-    return struct.pack("<HHHIBH", 125, 0, 0, 0, 0, 0) + bytes((3, 0, 0, 29)) + struct.pack("<I", mask)
+def _status(mask: int = 0, *, armed: bool = False) -> bytes:
+    return struct.pack("<HHHIBH", 125, 0, 0, int(armed), 0, 0) + bytes((3, 0, 0, 29)) + struct.pack("<I", mask)
 
 
 def _ranges(arm_aux: int = 1) -> bytes:
@@ -54,11 +55,17 @@ def _battery(volts: float = 16.4, cells: int = 4, alert: BatteryAlert = BatteryA
     return struct.pack("<BHBHhBH", cells, 1500, round(volts * 10), 0, 0, int(alert), round(volts * 100))
 
 
+def _failsafe(delay_ds: int = 15, procedure: int = 1) -> bytes:
+    """MSP_FAILSAFE_CONFIG as Betaflight 4.6 frames it (msp.c); procedure 1 is DROP, 2 GPS_RESCUE."""
+    return struct.pack("<BBHBHB", delay_ds, 60, 1000, 0, 100, procedure)
+
+
 def _answers(**change: bytes) -> dict[int, bytes]:
     answers = {MSP_SET_RAW_RC: b"", MSP_STATUS_EX: _status(), MSP_BATTERY_STATE: _battery(),
-               MSP_FEATURE_CONFIG: struct.pack("<I", FEATURE_RX_MSP), MSP_MODE_RANGES: _ranges()}
+               MSP_FEATURE_CONFIG: struct.pack("<I", FEATURE_RX_MSP), MSP_MODE_RANGES: _ranges(),
+               MSP_FAILSAFE_CONFIG: _failsafe()}
     names = {"status": MSP_STATUS_EX, "battery": MSP_BATTERY_STATE, "features": MSP_FEATURE_CONFIG,
-             "ranges": MSP_MODE_RANGES}
+             "ranges": MSP_MODE_RANGES, "failsafe": MSP_FAILSAFE_CONFIG}
     answers.update({names[k]: v for k, v in change.items()})
     return answers
 
@@ -87,6 +94,8 @@ def _plant(board: FakeBoard, *, dry_run: bool = False) -> FlightControllerPlant:
 @pytest.mark.parametrize("change, problem", [
     ({"features": struct.pack("<I", 1 << 3)}, "firmware: the receiver is not MSP"),
     ({"ranges": _ranges(arm_aux=3)}, "firmware: ARM is not on AUX1 1700–2100 µs"),
+    ({"failsafe": _failsafe(procedure=2)}, "firmware: failsafe_procedure is GPS_RESCUE; a room needs DROP"),
+    ({"failsafe": _failsafe(delay_ds=50)}, "firmware: failsafe_delay is 5 s, above max_failsafe_delay_s 2 s"),
     ({"battery": _battery(13.6)}, "battery: 3.40 V per cell, below min_cell_voltage_v 3.5 V"),
     ({"battery": _battery(0.0, cells=0, alert=BatteryAlert.NOT_PRESENT)}, "battery: none detected"),
     ({"status": _status(mask=1 << 2)}, "arming: the firmware refuses to arm (RXLOSS)"),
@@ -147,5 +156,30 @@ def test_a_battery_going_critical_in_flight_stops_the_flight_and_disarms():
         frames = [p for c, p in board.received if c == MSP_SET_RAW_RC]
         assert any(struct.unpack_from("<5H", p)[4] >= 1700 for p in frames)  # it had armed
         assert struct.unpack_from("<5H", frames[-1])[4] < 1700  # and the last frame it sent disarms
+    finally:
+        board.unplug()
+
+
+def test_a_board_that_stays_armed_after_a_stop_is_named_and_sent_disarmed_frames_again():
+    board = FakeBoard({**_answers(), MSP_MOTOR: struct.pack("<8H", *([1100] * 4 + [0] * 4))})
+    plant = _plant(board)
+
+    def armed_for_good() -> None:  # once the ARM switch is on, the board says armed whatever it is sent
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline and not any(
+                c == MSP_SET_RAW_RC and struct.unpack_from("<5H", p)[4] >= 1700 for c, p in board.received):
+            time.sleep(0.01)
+        board.answers[MSP_STATUS_EX] = _status(armed=True)
+        board.answers[MSP_BATTERY_STATE] = _battery(15.0, alert=BatteryAlert.CRITICAL)
+
+    watcher = threading.Thread(target=armed_for_good, daemon=True)
+    watcher.start()
+    try:
+        trial = plant.fly(FLIP.program(P0))
+        assert trial.info["safety_stop"] == "low_battery" and trial.info["disarm_confirmed"] is False
+        assert trial.message.endswith("THE BOARD STILL REPORTS ITSELF ARMED"), trial.message
+        asked = [i for i, (c, _) in enumerate(board.received) if c == MSP_STATUS_EX]
+        frames_after_stop = [p for c, p in board.received[asked[-3]:] if c == MSP_SET_RAW_RC]
+        assert frames_after_stop and all(struct.unpack_from("<5H", p)[4] < 1700 for p in frames_after_stop)
     finally:
         board.unplug()

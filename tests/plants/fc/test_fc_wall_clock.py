@@ -17,7 +17,13 @@ pytest.importorskip("serial", reason="pyserial is not installed (pip install 'ae
 
 from fake_board import FakeBoard  # noqa: E402
 
-from aerobat.plants.betaflight.msp import MSP_BATTERY_STATE, MSP_SET_RAW_RC, BatteryAlert, MspClient  # noqa: E402
+from aerobat.plants.betaflight.msp import (  # noqa: E402
+    MSP_BATTERY_STATE,
+    MSP_SET_RAW_RC,
+    MSP_STATUS_EX,
+    BatteryAlert,
+    MspClient,
+)
 from aerobat.plants.fc import Pose, SafetyLimits, SafetyMonitor, SerialTransport, StopReason  # noqa: E402
 from aerobat.plants.fc.wall_clock import SafetyStop, WallClockFlight  # noqa: E402
 
@@ -63,13 +69,44 @@ def test_frames_keep_their_deadlines_and_reach_the_board():
             jitter = flight.jitter()
         assert 0.45 < elapsed < 1.5  # 50 frames at 100 Hz (the first is sent at once)
         assert jitter["frames"] == 50 and jitter["lateness_median_ms"] < 5.0
-        deadlines = np.array([d for d, _ in flight.deadlines])
-        assert np.allclose(np.diff(deadlines), 0.01)  # the schedule does not drift
+        deadlines, sent = np.array(flight.deadlines).T
+        # the schedule does not drift: each deadline is one period after the last, unless that frame went a
+        # whole period late (a loaded machine), when the schedule starts again a period after it was sent
+        late = sent[:-1] - deadlines[:-1] >= 0.01
+        expected = np.where(late, sent[:-1], deadlines[:-1]) + 0.01
+        assert np.allclose(deadlines[1:], expected, rtol=0.0, atol=1e-9)
         deadline = time.monotonic() + 2.0  # the board reads on its own thread: the last frame may be in flight
         while sum(1 for c, _ in board.received if c == MSP_SET_RAW_RC) < 50 and time.monotonic() < deadline:
             time.sleep(0.01)
         assert sum(1 for c, _ in board.received if c == MSP_SET_RAW_RC) == 50
         assert flight.battery is not None and flight.battery.voltage_v == pytest.approx(16.2)
+    finally:
+        board.unplug()
+
+
+def test_acknowledgements_stay_paired_with_their_frames_when_a_request_reads_some_in_between():
+    """A request (status, motors) reads and drops the acknowledgements that arrive before its answer; the
+    flight counts them, so later acknowledgements are still paired with their own frames, not older ones."""
+    status = struct.pack("<HHHIBH", 125, 0, 0, 0, 0, 0) + bytes((3, 0, 0, 29)) + struct.pack("<I", 0)
+    board = FakeBoard({MSP_SET_RAW_RC: b"", MSP_BATTERY_STATE: _battery(16.2), MSP_STATUS_EX: status})
+    try:
+        with SerialTransport(board.device) as port:
+            flight = _flight(port, SafetyLimits(link_timeout_s=2.0), battery_period_s=60.0)
+            for _ in range(10):  # each status request reads the frame's acknowledgement, which it drops
+                flight.frame(CHANNELS)
+                time.sleep(0.02)
+                flight.msp.status_ex()
+            for _ in range(20):
+                flight.frame(CHANNELS)
+            time.sleep(0.5)  # every acknowledgement has come
+            flight.frame(CHANNELS)
+        sent = [s for _, s in flight.deadlines]
+        assert flight.msp.discarded[MSP_SET_RAW_RC] >= 1
+        assert len(flight.acks) + flight.msp.discarded[MSP_SET_RAW_RC] >= len(sent) - 1
+        # the last acknowledgement read answers one of the last two frames (unpaired, it would be an older
+        # frame's by as many as were dropped)
+        assert flight.acks[-1][0] in sent[-2:]
+        assert all(ack >= frame for frame, ack in flight.acks)
     finally:
         board.unplug()
 

@@ -16,7 +16,9 @@ lockstep SITL makes a run non-deterministic; use it for diagnosis only.
 
 from __future__ import annotations
 
+import collections
 import enum
+import math
 import struct
 import time
 from collections.abc import Sequence
@@ -31,6 +33,7 @@ __all__ = [
     "MSP_API_VERSION",
     "MSP_ATTITUDE",
     "MSP_BATTERY_STATE",
+    "MSP_FAILSAFE_CONFIG",
     "MSP_FEATURE_CONFIG",
     "MSP_MODE_RANGES",
     "MSP_MOTOR",
@@ -42,6 +45,8 @@ __all__ = [
     "Attitude",
     "Battery",
     "BatteryAlert",
+    "FailsafeConfig",
+    "FailsafeProcedure",
     "MspClient",
     "MspModeRange",
     "MspVersion",
@@ -54,6 +59,7 @@ __all__ = [
 MSP_API_VERSION = 1
 MSP_MODE_RANGES = 34
 MSP_FEATURE_CONFIG = 36
+MSP_FAILSAFE_CONFIG = 75
 MSP_STATUS = 101
 MSP_MOTOR = 104
 MSP_RC = 105
@@ -204,6 +210,39 @@ class MspModeRange:
     high_us: int
 
 
+class FailsafeProcedure(enum.IntEnum):
+    """What the firmware does in failsafe's stage 2 (``failsafeProcedure_e`` in flight/failsafe.h)."""
+
+    AUTO_LANDING = 0
+    DROP = 1
+    GPS_RESCUE = 2
+
+
+@dataclass(frozen=True)
+class FailsafeConfig:
+    """MSP_FAILSAFE_CONFIG: what the firmware does when the receiver goes silent.
+
+    Attributes
+    ----------
+    delay_s : stage 1 (sticks centred, throttle at ``failsafe_throttle``) lasts this long after the
+        300 ms hold, before stage 2 (``failsafe_delay``, 0.1 s units).
+    landing_time_s : AUTO_LANDING's time before the motors stop (``failsafe_landing_time``).
+    procedure : stage 2's procedure (a number the enum does not know stays an ``int``).
+    """
+
+    delay_s: float
+    landing_time_s: float
+    procedure: FailsafeProcedure | int
+
+    @classmethod
+    def decode(cls, payload: bytes) -> FailsafeConfig:
+        """From MSP_FAILSAFE_CONFIG's payload (delay u8, landing time u8, throttle u16, switch mode u8,
+        throttle-low delay u16, procedure u8; msp/msp.c)."""
+        delay, landing, _throttle, _switch, _low_delay, procedure = struct.unpack_from("<BBHBHB", payload)
+        known = procedure in FailsafeProcedure._value2member_map_
+        return cls(delay / 10.0, landing / 10.0, FailsafeProcedure(procedure) if known else procedure)
+
+
 class BatteryAlert(enum.IntEnum):
     """The firmware's battery state (``batteryState_e`` in sensors/battery.h)."""
 
@@ -328,12 +367,17 @@ class MspClient:
         self._version = version
         self._timeout_s = timeout_s
         self._buffer = bytearray()
+        self.discarded: collections.Counter[int] = collections.Counter()
+        """Answers :meth:`request` read and dropped (another command's), counted by command."""
+        self.answered_at_s = -math.inf
+        """``time.monotonic()`` when the last complete answer (any command's) was read: the link's sign of life."""
 
     def request(self, command: int, payload: bytes = b"", timeout_s: float | None = None) -> bytes:
         """Send one request and return the payload of its answer.
 
-        Answers to other commands (late answers to earlier requests) are
-        discarded.
+        Answers to other commands (late answers to earlier requests, acknowledgements of
+        :meth:`post`-ed frames) are discarded and counted in :attr:`discarded` by command, so
+        that a caller pairing acknowledgements with what it posted stays in step.
 
         Raises
         ------
@@ -349,7 +393,9 @@ class MspClient:
             frame, consumed = _parse_frame(self._buffer)
             del self._buffer[:consumed]
             if frame is not None:
+                self.answered_at_s = time.monotonic()
                 if frame.command != command:
+                    self.discarded[frame.command] += 1
                     continue
                 if frame.is_error:
                     raise MspError(f"the flight controller rejected MSP command {command}")
@@ -378,6 +424,7 @@ class MspClient:
             del self._buffer[:consumed]
             if frame is None:
                 return answers
+            self.answered_at_s = time.monotonic()
             answers.append((frame.command, b"" if frame.is_error else frame.payload))
 
     def api_version(self) -> ApiVersion:
@@ -404,6 +451,10 @@ class MspClient:
                 out.append(MspModeRange(box, aux_index + 1, _MODE_RANGE_MIN_US + _MODE_STEP_US * start,
                                         _MODE_RANGE_MIN_US + _MODE_STEP_US * end))
         return tuple(out)
+
+    def failsafe(self, timeout_s: float | None = None) -> FailsafeConfig:
+        """MSP_FAILSAFE_CONFIG: the RX-loss failsafe's delay and procedure."""
+        return FailsafeConfig.decode(self.request(MSP_FAILSAFE_CONFIG, timeout_s=timeout_s))
 
     def battery(self, timeout_s: float | None = None) -> Battery:
         """MSP_BATTERY_STATE: voltage, cells, charge drawn and the firmware's battery alert."""

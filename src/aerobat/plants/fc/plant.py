@@ -28,8 +28,9 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
+import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -40,7 +41,7 @@ from aerobat.core.plant import Trial, TrialStatus
 from aerobat.errors import ConfigError
 from aerobat.plants.betaflight.errors import LinkClosed, LinkTimeout, MspError
 from aerobat.plants.betaflight.firmware_settings import BetaflightSettings, load_settings
-from aerobat.plants.betaflight.msp import Battery, MspClient, MspModeRange, StatusEx
+from aerobat.plants.betaflight.msp import Battery, FailsafeConfig, MspClient, MspModeRange, StatusEx
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.pilot import program_sticks
 from aerobat.plants.betaflight.plant import BetaflightPlant
@@ -50,7 +51,14 @@ from aerobat.quadrotor.vehicle import VehicleConfig
 
 from .pose_source import MotionCaptureSource, PoseSource
 from .pty_bridge import PtyBridge
-from .safety import SafetyLimits, SafetyMonitor, StopReason, configuration_problems, preflight
+from .safety import (
+    SafetyLimits,
+    SafetyMonitor,
+    StopReason,
+    configuration_problems,
+    failsafe_problems,
+    preflight,
+)
 from .serial_link import SerialTransport
 from .settings import FcSettings, LinkKind, fc_params
 from .simulated_source import SimulatedSource
@@ -72,6 +80,7 @@ _STATUS_FOR = {StopReason.GEOFENCE: TrialStatus.CRASHED}
 _PREFLIGHT_FRAMES_S = 0.5  # disarmed frames before the checks: the receiver sees a live link
 _CALIBRATION_WAIT_S = 2.0  # beyond the pilot's calibration time, the longest the checks wait for the gyro
 _SAFE_FRAMES_S = 0.3  # disarmed frames sent after a stop
+_DISARM_ATTEMPTS = 3  # rounds of disarmed frames while the board still reports itself armed after a stop
 _FAILSAFE_WAIT_S = 4.0  # after a link loss, how long the vehicle is watched coming down (failsafe DROP: ≈1.6 s)
 
 
@@ -196,6 +205,7 @@ class FlightControllerPlant(BetaflightPlant):
                                              **REHEARSAL_TIMEOUTS)
         self.safety = limits
         self.kill_requested = False
+        program_sticks(np.zeros(4), self.limits, np.zeros(4))  # compiled now, not inside a flight's frame deadline
         if isinstance(connection, RehearsalConnection):
             connection.plant_args.update(config=config, params=self.params, binary=self.binary,
                                          eeprom=self.eeprom, settings=self.settings)
@@ -234,7 +244,8 @@ class FlightControllerPlant(BetaflightPlant):
         if start is not None:
             trial.info["maneuver_frames"] = flight.jitter(start, start + compiled.duration_s)
             if report is not None:
-                trial.info["command_latency_s"] = _command_latency(flight, report, start)
+                trial.info["command_latency_s"] = _command_latency(flight, report.set_point_jumps_wall_s, start)
+                trial.info["command_latency_world_s"] = _command_latency(flight, report.set_point_jumps_s, start)
         trial.info["frames"] = flight.jitter()
         if trial.ok:
             trial = dataclasses.replace(trial, message=f"maneuver flown over MSP on the wall clock "
@@ -263,11 +274,13 @@ class FlightControllerPlant(BetaflightPlant):
             return self._fly(flight, compiled, info, wall), flight  # type: ignore[arg-type]
         except SafetyStop as stop:
             info["safety_stop"] = stop.reason.value
-            self._make_safe(flight, stop.reason)
-            return self._failed(_STATUS_FOR.get(stop.reason, TrialStatus.ABORTED), str(stop), info), flight
+            info["disarm_confirmed"] = confirmed = self._make_safe(flight, stop.reason)
+            message = str(stop) if confirmed is not False else f"{stop}; THE BOARD STILL REPORTS ITSELF ARMED"
+            return self._failed(_STATUS_FOR.get(stop.reason, TrialStatus.ABORTED), message, info), flight
         except KeyboardInterrupt:  # Ctrl-C is the operator's kill: disarm, then let the session stop
             flight.monitor.kill()
-            self._make_safe(flight, StopReason.KILL)
+            if self._make_safe(flight, StopReason.KILL) is False:
+                print("aerobat: THE BOARD STILL REPORTS ITSELF ARMED after the kill", file=sys.stderr)
             raise
         finally:
             self.flight = None
@@ -310,8 +323,11 @@ class FlightControllerPlant(BetaflightPlant):
                 break
         features: int | None = None
         ranges: tuple[MspModeRange, ...] | None = None
+        failsafe: FailsafeConfig | None = None
         with contextlib.suppress(LinkClosed, LinkTimeout, MspError):  # no answer: the check says so
             features, ranges = msp.features(), msp.mode_ranges()
+        with contextlib.suppress(LinkClosed, LinkTimeout, MspError):
+            failsafe = msp.failsafe()
         rows = flight.mocap()
         recent = rows[rows[:, 0] > flight.time_s - _PREFLIGHT_FRAMES_S] if rows.shape[0] else rows
         rate_hz = recent.shape[0] / _PREFLIGHT_FRAMES_S
@@ -320,13 +336,18 @@ class FlightControllerPlant(BetaflightPlant):
         check = preflight(self.safety, status=status, battery=battery, mocap_rate_hz=rate_hz,
                           position_m=position, start_m=floor)
         flight.battery_stops = True
-        problems = configuration_problems(features, ranges, self.settings.modes) + check.problems
+        problems = (configuration_problems(features, ranges, self.settings.modes)
+                    + failsafe_problems(failsafe, self.safety) + check.problems)
         if not self.connection.require_battery:
             problems = tuple(p for p in problems if not p.startswith("battery:"))
         return problems
 
-    def _make_safe(self, flight: WallClockFlight, reason: StopReason) -> None:
-        """Disarm at once; with the link gone, send nothing and watch the firmware's RX-loss failsafe bring it down."""
+    def _make_safe(self, flight: WallClockFlight, reason: StopReason) -> bool | None:
+        """Disarm at once; with the link gone, send nothing and watch the firmware's RX-loss failsafe bring it down.
+
+        Returns whether the board then reports itself disarmed (MSP_STATUS_EX; disarmed frames are sent
+        again while it does not, :data:`_DISARM_ATTEMPTS` times), None when it cannot be asked (the link).
+        """
         if reason is StopReason.LINK_LOST:
             deadline_s = flight.time_s + _FAILSAFE_WAIT_S
             while flight.time_s < deadline_s:
@@ -334,11 +355,19 @@ class FlightControllerPlant(BetaflightPlant):
                     flight.watch(0.05)
                 if flight.on_floor and np.linalg.norm(flight.x[3:6]) < 0.05:
                     break
-            return
+            return None
         low = self.channels(np.array([0.0, 0.0, 0.0, float(RC_MIN_US)]), arm=False, angle=True)
-        for _ in range(flight.frames_for(_SAFE_FRAMES_S)):
-            with contextlib.suppress(SafetyStop):
-                flight.frame(low)
+        for _attempt in range(_DISARM_ATTEMPTS):
+            for _ in range(flight.frames_for(_SAFE_FRAMES_S)):
+                with contextlib.suppress(SafetyStop):
+                    flight.frame(low)
+            try:  # the board says whether it disarmed; disarmed frames go on while it says it is armed
+                armed = flight.msp.status_ex().armed
+            except (LinkClosed, LinkTimeout, MspError):
+                return None
+            if not armed:
+                return True
+        return False
 
     def _timing(self, flight: Any, wall: float) -> dict[str, Any]:
         elapsed = time.perf_counter() - wall
@@ -365,13 +394,15 @@ def build_fc_plant(config: VehicleConfig, settings: FcSettings, *, seed: int = 0
                                  binary=Path(os.devnull), eeprom=Path(os.devnull))
 
 
-def _command_latency(flight: WallClockFlight, report: WorldReport, start_s: float) -> float | None:
+def _command_latency(flight: WallClockFlight, jumps_s: Sequence[float], start_s: float) -> float | None:
     """From sending the maneuver's first rotation frame to the firmware's rate set point jumping [s].
 
     The ground notes when a frame first deflects a roll, pitch or yaw stick (the program's first rate
     command: a step), the rehearsal's world when the firmware's rate set point rises above 200 °/s (to
-    its 1 ms chunk); None when either moment is unknown.
+    its 1 ms chunk), on the wall clock (``set_point_jumps_wall_s``: what a board on its own clock would
+    show) or in the world's time (``set_point_jumps_s``: earlier by the world's lag then); None when
+    either moment is unknown.
     """
     sent = [t for t in flight.deflections_s if t >= start_s - 0.1]
-    jumps = [t for t in report.set_point_jumps_s if sent and t >= sent[0]]
+    jumps = [t for t in jumps_s if sent and t >= sent[0]]
     return jumps[0] - sent[0] if jumps else None

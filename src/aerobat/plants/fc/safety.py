@@ -26,10 +26,19 @@ import numpy as np
 from aerobat.core.bounds import Interval, Items, bounded, validate
 from aerobat.errors import ConfigError
 from aerobat.plants.betaflight.firmware_settings import ModeRange
-from aerobat.plants.betaflight.msp import FEATURE_RX_MSP, Battery, BatteryAlert, MspModeRange, StatusEx
+from aerobat.plants.betaflight.msp import (
+    FEATURE_RX_MSP,
+    Battery,
+    BatteryAlert,
+    FailsafeConfig,
+    FailsafeProcedure,
+    MspModeRange,
+    StatusEx,
+)
 from aerobat.plants.world_params import Volume
 
-__all__ = ["Preflight", "SafetyLimits", "SafetyMonitor", "StopReason", "configuration_problems", "preflight"]
+__all__ = ["Preflight", "SafetyLimits", "SafetyMonitor", "StopReason", "configuration_problems", "failsafe_problems",
+           "preflight"]
 
 
 class StopReason(StrEnum):
@@ -52,7 +61,7 @@ _MEANINGS = {
     StopReason.GEOFENCE: "the vehicle left the geofence: disarmed",
     StopReason.MOCAP_LOST: "no fresh motion-capture pose of the vehicle: disarmed",
     StopReason.LINK_LOST: "the flight controller stopped answering: its RX-loss failsafe takes over",
-    StopReason.LOW_BATTERY: "the battery is below its limit or the firmware reports it critical: landing",
+    StopReason.LOW_BATTERY: "the battery is below its limit or the firmware reports it critical: disarmed",
 }
 
 _SIDE = Items.each(Interval(-50.0, 50.0, unit="m"), ("low", "high"), "(low, high) in metres")
@@ -70,6 +79,8 @@ class SafetyLimits:
     link_timeout_s : no answer from the flight controller for this long stops the flight.
     min_cell_voltage_v : below this mean cell voltage the flight is stopped (and a take-off refused).
     start_tolerance_m : pre-flight: the vehicle must stand within this of the start.
+    max_failsafe_delay_s : pre-flight: the firmware's RX-loss failsafe must reach its procedure (DROP or
+        AUTO_LANDING) within this (its ``failsafe_delay``; the 0.3 s hold before it not counted).
     """
 
     fence_x_m: tuple[float, float] = bounded((-2.0, 2.0), _SIDE)
@@ -80,6 +91,7 @@ class SafetyLimits:
     link_timeout_s: float = bounded(0.25, Interval(0.01, 5.0, unit="s"))
     min_cell_voltage_v: float = bounded(3.5, Interval(2.8, 4.2, unit="V"))
     start_tolerance_m: float = bounded(0.3, Interval(0.01, 5.0, unit="m"))
+    max_failsafe_delay_s: float = bounded(2.0, Interval(0.0, 20.0, unit="s"))
 
     def __post_init__(self) -> None:
         validate(self)
@@ -185,6 +197,26 @@ def configuration_problems(features: int | None, ranges: Sequence[MspModeRange] 
             found = [f"AUX{r.aux} {r.low_us}–{r.high_us} µs" for r in ranges if r.permanent_id == mode.permanent_id]
             problems.append(f"firmware: {name} is not on AUX{mode.aux} {mode.low_us}–{mode.high_us} µs as aerobat "
                             f"sends it (found: {', '.join(found) or 'no range'}; `aux` in the CLI)")
+    return tuple(problems)
+
+
+def failsafe_problems(failsafe: FailsafeConfig | None, limits: SafetyLimits) -> tuple[str, ...]:
+    """What in the firmware's RX-loss failsafe (MSP_FAILSAFE_CONFIG) would not bring the vehicle down in a room.
+
+    The failsafe is the backstop when the ground is gone (link loss): its procedure must stop the motors
+    (DROP) or land (AUTO_LANDING), not fly somewhere (GPS_RESCUE needs a sky), and it must act within
+    ``limits.max_failsafe_delay_s``. ``None``: the board did not answer.
+    """
+    if failsafe is None:
+        return ("firmware: the flight controller does not report its failsafe configuration over MSP",)
+    problems = []
+    if failsafe.procedure not in (FailsafeProcedure.DROP, FailsafeProcedure.AUTO_LANDING):
+        name = failsafe.procedure.name if isinstance(failsafe.procedure, FailsafeProcedure) else failsafe.procedure
+        problems.append(f"firmware: failsafe_procedure is {name}; a room needs DROP (or AUTO_LANDING): "
+                        f"`set failsafe_procedure = DROP` in the CLI")
+    if failsafe.delay_s > limits.max_failsafe_delay_s:
+        problems.append(f"firmware: failsafe_delay is {failsafe.delay_s:g} s, above max_failsafe_delay_s "
+                        f"{limits.max_failsafe_delay_s:g} s (`set failsafe_delay` counts 0.1 s)")
     return tuple(problems)
 
 

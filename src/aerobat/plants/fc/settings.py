@@ -28,6 +28,7 @@ fence just outside ``[betaflight.volume]`` and :data:`~.plant.REHEARSAL_TIMEOUTS
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from pathlib import Path
@@ -124,7 +125,18 @@ class FcSettings:
 
 
 def fc_settings_from_table(table: Any, source: str) -> FcSettings:
-    """The settings from a TOML table (errors name ``source``, the table and the field)."""
+    """The settings from a TOML table (errors name ``source``, the table and the field).
+
+    A ``[betaflight.pilot]`` table that does not set ``settle_timeout_s`` keeps
+    :data:`FC_SETTLE_TIMEOUT_S`, as when there is no ``[betaflight]`` table at all (the Betaflight
+    plant's sections are read with lockstep's defaults otherwise).
+    """
+    betaflight = table.get("betaflight") if isinstance(table, Mapping) else None
+    if isinstance(betaflight, Mapping):
+        pilot = betaflight.get("pilot", {})
+        if isinstance(pilot, Mapping) and "settle_timeout_s" not in pilot:
+            betaflight = {**betaflight, "pilot": {**pilot, "settle_timeout_s": FC_SETTLE_TIMEOUT_S}}
+            table = {**table, "betaflight": betaflight}
     return dataclass_from_table(FcSettings, table, source=source)
 
 

@@ -89,6 +89,8 @@ class WallClockFlight:
         self.deadlines: list[tuple[float, float]] = []  # (deadline, sent) in flight time [s]
         self.answers = 0
         self._posted: collections.deque[float] = collections.deque()  # frames not yet acknowledged
+        self._acks_dropped = msp.discarded[MSP_SET_RAW_RC]  # acknowledgements a request read and dropped
+        self._answered_at_s = msp.answered_at_s  # the link's last sign of life before this flight
         self.acks: list[tuple[float, float]] = []  # (frame sent, its acknowledgement) in flight time [s]
         self.rotation_stick_us = rotation_stick_us
         self.deflections_s: list[float] = []  # frames whose roll, pitch or yaw stick left the centre [s]
@@ -177,9 +179,16 @@ class WallClockFlight:
             answers = self.msp.collect(0.0)
         except (LinkClosed, LinkTimeout) as error:
             self._stop(StopReason.LINK_LOST, str(error))
-        if answers:
-            self.answers += len(answers)
-            self.monitor.link_answered(wall)
+        self.answers += len(answers)
+        if self.msp.answered_at_s > self._answered_at_s:  # any new answer is a sign of life, a request's included
+            self._answered_at_s = self.msp.answered_at_s
+            self.monitor.link_answered(self._answered_at_s)
+        # acknowledgements a request (status, motors, battery) read in between answered the oldest frames:
+        # those frames' times are unknown, and the next acknowledgement is a later frame's
+        dropped = self.msp.discarded[MSP_SET_RAW_RC]
+        for _ in range(min(dropped - self._acks_dropped, len(self._posted))):
+            self._posted.popleft()
+        self._acks_dropped = dropped
         for command, payload in answers:
             if command == MSP_SET_RAW_RC and self._posted:  # answered in order: the oldest frame's
                 self.acks.append((self._posted.popleft(), wall - self.time_zero_s))

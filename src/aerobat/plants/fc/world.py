@@ -17,7 +17,9 @@ When the world falls behind the wall clock (a loaded machine), it does not skip:
 as late and keeps the largest lag, which :meth:`RealTimeWorld.stop` reports (:class:`WorldReport`).
 Where it may (as root), the world raises its priority (:data:`WORLD_NICENESS`), as a real vehicle
 never waits for a CPU.
-The world process dies with its owner (``PR_SET_PDEATHSIG``), and the firmware with the world.
+The world process dies with its owner (``PR_SET_PDEATHSIG``), and the firmware with the world. It runs
+in a session of its own, so the operator's Ctrl-C in the terminal reaches the ground (which disarms the
+flight) and not the world, which flies on until the ground stops it.
 """
 
 from __future__ import annotations
@@ -68,6 +70,8 @@ class WorldReport:
     firmware_pid : the firmware process's id (it ends with the world).
     set_point_jumps_s : world times at which the firmware's rate set point rose above 200 °/s after
         being below it (a maneuver's first frames taking effect), to 1 chunk.
+    set_point_jumps_wall_s : the same moments on the wall clock (seconds since :meth:`RealTimeWorld.start`,
+        read when the chunk that saw the jump ended): later than the world times by the world's lag.
     peak_motor : the highest motor command of the run (0: the motors never spun, e.g. a dry run).
     error : what ended the world early ("" when it was stopped).
     """
@@ -83,6 +87,7 @@ class WorldReport:
     motors: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     firmware_pid: int | None = None
     set_point_jumps_s: tuple[float, ...] = ()
+    set_point_jumps_wall_s: tuple[float, ...] = ()
     peak_motor: float = 0.0
     error: str = ""
 
@@ -104,6 +109,9 @@ def _die_with(parent_pid: int) -> None:
 def _world_main(conn: Any, parent_pid: int, plant_args: dict[str, Any], pose_port: int, chunk_s: float) -> None:
     """The world process: build the flight, report its UART port, fly paced until told to stop."""
     _die_with(parent_pid)
+    # the operator's Ctrl-C is the ground's (it disarms the flight); the world, in a session of its own, never
+    # sees the terminal's signal, and ignores one sent to it anyway: it ends when its owner says so or dies
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     # a real vehicle never waits for a CPU: ahead of the machine's other work where allowed (root),
     # and the firmware, started from here, inherits it; elsewhere the lag is measured and reported
     with contextlib.suppress(PermissionError):
@@ -125,6 +133,7 @@ def _world_main(conn: Any, parent_pid: int, plant_args: dict[str, Any], pose_por
         max_lag_s = 0.0
         error = ""
         moved: list[float] = []  # when the firmware's rate set point first jumped, after each quiet spell
+        moved_wall: list[float] = []  # the same, on the wall clock
         peak = 0.0  # the highest motor command of the whole run (0: the motors never spun)
         quiet = True
         try:
@@ -139,6 +148,7 @@ def _world_main(conn: Any, parent_pid: int, plant_args: dict[str, Any], pose_por
                 jumped = max(abs(float(v)) for v in flight.motors[4:7]) > SET_POINT_JUMP_DEG_S
                 if jumped and quiet and len(moved) < _MAX_EVENTS:
                     moved.append(flight.time_s)
+                    moved_wall.append(now_s)
                 quiet = not jumped
                 rows = flight.log[: flight.log_count]
                 while published < rows.shape[0] and rows[published, 0] + latency_s <= now_s:
@@ -161,7 +171,7 @@ def _world_main(conn: Any, parent_pid: int, plant_args: dict[str, Any], pose_por
             error = f"{type(failure).__name__}: {str(failure).splitlines()[0] if str(failure) else ''}"
         report = WorldReport(flight.time_s, time.monotonic() - t0, chunks, late, max_lag_s, published,
                              round(1e6 / flight.sitl.gyro_period_us), steps * flight.step_s,
-                             flight.motor_commands(), flight.sitl.pid, tuple(moved), peak, error)
+                             flight.motor_commands(), flight.sitl.pid, tuple(moved), tuple(moved_wall), peak, error)
         try:
             conn.send(("stopped", report))
         except OSError:  # the owner closed the pipe: nobody to tell
@@ -194,7 +204,8 @@ class RealTimeWorld:
         ours, theirs = socket.socketpair()
         # a process of its own (not multiprocessing's spawn, which re-runs the caller's main script)
         self._process = subprocess.Popen([sys.executable, "-m", "aerobat.plants.fc.world", str(theirs.fileno())],
-                                         pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL)
+                                         pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL,
+                                         start_new_session=True)
         theirs.close()
         self._conn = Connection(ours.detach())
         self._conn.send((os.getpid(), plant_args, pose_port, chunk_s))

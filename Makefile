@@ -43,9 +43,10 @@ demo: $(COMPILED)
 		--trials 30 --out $(OUT)/demo
 
 # the fast suite on every core (pytest-xdist): each test is independent (own folders, free ports, its own
-# firmware processes), so two workers halve the wall time on the 2-core machine
+# firmware processes), so two workers halve the wall time on the 2-core machine; the tests that fly on the
+# wall clock share one group (xdist_group "real_time"), so two real-time flights never compete for the cores
 test: $(COMPILED)
-	$(PY) -m pytest -q -m "not slow" -n auto; rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; exit 0; fi; exit $$rc
+	$(PY) -m pytest -q -m "not slow" -n auto --dist loadgroup; rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; exit 0; fi; exit $$rc
 
 test-slow: $(COMPILED)
 	$(PY) -m pytest -q -m slow

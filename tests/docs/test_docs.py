@@ -207,7 +207,17 @@ def test_every_document_has_been_looked_at():
     assert {"README.md", "docs/store.md", "docs/maneuvers.md", "docs/scaling.md"} <= with_commands
 
 
-@pytest.mark.parametrize("path", DOCUMENTS, ids=_ids)
+REAL_TIME = {"docs/real-vehicle.md"}
+"""Documents whose commands fly on the wall clock (the real-time rehearsal): they run in the suite's one
+``real_time`` group of tests (tests/conftest.py), never beside another real-time flight."""
+
+
+def _documents() -> list:
+    return [pytest.param(p, marks=pytest.mark.xdist_group("real_time")) if _ids(p) in REAL_TIME else p
+            for p in DOCUMENTS]
+
+
+@pytest.mark.parametrize("path", _documents(), ids=_ids)
 def test_documented_commands_run(tmp_path, path):
     started = time.perf_counter()
     ran = run_document(path, tmp_path, small=True)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from bf_processes import sitl_processes
+from bf_processes import sitl_processes, wait_gone
 
 from aerobat.core.design import design
 from aerobat.core.learning import IterationStatus, learn
@@ -33,15 +33,6 @@ FPV = fpv5()
 FLIP = MultiFlip(vehicle=FPV.vehicle, flips=1, max_rate_rad_s=math.radians(800), dims=2)
 DESIGN = design(FLIP, NominalModel(FPV))
 FAKE = Path(__file__).with_name("fake_sitl.py")
-
-
-def wait_gone(pid: int, timeout_s: float = 3.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if pid not in sitl_processes():
-            return True
-        time.sleep(0.02)
-    return False
 
 
 def sabotage(monkeypatch: pytest.MonkeyPatch, trials: set[int], at_s: float, how: signal.Signals,

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
+from bf_processes import running, wait_gone
 
 from aerobat.plants.betaflight.configure import AT_REST_LEVEL, step_at_rest
 from aerobat.plants.betaflight.errors import FirmwareExited, FirmwareNotResponding
@@ -24,24 +25,6 @@ from aerobat.plants.betaflight.sitl import SitlProcess
 
 SETTINGS = load_settings()
 PERIOD_S = 125e-6
-
-
-def pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    return state != "Z"
-
-
-def wait_gone(pid: int, timeout_s: float = 3.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if not pid_alive(pid):
-            return True
-        time.sleep(0.02)
-    return False
 
 
 def arm_and_spin(sitl: SitlProcess, roll_stick: float) -> bytes:
@@ -176,7 +159,7 @@ def test_firmware_never_outlives_its_owner(firmware: tuple[Path, Path], ending: 
     assert owner.stdout is not None and owner.stdin is not None
     pid_text, workdir_text = owner.stdout.readline().split()
     sitl_pid, workdir = int(pid_text), Path(workdir_text)
-    assert pid_alive(sitl_pid)
+    assert running(sitl_pid)
     if ending == "sigkill":
         owner.kill()  # no atexit: PR_SET_PDEATHSIG must do it
     else:

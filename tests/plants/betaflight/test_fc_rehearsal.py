@@ -15,14 +15,18 @@ import dataclasses
 import math
 import os
 import signal
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+from bf_processes import running, sitl_processes, wait_gone
 
 pytest.importorskip("serial", reason="pyserial is not installed (pip install 'aerobat[fc]')")
+pytestmark = pytest.mark.xdist_group("real_time")  # flights on the wall clock: one at a time (tests/README.md)
 
 from aerobat.core.design import design  # noqa: E402
 from aerobat.core.plant import TrialStatus  # noqa: E402
@@ -33,6 +37,7 @@ from aerobat.plants.fc.wall_clock import WallClockFlight  # noqa: E402
 from aerobat.quadrotor.maneuvers import MultiFlip  # noqa: E402
 from aerobat.quadrotor.simulate import NominalModel  # noqa: E402
 from aerobat.quadrotor.vehicle import fpv5  # noqa: E402
+from aerobat.store import Store  # noqa: E402
 
 FPV = fpv5()
 FLIP = MultiFlip(vehicle=FPV.vehicle, flips=1, max_rate_rad_s=math.radians(800.0), dims=2)
@@ -72,15 +77,8 @@ def _ended_disarmed(trial) -> None:  # noqa: ANN001
 def _no_process_left(connection: RehearsalConnection) -> None:
     assert connection.current is None and connection.reports, "the trial's world was not stopped"
     for report in connection.reports:
-        assert report.firmware_pid is not None and not _running(report.firmware_pid), "a firmware outlived its world"
+        assert report.firmware_pid is not None and not running(report.firmware_pid), "a firmware outlived its world"
 
-
-def _running(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"
 
 
 def test_a_trial_flies_in_real_time_over_the_serial_path_and_reports_its_timing(firmware: tuple[Path, Path]) -> None:
@@ -166,3 +164,91 @@ def test_a_dry_run_with_the_firmware_never_spins_a_motor(firmware: tuple[Path, P
     assert trial.info["world"]["peak_motor"] == 0.0  # not one motor command above zero, the whole run
     assert trial.info["dry_run"]["frames"] >= 0.9 * FLIP.program(P0).compile().duration_s * 100.0
     _no_process_left(connection)
+
+
+def _world_processes(parent: int) -> list[int]:
+    """Pids of the rehearsal's world processes started by ``parent``."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+                command = (entry / "cmdline").read_bytes().split(b"\0")
+            except OSError:
+                continue
+            if int(fields[1]) == parent and b"aerobat.plants.fc.world" in command:
+                found.append(int(entry.name))
+    return found
+
+
+def _session_in_flight(tmp_path: Path) -> tuple[subprocess.Popen[str], int, int]:
+    """`aerobat learn --plant fc` in a process group of its own, as a terminal starts it: (process, world, firmware)
+    once the first trial's world and firmware run and the vehicle has had time to take off."""
+    room = tmp_path / "drill.toml"
+    room.write_text("[betaflight.firmware]\ngyro_rate_hz = 2000\n\n[betaflight.radio]\nrate_hz = 100.0\n")
+    exe = Path(sys.executable).with_name("aerobat")
+    command = [str(exe), "learn", "flip", "--flips", "1", "--max-rate-deg-s", "800", "--dims", "2", "--vehicle",
+               "fpv5", "--plant", "fc", "--fc", str(room), "--trials", "3", "--db", str(tmp_path / "s.sqlite"),
+               "--out", str(tmp_path / "out")]
+    session = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True)
+    deadline = time.monotonic() + 120.0
+    worlds: list[int] = []
+    firmwares: list[int] = []
+    while not firmwares and time.monotonic() < deadline and session.poll() is None:
+        worlds = _world_processes(session.pid)
+        firmwares = [pid for world in worlds for pid in sitl_processes(world)]
+        time.sleep(0.05)
+    assert firmwares, f"the session never started a world with its firmware: {session.poll()}"
+    time.sleep(8.0)  # calibration, arming and the take-off (the pilot settles for seconds after)
+    return session, worlds[0], firmwares[0]
+
+
+def test_no_world_or_firmware_outlives_a_killed_fc_session(firmware: tuple[Path, Path], tmp_path: Path) -> None:
+    session, world, sitl = _session_in_flight(tmp_path)
+    try:
+        session.kill()  # SIGKILL: no cleanup code runs in the ground station
+        session.wait(timeout=10)
+        assert wait_gone(world, 10.0), "the world outlived its ground station"
+        assert wait_gone(sitl, 10.0), "the firmware outlived its world"
+    finally:
+        if session.poll() is None:
+            session.kill()
+            session.wait()
+
+
+def test_ctrl_c_at_the_terminal_is_the_kill_and_the_world_flies_on_until_the_vehicle_is_disarmed(
+        firmware: tuple[Path, Path], tmp_path: Path) -> None:
+    session, world, sitl = _session_in_flight(tmp_path)
+    try:
+        os.killpg(session.pid, signal.SIGINT)  # what Ctrl-C in the terminal sends: the whole foreground group
+        _, err = session.communicate(timeout=120)
+        # the kill ends the session (a real vehicle is not flown again until a person has looked), stored
+        assert session.returncode == 1 and "trial 1 aborted: kill" in err and "resume with" in err, err[-2000:]
+        assert wait_gone(world, 10.0) and wait_gone(sitl, 10.0)
+    finally:
+        if session.poll() is None:
+            session.kill()
+            session.wait()
+    with Store(tmp_path / "s.sqlite") as store:
+        info = store.iterations(1)[0].info
+    # the ground disarmed the vehicle through the firmware and the firmware said so: the world had not been
+    # killed by the signal (a dead world is a lost link, and a lost trial)
+    assert info.get("safety_stop") == "kill" and info.get("disarm_confirmed") is True, info
+    assert max(info["world"]["motors"]) == 0.0
+
+
+@pytest.mark.slow
+def test_the_rehearsal_learns_the_3d_triple_flip_open_loop_with_no_trial_lost(firmware: tuple[Path, Path]) -> None:
+    """docs/real-vehicle.md's command, as a library call: 30 trials in real time at 8 kHz (about 9 minutes)."""
+    from aerobat.core.learning import learn
+    from aerobat.core.maneuver import ErrorKind
+
+    triple = MultiFlip(vehicle=FPV.vehicle, flips=3, max_rate_rad_s=math.radians(1800.0), dims=3)
+    plant = FlightControllerPlant(FPV, RehearsalConnection({}), seed=1, binary=firmware[0])
+    session = learn(triple, design(triple, NominalModel(FPV)), plant, iterations=30)
+    assert session.status.value == "completed" and len(session.iterations) == 30, session.message
+    assert all(it.measured for it in session.iterations), [it.message for it in session.iterations]
+    pos = [i for i, e in enumerate(triple.errors) if e.kind is ErrorKind.POSITION]
+    position = [float(math.dist(it.error[pos], (0.0,) * len(pos))) for it in session.measured]
+    assert sum(position[-10:]) / 10 <= 0.15, position

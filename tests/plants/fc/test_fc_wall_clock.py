@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip("serial", reason="pyserial is not installed (pip install 'aerobat[fc]')")
+pytestmark = pytest.mark.xdist_group("real_time")  # flights on the wall clock: one at a time (tests/README.md)
 
 from fake_board import FakeBoard  # noqa: E402
 

@@ -31,7 +31,7 @@ from aerobat.plants.betaflight.msp import (  # noqa: E402
     MSP_STATUS_EX,
     BatteryAlert,
 )
-from aerobat.plants.fc import Pose
+from aerobat.plants.fc import Pose  # noqa: E402
 from aerobat.plants.fc.plant import BoardConnection, FlightControllerPlant, build_fc_plant  # noqa: E402
 from aerobat.plants.fc.settings import FcSettings, LinkKind, LinkSettings  # noqa: E402
 from aerobat.quadrotor.maneuvers import MultiFlip  # noqa: E402

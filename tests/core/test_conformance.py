@@ -51,7 +51,8 @@ def test_every_plant_has_a_check():
     assert set(PLANTS.names()) == {"nominal", "arena", "rotorpy", "betaflight", "fc"}
 
 
-@pytest.mark.parametrize("kind", ["nominal", "arena", "rotorpy", "betaflight", "fc"])  # fc: its real-time rehearsal
+@pytest.mark.parametrize("kind", ["nominal", "arena", "rotorpy", "betaflight",
+                                  pytest.param("fc", marks=pytest.mark.xdist_group("real_time"))])  # fc: rehearsal
 def test_plant_conforms(kind):
     choice = PlantChoice(kind, seed=4)
     try:

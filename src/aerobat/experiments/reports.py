@@ -250,11 +250,10 @@ def session_from_json(data: dict[str, Any]) -> Session:
                           "`aerobat export ID --format json` or `aerobat show ID --json`")
     try:
         maneuver = from_spec(data["maneuver"], source="session JSON maneuver")
-        table = dict(data["design"])
-        table.update(converged=DesignStatus(table["status"]) is DesignStatus.CONVERGED,
-                     **{k: [[math.nan if v is None else v for v in row] for row in table[k]]
-                        for k in ("jacobian", "correction")})
-        table["residual"] = [math.nan if v is None else v for v in table["residual"]]
+        # the export's design is the stored one without what only its computation knew (its wall time,
+        # how many simulations) and with ``converged`` as its status says; arrays as the codec reads them
+        table = {"compute_s": math.nan, "evaluations": 0, **data["design"]}
+        table["converged"] = DesignStatus(table["status"]) is DesignStatus.CONVERGED
         design = Design.from_json_dict(maneuver, table)
         iterations = tuple(Iteration.from_json_dict(it, notes_from_message(str(it["message"])))
                            for it in data["iterations"])

@@ -136,15 +136,19 @@ class Iteration:
         return encode(self, _JSON_FIELDS, form=Form.JSON, keys=_JSON_KEYS)
 
     @classmethod
-    def from_json_dict(cls, table: dict[str, Any], notes: tuple[IterationNote, ...] = ()) -> Iteration:
-        """The iteration :meth:`to_json_dict` wrote (without its trial), ``next_params`` exactly as written."""
+    def from_json_dict(cls, table: dict[str, Any]) -> Iteration:
+        """The iteration :meth:`to_json_dict` wrote (without its trial), ``next_params`` exactly as written.
+
+        A table without ``notes`` (written before iterations carried them) gives none.
+        """
         params = decode_value(np.ndarray, table["params"], Form.JSON)
         step = step_to(params, decode_value(np.ndarray, table["next_params"], Form.JSON))
-        return decode(cls, table, form=Form.JSON, keys=_JSON_KEYS, params=params, step=step,  # type: ignore[no-any-return]
-                      notes=notes)
+        return decode(cls, table, form=Form.JSON, keys=_JSON_KEYS, params=params,  # type: ignore[no-any-return]
+                      step=step)
 
 
-_JSON_FIELDS = ("index", "correction", "status", "params", "next_params", "error", "gamma", "scale", "message")
+_JSON_FIELDS = ("index", "correction", "status", "params", "next_params", "error", "gamma", "scale", "message",
+                "notes")
 """What ``session.json`` keeps of an iteration (``next_params`` for the step: exact, and what a reader wants)."""
 _JSON_KEYS = {"index": "i"}
 """Fields kept under another key."""

@@ -20,7 +20,6 @@ from typing import Any
 import numpy as np
 
 from aerobat.core.codec import Form, decode, encode, encode_value, pack_f8, unpack_f8
-from aerobat.core.notes import HELD_PREFIX, WARNING_PREFIX, IterationNote, NoteKind
 
 __all__ = [
     "TRAJECTORY_CODEC",
@@ -33,7 +32,6 @@ __all__ = [
     "from_columns",
     "json_ready",
     "nan_if_none",
-    "notes_from_message",
     "pack_f8",
     "unpack_f8",
     "utc_now",
@@ -121,17 +119,3 @@ def from_columns(cls: type[Any], columns: Mapping[str, Any], *, shapes: Mapping[
     value its type refuses (an unknown enum value, an array of the wrong size).
     """
     return decode(cls, columns, form=Form.COLUMNS, shapes=shapes, **given)
-
-
-# ------------------------------------------------------------- an iteration's notes
-def notes_from_message(message: str) -> tuple[IterationNote, ...]:
-    """The notes a stored iteration's message says in words (the inverse of ``message_with_notes``).
-
-    The store keeps an iteration's message as learning wrote it; this is the one place that
-    reads its notes back (parameters held at a bound, and warnings of parameters pinned there).
-    """
-    head, *warnings = message.split(WARNING_PREFIX)
-    held = head.partition(HELD_PREFIX)[2]
-    notes = [IterationNote.held(name) for name in held.split(", ") if name]
-    return tuple(notes + [IterationNote(NoteKind.PINNED_AT_BOUND, text.split(" (", 1)[0], text)
-                          for text in warnings])

@@ -14,7 +14,7 @@ from aerobat.config import check_int, check_type, short_repr
 from aerobat.core.outcomes import IterationStatus, SessionStatus
 from aerobat.errors import ConfigError, SessionNotFound, StoreFormatError
 from aerobat.store import checksums
-from aerobat.store.codec import TRAJECTORY_CODEC, decode_trajectory, from_columns, notes_from_message, unpack_f8
+from aerobat.store.codec import TRAJECTORY_CODEC, decode_trajectory, from_columns, unpack_f8
 from aerobat.store.owners import owner_alive
 from aerobat.store.records import (
     DesignRecord,
@@ -227,12 +227,17 @@ class Reading(StudyTables):
                     times, states = decode_trajectory(blob, r["traj_rows"], r["traj_cols"])
                 except (ValueError, zlib.error) as exc:
                     raise StoreFormatError(f"{self.path}: {where}: damaged trajectory ({exc})") from None
-        return from_columns(  # type: ignore[no-any-return]
-            IterationRecord, r, index=r["idx"], status=self._enum(IterationStatus, r["status"], where),
-            trajectory_rows=r["traj_rows"], info=self._loads(r["info"], where) if r["info"] else {}, times_s=times,
-            states=states, notes=notes_from_message(r["message"]),
-            plant_state=self._loads(r["plant_state"], where) if plant_state and r["plant_state"] else None,
-            learner_state=self._loads(r["learner_state"], where) if learner_state and r["learner_state"] else None)
+        status = self._enum(IterationStatus, r["status"], where)
+        info = self._loads(r["info"], where) if r["info"] else {}
+        plant = self._loads(r["plant_state"], where) if plant_state and r["plant_state"] else None
+        learner = self._loads(r["learner_state"], where) if learner_state and r["learner_state"] else None
+        try:  # the notes column (JSON) is decoded by the codec, from IterationRecord.notes' type
+            return from_columns(  # type: ignore[no-any-return]
+                IterationRecord, r, index=r["idx"], status=status, trajectory_rows=r["traj_rows"], info=info,
+                times_s=times, states=states, plant_state=plant, learner_state=learner)
+        except (ValueError, TypeError, KeyError) as exc:
+            raise StoreFormatError(f"{self.path}: {where}: damaged notes ({type(exc).__name__}: {exc}); restore "
+                                   f"the store from a backup") from None
 
     def iterations(self, session_id: int, *, trajectories: bool = False, plant_state: bool = False,
                    indices: Sequence[int] | None = None) -> list[IterationRecord]:

@@ -245,7 +245,7 @@ class Store(Browsing):
         position = float(np.linalg.norm(err[mask])) if ok and mask.shape == err.shape and mask.any() else None
         row = {
             "session_id": int(session_id), "idx": int(iteration.index),
-            **columns_of(iteration, ("correction", "status", "params", "next_params", "message")),
+            **columns_of(iteration, ("correction", "status", "params", "next_params", "message", "notes")),
             "gamma": float(iteration.gamma), "scale": float(iteration.scale), "error": pack_f8(err),
             "final_state": None if trial is None or trial.final_state is None else pack_f8(trial.final_state),
             "start_state": None if trial is None or trial.start_state is None else pack_f8(trial.start_state),

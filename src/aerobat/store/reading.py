@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.config import check_int, check_type, short_repr
+from aerobat.core.maneuver import ErrorKind
 from aerobat.core.outcomes import IterationStatus, SessionStatus
 from aerobat.errors import ConfigError, SessionNotFound, StoreFormatError
 from aerobat.store import checksums
@@ -44,12 +45,13 @@ class Reading(StudyTables):
             raise StoreFormatError(f"{self.path}: {what}: damaged JSON ({exc}); restore the store from a "
                                    f"backup") from None
 
-    def _enum(self, cls: type[Any], value: Any, what: str) -> Any:
-        """A stored status as its enum; :class:`StoreFormatError` naming the record if it is none of them."""
+    def _enum(self, cls: type[Any], value: Any, what: str, noun: str = "status") -> Any:
+        """A stored status (or other ``noun``) as its enum; :class:`StoreFormatError` naming the record if it is
+        none of them."""
         try:
             return cls(value)
         except ValueError:
-            raise StoreFormatError(f"{self.path}: {what}: unknown status {short_repr(value)} (written by another "
+            raise StoreFormatError(f"{self.path}: {what}: unknown {noun} {short_repr(value)} (written by another "
                                    f"aerobat?)") from None
 
     def _state(self, row: Mapping[str, Any]) -> SessionStatus:
@@ -77,7 +79,7 @@ class Reading(StudyTables):
             with self._guard(f"reading session {session_id}"):
                 row = self._db.execute("SELECT maneuver_id FROM sessions WHERE id = ?", (session_id,)).fetchone()
             kinds = self.maneuver(row[0]).error_kinds if row else ()
-            self._position_masks[session_id] = np.array([k == "position" for k in kinds], dtype=bool)
+            self._position_masks[session_id] = np.array([k is ErrorKind.POSITION for k in kinds], dtype=bool)
         return self._position_masks[session_id]
 
     # ---------------------------------------------------------- sessions
@@ -187,7 +189,8 @@ class Reading(StudyTables):
             parameter_units=tuple(self._loads(r["parameter_units"], what)), error_names=tuple(names),
             error_units=tuple(self._loads(r["error_units"], what)),
             error_scales=tuple(float(v) for v in self._loads(r["error_scales"], what)),
-            error_kinds=tuple(self._loads(r["error_kinds"], what) if r["error_kinds"] else ["other"] * len(names)))
+            error_kinds=tuple(self._enum(ErrorKind, kind, what, "error kind") for kind in (
+                self._loads(r["error_kinds"], what) if r["error_kinds"] else [ErrorKind.OTHER] * len(names))))
 
     def design(self, design_id: int) -> DesignRecord:
         """A stored design, arrays bit for bit as computed."""

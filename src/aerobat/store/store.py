@@ -32,7 +32,7 @@ import numpy as np
 from aerobat.config import check_int, short_repr
 from aerobat.core.bounds import ITERATIONS
 from aerobat.core.design import Design
-from aerobat.core.maneuver import Maneuver
+from aerobat.core.maneuver import ErrorKind, Maneuver
 from aerobat.core.outcomes import Iteration, IterationStatus, SessionStatus
 from aerobat.errors import ConfigError, SessionInUse, SessionNotFound, StoreError
 from aerobat.store import checksums
@@ -78,7 +78,7 @@ def _maneuver_columns(maneuver: Maneuver) -> dict[str, Any]:
         "error_names": json.dumps([e.name for e in maneuver.errors]),
         "error_units": json.dumps([e.unit for e in maneuver.errors]),
         "error_scales": json.dumps([float(e.scale) for e in maneuver.errors]),
-        "error_kinds": json.dumps([str(getattr(e, "kind", "other")) for e in maneuver.errors]),
+        "error_kinds": json.dumps([ErrorKind(e.kind).value for e in maneuver.errors]),
         "digest": digest(spec_json)}
 
 class Store(Browsing):

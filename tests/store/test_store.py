@@ -94,7 +94,7 @@ def assert_one_line(err: str, code: int, expected: int = 2, *fragments: str) -> 
 def test_new_store_has_current_schema_wal_and_foreign_keys(tmp_path):
     path = tmp_path / "a.sqlite"
     with Store(path) as store:
-        assert store.schema_version == SCHEMA_VERSION == 5
+        assert store.schema_version == SCHEMA_VERSION == 6
         assert store.integrity_check() == []
         conn = store._db
         assert conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
@@ -357,7 +357,7 @@ def test_a_version_1_store_is_migrated_in_place_with_its_data_intact(tmp_path, c
     path = tmp_path / "old.sqlite"
     expected = _v1_fixture(path)
     with Store(path) as store:
-        assert store.migrated_from == [1, 2, 3, 4]  # version 1 → 2 → 3 → 4 → 5
+        assert store.migrated_from == [1, 2, 3, 4, 5]  # version 1 → 2 → 3 → 4 → 5 → 6
         assert store.schema_version == SCHEMA_VERSION
         assert store.integrity_check() == []
         for (sid, idx), (params, nxt, error, status) in expected.items():

@@ -164,7 +164,7 @@ def test_a_version_4_store_is_migrated_with_every_record_checksummed(tmp_path):
     conn.commit()
     conn.close()
     with Store(path) as store:
-        assert store.migrated_from == [4] and store.schema_version == 5
+        assert store.migrated_from == [4, 5] and store.schema_version == 6
         assert [it.index for it in store.iterations(1)] == [1] and store.session(1).n_measured == 1
         store.verify_session(1)
         for table in checksums.COVERED:  # every row of every table has its checksum
@@ -172,6 +172,44 @@ def test_a_version_4_store_is_migrated_with_every_record_checksummed(tmp_path):
     raw(path, "UPDATE iterations SET message = 'n'")
     with Store(path, create=False) as store, pytest.raises(StoreFormatError, match="fails its checksum"):
         store.iterations(1)
+
+
+def test_a_version_5_store_is_migrated_with_the_notes_its_messages_say(tmp_path):
+    """Schema 6 keeps an iteration's notes in a column; a version-5 row gets the notes its message says, once."""
+    import numpy as np
+
+    from aerobat.core.learning import Iteration, IterationStatus
+    from aerobat.core.notes import IterationNote, NoteKind, message_with_notes
+    from browse_fixtures import DESIGN, FLIP, VEHICLE
+
+    path = tmp_path / "v5.sqlite"
+    notes = (IterationNote.held("t1"),
+             IterationNote(NoteKind.PINNED_AT_BOUND, "t2", "t2 (coast) pinned at a bound for 8 corrections: bad"))
+    params = DESIGN.p_nominal.copy()
+    with Store(path) as store:
+        sid = store.create_session(vehicle=VEHICLE, plant_kind="nominal", plant_config={}, maneuver=FLIP,
+                                   design=DESIGN, seed=None, rule={"name": "paper"}, target_iterations=3,
+                                   start_params=params)
+        for i, said in enumerate(((), notes, (notes[0],)), start=1):
+            store.append_iteration(sid, Iteration(i, i, IterationStatus.OK, params, np.full(len(FLIP.errors), 0.1),
+                                                  0.5, 1.0, np.zeros_like(params),
+                                                  message_with_notes("measured", said), None, said))
+    with contextlib.closing(sqlite3.connect(path)) as conn:  # the file as version 5 wrote it
+        conn.execute("ALTER TABLE iterations DROP COLUMN notes")
+        checksums.backfill(conn, "iterations", [c for c in checksums.COVERED["iterations"] if c != "notes"])
+        conn.execute("UPDATE iterations SET gamma = 0.25 WHERE idx = 3")  # damaged before the migration
+        conn.execute("PRAGMA user_version = 5")
+        conn.commit()
+    with Store(path) as store:
+        assert store.migrated_from == [5] and store.schema_version == 6
+        got = store.iterations(sid, indices=[1, 2])
+        assert [it.notes for it in got] == [(), notes] and got[1].message == message_with_notes("measured", notes)
+        assert store._db.execute("SELECT count(*) FROM iterations WHERE notes IS NULL").fetchone()[0] == 0
+        with pytest.raises(StoreFormatError, match=r"idx 3\) fails its checksum"):  # still caught
+            store.iterations(sid)
+    raw(path, "UPDATE iterations SET notes = '[]' WHERE idx = 2")  # the notes are covered by the checksum
+    with Store(path, create=False) as store, pytest.raises(StoreFormatError, match="fails its checksum"):
+        store.iterations(sid, indices=[2])
 
 
 def test_docs_state_the_real_schema_version():

@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.cli.common import console
+from aerobat.core.maneuver import ErrorKind
 
 __all__ = ["print_stored_session"]
 
@@ -57,7 +58,7 @@ def print_stored_session(store: Any, session_id: int, *, iterations: bool, heade
         rows.add_column("γ", justify="right")
         rows.add_column("scale", justify="right")
         position = np.array(mrec.position_mask, dtype=bool)
-        angles = np.array([k == "angle" for k in mrec.error_kinds], dtype=bool)
+        angles = np.array([k is ErrorKind.ANGLE for k in mrec.error_kinds], dtype=bool)
         if full:
             for name, unit in zip(mrec.error_names, mrec.error_units, strict=True):
                 rows.add_column(f"{name} [{'°' if unit == 'rad' else unit}]", justify="right")

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from enum import StrEnum
 from typing import Any, Protocol
 
@@ -17,6 +17,7 @@ import numpy as np
 
 from aerobat.config import as_float_array, check_type, short_repr
 from aerobat.core.bounds import Integer, Interval, OneOf, bounded, validate
+from aerobat.core.codec import Form, decode, encode
 from aerobat.core.correction import CorrectionKind, correction_matrix, svd_info
 from aerobat.core.maneuver import Maneuver, batch_errors, bounds_arrays, check_maneuver, error_scales, parameter_scales
 from aerobat.errors import ConfigError, DesignFailed
@@ -107,54 +108,18 @@ class Design:
 
     @classmethod
     def from_json_dict(cls, maneuver: Maneuver, table: dict[str, Any]) -> Design:
-        """The design that :meth:`to_json_dict` wrote, for ``maneuver`` (arrays exact)."""
+        """The design that :meth:`to_json_dict` wrote, for ``maneuver`` (arrays exact; the core's codec)."""
         try:
-            return cls(
-                maneuver=maneuver,
-                p_guess=np.asarray(table["p_guess"], dtype=float),
-                p_nominal=np.asarray(table["p_nominal"], dtype=float),
-                residual=np.asarray(table["residual"], dtype=float),
-                residual_norm=float(table["residual_norm"]),
-                converged=bool(table["converged"]),
-                status=DesignStatus(table["status"]),
-                message=str(table["message"]),
-                jacobian=np.asarray(table["jacobian"], dtype=float),
-                correction=np.asarray(table["correction"], dtype=float),
-                correction_kind=str(table["correction_kind"]),
-                singular_values=np.asarray(table["singular_values"], dtype=float),
-                condition_number=float(table["condition_number"]),
-                rank=int(table["rank"]),
-                duration_s=float(table["duration_s"]),
-                compute_s=float(table.get("compute_s", math.nan)),
-                evaluations=int(table.get("evaluations", 0)),
-            )
+            return decode(cls, table, form=Form.JSON, maneuver=maneuver)  # type: ignore[no-any-return]
         except (KeyError, TypeError, ValueError) as exc:
             raise ConfigError(f"design table: {type(exc).__name__}: {exc}") from None
 
     def to_json_dict(self) -> dict[str, Any]:
-        """The design as plain JSON types (arrays as lists), as the store and ``session.json`` keep it."""
-        return {
-            "maneuver": self.maneuver.spec(),
-            "parameter_names": [p.name for p in self.maneuver.parameters],
-            "parameter_units": [p.unit for p in self.maneuver.parameters],
-            "error_names": [e.name for e in self.maneuver.errors],
-            "p_guess": self.p_guess.tolist(),
-            "p_nominal": self.p_nominal.tolist(),
-            "residual": self.residual.tolist(),
-            "residual_norm": self.residual_norm,
-            "converged": self.converged,
-            "status": self.status.value,
-            "message": self.message,
-            "duration_s": self.duration_s,
-            "jacobian": self.jacobian.tolist(),
-            "correction": self.correction.tolist(),
-            "correction_kind": self.correction_kind,
-            "singular_values": self.singular_values.tolist(),
-            "condition_number": self.condition_number,
-            "rank": self.rank,
-            "compute_s": self.compute_s,
-            "evaluations": self.evaluations,
-        }
+        """The design as plain JSON types (arrays as lists; the core's codec), with its maneuver's spec and names."""
+        m = self.maneuver
+        return {"maneuver": m.spec(), "parameter_names": [p.name for p in m.parameters],
+                "parameter_units": [p.unit for p in m.parameters], "error_names": [e.name for e in m.errors],
+                **encode(self, (f.name for f in fields(self) if f.name != "maneuver"), form=Form.JSON)}
 
 
 class _CountingModel:

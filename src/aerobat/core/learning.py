@@ -334,7 +334,10 @@ def learn(
     """
     if not isinstance(force, bool):
         raise ConfigError(f"force = {short_repr(force)}: expected True or False")
-    if not force and getattr(design, "converged", True) is False:
+    if not isinstance(design, Design):
+        raise ConfigError(f"design: expected a Design (from aerobat.design()), got {type(design).__name__} "
+                          f"{short_repr(design)}")
+    if not force and not design.converged:
         raise DesignFailed(f"design failed, nothing to learn: {design.message} (learn(..., force=True) learns from "
                            f"it anyway)", design)
     iterations = ITERATIONS.check("iterations", iterations)

@@ -6,13 +6,13 @@ live apart from the method itself (:mod:`aerobat.core.learning`), which imports 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
 
 import numpy as np
 
+from aerobat.core.codec import Form, decode, decode_value, encode
 from aerobat.core.notes import IterationNote
 from aerobat.core.plant import Trial, TrialStatus
 
@@ -132,27 +132,26 @@ class Iteration:
         return f"Iteration({self.index}, {self.status.value!r}, correction={self.correction}, gamma={self.gamma:.3g})"
 
     def to_json_dict(self) -> dict[str, Any]:
-        """The iteration as plain JSON types (arrays as lists), as ``session.json`` keeps it."""
-        return {
-            "i": self.index,
-            "correction": self.correction,
-            "status": self.status.value,
-            "params": [float(v) for v in self.params],
-            "next_params": [float(v) for v in self.next_params],
-            "error": [float(v) if math.isfinite(v) else None for v in self.error],
-            "gamma": self.gamma,
-            "scale": self.scale,
-            "message": self.message,
-        }
+        """The iteration as plain JSON types (arrays as lists; the core's codec), as ``session.json`` keeps it."""
+        return encode(self, _JSON_FIELDS, form=Form.JSON, keys=_JSON_KEYS)
 
     @classmethod
-    def from_json_dict(cls, table: dict[str, Any], notes: tuple[IterationNote, ...] = ()) -> Iteration:
-        """The iteration :meth:`to_json_dict` wrote (without its trial), ``next_params`` exactly as written."""
-        params = np.asarray(table["params"], dtype=float)
-        return cls(int(table["i"]), int(table["correction"]), IterationStatus(table["status"]), params,
-                   np.array([math.nan if v is None else v for v in table["error"]], dtype=float),
-                   float(table["gamma"]), float(table["scale"]),
-                   step_to(params, np.asarray(table["next_params"], dtype=float)), str(table["message"]), None, notes)
+    def from_json_dict(cls, table: dict[str, Any]) -> Iteration:
+        """The iteration :meth:`to_json_dict` wrote (without its trial), ``next_params`` exactly as written.
+
+        A table without ``notes`` (written before iterations carried them) gives none.
+        """
+        params = decode_value(np.ndarray, table["params"], Form.JSON)
+        step = step_to(params, decode_value(np.ndarray, table["next_params"], Form.JSON))
+        return decode(cls, table, form=Form.JSON, keys=_JSON_KEYS, params=params,  # type: ignore[no-any-return]
+                      step=step)
+
+
+_JSON_FIELDS = ("index", "correction", "status", "params", "next_params", "error", "gamma", "scale", "message",
+                "notes")
+"""What ``session.json`` keeps of an iteration (``next_params`` for the step: exact, and what a reader wants)."""
+_JSON_KEYS = {"index": "i"}
+"""Fields kept under another key."""
 
 
 def step_to(params: np.ndarray, target: np.ndarray) -> np.ndarray:

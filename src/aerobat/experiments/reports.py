@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from aerobat.core.codec import Form, encode_value
 from aerobat.core.learning import IterationStatus, SessionStatus
 from aerobat.core.registry import from_spec
 from aerobat.errors import ConfigError
@@ -43,6 +44,7 @@ def session_json(store: Store, session_id: int, *, trajectories: bool = False, f
             "i": it.index, "correction": it.correction, "status": it.status,
             "params": it.params.tolist(), "next_params": it.next_params.tolist(),
             "error": finite_or_none(it.error), "gamma": it.gamma, "scale": it.scale, "message": it.message,
+            "notes": encode_value(it.notes, Form.JSON),
         }
         if full:
             entry["final_state"] = None if it.final_state is None else finite_or_none(it.final_state)
@@ -241,7 +243,6 @@ def session_from_json(data: dict[str, Any]) -> Session:
 
     from aerobat.core.design import Design, DesignStatus
     from aerobat.core.learning import Iteration, Session
-    from aerobat.store.codec import notes_from_message
 
     if not isinstance(data, dict):
         raise ConfigError(f"session JSON: expected an object (a dict), got {type(data).__name__}")
@@ -250,14 +251,12 @@ def session_from_json(data: dict[str, Any]) -> Session:
                           "`aerobat export ID --format json` or `aerobat show ID --json`")
     try:
         maneuver = from_spec(data["maneuver"], source="session JSON maneuver")
-        table = dict(data["design"])
-        table.update(converged=DesignStatus(table["status"]) is DesignStatus.CONVERGED,
-                     **{k: [[math.nan if v is None else v for v in row] for row in table[k]]
-                        for k in ("jacobian", "correction")})
-        table["residual"] = [math.nan if v is None else v for v in table["residual"]]
+        # the export's design is the stored one without what only its computation knew (its wall time,
+        # how many simulations) and with ``converged`` as its status says; arrays as the codec reads them
+        table = {"compute_s": math.nan, "evaluations": 0, **data["design"]}
+        table["converged"] = DesignStatus(table["status"]) is DesignStatus.CONVERGED
         design = Design.from_json_dict(maneuver, table)
-        iterations = tuple(Iteration.from_json_dict(it, notes_from_message(str(it["message"])))
-                           for it in data["iterations"])
+        iterations = tuple(Iteration.from_json_dict(it) for it in data["iterations"])
         status = _ended(data["status"])
         return Session(maneuver, design, data["plant"], iterations, np.asarray(data["final_params"]), status,
                        data["message"], float(data.get("wall_s", math.nan)))

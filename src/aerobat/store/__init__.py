@@ -27,6 +27,7 @@ from aerobat.store.records import (
     SessionRecord,
     SessionSummary,
     StudyJobRecord,
+    StudyKind,
     StudyRecord,
     VehicleRecord,
 )
@@ -53,6 +54,7 @@ __all__ = [
     "StoreVersionError",
     "StoreWriteError",
     "StudyJobRecord",
+    "StudyKind",
     "StudyRecord",
     "VehicleRecord",
     "decode_trajectory",

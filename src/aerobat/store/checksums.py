@@ -48,12 +48,12 @@ COVERED: dict[str, tuple[str, ...]] = {
                  "last_error", "last_position_error_m", "current_params", "study_id", "tags", "notes"),
     "iterations": ("session_id", "idx", "correction", "status", "params", "next_params", "error", "gamma", "scale",
                    "message", "final_state", "start_state", "traj_rows", "traj_cols", "traj_codec", "info",
-                   "recorded_at", "plant_state", "learner_state", "traj_checksum"),
+                   "recorded_at", "plant_state", "learner_state", "traj_checksum", "notes"),
     "studies": ("id", "kind", "spec", "created_at", "command", "out_dir"),
     "study_jobs": ("study_id", "key", "spec", "result", "recorded_at", "status", "error", "attempts", "session_id"),
 }
-"""The columns each table's checksum covers, in order (schema 5: every column but ``checksum`` and
-``iterations.trajectory``, which ``traj_checksum`` covers)."""
+"""The columns each table's checksum covers, in order (every column but ``checksum`` and
+``iterations.trajectory``, which ``traj_checksum`` covers; ``iterations.notes`` since schema 6)."""
 
 KEYS: dict[str, tuple[str, ...]] = {"meta": ("key",), "iterations": ("session_id", "idx"),
                                     "study_jobs": ("study_id", "key")}
@@ -174,9 +174,10 @@ def update(conn: sqlite3.Connection, path: Any, table: str, key: Mapping[str, An
     return old
 
 
-def backfill(conn: sqlite3.Connection, table: str) -> None:
-    """Give every row of ``table`` its checksum (the migration to schema 5)."""
-    columns = COVERED[table]
+def backfill(conn: sqlite3.Connection, table: str, columns: Sequence[str] | None = None) -> None:
+    """Give every row of ``table`` its checksum (the migration to schema 5; ``columns``: the covered
+    columns at that version, default :data:`COVERED`'s)."""
+    columns = tuple(COVERED[table] if columns is None else columns)
     keys = key_of(table)
     where = " AND ".join(f"{k} = ?" for k in keys)
     if table == "iterations":

@@ -1,28 +1,25 @@
 """How values are stored: exact float64 arrays, compressed trajectories, canonical JSON and digests.
 
-One codec maps the core's frozen dataclasses to columns and back (:func:`columns_of`,
-:func:`from_columns`): arrays as little-endian float64 bytes (exact), enums as their
-values, booleans as 0/1, NaN as NULL; it is the store's only translation between the
-core's types and the strings and bytes of its tables.
+The core's one codec (:mod:`aerobat.core.codec`, the same that writes ``session.json``) maps
+the core's frozen dataclasses to columns and back (:func:`columns_of`, :func:`from_columns`:
+its :attr:`~aerobat.core.codec.Form.COLUMNS` form): arrays as little-endian float64 bytes
+(exact), enums as their values, booleans as 0/1, NaN as NULL; it is the store's only
+translation between the core's types and the strings and bytes of its tables.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 import math
-import types
-import typing
 import zlib
 from collections.abc import Iterable, Mapping
 from datetime import UTC, datetime
-from enum import Enum
 from typing import Any
 
 import numpy as np
 
-from aerobat.core.notes import HELD_PREFIX, WARNING_PREFIX, IterationNote, NoteKind
+from aerobat.core.codec import Form, decode, encode, encode_value, pack_f8, unpack_f8
 
 __all__ = [
     "TRAJECTORY_CODEC",
@@ -35,7 +32,6 @@ __all__ = [
     "from_columns",
     "json_ready",
     "nan_if_none",
-    "notes_from_message",
     "pack_f8",
     "unpack_f8",
     "utc_now",
@@ -43,15 +39,6 @@ __all__ = [
 
 TRAJECTORY_CODEC = "f4-planes-zlib-hi2"
 """float32, column-major, split into byte planes; the two high planes zlib-compressed (level 1, RLE)."""
-
-
-def pack_f8(values: Any) -> bytes:
-    return np.ascontiguousarray(np.asarray(values, dtype=np.float64), dtype="<f8").tobytes()
-
-
-def unpack_f8(blob: bytes | None, shape: tuple[int, ...] | None = None) -> np.ndarray:
-    array = np.frombuffer(blob or b"", dtype="<f8").astype(np.float64)
-    return array.reshape(shape) if shape is not None else array
 
 
 def encode_trajectory(times_s: np.ndarray, states: np.ndarray) -> tuple[int, int, bytes]:
@@ -109,8 +96,6 @@ def json_ready(obj: Any) -> Any:
     return json.loads(json.dumps(obj, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)))
 
 
-
-
 def nan_if_none(value: float | None) -> float:
     return math.nan if value is None else float(value)
 
@@ -118,49 +103,12 @@ def nan_if_none(value: float | None) -> float:
 # ------------------------------------------------------------- frozen dataclasses
 def column_value(value: Any) -> Any:
     """One value as a column holds it: an array as float64 bytes, an enum as its value, a bool as 0/1."""
-    if isinstance(value, np.ndarray):
-        return pack_f8(value)
-    if isinstance(value, Enum):
-        return value.value
-    if isinstance(value, bool | np.bool_):
-        return int(value)
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, np.floating):
-        return float(value)
-    return value
+    return encode_value(value, Form.COLUMNS)
 
 
 def columns_of(obj: Any, names: Iterable[str]) -> dict[str, Any]:
-    """The columns of a frozen dataclass's fields ``names`` (see :func:`column_value`)."""
-    return {name: column_value(getattr(obj, name)) for name in names}
-
-
-def _decoder(hint: Any) -> Any:
-    """How to turn a column back into a field of type ``hint`` (None: as it is)."""
-    args = [a for a in typing.get_args(hint) if a is not type(None)]
-    optional = isinstance(hint, types.UnionType) or typing.get_origin(hint) is typing.Union
-    inner = args[0] if optional and len(args) == 1 else hint
-    if inner is np.ndarray:
-        return lambda v, shape: None if v is None and optional else unpack_f8(v, shape)
-    if isinstance(inner, type) and issubclass(inner, Enum):
-        return lambda v, shape: None if v is None and optional else inner(v)
-    if inner is bool:
-        return lambda v, shape: bool(v)
-    if inner is float:
-        return lambda v, shape: None if v is None and optional else nan_if_none(v)
-    return None
-
-
-_DECODERS: dict[type[Any], tuple[tuple[str, Any], ...]] = {}
-
-
-def _decoders(cls: type[Any]) -> tuple[tuple[str, Any], ...]:
-    """Each field of the dataclass ``cls`` with how its column is decoded (read once per class)."""
-    if cls not in _DECODERS:
-        hints = typing.get_type_hints(cls)
-        _DECODERS[cls] = tuple((field.name, _decoder(hints[field.name])) for field in dataclasses.fields(cls))
-    return _DECODERS[cls]
+    """The columns of a frozen dataclass's fields ``names`` (the core's codec, :attr:`Form.COLUMNS`)."""
+    return encode(obj, names, form=Form.COLUMNS)
 
 
 def from_columns(cls: type[Any], columns: Mapping[str, Any], *, shapes: Mapping[str, tuple[int, ...]] | None = None,
@@ -170,24 +118,4 @@ def from_columns(cls: type[Any], columns: Mapping[str, Any], *, shapes: Mapping[
     Fields missing from ``columns`` keep their defaults. Raises :class:`ValueError` for a
     value its type refuses (an unknown enum value, an array of the wrong size).
     """
-    values = dict(given)
-    for name, decode in _decoders(cls):
-        if name in values or name not in columns:
-            continue
-        raw = columns[name]
-        values[name] = raw if decode is None else decode(raw, (shapes or {}).get(name))
-    return cls(**values)
-
-
-# ------------------------------------------------------------- an iteration's notes
-def notes_from_message(message: str) -> tuple[IterationNote, ...]:
-    """The notes a stored iteration's message says in words (the inverse of ``message_with_notes``).
-
-    The store keeps an iteration's message as learning wrote it; this is the one place that
-    reads its notes back (parameters held at a bound, and warnings of parameters pinned there).
-    """
-    head, *warnings = message.split(WARNING_PREFIX)
-    held = head.partition(HELD_PREFIX)[2]
-    notes = [IterationNote.held(name) for name in held.split(", ") if name]
-    return tuple(notes + [IterationNote(NoteKind.PINNED_AT_BOUND, text.split(" (", 1)[0], text)
-                          for text in warnings])
+    return decode(cls, columns, form=Form.COLUMNS, shapes=shapes, **given)

@@ -32,6 +32,11 @@ History
    for the trajectory; :mod:`aerobat.store.checksums`), verified on every read, and
    the user's tags and notes on sessions (``sessions.tags``, ``notes``). The migration
    computes the checksums of what the file holds.
+6. An iteration's notes as data (``iterations.notes``: JSON list of ``{kind, parameter,
+   text}``, :class:`~aerobat.core.notes.IterationNote`), written with the iteration; before,
+   the store read them back out of the message's words. The migration gives older rows the
+   notes their messages say (:func:`legacy_notes_from_message`, kept for this migration only)
+   and their new checksums; a row that failed its checksum before keeps failing it.
 """
 
 from __future__ import annotations
@@ -42,14 +47,16 @@ from collections.abc import Callable
 
 import numpy as np
 
+from aerobat.core.codec import Form, encode_value
+from aerobat.core.notes import HELD_PREFIX, WARNING_PREFIX, IterationNote, NoteKind
 from aerobat.errors import StoreFormatError
-from aerobat.store.checksums import backfill
+from aerobat.store.checksums import COVERED, backfill, record_checksum
 
-__all__ = ["APPLICATION_ID", "MIGRATIONS", "SCHEMA", "SCHEMA_V1", "SCHEMA_VERSION", "TABLES", "TABLES_SINCE", "migrate",
-           "sql_statements"]
+__all__ = ["APPLICATION_ID", "MIGRATIONS", "SCHEMA", "SCHEMA_V1", "SCHEMA_VERSION", "TABLES", "TABLES_SINCE",
+           "legacy_notes_from_message", "migrate", "sql_statements"]
 
-SCHEMA_VERSION = 5
-"""The version this aerobat writes; it reads 1 to 4 (migrating them) and 5."""
+SCHEMA_VERSION = 6
+"""The version this aerobat writes; it reads 1 to 5 (migrating them) and 6."""
 
 APPLICATION_ID = 0x41455242
 """``PRAGMA application_id`` of aerobat stores ("AERB")."""
@@ -259,6 +266,9 @@ _V5_COLUMNS = (
 )
 SCHEMA += "".join(f"\nALTER TABLE {column};" for column in _V5_COLUMNS) + "\n"
 
+_V6_COLUMN = "iterations ADD COLUMN notes TEXT"  # JSON list of {"kind", "parameter", "text"} (IterationNote)
+SCHEMA += f"ALTER TABLE {_V6_COLUMN};\n"
+
 _STUDY_TABLES_V3 = """
 CREATE TABLE studies (
     id         INTEGER PRIMARY KEY,
@@ -348,15 +358,48 @@ def _migrate_3_to_4(conn: sqlite3.Connection) -> None:
                     WHERE json_valid(result) AND json_extract(result, '$.status') = 'error'""")
 
 
+_ADDED_IN_6 = {"iterations": ("notes",)}
+"""Covered columns that version 5 does not have yet."""
+
+
 def _migrate_4_to_5(conn: sqlite3.Connection) -> None:
     for column in _V5_COLUMNS:
         conn.execute(f"ALTER TABLE {column}")
     for table in TABLES:
-        backfill(conn, table)
+        backfill(conn, table, [c for c in COVERED[table] if c not in _ADDED_IN_6.get(table, ())])
+
+
+def legacy_notes_from_message(message: str) -> tuple[IterationNote, ...]:
+    """The notes an iteration's message says in words — only to migrate rows written before schema 6.
+
+    Until schema 6 the store kept an iteration's notes only in its message
+    (:func:`~aerobat.core.notes.message_with_notes`: the parameters held at a bound in one
+    clause, then each warning, whose first word is the parameter pinned). This reads them
+    back once, when such a row is migrated; nothing else reads notes out of text.
+    """
+    head, *warnings = message.split(WARNING_PREFIX)
+    held = head.partition(HELD_PREFIX)[2]
+    notes = [IterationNote.held(name) for name in held.split(", ") if name]
+    return tuple(notes + [IterationNote(NoteKind.PINNED_AT_BOUND, text.split(" (", 1)[0], text)
+                          for text in warnings])
+
+
+def _migrate_5_to_6(conn: sqlite3.Connection) -> None:
+    conn.execute(f"ALTER TABLE {_V6_COLUMN}")
+    old = [c for c in COVERED["iterations"] if c not in _ADDED_IN_6["iterations"]]  # a version-5 row's checksum
+    updates = []
+    for row in conn.execute(f"SELECT {', '.join(old)}, checksum FROM iterations").fetchall():
+        values = dict(zip(old, row, strict=False))
+        notes = encode_value(legacy_notes_from_message(str(values["message"])), Form.COLUMNS)
+        intact = row[-1] == record_checksum("iterations", row[:-1])
+        checksum = record_checksum("iterations", [*row[:-1], notes]) if intact else row[-1]
+        updates.append((notes, checksum, values["session_id"], values["idx"]))
+    conn.executemany("UPDATE iterations SET notes = ?, checksum = ? WHERE session_id = ? AND idx = ?", updates)
 
 
 MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {1: _migrate_1_to_2, 2: _migrate_2_to_3,
-                                                               3: _migrate_3_to_4, 4: _migrate_4_to_5}
+                                                               3: _migrate_3_to_4, 4: _migrate_4_to_5,
+                                                               5: _migrate_5_to_6}
 """``MIGRATIONS[n]`` takes a database from version n to n + 1 (inside the caller's transaction)."""
 
 

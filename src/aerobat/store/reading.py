@@ -11,10 +11,11 @@ from typing import Any
 import numpy as np
 
 from aerobat.config import check_int, check_type, short_repr
+from aerobat.core.maneuver import ErrorKind
 from aerobat.core.outcomes import IterationStatus, SessionStatus
 from aerobat.errors import ConfigError, SessionNotFound, StoreFormatError
 from aerobat.store import checksums
-from aerobat.store.codec import TRAJECTORY_CODEC, decode_trajectory, from_columns, notes_from_message, unpack_f8
+from aerobat.store.codec import TRAJECTORY_CODEC, decode_trajectory, from_columns, unpack_f8
 from aerobat.store.owners import owner_alive
 from aerobat.store.records import (
     DesignRecord,
@@ -44,12 +45,13 @@ class Reading(StudyTables):
             raise StoreFormatError(f"{self.path}: {what}: damaged JSON ({exc}); restore the store from a "
                                    f"backup") from None
 
-    def _enum(self, cls: type[Any], value: Any, what: str) -> Any:
-        """A stored status as its enum; :class:`StoreFormatError` naming the record if it is none of them."""
+    def _enum(self, cls: type[Any], value: Any, what: str, noun: str = "status") -> Any:
+        """A stored status (or other ``noun``) as its enum; :class:`StoreFormatError` naming the record if it is
+        none of them."""
         try:
             return cls(value)
         except ValueError:
-            raise StoreFormatError(f"{self.path}: {what}: unknown status {short_repr(value)} (written by another "
+            raise StoreFormatError(f"{self.path}: {what}: unknown {noun} {short_repr(value)} (written by another "
                                    f"aerobat?)") from None
 
     def _state(self, row: Mapping[str, Any]) -> SessionStatus:
@@ -77,7 +79,7 @@ class Reading(StudyTables):
             with self._guard(f"reading session {session_id}"):
                 row = self._db.execute("SELECT maneuver_id FROM sessions WHERE id = ?", (session_id,)).fetchone()
             kinds = self.maneuver(row[0]).error_kinds if row else ()
-            self._position_masks[session_id] = np.array([k == "position" for k in kinds], dtype=bool)
+            self._position_masks[session_id] = np.array([k is ErrorKind.POSITION for k in kinds], dtype=bool)
         return self._position_masks[session_id]
 
     # ---------------------------------------------------------- sessions
@@ -187,7 +189,8 @@ class Reading(StudyTables):
             parameter_units=tuple(self._loads(r["parameter_units"], what)), error_names=tuple(names),
             error_units=tuple(self._loads(r["error_units"], what)),
             error_scales=tuple(float(v) for v in self._loads(r["error_scales"], what)),
-            error_kinds=tuple(self._loads(r["error_kinds"], what) if r["error_kinds"] else ["other"] * len(names)))
+            error_kinds=tuple(self._enum(ErrorKind, kind, what, "error kind") for kind in (
+                self._loads(r["error_kinds"], what) if r["error_kinds"] else [ErrorKind.OTHER] * len(names))))
 
     def design(self, design_id: int) -> DesignRecord:
         """A stored design, arrays bit for bit as computed."""
@@ -227,12 +230,17 @@ class Reading(StudyTables):
                     times, states = decode_trajectory(blob, r["traj_rows"], r["traj_cols"])
                 except (ValueError, zlib.error) as exc:
                     raise StoreFormatError(f"{self.path}: {where}: damaged trajectory ({exc})") from None
-        return from_columns(  # type: ignore[no-any-return]
-            IterationRecord, r, index=r["idx"], status=self._enum(IterationStatus, r["status"], where),
-            trajectory_rows=r["traj_rows"], info=self._loads(r["info"], where) if r["info"] else {}, times_s=times,
-            states=states, notes=notes_from_message(r["message"]),
-            plant_state=self._loads(r["plant_state"], where) if plant_state and r["plant_state"] else None,
-            learner_state=self._loads(r["learner_state"], where) if learner_state and r["learner_state"] else None)
+        status = self._enum(IterationStatus, r["status"], where)
+        info = self._loads(r["info"], where) if r["info"] else {}
+        plant = self._loads(r["plant_state"], where) if plant_state and r["plant_state"] else None
+        learner = self._loads(r["learner_state"], where) if learner_state and r["learner_state"] else None
+        try:  # the notes column (JSON) is decoded by the codec, from IterationRecord.notes' type
+            return from_columns(  # type: ignore[no-any-return]
+                IterationRecord, r, index=r["idx"], status=status, trajectory_rows=r["traj_rows"], info=info,
+                times_s=times, states=states, plant_state=plant, learner_state=learner)
+        except (ValueError, TypeError, KeyError) as exc:
+            raise StoreFormatError(f"{self.path}: {where}: damaged notes ({type(exc).__name__}: {exc}); restore "
+                                   f"the store from a backup") from None
 
     def iterations(self, session_id: int, *, trajectories: bool = False, plant_state: bool = False,
                    indices: Sequence[int] | None = None) -> list[IterationRecord]:

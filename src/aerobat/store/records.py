@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.core.design import Design, DesignStatus
-from aerobat.core.maneuver import Maneuver
+from aerobat.core.maneuver import ErrorKind, Maneuver
 from aerobat.core.notes import IterationNote
 from aerobat.core.outcomes import Iteration, IterationStatus, SessionStatus, step_to
 
@@ -22,6 +22,7 @@ __all__ = [
     "SessionRecord",
     "SessionSummary",
     "StudyJobRecord",
+    "StudyKind",
     "StudyRecord",
     "VehicleRecord",
 ]
@@ -62,7 +63,7 @@ class ManeuverRecord:
     spec : the specification table; :func:`aerobat.core.registry.from_spec` rebuilds the maneuver.
     parameter_names, parameter_units : per parameter.
     error_names, error_units, error_scales : per error component.
-    error_kinds : per error component, what it measures (``position``, ``velocity``, ``angle``…).
+    error_kinds : per error component, what it measures (:class:`~aerobat.core.maneuver.ErrorKind`).
     """
 
     id: int
@@ -74,12 +75,12 @@ class ManeuverRecord:
     error_names: tuple[str, ...]
     error_units: tuple[str, ...]
     error_scales: tuple[float, ...]
-    error_kinds: tuple[str, ...]
+    error_kinds: tuple[ErrorKind, ...]
 
     @property
     def position_mask(self) -> tuple[bool, ...]:
         """Which error components are positions (their norm is the reported position error)."""
-        return tuple(kind == "position" for kind in self.error_kinds)
+        return tuple(kind is ErrorKind.POSITION for kind in self.error_kinds)
 
 
 @dataclass(frozen=True)
@@ -278,12 +279,32 @@ class IterationRecord:
 
 
 
+class StudyKind(StrEnum):
+    """What a study studies (``aerobat study …``, ``aerobat benchmark map``): which report it has."""
+
+    ROBUSTNESS = "robustness"
+    RULES = "rules"
+    FEEDBACK = "feedback"
+    ENVELOPE = "envelope"
+    MAP = "map"
+
+    @classmethod
+    def stored(cls, text: str) -> StudyKind | str:
+        """The kind a ``studies`` row names; the name itself if it is none of these (a study an older
+        aerobat ran under a name of its own through ``run_study``, which now takes a :class:`StudyKind`)."""
+        try:
+            return cls(text)
+        except ValueError:
+            return str(text)
+
+
 @dataclass(frozen=True)
 class StudyRecord:
     """A study: its kind, what defines it, and how far its jobs got.
 
     Attributes
     ----------
+    kind : :class:`StudyKind` (the stored name, for a study of a kind this aerobat does not know).
     spec : everything that defines the study (JSON table).
     command : the command-line arguments that started it.
     out_dir : where its report and figures go.
@@ -291,7 +312,7 @@ class StudyRecord:
     """
 
     id: int
-    kind: str
+    kind: StudyKind | str
     spec: dict[str, Any]
     created_at: str
     command: tuple[str, ...]

@@ -32,7 +32,7 @@ import numpy as np
 from aerobat.config import check_int, short_repr
 from aerobat.core.bounds import ITERATIONS
 from aerobat.core.design import Design
-from aerobat.core.maneuver import Maneuver
+from aerobat.core.maneuver import ErrorKind, Maneuver
 from aerobat.core.outcomes import Iteration, IterationStatus, SessionStatus
 from aerobat.errors import ConfigError, SessionInUse, SessionNotFound, StoreError
 from aerobat.store import checksums
@@ -78,7 +78,7 @@ def _maneuver_columns(maneuver: Maneuver) -> dict[str, Any]:
         "error_names": json.dumps([e.name for e in maneuver.errors]),
         "error_units": json.dumps([e.unit for e in maneuver.errors]),
         "error_scales": json.dumps([float(e.scale) for e in maneuver.errors]),
-        "error_kinds": json.dumps([str(getattr(e, "kind", "other")) for e in maneuver.errors]),
+        "error_kinds": json.dumps([ErrorKind(e.kind).value for e in maneuver.errors]),
         "digest": digest(spec_json)}
 
 class Store(Browsing):
@@ -245,7 +245,7 @@ class Store(Browsing):
         position = float(np.linalg.norm(err[mask])) if ok and mask.shape == err.shape and mask.any() else None
         row = {
             "session_id": int(session_id), "idx": int(iteration.index),
-            **columns_of(iteration, ("correction", "status", "params", "next_params", "message")),
+            **columns_of(iteration, ("correction", "status", "params", "next_params", "message", "notes")),
             "gamma": float(iteration.gamma), "scale": float(iteration.scale), "error": pack_f8(err),
             "final_state": None if trial is None or trial.final_state is None else pack_f8(trial.final_state),
             "start_state": None if trial is None or trial.start_state is None else pack_f8(trial.start_state),

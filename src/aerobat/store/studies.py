@@ -12,7 +12,7 @@ from aerobat.errors import ConfigError, SessionNotFound, StoreFormatError
 from aerobat.store import checksums
 from aerobat.store.codec import canonical_json, from_columns, json_ready, utc_now
 from aerobat.store.database import Database, next_id
-from aerobat.store.records import JobStatus, StudyJobRecord, StudyRecord
+from aerobat.store.records import JobStatus, StudyJobRecord, StudyKind, StudyRecord
 
 __all__ = ["StudyTables"]
 
@@ -20,14 +20,18 @@ __all__ = ["StudyTables"]
 class StudyTables(Database):
     """Studies and their jobs (the :class:`~aerobat.store.Store` has these methods)."""
 
-    def create_study(self, kind: str, spec: Mapping[str, Any], *, command: Sequence[str] = (),
+    def create_study(self, kind: StudyKind | str, spec: Mapping[str, Any], *, command: Sequence[str] = (),
                      out_dir: str | None = None) -> int:
-        """Record a new study; its id."""
+        """Record a new study of a :class:`~aerobat.store.records.StudyKind` (or its name); its id."""
+        try:
+            study_kind = StudyKind(kind)
+        except ValueError:
+            raise ConfigError(f"study kind {short_repr(kind)}: allowed {', '.join(StudyKind)}") from None
         spec_json = canonical_json(json_ready(dict(spec)))
 
         def write(conn: sqlite3.Connection) -> int:
             study_id = next_id(conn, "studies")
-            checksums.insert(conn, "studies", {"id": study_id, "kind": str(kind), "spec": spec_json,
+            checksums.insert(conn, "studies", {"id": study_id, "kind": study_kind.value, "spec": spec_json,
                                                "created_at": utc_now(), "command": json.dumps(list(command)),
                                                "out_dir": out_dir})
             return study_id
@@ -84,7 +88,8 @@ class StudyTables(Database):
         what = f"study {r['id']}"
         own = [j["status"] for j in jobs if j["study_id"] == r["id"]]
         return from_columns(  # type: ignore[no-any-return]
-            StudyRecord, r, spec=self._json(r["spec"], what), command=tuple(self._json(r["command"] or "[]", what)),
+            StudyRecord, r, kind=StudyKind.stored(r["kind"]), spec=self._json(r["spec"], what),
+            command=tuple(self._json(r["command"] or "[]", what)),
             jobs_done=own.count(JobStatus.DONE), jobs_failed=own.count(JobStatus.FAILED))
 
     def list_studies(self) -> list[StudyRecord]:

@@ -41,6 +41,7 @@ from aerobat.experiments.studies.robustness import (
 from aerobat.experiments.studies.rules import summarize_rules
 from aerobat.experiments.studies.runner import FailedJob, StudyOutcome
 from aerobat.quadrotor.feedback import FeedbackScheme
+from aerobat.store.records import StudyKind
 
 if TYPE_CHECKING:
     from aerobat.store import Store
@@ -488,13 +489,13 @@ def study_report(store: Store, study: int | str) -> StudyReport:
     results = {j.key: j.result for j in stored if JobStatus(j.status) is JobStatus.DONE}
     outcome = StudyOutcome(study_id, len(jobs), 0, len(jobs), failed, results)
     spec = record.spec
-    if record.kind == "feedback":
+    if record.kind is StudyKind.FEEDBACK:
         return feedback_report(outcome, jobs, schemes=spec.get("schemes"), scenarios=spec.get("scenarios"))
-    if record.kind == "rules":
+    if record.kind is StudyKind.RULES:
         return rules_report(outcome, jobs, methods=spec.get("methods"))
-    if record.kind == "robustness":
+    if record.kind is StudyKind.ROBUSTNESS:
         return robustness_report(outcome, jobs, vehicles=spec.get("vehicles"))
-    if record.kind == "envelope":
+    if record.kind is StudyKind.ENVELOPE:
         return envelope_report(outcome, record.spec["flips"], record.spec["rates_deg_s"])
     raise ConfigError(f"study {study_id} is a {record.kind} study: reports exist for robustness, rules, feedback "
                       f"and envelope studies")

@@ -41,6 +41,7 @@ from aerobat.experiments.studies.rules import check_method_names, rules_study_jo
 from aerobat.experiments.studies.runner import Progress, run_study
 from aerobat.quadrotor.feedback import FeedbackScheme
 from aerobat.quadrotor.vehicle import VehicleConfig
+from aerobat.store.records import StudyKind
 
 if TYPE_CHECKING:
     from aerobat.core.rules import RuleChoice
@@ -104,7 +105,7 @@ def feedback_study(store: Store, maneuver: Maneuver, design: Design, model: Vehi
                                trials=trials, plant=plant, rule=rule, tolerance_m=tolerance_m)
     spec = feedback_spec(maneuver, schemes=schemes, scenarios=scenarios, seeds=seeds, trials=trials, plant=plant,
                          rule=rule, tolerance_m=tolerance_m)
-    outcome = run_study(store, "feedback", spec, jobs, **options)
+    outcome = run_study(store, StudyKind.FEEDBACK, spec, jobs, **options)
     return feedback_report(outcome, jobs, schemes=[s.value for s in schemes], scenarios=list(scenarios))
 
 
@@ -133,7 +134,7 @@ def rules_study(store: Store, maneuver: Maneuver, design: Design, model: Vehicle
     jobs = rules_study_jobs(maneuver, design, model, methods=methods, seeds=seeds, trials=trials, plant=plant,
                             tolerance_m=tolerance_m)
     spec = rules_spec(maneuver, methods=methods, seeds=seeds, trials=trials, plant=plant, tolerance_m=tolerance_m)
-    outcome = run_study(store, "rules", spec, jobs, **options)
+    outcome = run_study(store, StudyKind.RULES, spec, jobs, **options)
     return rules_report(outcome, jobs, methods=methods)
 
 
@@ -170,7 +171,7 @@ def robustness_study(store: Store, maneuver: Maneuver, design: Design, model: Ve
     scheme = jobs[0].spec["plant"].get("feedback", {}).get("scheme", "none") if jobs else "none"
     spec = robustness_spec(maneuver, vehicles=vehicles, iterations=iterations, seed=seed, ranges=ranges, rule=rule,
                            tolerance_m=tolerance_m, plant=plant, feedback=scheme)
-    outcome = run_study(store, "robustness", spec, jobs, **options)
+    outcome = run_study(store, StudyKind.ROBUSTNESS, spec, jobs, **options)
     return robustness_report(outcome, jobs, vehicles=vehicles)
 
 
@@ -195,6 +196,6 @@ def envelope_study(store: Store, model: VehicleConfig, *, flips: Sequence[int], 
         raise ConfigError(f"rates_deg_s = {list(rates_deg_s)!r}: rates must be {low_rate:g} … {high_rate:g} deg/s")
     base = MultiFlip(vehicle=model.vehicle, dims=dims, axis=axis).spec()
     jobs = envelope_jobs(base, model, flips, rates_deg_s)
-    outcome = run_study(store, "envelope", envelope_spec(base, flips=flips, rates_deg_s=rates_deg_s), jobs,
+    outcome = run_study(store, StudyKind.ENVELOPE, envelope_spec(base, flips=flips, rates_deg_s=rates_deg_s), jobs,
                         **options)
     return envelope_report(outcome, flips, rates_deg_s)

@@ -28,6 +28,7 @@ from aerobat.experiments.job import Job, JobResult, JobStatus
 from aerobat.experiments.setup import plant_record_config
 from aerobat.plants import PlantChoice
 from aerobat.store import Store
+from aerobat.store.records import StudyKind
 
 __all__ = ["FailedJob", "StudyOutcome", "run_study"]
 
@@ -111,7 +112,7 @@ def _record(store: Store, study_id: int, job: Job, outcome: JobResult) -> None:
 
 def run_study(
     store: Store,
-    kind: str,
+    kind: StudyKind | str,
     spec: Mapping[str, Any],
     jobs: Sequence[Job],
     *,
@@ -128,7 +129,8 @@ def run_study(
     Parameters
     ----------
     store : where the study, its jobs and their sessions go.
-    kind, spec : what the study is (``spec`` is compared on resume).
+    kind, spec : what the study is (a :class:`~aerobat.store.records.StudyKind` or its name; ``spec`` is
+        compared on resume).
     jobs : all of the study's jobs.
     resume : continue this study (id or ``last``) instead of creating one.
     executor : run the jobs here (default: :func:`make_executor` with ``workers``/``scheduler``).
@@ -137,6 +139,7 @@ def run_study(
     command : the command line, kept with the study.
     """
     jobs = _check_study(kind, spec, jobs, resume=resume, progress=progress, on_start=on_start, command=command)
+    kind = StudyKind(kind)
     keys = [job.key for job in jobs]
     if len(set(keys)) != len(keys):
         raise ConfigError(f"study {kind}: job keys repeat")
@@ -189,6 +192,8 @@ def _check_study(kind: Any, spec: Any, jobs: Any, *, resume: Any, progress: Any,
     if not isinstance(kind, str) or not _KIND.fullmatch(kind):
         raise ConfigError(f"study kind = {short_repr(kind)}: expected a name of 1 … 64 letters, digits, '_', '-' "
                           f"or '.' that starts with a letter (e.g. 'robustness')")
+    if kind not in set(StudyKind):
+        raise ConfigError(f"study kind = {short_repr(kind)}: expected one of {', '.join(StudyKind)}")
     if not isinstance(spec, Mapping):
         raise ConfigError(f"study {kind} spec: expected a mapping of the study's options (a dict), got "
                           f"{type(spec).__name__} {short_repr(spec)}")

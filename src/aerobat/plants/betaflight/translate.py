@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 from .firmware_settings import PINNED
 from .sitl_table import SitlTable, load_table
-from .tune import Tune, TuneError
+from .tune import Tune, TuneError, TuneKind
 
 __all__ = ["PINNED", "TuneReport", "translate"]
 
@@ -309,7 +309,7 @@ def translate(tune: Tune, table: SitlTable | None = None) -> TuneReport:
     for name, why in PINNED.items():
         if not any(entry[0] == name for entry in builder.pinned):
             builder.pinned.append((name, "", why))
-    if tune.kind == "cli":
+    if tune.kind is TuneKind.CLI:
         builder.notes.append("settings the file does not list take Betaflight 4.6's defaults, which can differ "
                              "from the writer's (a 'dump' lists every setting)")
     if any(name.startswith("simplified_") for name in builder.sets):

@@ -20,11 +20,13 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
+from enum import StrEnum
 from pathlib import Path
 
 from aerobat.errors import ConfigError
 
-__all__ = ["Tune", "TuneError", "load_tune", "parse_cli", "read_blackbox_headers", "tune_from_blackbox_header"]
+__all__ = ["Tune", "TuneError", "TuneKind", "load_tune", "parse_cli", "read_blackbox_headers",
+           "tune_from_blackbox_header"]
 
 MAX_TUNE_BYTES = 64 * 1024 * 1024  # a blackbox file is read only up to its headers, but never more than this
 
@@ -46,6 +48,15 @@ class TuneError(ConfigError):
     """A tune file that cannot be read: the message names the file and the line."""
 
 
+class TuneKind(StrEnum):
+    """What a configuration was read from."""
+
+    CLI = "cli"
+    """The firmware's CLI ``diff`` or ``dump``."""
+    BLACKBOX = "blackbox"
+    """A blackbox log's header."""
+
+
 @dataclass(frozen=True)
 class Tune:
     """A Betaflight configuration as written by the firmware that wrote it.
@@ -56,7 +67,7 @@ class Tune:
         or a blackbox header's ``Firmware revision``); empty if the file does not say.
     version : (major, minor, patch) parsed from ``firmware``; (0, 0, 0) if unknown.
     source : where it came from (a path, ``path#log2``, ...).
-    kind : ``"cli"`` (diff or dump) or ``"blackbox"`` (a log header).
+    kind : :class:`TuneKind`: ``cli`` (diff or dump) or ``blackbox`` (a log header).
     active_profile, active_rateprofile : the PID profile and rate profile the quad flew.
     lines : ``(section, index, name, value, line)`` in file order. ``section`` is ``master``,
         ``profile``, ``rateprofile`` (``index`` its number) or ``command`` (``name`` the command
@@ -66,14 +77,16 @@ class Tune:
     firmware: str
     version: tuple[int, int, int]
     source: str
-    kind: str
+    kind: TuneKind
     active_profile: int
     active_rateprofile: int
     lines: tuple[tuple[str, int, str, str, int], ...]
 
     def __post_init__(self) -> None:
-        if self.kind not in ("cli", "blackbox"):
-            raise ConfigError(f"tune {self.source}: kind {self.kind!r}: expected 'cli' or 'blackbox'")
+        try:
+            object.__setattr__(self, "kind", TuneKind(self.kind))
+        except ValueError:
+            raise ConfigError(f"tune {self.source}: kind {self.kind!r}: expected 'cli' or 'blackbox'") from None
         for entry in self.lines:
             if len(entry) != 5 or entry[0] not in SECTIONS:
                 raise ConfigError(f"tune {self.source}: bad entry {entry!r}")
@@ -161,7 +174,8 @@ def parse_cli(text: str, *, source: str) -> Tune:
                             "profile, rateprofile, feature, aux, serial, ... lines)")
     if not lines:
         raise TuneError(f"{source}: no Betaflight settings found (expected a CLI diff or dump)")
-    return Tune(firmware, _version(firmware), source, "cli", active["profile"], active["rateprofile"], tuple(lines))
+    return Tune(firmware, _version(firmware), source, TuneKind.CLI, active["profile"], active["rateprofile"],
+                tuple(lines))
 
 
 def read_blackbox_headers(data: bytes) -> list[dict[str, str]]:
@@ -304,7 +318,7 @@ def tune_from_blackbox_header(header: Mapping[str, str], *, source: str) -> Tune
                                 f"allowed 0..{len(table) - 1}")
             value = table[int(value)]
         lines.append(("master", 0, cli.lower(), value, number))
-    return Tune(firmware, _version(firmware), source, "blackbox", 0, 0, tuple(lines))
+    return Tune(firmware, _version(firmware), source, TuneKind.BLACKBOX, 0, 0, tuple(lines))
 
 
 def load_tune(path: str | Path, *, log_index: int | None = None) -> Tune:

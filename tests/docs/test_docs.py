@@ -81,6 +81,10 @@ def smaller(command: str) -> str:
 
 SLOW_ONLY = {
     ".venv/bin/python benchmarks/": "regenerates published results (minutes); runs in the slow suite as written",
+    "aerobat learn flip --flips 3 --max-rate-deg-s 1800 --dims 3 --plant fc": (
+        "flies the real-time rehearsal (30 trials, about 9 minutes; 2 trials still take 40 s of wall clock); the "
+        "fast suite flies --plant fc through the CLI in tests/plants/betaflight/test_fc_rehearsal.py"),
+    ".venv/bin/python scripts/results_fc.py summary": "summarizes the session the command above stored",
 }
 
 

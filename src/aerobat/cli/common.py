@@ -19,6 +19,7 @@ from aerobat.core.bounds import choices_of
 from aerobat.core.correction import CorrectionKind
 from aerobat.errors import AerobatError, ConfigError, OutputError
 from aerobat.quadrotor.feedback import FeedbackScheme
+from aerobat.quadrotor.maneuvers.flip import Axis, Coast
 
 __all__ = [
     "CommandFailed",
@@ -282,8 +283,8 @@ def add_maneuver_options(p: argparse.ArgumentParser, *, optional: bool = False, 
                    help="coast rate c_pmax [deg/s], flip only (default: 1800)")
     p.add_argument("--dims", type=int, choices=(2, 3), default=None,
                    help="2D with 5 parameters or 3D with 9, flip only (default: 3)")
-    p.add_argument("--axis", choices=("roll", "pitch"), default=None, help="flip axis, flip only (default: roll)")
-    p.add_argument("--coast", choices=("min", "max"), default=None,
+    p.add_argument("--axis", choices=choices_of(Axis), default=None, help="flip axis, flip only (default: roll)")
+    p.add_argument("--coast", choices=choices_of(Coast), default=None,
                    help="coast collective β̲ or β̄, flip only (default: min)")
     p.add_argument("--ramp-s", type=finite_float(0.0, 1.0, "s"), default=None,
                    help="thrust ramp-down duration [s], flip only (default: 0.1)")

@@ -47,6 +47,7 @@ from aerobat.cli.stopping import Stopped, sigterm_stops
 from aerobat.core.bounds import choices_of
 from aerobat.errors import ConfigError, DesignFailed
 from aerobat.quadrotor.feedback import FeedbackScheme
+from aerobat.quadrotor.maneuvers.flip import Axis
 
 __all__ = ["add_execution_options", "register", "report_failures", "run_cli_study"]
 
@@ -470,7 +471,7 @@ def register(sub: Any) -> None:
     env.add_argument("--rates-deg-s", default="600:2000:8", metavar="A:B:N|LIST",
                      help="max rates A:B:N or a comma list [deg/s]")
     env.add_argument("--dims", type=int, choices=(2, 3), default=2, help="2D or 3D flips")
-    env.add_argument("--axis", choices=("roll", "pitch"), default="roll", help="flip axis")
+    env.add_argument("--axis", choices=choices_of(Axis), default="roll", help="flip axis")
     env.add_argument("--vehicle", default="hummingbird", help="design vehicle: preset or TOML file")
     env.add_argument("--json", action="store_true", help="print one JSON object")
     add_execution_options(env)

@@ -38,9 +38,12 @@ from aerobat.quadrotor.envelope import ReducedEnvelope
 from aerobat.quadrotor.program import Program, RampDown, Switch
 from aerobat.quadrotor.vehicle import VehicleParams
 
-__all__ = ["FlipStages", "MultiFlip", "flip_from_spec"]
+__all__ = ["Axis", "Coast", "FlipStages", "MultiFlip", "flip_from_spec"]
 
 Axis = Literal["roll", "pitch"]
+"""The axis a flip turns about: roll (in the Y–Z plane) or pitch (X–Z)."""
+Coast = Literal["min", "max"]
+"""The collective of a flip's coast stage: the reduced envelope's minimum β̲ or its maximum β̄."""
 
 
 @dataclass(frozen=True)
@@ -81,7 +84,7 @@ class MultiFlip:
         0.5, 100.0, unit=f"rad/s, {math.degrees(0.5):.0f}–{math.degrees(100):.0f} °/s", as_float=True))
     axis: Axis = bounded("roll", OneOf(Axis))
     dims: int = bounded(3, Integer(2, 3))
-    coast_collective: Literal["min", "max"] = bounded("min", OneOf(Literal["min", "max"]))
+    coast_collective: Coast = bounded("min", OneOf(Coast))
     ramp_collective_s: float = bounded(0.1, Interval(0.0, 1.0, unit="s", as_float=True))
     name: str = field(default="", compare=False)
 
@@ -320,9 +323,9 @@ def flip_from_spec(spec: Mapping[str, Any], source: str) -> MultiFlip:
             vehicle=vehicle,
             flips=table_field(spec, "flips", source, int, "an integer"),
             max_rate_rad_s=float(table_field(spec, "max_rate_rad_s", source, (int, float), "a number [rad/s]")),
-            axis=table_field(spec, "axis", source, str, "'roll' or 'pitch'"),
+            axis=table_field(spec, "axis", source, str, f"one of {OneOf(Axis).describe()}"),
             dims=table_field(spec, "dims", source, int, "2 or 3"),
-            coast_collective=table_field(spec, "coast_collective", source, str, "'min' or 'max'"),
+            coast_collective=table_field(spec, "coast_collective", source, str, f"one of {OneOf(Coast).describe()}"),
             ramp_collective_s=float(table_field(spec, "ramp_collective_s", source, (int, float), "a number [s]")),
         )
     except ConfigError as exc:

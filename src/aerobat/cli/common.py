@@ -15,11 +15,11 @@ import sys
 from pathlib import Path
 from typing import Any, NoReturn
 
-from aerobat.core.bounds import choices_of
+from aerobat.core.bounds import SEEDS, choices_of
 from aerobat.core.correction import CorrectionKind
 from aerobat.errors import AerobatError, ConfigError, OutputError
 from aerobat.quadrotor.feedback import FeedbackScheme
-from aerobat.quadrotor.maneuvers.flip import Axis, Coast
+from aerobat.quadrotor.maneuvers.flip import FLIPS, MAX_RATE_DEG_S, Axis, Coast
 
 __all__ = [
     "CommandFailed",
@@ -278,8 +278,9 @@ def add_maneuver_options(p: argparse.ArgumentParser, *, optional: bool = False, 
                    help="maneuver family (required unless --maneuver" + (" or --resume" if optional else "") + ")")
     p.add_argument("--maneuver", dest="maneuver_source", metavar="FILE.toml|package.module:Name", default=None,
                    help="a maneuver file (docs/maneuvers.md) or a Python maneuver, instead of a family (default: none)")
-    p.add_argument("--flips", type=bounded_int(1, 10), default=None, help="number of flips c_N, flip only (default: 3)")
-    p.add_argument("--max-rate-deg-s", type=finite_float(30.0, 5700.0, "deg/s"), default=None,
+    p.add_argument("--flips", type=bounded_int(*FLIPS.bounds()), default=None,
+                   help="number of flips c_N, flip only (default: 3)")
+    p.add_argument("--max-rate-deg-s", type=finite_float(*MAX_RATE_DEG_S.bounds(), "deg/s"), default=None,
                    help="coast rate c_pmax [deg/s], flip only (default: 1800)")
     p.add_argument("--dims", type=int, choices=(2, 3), default=None,
                    help="2D with 5 parameters or 3D with 9, flip only (default: 3)")
@@ -339,7 +340,7 @@ def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | No
                             "(default: aerobat's own settings)")
         p.add_argument("--tune-log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
                        help="which log of a blackbox file holding several gives the tune (default: 1)")
-    p.add_argument("--seed", type=bounded_int(0, 2**63 - 1), default=0, help="seed of the plant's random generator")
+    p.add_argument("--seed", type=bounded_int(*SEEDS.bounds()), default=0, help="seed of the plant's random generator")
     if not feedback:
         return
     p.add_argument("--feedback", choices=choices_of(FeedbackScheme), default=None,

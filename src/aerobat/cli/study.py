@@ -268,16 +268,12 @@ def _parse_list(text: str, option: str, cast: Any) -> list:
 
 
 def _cmd_envelope(args: argparse.Namespace) -> int:
-    from aerobat.experiments.studies import ENVELOPE_FLIPS, ENVELOPE_RATES_DEG_S, envelope_study
+    from aerobat.experiments.studies import check_envelope_grid, envelope_study
     from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
 
-    flips = _parse_list(args.flips, "--flips", int)
-    if not all(ENVELOPE_FLIPS[0] <= n <= ENVELOPE_FLIPS[1] for n in flips):
-        raise ConfigError(f"--flips {args.flips!r}: flip counts must be {ENVELOPE_FLIPS[0]} … {ENVELOPE_FLIPS[1]}")
-    rates = _parse_list(args.rates_deg_s, "--rates-deg-s", float)
-    if not all(ENVELOPE_RATES_DEG_S[0] <= r <= ENVELOPE_RATES_DEG_S[1] for r in rates):
-        raise ConfigError(f"--rates-deg-s {args.rates_deg_s!r}: rates must be {ENVELOPE_RATES_DEG_S[0]:g} … "
-                          f"{ENVELOPE_RATES_DEG_S[1]:g} deg/s")
+    # the study's own check, before the store is opened
+    flips, rates = check_envelope_grid(_parse_list(args.flips, "--flips", int),
+                                       _parse_list(args.rates_deg_s, "--rates-deg-s", float))
     config = vehicle_from_name_or_file(args.vehicle)
     run = functools.partial(envelope_study, model=config, flips=flips, rates_deg_s=rates, dims=args.dims,
                             axis=args.axis)

@@ -10,7 +10,7 @@ from typing import Any
 
 from aerobat.cli.common import HelpFormatter, console
 from aerobat.core.bounds import choices_of
-from aerobat.quadrotor.maneuvers.flip import Axis
+from aerobat.quadrotor.maneuvers.flip import FLIPS, MAX_RATE_DEG_S, Axis
 
 __all__ = ["register"]
 
@@ -32,8 +32,8 @@ def _cmd_vehicles(args: argparse.Namespace) -> int:
     from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
 
     configs = vehicle_library() + [vehicle_from_name_or_file(path) for path in args.vehicle or []]
-    flips = _parse_list(args.flip_counts, "--flip-counts", int, 1, 10)
-    rates = _parse_list(args.rates_deg_s, "--rates-deg-s", float, 30.0, 5700.0)
+    flips = _parse_list(args.flip_counts, "--flip-counts", int, *FLIPS.bounds())
+    rates = _parse_list(args.rates_deg_s, "--rates-deg-s", float, *MAX_RATE_DEG_S.bounds())
     rows = []
     for config in configs:
         row = vehicle_envelope(config)

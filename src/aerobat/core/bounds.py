@@ -44,6 +44,7 @@ __all__ = [
     "Interval",
     "Items",
     "OneOf",
+    "SEEDS",
     "Span",
     "bounded",
     "choices_of",
@@ -154,6 +155,12 @@ class Interval(Constraint):
             values.append(math.nextafter(high, math.inf) if self.high_inclusive else high)
         return values
 
+    def bounds(self) -> tuple[float, float]:
+        """``(low, high)`` for a command-line option (both limits must be numbers)."""
+        if not isinstance(self.low, int | float) or not isinstance(self.high, int | float):
+            raise TypeError("an Interval without two numeric limits has no (low, high)")
+        return float(self.low), float(self.high)
+
 
 @dataclass(frozen=True)
 class Integer(Constraint):
@@ -186,6 +193,10 @@ ITERATIONS = Integer(1, MAX_ITERATIONS)
 """The one allowed range of a number of measured iterations: of a ``learn`` call, of a durable
 session's target, of ``aerobat learn --trials`` (1 … :data:`MAX_ITERATIONS`). Here, not in
 :mod:`aerobat.core.learning`, so that the store checks it without loading the method."""
+
+SEEDS = Integer(0, 2**63 - 1)
+"""The one allowed range of a plant's random seed (:class:`~aerobat.plants.PlantChoice`, the arena,
+``--seed``): any seed NumPy's generator takes that the store's SQLite INTEGER column holds."""
 
 
 def choices_of(kind: Any) -> tuple[Any, ...]:

@@ -38,12 +38,21 @@ from aerobat.quadrotor.envelope import ReducedEnvelope
 from aerobat.quadrotor.program import Program, RampDown, Switch
 from aerobat.quadrotor.vehicle import VehicleParams
 
-__all__ = ["Axis", "Coast", "FlipStages", "MultiFlip", "flip_from_spec"]
+__all__ = ["FLIPS", "MAX_RATE", "MAX_RATE_DEG_S", "Axis", "Coast", "FlipStages", "MultiFlip", "flip_from_spec"]
 
 Axis = Literal["roll", "pitch"]
 """The axis a flip turns about: roll (in the Y–Z plane) or pitch (X–Z)."""
 Coast = Literal["min", "max"]
 """The collective of a flip's coast stage: the reduced envelope's minimum β̲ or its maximum β̄."""
+
+FLIPS = Integer(1, 10)
+"""c_N, the full turns a flip may make (:attr:`MultiFlip.flips`, the envelope study's flip counts, ``--flips``)."""
+_RATE_LOW_RAD_S, _RATE_HIGH_RAD_S = 0.5, 100.0
+MAX_RATE = Interval(_RATE_LOW_RAD_S, _RATE_HIGH_RAD_S, as_float=True,
+                    unit=f"rad/s, {math.degrees(_RATE_LOW_RAD_S):.0f}–{math.degrees(_RATE_HIGH_RAD_S):.0f} °/s")
+"""c_pmax, the coast rates a flip may have [rad/s] (:attr:`MultiFlip.max_rate_rad_s`)."""
+MAX_RATE_DEG_S = Interval(math.degrees(_RATE_LOW_RAD_S), math.degrees(_RATE_HIGH_RAD_S), unit="deg/s")
+"""The same range in degrees per second, for what is given in them (``--max-rate-deg-s``, the envelope's rates)."""
 
 
 @dataclass(frozen=True)
@@ -79,9 +88,8 @@ class MultiFlip:
     """
 
     vehicle: VehicleParams
-    flips: int = bounded(3, Integer(1, 10))
-    max_rate_rad_s: float = bounded(math.radians(1800.0), Interval(
-        0.5, 100.0, unit=f"rad/s, {math.degrees(0.5):.0f}–{math.degrees(100):.0f} °/s", as_float=True))
+    flips: int = bounded(3, FLIPS)
+    max_rate_rad_s: float = bounded(math.radians(1800.0), MAX_RATE)
     axis: Axis = bounded("roll", OneOf(Axis))
     dims: int = bounded(3, Integer(2, 3))
     coast_collective: Coast = bounded("min", OneOf(Coast))

@@ -56,10 +56,53 @@ def _multiflip():
     return MultiFlip(vehicle=VehicleParams())
 
 
+def _input_arc():
+    from aerobat.quadrotor.timeoptimal.solution import ArcKind, InputArc
+
+    return InputArc(kind=ArcKind.MAX, start_s=0.5, end_s=1.0, value=20.0)
+
+
+def _program():
+    from aerobat.quadrotor.program import Program
+
+    return Program(switches=(), duration_s=1.0)
+
+
+def _geometry():
+    from aerobat.quadrotor.identification.logfit import Geometry
+
+    return Geometry(mass_kg=0.5, motor_x_m=0.08, motor_y_m=0.1)
+
+
+def _log_fit_options():
+    from aerobat.quadrotor.identification.logfit import LogFitOptions
+
+    return LogFitOptions(fixed_time_constant_s=0.03)  # a value, so that its bound is tested too (None: fitted)
+
+
+def _parameter_spec():
+    from aerobat.core.maneuver import ParameterSpec
+
+    return ParameterSpec(name="p0", description="a duration", unit="s", lower=0.0, upper=2.0, scale=0.02)
+
+
+def _error_spec():
+    from aerobat.core.maneuver import ErrorSpec
+
+    return ErrorSpec(name="z", unit="m", scale=0.1)
+
+
 EXAMPLES = {
-    # classes with required fields: one valid instance each (the others are built with their defaults)
+    # classes with required fields (or a default of None): one valid instance each (the others are
+    # built with their defaults)
     "aerobat.quadrotor.maneuvers.translation.Translation": _translation,
     "aerobat.quadrotor.maneuvers.flip.MultiFlip": _multiflip,
+    "aerobat.quadrotor.timeoptimal.solution.InputArc": _input_arc,
+    "aerobat.quadrotor.program.Program": _program,
+    "aerobat.quadrotor.identification.logfit.Geometry": _geometry,
+    "aerobat.quadrotor.identification.logfit.LogFitOptions": _log_fit_options,
+    "aerobat.core.maneuver.ParameterSpec": _parameter_spec,
+    "aerobat.core.maneuver.ErrorSpec": _error_spec,
 }
 
 
@@ -87,6 +130,8 @@ def _cases() -> list[tuple[type, str, object, str]]:
 def test_the_walk_finds_the_parameter_classes():
     names = {cls.__name__ for cls in CLASSES}
     assert {"Aerodynamics", "Disturbances", "Drift", "MotionCapture", "Supervisor", "Volume"} <= names
+    assert {"BenchmarkLimits", "InputArc", "RampDown", "Program", "Geometry", "LogFitOptions", "ParameterSpec",
+            "ErrorSpec", "SafetyLimits", "PlantChoice"} <= names
 
 
 @pytest.mark.parametrize("cls, field, value, where, allowed", _cases(),
@@ -112,6 +157,8 @@ def test_the_constraints_describe_their_ranges_as_the_messages_do():
     assert Interval(low=0.0).describe() == ">= 0"
     assert Interval(high=0.0, closed="left").describe() == "< 0"
     assert Integer(1, 10_000).describe() == "1 … 10000"
+    fence = Span(Interval(-50.0, 50.0, unit="m"), strict=True, end=50.0)
+    assert fence.describe() == "[0] [-50, 50] (m); [1] > [0], <= 50"
     with pytest.raises(ConfigError, match=r"^n = 2.5 must be an integer|^n must be an integer, got float 2.5$"):
         Integer(1, 3).check("n", 2.5)
 

@@ -302,18 +302,24 @@ class Items(Constraint):
 @dataclass(frozen=True)
 class Span(Constraint):
     """A range ``(low, high)`` of two numbers: ``low`` within :attr:`start`, ``high`` at least ``low``
-    (above it, with :attr:`strict`).
+    (above it, with :attr:`strict`) and at most :attr:`end` if given.
 
     Messages name ``field[0]`` and ``field[1]``; ``high`` below ``low`` is told ``allowed >= low``
-    (``> low``).
+    (``> low``), or ``[low, end]`` (``(low, end]``).
     """
 
     start: Interval = Interval()
     strict: bool = False
+    end: float | None = None
 
     def _items(self, low: Any) -> Items:
-        end = Interval(low=low, closed="neither" if self.strict else "both", unit=self.start.unit)
-        return Items((self.start, end), what="two numbers (low, high)")
+        closed: Literal["both", "right", "left", "neither"]
+        if self.end is None:
+            closed = "neither" if self.strict else "both"
+        else:
+            closed = "right" if self.strict else "both"
+        high = Interval(low=low, high=self.end, closed=closed, unit=self.start.unit)
+        return Items((self.start, high), what="two numbers (low, high)")
 
     def check(self, name: str, value: Any, owner: Any = None) -> Any:
         """``value`` (as a tuple) if a range starting within :attr:`start`; :class:`ConfigError` otherwise."""
@@ -324,7 +330,8 @@ class Span(Constraint):
 
     def describe(self, owner: Any = None) -> str:
         """The range of the low end; the high end is at least the low one."""
-        return f"[0] {self.start.describe(owner)}; [1] {'>' if self.strict else '>='} [0]"
+        upto = "" if self.end is None else f", <= {self.end:g}"
+        return f"[0] {self.start.describe(owner)}; [1] {'>' if self.strict else '>='} [0]{upto}"
 
     def outside(self, owner: Any = None) -> list[Any]:
         """Not used for ranges: see :meth:`outside_items`."""

@@ -18,7 +18,7 @@ import textwrap
 import pytest
 
 import aerobat
-from aerobat.core.bounds import Integer, Interval, Items, OneOf, Span, constraints
+from aerobat.core.bounds import BOUNDS, Integer, Interval, Items, OneOf, Span, bounded, constraints
 from aerobat.errors import ConfigError
 
 
@@ -207,6 +207,100 @@ def test_no_parameter_class_checks_its_own_ranges_by_hand():
     assert not undeclared, ("declare these bounds next to the field (bounded(default, Interval(...)) and "
                             f"validate(self)), or allow-list the class with its reason: {undeclared}")
     assert set(UNDECLARED) <= set(by_hand), f"allowed but checks nothing by hand now: {set(UNDECLARED) - set(by_hand)}"
+
+
+ORDERINGS = (ast.Lt, ast.LtE, ast.Gt, ast.GtE)
+REFUSALS = {"ConfigError", "ValueError"}
+
+CROSS_FIELD = {
+    "aerobat.core.maneuver.ParameterSpec": "lower < upper, where either may be infinite (no bound), which no "
+                                           "Interval allows",
+}
+"""Dataclasses whose ``__post_init__`` compares fields without declared bounds itself, each with its reason."""
+
+
+def _refuses(statements: list[ast.stmt]) -> bool:
+    for node in (n for s in statements for n in ast.walk(s)):
+        if isinstance(node, ast.Raise) and isinstance(node.exc, ast.Call):
+            func = node.exc.func
+            if (func.id if isinstance(func, ast.Name) else getattr(func, "attr", None)) in REFUSALS:
+                return True
+    return False
+
+
+def _compared_by_hand(cls: type) -> list[str]:
+    """Undeclared fields of ``cls`` whose value ``__post_init__`` compares (<, <=, >, >=) in an ``if`` that raises
+    :class:`ConfigError` or ``ValueError``: ``self.field`` itself, or a name bound to ``getattr(self, …)`` or
+    ``self.field``, as an operand (a field inside a call, ``len(self.items)`` or ``np.diff(self.times)``, is its
+    shape or order, not its range)."""
+    post_init = vars(cls).get("__post_init__")
+    if post_init is None:
+        return []
+    tree = ast.parse(textwrap.dedent(inspect.getsource(post_init)))
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    bound: dict[str, str] = {}  # local name -> the field (or getattr's argument) it holds
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.Assign):
+            continue
+        value, source = node.value, None
+        if (isinstance(value, ast.Call) and isinstance(value.func, ast.Name) and value.func.id == "getattr"
+                and isinstance(value.args[0], ast.Name) and value.args[0].id == "self"):
+            source = ast.unparse(value.args[1])
+        elif isinstance(value, ast.Attribute) and isinstance(value.value, ast.Name) and value.value.id == "self":
+            source = value.attr
+        if source is not None:
+            bound.update({name.id: source for target in node.targets for name in ast.walk(target)
+                          if isinstance(name, ast.Name)})
+    found = set()
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.If) or not _refuses(node.body):
+            continue
+        for compare in (c for c in ast.walk(node.test) if isinstance(c, ast.Compare)):
+            if not any(isinstance(op, ORDERINGS) for op in compare.ops):
+                continue
+            for operand in (compare.left, *compare.comparators):
+                for name in (operand, *(operand.elts if isinstance(operand, ast.Tuple) else ())):
+                    if isinstance(name, ast.Attribute) and isinstance(name.value, ast.Name) and name.value.id == "self":
+                        field = name.attr
+                    elif isinstance(name, ast.Name) and name.id in bound:
+                        field = bound[name.id]
+                    else:
+                        continue
+                    if field not in fields or BOUNDS not in fields[field].metadata:
+                        found.add(f"{field}: {ast.unparse(node.test)}")
+    return sorted(found)
+
+
+def test_no_parameter_class_compares_undeclared_fields_by_hand():
+    by_hand = {key: found for key, cls in DATACLASSES.items() if (found := _compared_by_hand(cls))}
+    undeclared = {key: found for key, found in by_hand.items() if key not in CROSS_FIELD}
+    assert not undeclared, ("declare these bounds next to the field (bounded(default, Interval(...)), a limit "
+                            f"may name another field) or list a genuine cross-field check in CROSS_FIELD: {undeclared}")
+    stale = set(CROSS_FIELD) - set(by_hand)
+    assert not stale, f"listed but compares nothing by hand now: {stale}"
+
+
+def test_the_scan_sees_a_comparison_by_hand():
+    @dataclasses.dataclass(frozen=True)
+    class Compared:
+        low_s: float = 0.0
+        high_s: float = 1.0
+        items: tuple[float, ...] = ()
+        gain: float = bounded(1.0, Interval(0.0, 2.0))
+
+        def __post_init__(self) -> None:
+            for name in ("low_s", "high_s"):
+                value = getattr(self, name)
+                if value < 0:
+                    raise ConfigError(f"{name} = {value}: allowed >= 0")
+            if len(self.items) > 3 or self.gain > 1.5:  # a length, and a declared field: not flagged
+                raise ValueError("too many")
+            if not self.low_s < self.high_s:
+                raise ConfigError("low_s must be below high_s")
+
+    assert _compared_by_hand(Compared) == [
+        "high_s: not self.low_s < self.high_s", "low_s: not self.low_s < self.high_s", "name: value < 0"]
+    assert _compared_by_hand(CLASSES[0]) == []
 
 
 def test_the_scan_sees_a_range_checked_by_hand():

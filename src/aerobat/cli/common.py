@@ -15,11 +15,12 @@ import sys
 from pathlib import Path
 from typing import Any, NoReturn
 
-from aerobat.core.bounds import SEEDS, choices_of
+from aerobat.core.bounds import SEEDS, Integer, choices_of
 from aerobat.core.correction import CorrectionKind
 from aerobat.errors import AerobatError, ConfigError, OutputError
 from aerobat.quadrotor.feedback import FeedbackScheme
-from aerobat.quadrotor.maneuvers.flip import FLIPS, MAX_RATE_DEG_S, Axis, Coast
+from aerobat.quadrotor.maneuvers.flip import DIMS, FLIPS, MAX_RATE_DEG_S, Axis, Coast
+from aerobat.quadrotor.program import MANEUVER_RAMP_S
 
 __all__ = [
     "CommandFailed",
@@ -30,6 +31,7 @@ __all__ = [
     "add_plant_options",
     "old_spelling",
     "console",
+    "each_of",
     "maneuver_from_args",
     "open_store",
     "output_dir",
@@ -243,6 +245,12 @@ def bounded_int(low: int, high: int) -> Any:
     return parse
 
 
+def each_of(constraint: Integer) -> tuple[int, ...]:
+    """The integers a bounded :class:`~aerobat.core.bounds.Integer` allows, as an option's choices."""
+    low, high = constraint.bounds()
+    return tuple(range(low, high + 1))
+
+
 def finite_float(low: float, high: float, unit: str = "") -> Any:
     """An argparse type: a finite number in [low, high]."""
     suffix = f" {unit}" if unit else ""
@@ -282,12 +290,12 @@ def add_maneuver_options(p: argparse.ArgumentParser, *, optional: bool = False, 
                    help="number of flips c_N, flip only (default: 3)")
     p.add_argument("--max-rate-deg-s", type=finite_float(*MAX_RATE_DEG_S.bounds(), "deg/s"), default=None,
                    help="coast rate c_pmax [deg/s], flip only (default: 1800)")
-    p.add_argument("--dims", type=int, choices=(2, 3), default=None,
+    p.add_argument("--dims", type=int, choices=each_of(DIMS), default=None,
                    help="2D with 5 parameters or 3D with 9, flip only (default: 3)")
     p.add_argument("--axis", choices=choices_of(Axis), default=None, help="flip axis, flip only (default: roll)")
     p.add_argument("--coast", choices=choices_of(Coast), default=None,
                    help="coast collective β̲ or β̄, flip only (default: min)")
-    p.add_argument("--ramp-s", type=finite_float(0.0, 1.0, "s"), default=None,
+    p.add_argument("--ramp-s", type=finite_float(*MANEUVER_RAMP_S.bounds(), "s"), default=None,
                    help="thrust ramp-down duration [s], flip only (default: 0.1)")
     p.add_argument("--to-m", dest="to", metavar="Y,Z", default=None,
                    help="target Y,Z [m], translation only (default: 5,5)")

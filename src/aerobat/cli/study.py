@@ -33,6 +33,7 @@ from aerobat.cli.common import (
     bounded_int,
     check_outputs,
     console,
+    each_of,
     finite_float,
     maneuver_from_args,
     old_spelling,
@@ -47,7 +48,7 @@ from aerobat.cli.stopping import Stopped, sigterm_stops
 from aerobat.core.bounds import choices_of
 from aerobat.errors import ConfigError, DesignFailed
 from aerobat.quadrotor.feedback import FeedbackScheme
-from aerobat.quadrotor.maneuvers.flip import Axis
+from aerobat.quadrotor.maneuvers.flip import DIMS, Axis
 
 __all__ = ["add_execution_options", "register", "report_failures", "run_cli_study"]
 
@@ -466,7 +467,7 @@ def register(sub: Any) -> None:
     env.add_argument("--flips", default="1,2,3,4", metavar="LIST", help="flip counts, e.g. 1,2,3,4")
     env.add_argument("--rates-deg-s", default="600:2000:8", metavar="A:B:N|LIST",
                      help="max rates A:B:N or a comma list [deg/s]")
-    env.add_argument("--dims", type=int, choices=(2, 3), default=2, help="2D or 3D flips")
+    env.add_argument("--dims", type=int, choices=each_of(DIMS), default=2, help="2D or 3D flips")
     env.add_argument("--axis", choices=choices_of(Axis), default="roll", help="flip axis")
     env.add_argument("--vehicle", default="hummingbird", help="design vehicle: preset or TOML file")
     env.add_argument("--json", action="store_true", help="print one JSON object")

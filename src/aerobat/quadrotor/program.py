@@ -42,6 +42,7 @@ from aerobat.errors import ConfigError
 
 __all__ = [
     "CHANNELS",
+    "MANEUVER_RAMP_S",
     "CompiledProgram",
     "Program",
     "RampDown",
@@ -64,6 +65,9 @@ CHANNEL_UNITS = {
 CHANNEL_LIMITS = {"collective": (0.0, 200.0), "rate": (-100.0, 100.0), "accel": (-1e4, 1e4)}
 MAX_DURATION_S = 600.0
 _RAMP = Interval(0.0, None, unit="s")
+MANEUVER_RAMP_S = Interval(0.0, 1.0, unit="s", as_float=True)
+"""The ramp-down a maneuver family may ask for [s] (``MultiFlip.ramp_collective_s``, ``Translation.ramp_s``,
+``--ramp-s``); a program's own :class:`RampDown` may be longer."""
 
 
 def _channel_limits(channel: str) -> tuple[float, float]:

@@ -148,9 +148,10 @@ def test_envelope_study_grid_and_refused_ranges(tmp_path, pool):
     with Store(tmp_path / "s.sqlite") as store:
         report = envelope_study(store, config, flips=[1, 2], rates_deg_s=[900.0, 1800.0], dims=2, executor=pool)
         stored = study_report(store, report.study_id)
-        with pytest.raises(ConfigError, match=r"flips = \[0\]: flip counts must be 1 … 10"):
+        with pytest.raises(ConfigError, match=r"^flips\[0\] = 0 is out of range: allowed 1 … 10$"):
             envelope_study(store, config, flips=[0], rates_deg_s=[900.0])
-        with pytest.raises(ConfigError, match=r"rates_deg_s = \[6000.0\]: rates must be 30 … 5700 deg/s"):
+        with pytest.raises(ConfigError, match=r"^rates_deg_s\[0\] = 6000 is out of range: allowed "
+                                              r"\[28.6479, 5729.58\] \(deg/s\)$"):
             envelope_study(store, config, flips=[1], rates_deg_s=[6000.0])
     assert isinstance(report, EnvelopeReport)
     assert report.feasible.shape == (2, 2) and np.all(report.feasible == 1.0)

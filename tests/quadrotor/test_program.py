@@ -68,11 +68,11 @@ def sw(t: float, channel: str, value: float) -> Switch:
             1.0,
             r"^switch 0 \(accel_q\): value = -20000 is out of range",
         ),
-        ((), 0.0, r"^duration_s = 0.0 is out of range: allowed \(0, 600\]"),
-        ((), -1.0, r"^duration_s = -1.0 is out of range"),
-        ((), math.nan, r"^duration_s = nan is out of range"),
-        ((), 601.0, r"^duration_s = 601.0 is out of range"),
-        ((), "1.0", r"^duration_s must be a number, got '1.0'"),
+        ((), 0.0, r"^duration_s = 0 is out of range: allowed \(0, 600\] \(s\)$"),
+        ((), -1.0, r"^duration_s = -1 is out of range"),
+        ((), math.nan, r"^duration_s = nan must be finite \(s\)$"),
+        ((), 601.0, r"^duration_s = 601 is out of range"),
+        ((), "1.0", r"^duration_s must be a number, got str '1.0'"),
     ],
 )
 def test_invalid_program_names_switch_and_field(switches, duration, pattern):
@@ -91,8 +91,8 @@ def test_same_time_on_different_channels_is_allowed():
 @pytest.mark.parametrize(
     ("kwargs", "pattern"),
     [
-        ({"collective_s": -0.1}, r"^ramp_down.collective_s = -0.1 is out of range: allowed >= 0"),
-        ({"rates_s": math.inf}, r"^ramp_down.rates_s = inf is out of range"),
+        ({"collective_s": -0.1}, r"^collective_s = -0.1 is out of range: allowed >= 0 \(s\)$"),
+        ({"rates_s": math.inf}, r"^rates_s = inf must be finite \(s\)$"),
     ],
 )
 def test_invalid_ramp_down(kwargs, pattern):
@@ -101,7 +101,7 @@ def test_invalid_ramp_down(kwargs, pattern):
 
 
 def test_invalid_hover_collective():
-    with pytest.raises(ValueError, match=r"^hover_collective_m_s2 = -9.81 must be finite and > 0"):
+    with pytest.raises(ValueError, match=r"^hover_collective_m_s2 = -9.81 is out of range: allowed > 0 \(m/s²\)$"):
         Program(switches=(), duration_s=1.0, hover_collective_m_s2=-9.81)
 
 
@@ -133,7 +133,7 @@ def _switch(t: str, channel: str, value: str) -> str:
             HEADER + _switch("inf", "collective", "10.0"),
             ["switch 0 (collective)", "time_s = inf", "not finite"],
         ),
-        ("[program]\nduration_s = nan\n", ["duration_s = nan", "out of range"]),
+        ("[program]\nduration_s = nan\n", ["duration_s = nan", "must be finite"]),
         (
             "[program]\nduration_s = 1.0\nhover_collective_m_s2 = inf\n",
             ["hover_collective_m_s2 = inf"],

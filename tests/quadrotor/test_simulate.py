@@ -405,7 +405,7 @@ def test_batch_mixing_vehicles_with_and_without_latency_equals_separate_runs(sin
 @pytest.mark.parametrize(
     ("kwargs", "pattern"),
     [
-        ({"mode": "discrete"}, r"mode = 'discrete': allowed 'continuous' or 'sampled'"),
+        ({"mode": "discrete"}, r"mode = 'discrete': allowed 'continuous', 'sampled'"),
         ({"max_step_s": 0.0}, r"max_step_s = 0.0 must be finite and > 0"),
         ({"max_step_s": math.nan}, r"max_step_s = nan"),
         ({"tick_s": -1.0}, r"tick_s = -1.0 must be finite and > 0"),

@@ -15,10 +15,12 @@ import sys
 from pathlib import Path
 from typing import Any, NoReturn
 
-from aerobat.core.bounds import choices_of
+from aerobat.core.bounds import SEEDS, Integer, choices_of
 from aerobat.core.correction import CorrectionKind
 from aerobat.errors import AerobatError, ConfigError, OutputError
 from aerobat.quadrotor.feedback import FeedbackScheme
+from aerobat.quadrotor.maneuvers.flip import DIMS, FLIPS, MAX_RATE_DEG_S, Axis, Coast
+from aerobat.quadrotor.program import MANEUVER_RAMP_S
 
 __all__ = [
     "CommandFailed",
@@ -29,6 +31,7 @@ __all__ = [
     "add_plant_options",
     "old_spelling",
     "console",
+    "each_of",
     "maneuver_from_args",
     "open_store",
     "output_dir",
@@ -242,6 +245,12 @@ def bounded_int(low: int, high: int) -> Any:
     return parse
 
 
+def each_of(constraint: Integer) -> tuple[int, ...]:
+    """The integers a bounded :class:`~aerobat.core.bounds.Integer` allows, as an option's choices."""
+    low, high = constraint.bounds()
+    return tuple(range(low, high + 1))
+
+
 def finite_float(low: float, high: float, unit: str = "") -> Any:
     """An argparse type: a finite number in [low, high]."""
     suffix = f" {unit}" if unit else ""
@@ -277,15 +286,16 @@ def add_maneuver_options(p: argparse.ArgumentParser, *, optional: bool = False, 
                    help="maneuver family (required unless --maneuver" + (" or --resume" if optional else "") + ")")
     p.add_argument("--maneuver", dest="maneuver_source", metavar="FILE.toml|package.module:Name", default=None,
                    help="a maneuver file (docs/maneuvers.md) or a Python maneuver, instead of a family (default: none)")
-    p.add_argument("--flips", type=bounded_int(1, 10), default=None, help="number of flips c_N, flip only (default: 3)")
-    p.add_argument("--max-rate-deg-s", type=finite_float(30.0, 5700.0, "deg/s"), default=None,
+    p.add_argument("--flips", type=bounded_int(*FLIPS.bounds()), default=None,
+                   help="number of flips c_N, flip only (default: 3)")
+    p.add_argument("--max-rate-deg-s", type=finite_float(*MAX_RATE_DEG_S.bounds(), "deg/s"), default=None,
                    help="coast rate c_pmax [deg/s], flip only (default: 1800)")
-    p.add_argument("--dims", type=int, choices=(2, 3), default=None,
+    p.add_argument("--dims", type=int, choices=each_of(DIMS), default=None,
                    help="2D with 5 parameters or 3D with 9, flip only (default: 3)")
-    p.add_argument("--axis", choices=("roll", "pitch"), default=None, help="flip axis, flip only (default: roll)")
-    p.add_argument("--coast", choices=("min", "max"), default=None,
+    p.add_argument("--axis", choices=choices_of(Axis), default=None, help="flip axis, flip only (default: roll)")
+    p.add_argument("--coast", choices=choices_of(Coast), default=None,
                    help="coast collective β̲ or β̄, flip only (default: min)")
-    p.add_argument("--ramp-s", type=finite_float(0.0, 1.0, "s"), default=None,
+    p.add_argument("--ramp-s", type=finite_float(*MANEUVER_RAMP_S.bounds(), "s"), default=None,
                    help="thrust ramp-down duration [s], flip only (default: 0.1)")
     p.add_argument("--to-m", dest="to", metavar="Y,Z", default=None,
                    help="target Y,Z [m], translation only (default: 5,5)")
@@ -338,7 +348,7 @@ def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | No
                             "(default: aerobat's own settings)")
         p.add_argument("--tune-log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
                        help="which log of a blackbox file holding several gives the tune (default: 1)")
-    p.add_argument("--seed", type=bounded_int(0, 2**63 - 1), default=0, help="seed of the plant's random generator")
+    p.add_argument("--seed", type=bounded_int(*SEEDS.bounds()), default=0, help="seed of the plant's random generator")
     if not feedback:
         return
     p.add_argument("--feedback", choices=choices_of(FeedbackScheme), default=None,

@@ -19,7 +19,9 @@ from aerobat.cli.common import (
     console,
     plant_choice_from_args,
 )
+from aerobat.core.bounds import choices_of
 from aerobat.errors import ConfigError, DesignFailed
+from aerobat.quadrotor.simulate import Mode
 
 __all__ = ["register"]
 
@@ -164,7 +166,7 @@ def register(sub: Any) -> None:
                          formatter_class=HelpFormatter)
     sim.add_argument("program", help="program TOML file (required)")
     sim.add_argument("--vehicle", default="hummingbird", help="preset name or vehicle TOML file")
-    sim.add_argument("--mode", choices=("continuous", "sampled"), default="continuous",
+    sim.add_argument("--mode", choices=choices_of(Mode), default="continuous",
                      help="continuous-time model or 800 Hz onboard zero-order hold")
     sim.add_argument("--out", metavar="DIR", default=None,
                      help="folder for trajectory.png and simulation.json (default: none written)")

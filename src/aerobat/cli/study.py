@@ -33,6 +33,7 @@ from aerobat.cli.common import (
     bounded_int,
     check_outputs,
     console,
+    each_of,
     finite_float,
     maneuver_from_args,
     old_spelling,
@@ -47,6 +48,7 @@ from aerobat.cli.stopping import Stopped, sigterm_stops
 from aerobat.core.bounds import choices_of
 from aerobat.errors import ConfigError, DesignFailed
 from aerobat.quadrotor.feedback import FeedbackScheme
+from aerobat.quadrotor.maneuvers.flip import DIMS, Axis
 
 __all__ = ["add_execution_options", "register", "report_failures", "run_cli_study"]
 
@@ -267,16 +269,12 @@ def _parse_list(text: str, option: str, cast: Any) -> list:
 
 
 def _cmd_envelope(args: argparse.Namespace) -> int:
-    from aerobat.experiments.studies import ENVELOPE_FLIPS, ENVELOPE_RATES_DEG_S, envelope_study
+    from aerobat.experiments.studies import check_envelope_grid, envelope_study
     from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
 
-    flips = _parse_list(args.flips, "--flips", int)
-    if not all(ENVELOPE_FLIPS[0] <= n <= ENVELOPE_FLIPS[1] for n in flips):
-        raise ConfigError(f"--flips {args.flips!r}: flip counts must be {ENVELOPE_FLIPS[0]} … {ENVELOPE_FLIPS[1]}")
-    rates = _parse_list(args.rates_deg_s, "--rates-deg-s", float)
-    if not all(ENVELOPE_RATES_DEG_S[0] <= r <= ENVELOPE_RATES_DEG_S[1] for r in rates):
-        raise ConfigError(f"--rates-deg-s {args.rates_deg_s!r}: rates must be {ENVELOPE_RATES_DEG_S[0]:g} … "
-                          f"{ENVELOPE_RATES_DEG_S[1]:g} deg/s")
+    # the study's own check, before the store is opened
+    flips, rates = check_envelope_grid(_parse_list(args.flips, "--flips", int),
+                                       _parse_list(args.rates_deg_s, "--rates-deg-s", float))
     config = vehicle_from_name_or_file(args.vehicle)
     run = functools.partial(envelope_study, model=config, flips=flips, rates_deg_s=rates, dims=args.dims,
                             axis=args.axis)
@@ -469,8 +467,8 @@ def register(sub: Any) -> None:
     env.add_argument("--flips", default="1,2,3,4", metavar="LIST", help="flip counts, e.g. 1,2,3,4")
     env.add_argument("--rates-deg-s", default="600:2000:8", metavar="A:B:N|LIST",
                      help="max rates A:B:N or a comma list [deg/s]")
-    env.add_argument("--dims", type=int, choices=(2, 3), default=2, help="2D or 3D flips")
-    env.add_argument("--axis", choices=("roll", "pitch"), default="roll", help="flip axis")
+    env.add_argument("--dims", type=int, choices=each_of(DIMS), default=2, help="2D or 3D flips")
+    env.add_argument("--axis", choices=choices_of(Axis), default="roll", help="flip axis")
     env.add_argument("--vehicle", default="hummingbird", help="design vehicle: preset or TOML file")
     env.add_argument("--json", action="store_true", help="print one JSON object")
     add_execution_options(env)

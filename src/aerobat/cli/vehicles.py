@@ -9,6 +9,8 @@ import re
 from typing import Any
 
 from aerobat.cli.common import HelpFormatter, console
+from aerobat.core.bounds import choices_of
+from aerobat.quadrotor.maneuvers.flip import FLIPS, MAX_RATE_DEG_S, Axis
 
 __all__ = ["register"]
 
@@ -30,8 +32,8 @@ def _cmd_vehicles(args: argparse.Namespace) -> int:
     from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
 
     configs = vehicle_library() + [vehicle_from_name_or_file(path) for path in args.vehicle or []]
-    flips = _parse_list(args.flip_counts, "--flip-counts", int, 1, 10)
-    rates = _parse_list(args.rates_deg_s, "--rates-deg-s", float, 30.0, 5700.0)
+    flips = _parse_list(args.flip_counts, "--flip-counts", int, *FLIPS.bounds())
+    rates = _parse_list(args.rates_deg_s, "--rates-deg-s", float, *MAX_RATE_DEG_S.bounds())
     rows = []
     for config in configs:
         row = vehicle_envelope(config)
@@ -114,7 +116,7 @@ def register(sub: Any) -> None:
     p.add_argument("--flip-counts", metavar="LIST", default="1,2,3", help="flip counts of the grid")
     p.add_argument("--rates-deg-s", metavar="LIST", default="720,1080,1440,1800",
                    help="coast rates of the grid [deg/s]")
-    p.add_argument("--axis", choices=("roll", "pitch"), default="roll", help="flip axis of the grid")
+    p.add_argument("--axis", choices=choices_of(Axis), default="roll", help="flip axis of the grid")
     p.add_argument("--vehicle", action="append", metavar="FILE.toml",
                    help="also list this vehicle file (repeatable), e.g. an identified one (default: the presets only)")
     p.add_argument("--json", action="store_true", help="print one JSON array")

@@ -44,6 +44,7 @@ __all__ = [
     "Interval",
     "Items",
     "OneOf",
+    "SEEDS",
     "Span",
     "bounded",
     "choices_of",
@@ -154,6 +155,12 @@ class Interval(Constraint):
             values.append(math.nextafter(high, math.inf) if self.high_inclusive else high)
         return values
 
+    def bounds(self) -> tuple[float, float]:
+        """``(low, high)`` for a command-line option (both limits must be numbers)."""
+        if not isinstance(self.low, int | float) or not isinstance(self.high, int | float):
+            raise TypeError("an Interval without two numeric limits has no (low, high)")
+        return float(self.low), float(self.high)
+
 
 @dataclass(frozen=True)
 class Integer(Constraint):
@@ -186,6 +193,10 @@ ITERATIONS = Integer(1, MAX_ITERATIONS)
 """The one allowed range of a number of measured iterations: of a ``learn`` call, of a durable
 session's target, of ``aerobat learn --trials`` (1 … :data:`MAX_ITERATIONS`). Here, not in
 :mod:`aerobat.core.learning`, so that the store checks it without loading the method."""
+
+SEEDS = Integer(0, 2**63 - 1)
+"""The one allowed range of a plant's random seed (:class:`~aerobat.plants.PlantChoice`, the arena,
+``--seed``): any seed NumPy's generator takes that the store's SQLite INTEGER column holds."""
 
 
 def choices_of(kind: Any) -> tuple[Any, ...]:
@@ -291,18 +302,24 @@ class Items(Constraint):
 @dataclass(frozen=True)
 class Span(Constraint):
     """A range ``(low, high)`` of two numbers: ``low`` within :attr:`start`, ``high`` at least ``low``
-    (above it, with :attr:`strict`).
+    (above it, with :attr:`strict`) and at most :attr:`end` if given.
 
     Messages name ``field[0]`` and ``field[1]``; ``high`` below ``low`` is told ``allowed >= low``
-    (``> low``).
+    (``> low``), or ``[low, end]`` (``(low, end]``).
     """
 
     start: Interval = Interval()
     strict: bool = False
+    end: float | None = None
 
     def _items(self, low: Any) -> Items:
-        end = Interval(low=low, closed="neither" if self.strict else "both", unit=self.start.unit)
-        return Items((self.start, end), what="two numbers (low, high)")
+        closed: Literal["both", "right", "left", "neither"]
+        if self.end is None:
+            closed = "neither" if self.strict else "both"
+        else:
+            closed = "right" if self.strict else "both"
+        high = Interval(low=low, high=self.end, closed=closed, unit=self.start.unit)
+        return Items((self.start, high), what="two numbers (low, high)")
 
     def check(self, name: str, value: Any, owner: Any = None) -> Any:
         """``value`` (as a tuple) if a range starting within :attr:`start`; :class:`ConfigError` otherwise."""
@@ -313,7 +330,8 @@ class Span(Constraint):
 
     def describe(self, owner: Any = None) -> str:
         """The range of the low end; the high end is at least the low one."""
-        return f"[0] {self.start.describe(owner)}; [1] {'>' if self.strict else '>='} [0]"
+        upto = "" if self.end is None else f", <= {self.end:g}"
+        return f"[0] {self.start.describe(owner)}; [1] {'>' if self.strict else '>='} [0]{upto}"
 
     def outside(self, owner: Any = None) -> list[Any]:
         """Not used for ranges: see :meth:`outside_items`."""

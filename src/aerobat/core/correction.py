@@ -16,9 +16,12 @@ import numpy as np
 
 from aerobat.errors import ConfigError
 
-__all__ = ["CorrectionKind", "SvdInfo", "correction_matrix", "svd_info"]
+__all__ = ["CorrectionKind", "RegularizedKind", "SvdInfo", "correction_matrix", "svd_info"]
 
-CorrectionKind = Literal["inverse", "tsvd", "damped"]
+RegularizedKind = Literal["tsvd", "damped"]
+"""The regularized inverses: truncated SVD or damped (the learning rules' filter factors too)."""
+CorrectionKind = Literal["inverse", RegularizedKind]
+"""The right inverses a correction matrix is built with: the plain pseudo-inverse or a regularized one."""
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from aerobat.core.bounds import Interval, OneOf, bounded, validate
 from aerobat.errors import ConfigError
 
 __all__ = [
@@ -30,6 +31,10 @@ __all__ = [
     "parameter_scales",
     "position_indices",
 ]
+
+
+_SCALE = Interval(0.0, None, closed="neither")
+"""A parameter's or an error's scale: a finite size above zero."""
 
 
 class ErrorKind(StrEnum):
@@ -62,14 +67,14 @@ class ParameterSpec:
     unit: str
     lower: float = -math.inf
     upper: float = math.inf
-    scale: float = 1.0
+    scale: float = bounded(1.0, _SCALE)
     bound_names: tuple[str, str] = ("", "")
 
     def __post_init__(self) -> None:
+        # lower and upper may be ±inf (no bound), which no Interval allows: compared here
         if not self.lower < self.upper:
             raise ConfigError(f"parameter {self.name}: lower = {self.lower} must be < upper = {self.upper}")
-        if not (math.isfinite(self.scale) and self.scale > 0):
-            raise ConfigError(f"parameter {self.name}: scale = {self.scale} must be finite and > 0")
+        validate(self)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -86,13 +91,11 @@ class ErrorSpec:
 
     name: str
     unit: str
-    scale: float = 1.0
-    kind: ErrorKind = ErrorKind.OTHER
+    scale: float = bounded(1.0, _SCALE)
+    kind: ErrorKind = bounded(ErrorKind.OTHER, OneOf(ErrorKind))
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.scale) and self.scale > 0):
-            raise ConfigError(f"error {self.name}: scale = {self.scale} must be finite and > 0")
-        object.__setattr__(self, "kind", ErrorKind(self.kind))
+        validate(self)
 
 
 @runtime_checkable

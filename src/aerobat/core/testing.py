@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from aerobat.core.bounds import Interval, bounded, validate
 from aerobat.core.design import Design, FinalStateModel, design
 from aerobat.core.maneuver import ErrorKind, ErrorSpec, Maneuver, ParameterSpec, batch_errors, check_parameters
 from aerobat.core.plant import Plant, StatefulPlant, Trial, TrialStatus, repeats_exactly
@@ -81,15 +82,14 @@ class ToyManeuver:
     velocity. Three parameters, two errors: the correction is a right pseudo-inverse.
     """
 
-    distance_m: float = 1.0
+    distance_m: float = bounded(1.0, Interval(0.0, 100.0, closed="right", unit="m"))
     friction_per_s: float = 0.5
     name: str = "toy cart"
     parameters: tuple[ParameterSpec, ...] = field(init=False, repr=False, compare=False)
     errors: tuple[ErrorSpec, ...] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.distance_m) and 0.0 < self.distance_m <= 100.0):
-            raise ConfigError(f"toy maneuver distance_m = {self.distance_m}: allowed (0, 100]")
+        validate(self)
         object.__setattr__(self, "parameters", (
             ParameterSpec(name="p0", description="force", unit="m/s²", lower=0.1, upper=20.0, scale=1.0,
                           bound_names=("", "force limit")),

@@ -11,10 +11,11 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any
 
 from aerobat.core.design import design
 from aerobat.quadrotor.maneuvers import MultiFlip
+from aerobat.quadrotor.maneuvers.flip import Axis
 from aerobat.quadrotor.simulate import NominalModel
 from aerobat.quadrotor.vehicle import VehicleConfig, preset, preset_names
 
@@ -84,7 +85,7 @@ def _reason(message: str) -> str:
 
 def flip_feasibility(config: VehicleConfig, flips: Sequence[int] = (1, 2, 3),
                      rates_deg_s: Sequence[float] = (720.0, 1080.0, 1440.0, 1800.0), *,
-                     axis: Literal["roll", "pitch"] = "roll", dims: int = 2) -> list[FlipFeasibility]:
+                     axis: Axis = "roll", dims: int = 2) -> list[FlipFeasibility]:
     """Design each flip (count × rate) on ``config``'s nominal model; one result per flip."""
     model = NominalModel(config)
     out = []

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from aerobat.core.bounds import SEEDS, bounded, validate
 from aerobat.core.plant import Plant
 from aerobat.core.registry import Registry
 from aerobat.errors import ConfigError, MissingDependency
@@ -91,13 +92,12 @@ class PlantChoice:
 
     kind: str = "arena"
     settings: Any = field(default=None, compare=False)
-    seed: int = 0
+    seed: int = bounded(0, SEEDS)
     feedback: Any = None
 
     def __post_init__(self) -> None:
         spec = PLANTS.get(self.kind, source="plant")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed < 2**63:
-            raise ConfigError(f"plant seed {self.seed!r}: expected an integer in [0, 2^63)")
+        validate(self)
         if self.settings is None and spec.default_settings is not None:
             object.__setattr__(self, "settings", spec.default_settings())
         feedback = Feedback(spec.default_feedback) if self.feedback is None else as_feedback(self.feedback)

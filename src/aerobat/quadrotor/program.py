@@ -37,10 +37,12 @@ import numpy as np
 import tomli_w
 
 from aerobat.config import check_type, read_toml, short_repr, write_file
+from aerobat.core.bounds import Interval, bounded, required, validate
 from aerobat.errors import ConfigError
 
 __all__ = [
     "CHANNELS",
+    "MANEUVER_RAMP_S",
     "CompiledProgram",
     "Program",
     "RampDown",
@@ -62,6 +64,10 @@ CHANNEL_UNITS = {
 # Generous sanity bounds: a value outside them is a unit mistake, not a maneuver.
 CHANNEL_LIMITS = {"collective": (0.0, 200.0), "rate": (-100.0, 100.0), "accel": (-1e4, 1e4)}
 MAX_DURATION_S = 600.0
+_RAMP = Interval(0.0, None, unit="s")
+MANEUVER_RAMP_S = Interval(0.0, 1.0, unit="s", as_float=True)
+"""The ramp-down a maneuver family may ask for [s] (``MultiFlip.ramp_collective_s``, ``Translation.ramp_s``,
+``--ramp-s``); a program's own :class:`RampDown` may be longer."""
 
 
 def _channel_limits(channel: str) -> tuple[float, float]:
@@ -95,16 +101,11 @@ class RampDown:
     rates_s : ramp duration for the body-rate commands [s]; 0 disables it.
     """
 
-    collective_s: float = 0.0
-    rates_s: float = 0.0
+    collective_s: float = bounded(0.0, _RAMP)
+    rates_s: float = bounded(0.0, _RAMP)
 
     def __post_init__(self) -> None:
-        for name in ("collective_s", "rates_s"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | float):
-                raise ConfigError(f"ramp_down.{name} must be a number, got {value!r}")
-            if not _finite(value) or value < 0:
-                raise ConfigError(f"ramp_down.{name} = {value!r} is out of range: allowed >= 0 (s)")
+        validate(self)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -122,9 +123,9 @@ class Program:
     """
 
     switches: tuple[Switch, ...]
-    duration_s: float
+    duration_s: float = required(Interval(0.0, MAX_DURATION_S, closed="right", unit="s"))
     ramp_down: RampDown = field(default_factory=RampDown)
-    hover_collective_m_s2: float = 9.81
+    hover_collective_m_s2: float = bounded(9.81, Interval(0.0, None, closed="neither", unit="m/s²"))
     name: str = ""
     provenance: str = field(default="", compare=False)
 
@@ -134,14 +135,7 @@ class Program:
                               f"{short_repr(self.switches)}")
         check_type("ramp_down", self.ramp_down, RampDown, "a RampDown")
         check_type("name", self.name, str, "a string")
-        if isinstance(self.duration_s, bool) or not isinstance(self.duration_s, int | float):
-            raise ConfigError(f"duration_s must be a number, got {self.duration_s!r}")
-        if not _finite(self.duration_s) or not 0.0 < self.duration_s <= MAX_DURATION_S:
-            raise ConfigError(f"duration_s = {self.duration_s} is out of range: allowed (0, {MAX_DURATION_S:g}] (s)")
-        if isinstance(self.hover_collective_m_s2, bool) or not isinstance(self.hover_collective_m_s2, int | float):
-            raise ConfigError(f"hover_collective_m_s2 must be a number, got {self.hover_collective_m_s2!r}")
-        if not _finite(self.hover_collective_m_s2) or self.hover_collective_m_s2 <= 0:
-            raise ConfigError(f"hover_collective_m_s2 = {self.hover_collective_m_s2} must be finite and > 0 (m/s²)")
+        validate(self)
         seen: dict[tuple[str, float], int] = {}
         end = self.duration_s
         for index, sw in enumerate(self.switches):
@@ -359,11 +353,15 @@ def program_from_table(data: dict[str, Any], *, source: str) -> Program:
         provenance = header.get("provenance", "")
         if not isinstance(provenance, str):
             raise ConfigError(f"[program] provenance must be a string, got {provenance!r}")
+        try:
+            ramp_down = RampDown(**{k: float(v) if not isinstance(v, bool) and isinstance(v, int | float) else v
+                                    for k, v in ramp_table.items()})
+        except ConfigError as exc:
+            raise ConfigError(f"ramp_down.{exc}") from None
         return Program(
             switches=tuple(switches),
             duration_s=float(header["duration_s"]),
-            ramp_down=RampDown(**{k: float(v) if not isinstance(v, bool) and isinstance(v, int | float) else v
-                                  for k, v in ramp_table.items()}),
+            ramp_down=ramp_down,
             hover_collective_m_s2=float(header.get("hover_collective_m_s2", 9.81)),
             name=name,
             provenance=provenance,

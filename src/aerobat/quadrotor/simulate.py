@@ -35,6 +35,7 @@ import numba as nb
 import numpy as np
 
 from aerobat.config import as_float_array, check_int, check_real, check_type
+from aerobat.core.bounds import OneOf
 from aerobat.errors import ConfigError
 from aerobat.quadrotor.dynamics import (
     N_PLANT,
@@ -51,10 +52,11 @@ from aerobat.quadrotor.playback import run_continuous, run_continuous_delayed, r
 from aerobat.quadrotor.program import CompiledProgram, Program
 from aerobat.quadrotor.vehicle import VehicleConfig
 
-__all__ = ["NominalModel", "Trajectory", "batch_threads", "final_state_summary", "set_batch_threads", "simulate",
-           "simulate_batch"]
+__all__ = ["Mode", "NominalModel", "Trajectory", "batch_threads", "final_state_summary", "set_batch_threads",
+           "simulate", "simulate_batch"]
 
 Mode = Literal["continuous", "sampled"]
+"""How a program is played: the continuous-time model, or the onboard command generator's zero-order hold."""
 DEFAULT_MAX_STEP_S = 5e-4
 DEFAULT_TICK_S = 1.0 / 800.0
 
@@ -283,8 +285,7 @@ def simulate(
     if not 1 <= substeps <= MAX_STEPS:
         raise ConfigError(f"substeps = {substeps} must be >= 1 (and at most {MAX_STEPS:.0e})")
     check_type("record", record, (bool, np.bool_), "True or False")
-    if not isinstance(mode, str) or mode not in ("continuous", "sampled"):
-        raise ConfigError(f"mode = {mode!r}: allowed 'continuous' or 'sampled'")
+    OneOf(Mode).check("mode", mode)
     x = hover_state(config.vehicle) if initial_state is None else as_float_array("initial_state", initial_state,
                                                                                    (N_STATE,))
     start = x.copy()

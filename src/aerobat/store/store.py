@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.config import check_int, short_repr
+from aerobat.config import short_repr
 from aerobat.core.bounds import ITERATIONS
 from aerobat.core.design import Design
 from aerobat.core.maneuver import ErrorKind, Maneuver
@@ -318,7 +318,7 @@ class Store(Browsing):
 
     def set_target(self, session_id: int, target_iterations: int) -> None:
         """Change how many measured iterations the session aims for."""
-        target = check_int("target_iterations", target_iterations, low=1)
+        target = ITERATIONS.check("target_iterations", target_iterations)
         self._write(f"updating session {session_id}", lambda conn: checksums.update(
             conn, self.path, "sessions", {"id": session_id}, {"target_iterations": target, "updated_at": utc_now()}))
 

@@ -126,7 +126,7 @@ def test_preflight_names_what_forbids_a_take_off(change, problem):
 
 
 def test_a_geofence_whose_sides_cross_is_refused():
-    with pytest.raises(ConfigError, match=r"^fence_z_m = \(2, 1\): low must be below high$"):
+    with pytest.raises(ConfigError, match=r"^fence_z_m\[1\] = 1 is out of range: allowed \(2, 50\] \(m\)$"):
         SafetyLimits(fence_z_m=(2.0, 1.0))
 
 

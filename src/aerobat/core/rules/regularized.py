@@ -6,6 +6,8 @@ from typing import Any
 
 import numpy as np
 
+from aerobat.core.bounds import OneOf
+from aerobat.core.correction import RegularizedKind
 from aerobat.core.design import Design
 from aerobat.core.plant import Trial
 from aerobat.core.rules.base import Schedule
@@ -47,10 +49,8 @@ class RegularizedRule:
                  gamma_min: float = 0.1, noise: np.ndarray | None = None, noise_prior: float = 0.5,
                  max_noise_step: float = 10.0, rtol: float = 1e-4, jacobian: BroydenJacobian | None = None,
                  name: str | None = None) -> None:
-        if kind not in ("tsvd", "damped"):
-            raise ValueError(f"kind = {kind!r}: allowed 'tsvd' or 'damped'")
+        self.kind: RegularizedKind = OneOf(RegularizedKind).check("kind", kind)
         self.design = design
-        self.kind = kind
         self.name = name or kind
         self.sc = Scaled.of(design)
         self.schedule = schedule

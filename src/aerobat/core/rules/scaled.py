@@ -14,8 +14,11 @@ from typing import Any
 
 import numpy as np
 
+from aerobat.core.bounds import OneOf
+from aerobat.core.correction import RegularizedKind
 from aerobat.core.design import Design
 from aerobat.core.maneuver import bounds_arrays, error_scales, parameter_scales
+from aerobat.errors import ConfigError
 
 __all__ = [
     "KestenGamma",
@@ -107,7 +110,7 @@ def filter_factors(s: np.ndarray, lam: np.ndarray, kind: str, floor: float) -> n
     elif kind == "damped":
         f = s**2 / np.maximum(s**2 + lam**2, 1e-300)
     else:
-        raise ValueError(f"kind = {kind!r}: allowed 'tsvd' or 'damped'")
+        raise ConfigError(f"kind = {kind!r}: allowed {OneOf(RegularizedKind).describe()}")
     if s.size:
         f = np.where(s >= floor * s[0], f, 0.0)
     return f

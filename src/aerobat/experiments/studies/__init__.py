@@ -47,9 +47,8 @@ from aerobat.experiments.studies.robustness import (
 )
 from aerobat.experiments.studies.rules import DEFAULT_METHODS, parse_methods, rules_study_jobs, summarize_rules
 from aerobat.experiments.studies.run_and_report import (
-    ENVELOPE_FLIPS,
-    ENVELOPE_RATES_DEG_S,
     StudyRunOptions,
+    check_envelope_grid,
     envelope_spec,
     envelope_study,
     feedback_spec,
@@ -64,8 +63,6 @@ from aerobat.experiments.studies.runner import FailedJob, StudyOutcome, run_stud
 __all__ = [
     "BETAFLIGHT_PROPERTIES",
     "DEFAULT_METHODS",
-    "ENVELOPE_FLIPS",
-    "ENVELOPE_RATES_DEG_S",
     "SAMPLED_PROPERTIES",
     "SCENARIOS",
     "EnvelopeCell",
@@ -82,6 +79,7 @@ __all__ = [
     "StudyOutcome",
     "StudyReport",
     "StudyRunOptions",
+    "check_envelope_grid",
     "envelope_grid",
     "envelope_jobs",
     "envelope_report",

@@ -50,9 +50,8 @@ if TYPE_CHECKING:
     from aerobat.store import Store
 
 __all__ = [
-    "ENVELOPE_FLIPS",
-    "ENVELOPE_RATES_DEG_S",
     "StudyRunOptions",
+    "check_envelope_grid",
     "envelope_spec",
     "envelope_study",
     "feedback_spec",
@@ -62,12 +61,6 @@ __all__ = [
     "rules_spec",
     "rules_study",
 ]
-
-ENVELOPE_FLIPS = (1, 10)
-"""The flip counts an envelope may span (both included)."""
-ENVELOPE_RATES_DEG_S = (30.0, 5700.0)
-"""The maximum rates an envelope may span [deg/s] (both included)."""
-
 
 class StudyRunOptions(TypedDict, total=False):
     """How a study runs (:func:`~aerobat.experiments.studies.runner.run_study`'s keywords)."""
@@ -183,17 +176,28 @@ def envelope_spec(base: dict[str, Any], *, flips: Sequence[int], rates_deg_s: Se
     return {"base": base, "flips": list(flips), "rates_deg_s": list(rates_deg_s)}
 
 
+def check_envelope_grid(flips: Sequence[int], rates_deg_s: Sequence[float]) -> tuple[list[int], list[float]]:
+    """The flip counts and maximum rates [deg/s] of an envelope, each checked against the flip's own
+    bounds (:data:`~aerobat.quadrotor.maneuvers.flip.FLIPS`, ``MAX_RATE_DEG_S``); :class:`ConfigError` otherwise.
+
+    :func:`envelope_study` checks them; the command line calls it before it opens the store.
+    """
+    from aerobat.quadrotor.maneuvers.flip import FLIPS, MAX_RATE_DEG_S
+
+    if not flips:
+        raise ConfigError("flips = []: expected at least one flip count")
+    if not rates_deg_s:
+        raise ConfigError("rates_deg_s = []: expected at least one rate")
+    return ([FLIPS.check(f"flips[{i}]", n) for i, n in enumerate(flips)],
+            [MAX_RATE_DEG_S.check(f"rates_deg_s[{i}]", r) for i, r in enumerate(rates_deg_s)])
+
+
 def envelope_study(store: Store, model: VehicleConfig, *, flips: Sequence[int], rates_deg_s: Sequence[float],
                    dims: int = 3, axis: Axis = "roll", **options: Unpack[StudyRunOptions]) -> EnvelopeReport:
     """A flip designed on ``model`` for every (flip count, maximum rate [deg/s]); its report."""
     from aerobat.quadrotor.maneuvers import MultiFlip
 
-    low, high = ENVELOPE_FLIPS
-    if not flips or not all(low <= int(n) <= high for n in flips):
-        raise ConfigError(f"flips = {list(flips)!r}: flip counts must be {low} … {high}")
-    low_rate, high_rate = ENVELOPE_RATES_DEG_S
-    if not rates_deg_s or not all(low_rate <= float(r) <= high_rate for r in rates_deg_s):
-        raise ConfigError(f"rates_deg_s = {list(rates_deg_s)!r}: rates must be {low_rate:g} … {high_rate:g} deg/s")
+    flips, rates_deg_s = check_envelope_grid(flips, rates_deg_s)
     base = MultiFlip(vehicle=model.vehicle, dims=dims, axis=axis).spec()
     jobs = envelope_jobs(base, model, flips, rates_deg_s)
     outcome = run_study(store, StudyKind.ENVELOPE, envelope_spec(base, flips=flips, rates_deg_s=rates_deg_s), jobs,

@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aerobat.config import check_int, check_type
+from aerobat.config import check_type
+from aerobat.core.bounds import SEEDS
 from aerobat.core.plant import Trial, TrialStatus
 from aerobat.plants.arena.kernel import supervise
 from aerobat.plants.arena.params import ArenaParams
@@ -102,7 +103,7 @@ class Arena:
             "design_model", design_model, VehicleConfig, "a VehicleConfig or None")
         self.params = ArenaParams() if params is None else check_type("params", params, ArenaParams,
                                                                       "ArenaParams or None")
-        self.seed = check_int("seed", seed, low=0, high=2**63 - 1)
+        self.seed = SEEDS.check("seed", seed)
         self.feedback = as_feedback(feedback)
         self._fb_vector = feedback_vector(self.feedback)
         self.onboard, self.history = onboard_state()

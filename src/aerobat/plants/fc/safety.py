@@ -23,8 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.core.bounds import Interval, Items, bounded, validate
-from aerobat.errors import ConfigError
+from aerobat.core.bounds import Interval, Span, bounded, validate
 from aerobat.plants.betaflight.firmware_settings import ModeRange
 from aerobat.plants.betaflight.msp import (
     FEATURE_RX_MSP,
@@ -64,7 +63,8 @@ _MEANINGS = {
     StopReason.LOW_BATTERY: "the battery is below its limit or the firmware reports it critical: disarmed",
 }
 
-_SIDE = Items.each(Interval(-50.0, 50.0, unit="m"), ("low", "high"), "(low, high) in metres")
+_SIDE = Span(Interval(-50.0, 50.0, unit="m"), strict=True, end=50.0)
+"""A side of the geofence: (low, high) in metres, low below high, both within ±50 m."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -95,10 +95,6 @@ class SafetyLimits:
 
     def __post_init__(self) -> None:
         validate(self)
-        for axis in "xyz":
-            low, high = getattr(self, f"fence_{axis}_m")
-            if not low < high:
-                raise ConfigError(f"fence_{axis}_m = ({low:g}, {high:g}): low must be below high")
 
     def with_fence_around(self, start_m: Sequence[float] | np.ndarray, volume: Volume,
                           margin_m: float = 0.1) -> SafetyLimits:

@@ -35,6 +35,9 @@ import numpy as np
 from scipy import optimize
 from scipy import signal as sps
 
+from aerobat.config import check_type
+from aerobat.core.bounds import Integer, Interval, bounded, required
+from aerobat.core.bounds import validate as validate_bounds
 from aerobat.errors import ConfigError, IdentificationFailed
 from aerobat.quadrotor.flightlog import MotorLayout
 from aerobat.quadrotor.identification.logdata import PreparedLog, band, smooth
@@ -57,6 +60,8 @@ __all__ = [
 CHANNELS = ("roll acceleration", "pitch acceleration", "yaw acceleration", "specific force z")
 _UNITS = ("rad/s²", "rad/s²", "rad/s²", "m/s²")
 MIN_MOTOR_RATE_HZ = 50.0  # motor commands logged slower than this cannot show the motor's time constant
+_TAU_S = (0.003, 0.3)  # the motor time constants the fit searches [s]
+_MOTOR_OFFSET = Interval(0.005, 2.0, unit="m")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -70,17 +75,13 @@ class Geometry:
     inertia_zz_ratio : I_zz / (I_xx + I_yy), to split the yaw gain into κ and I_zz.
     """
 
-    mass_kg: float
-    motor_x_m: float
-    motor_y_m: float
-    inertia_zz_ratio: float = 0.93
+    mass_kg: float = required(Interval(0.005, 50.0, unit="kg"))
+    motor_x_m: float = required(_MOTOR_OFFSET)
+    motor_y_m: float = required(_MOTOR_OFFSET)
+    inertia_zz_ratio: float = bounded(0.93, Interval(0.3, 2.0))
 
     def __post_init__(self) -> None:
-        for name, low, high in (("mass_kg", 0.005, 50.0), ("motor_x_m", 0.005, 2.0), ("motor_y_m", 0.005, 2.0),
-                                ("inertia_zz_ratio", 0.3, 2.0)):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and math.isfinite(value) and low <= value <= high):
-                raise ConfigError(f"{name} = {value!r}: expected a number in [{low:g}, {high:g}]")
+        validate_bounds(self)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -89,19 +90,24 @@ class LogFitOptions:
 
     Attributes
     ----------
-    jackknife_groups : block groups left out in turn for the uncertainties (0: none).
+    jackknife_groups : block groups left out in turn for the uncertainties (0 or 1: none).
     instrument_setpoint : fit the moments with the set point's rate of change as instrument
         (instrumental variables) instead of least squares; see :func:`instruments` (off: on the
         shared 5-inch logs it gave negative held-out R², docs/logs.md).
-    fixed_time_constant_s : use this motor time constant instead of fitting it (it is fixed
-        anyway when the motor commands are logged slower than 50 Hz).
-    max_delay_s : upper bound of the command-to-thrust delay [s].
+    fixed_time_constant_s : use this motor time constant [s] instead of fitting it (it is fixed
+        anyway when the motor commands are logged slower than 50 Hz); within the range the fit
+        searches, 3 … 300 ms. None: fitted.
+    max_delay_s : upper bound of the command-to-thrust delay the fit searches [s].
     """
 
-    jackknife_groups: int = 5
+    jackknife_groups: int = bounded(5, Integer(0, 100))
     instrument_setpoint: bool = False
-    fixed_time_constant_s: float | None = None
-    max_delay_s: float = 0.02
+    fixed_time_constant_s: float | None = bounded(None, Interval(*_TAU_S, unit="s"))
+    max_delay_s: float = bounded(0.02, Interval(0.001, 0.2, unit="s"))
+
+    def __post_init__(self) -> None:
+        check_type("instrument_setpoint", self.instrument_setpoint, (bool, np.bool_), "True or False")
+        validate_bounds(self, skip=("fixed_time_constant_s",) if self.fixed_time_constant_s is None else ())
 
 
 @dataclass(frozen=True)
@@ -409,8 +415,8 @@ def fit_log(logs: PreparedLog | Sequence[PreparedLog], layout: MotorLayout, geom
     offsets = np.cumsum([0] + [int(log.block.max()) + 1 for log in logs[:-1]])
     block = np.concatenate([np.where(log.block >= 0, log.block + off, -1) for log, off in zip(logs, offsets,
                                                                                               strict=True)])
-    lo = np.array([0.003, 0.0, 0.0, 0.0])
-    hi = np.array([0.3, options.max_delay_s, 0.6, 1.0])
+    lo = np.array([_TAU_S[0], 0.0, 0.0, 0.0])
+    hi = np.array([_TAU_S[1], options.max_delay_s, 0.6, 1.0])
     start = np.clip(np.array(x0, dtype=float), lo + 1e-6, hi - 1e-6)
     theta, coefs, evaluations = _fit_rows(logs, layout, geometry, y, train, start, (lo, hi), fixed_tau, iv=iv)
     model = _model(theta, coefs)

@@ -32,7 +32,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
@@ -41,7 +41,7 @@ from aerobat.core.design import design
 from aerobat.core.maneuver import ErrorKind, ErrorSpec, ParameterSpec, check_parameters
 from aerobat.errors import ConfigError
 from aerobat.quadrotor.dynamics import POS, hover_state
-from aerobat.quadrotor.maneuvers.flip import MultiFlip
+from aerobat.quadrotor.maneuvers.flip import Axis, MultiFlip
 from aerobat.quadrotor.program import Program, Switch, program_from_table, program_to_table
 from aerobat.quadrotor.simulate import NominalModel
 from aerobat.quadrotor.vehicle import VehicleConfig, vehicle_from_table, vehicle_table
@@ -153,7 +153,7 @@ def identification_sequence(prior: VehicleConfig, *, flips: bool = True,
     notes = []
     if flips:
         model = NominalModel(prior)
-        flip_axes: tuple[tuple[TrialKind, Literal["roll", "pitch"]], ...] = (
+        flip_axes: tuple[tuple[TrialKind, Axis], ...] = (
             (TrialKind.ROLL_FLIP, "roll"), (TrialKind.PITCH_FLIP, "pitch"))
         for kind, axis in flip_axes:
             flip = MultiFlip(vehicle=v, flips=1, max_rate_rad_s=math.radians(720.0), dims=2, axis=axis)

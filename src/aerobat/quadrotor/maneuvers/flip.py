@@ -35,12 +35,26 @@ from aerobat.core.maneuver import ErrorKind, ErrorSpec, ParameterSpec, check_par
 from aerobat.errors import ConfigError
 from aerobat.quadrotor.dynamics import POS, VEL, euler_zyx, hover_state, rotation_angles
 from aerobat.quadrotor.envelope import ReducedEnvelope
-from aerobat.quadrotor.program import Program, RampDown, Switch
+from aerobat.quadrotor.program import MANEUVER_RAMP_S, Program, RampDown, Switch
 from aerobat.quadrotor.vehicle import VehicleParams
 
-__all__ = ["FlipStages", "MultiFlip", "flip_from_spec"]
+__all__ = ["DIMS", "FLIPS", "MAX_RATE", "MAX_RATE_DEG_S", "Axis", "Coast", "FlipStages", "MultiFlip", "flip_from_spec"]
 
 Axis = Literal["roll", "pitch"]
+"""The axis a flip turns about: roll (in the Y–Z plane) or pitch (X–Z)."""
+Coast = Literal["min", "max"]
+"""The collective of a flip's coast stage: the reduced envelope's minimum β̲ or its maximum β̄."""
+
+DIMS = Integer(2, 3)
+"""2D flips (5 parameters, 5 errors) or 3D (9 and 9): :attr:`MultiFlip.dims`, ``--dims``."""
+FLIPS = Integer(1, 10)
+"""c_N, the full turns a flip may make (:attr:`MultiFlip.flips`, the envelope study's flip counts, ``--flips``)."""
+_RATE_LOW_RAD_S, _RATE_HIGH_RAD_S = 0.5, 100.0
+MAX_RATE = Interval(_RATE_LOW_RAD_S, _RATE_HIGH_RAD_S, as_float=True,
+                    unit=f"rad/s, {math.degrees(_RATE_LOW_RAD_S):.0f}–{math.degrees(_RATE_HIGH_RAD_S):.0f} °/s")
+"""c_pmax, the coast rates a flip may have [rad/s] (:attr:`MultiFlip.max_rate_rad_s`)."""
+MAX_RATE_DEG_S = Interval(math.degrees(_RATE_LOW_RAD_S), math.degrees(_RATE_HIGH_RAD_S), unit="deg/s")
+"""The same range in degrees per second, for what is given in them (``--max-rate-deg-s``, the envelope's rates)."""
 
 
 @dataclass(frozen=True)
@@ -76,13 +90,12 @@ class MultiFlip:
     """
 
     vehicle: VehicleParams
-    flips: int = bounded(3, Integer(1, 10))
-    max_rate_rad_s: float = bounded(math.radians(1800.0), Interval(
-        0.5, 100.0, unit=f"rad/s, {math.degrees(0.5):.0f}–{math.degrees(100):.0f} °/s", as_float=True))
+    flips: int = bounded(3, FLIPS)
+    max_rate_rad_s: float = bounded(math.radians(1800.0), MAX_RATE)
     axis: Axis = bounded("roll", OneOf(Axis))
-    dims: int = bounded(3, Integer(2, 3))
-    coast_collective: Literal["min", "max"] = bounded("min", OneOf(Literal["min", "max"]))
-    ramp_collective_s: float = bounded(0.1, Interval(0.0, 1.0, unit="s", as_float=True))
+    dims: int = bounded(3, DIMS)
+    coast_collective: Coast = bounded("min", OneOf(Coast))
+    ramp_collective_s: float = bounded(0.1, MANEUVER_RAMP_S)
     name: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
@@ -320,9 +333,9 @@ def flip_from_spec(spec: Mapping[str, Any], source: str) -> MultiFlip:
             vehicle=vehicle,
             flips=table_field(spec, "flips", source, int, "an integer"),
             max_rate_rad_s=float(table_field(spec, "max_rate_rad_s", source, (int, float), "a number [rad/s]")),
-            axis=table_field(spec, "axis", source, str, "'roll' or 'pitch'"),
-            dims=table_field(spec, "dims", source, int, "2 or 3"),
-            coast_collective=table_field(spec, "coast_collective", source, str, "'min' or 'max'"),
+            axis=table_field(spec, "axis", source, str, f"one of {OneOf(Axis).describe()}"),
+            dims=table_field(spec, "dims", source, int, f"an integer {DIMS.describe()}"),
+            coast_collective=table_field(spec, "coast_collective", source, str, f"one of {OneOf(Coast).describe()}"),
             ramp_collective_s=float(table_field(spec, "ramp_collective_s", source, (int, float), "a number [s]")),
         )
     except ConfigError as exc:

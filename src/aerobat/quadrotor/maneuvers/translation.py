@@ -30,7 +30,7 @@ from aerobat.core.bounds import Interval, bounded, constraints, required, valida
 from aerobat.core.maneuver import ErrorKind, ErrorSpec, ParameterSpec, check_parameters
 from aerobat.errors import ConfigError, SolveFailed
 from aerobat.quadrotor.dynamics import POS, VEL, hover_state, rotation_angles
-from aerobat.quadrotor.program import Program, RampDown, Switch
+from aerobat.quadrotor.program import MANEUVER_RAMP_S, Program, RampDown, Switch
 from aerobat.quadrotor.vehicle import VehicleConfig, VehicleParams
 
 __all__ = ["Translation", "translation_from_solution", "translation_from_spec", "translation_maneuver"]
@@ -64,7 +64,7 @@ class Translation:
     final_angle_rad: float = required(Interval(unit="rad", as_float=True))
     interval_inputs: tuple[tuple[float, float], ...]
     guess_times_s: tuple[float, ...]
-    ramp_s: float = bounded(0.1, Interval(0.0, 1.0, unit="s", as_float=True))
+    ramp_s: float = bounded(0.1, MANEUVER_RAMP_S)
     name: str = ""
     parameters: tuple[ParameterSpec, ...] = field(init=False, repr=False, compare=False)
     errors: tuple[ErrorSpec, ...] = field(init=False, repr=False, compare=False)

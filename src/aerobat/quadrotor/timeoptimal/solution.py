@@ -10,18 +10,11 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.errors import ConfigError
+from aerobat.core.bounds import Interval, OneOf, bounded, required, validate
 
 _F_LOW_RAW = 3.92
 _F_HIGH_RAW = 21.58
 _MARGIN = 0.05
-
-
-def _check_positive_finite(name: str, value: float) -> None:
-    if not isinstance(value, (int, float, np.floating, np.integer)) or isinstance(value, bool):
-        raise ConfigError(f"{name} must be a real number, got {value!r}")
-    if not math.isfinite(float(value)) or float(value) <= 0.0:
-        raise ConfigError(f"{name}={value!r} is invalid: allowed range is (0, inf), finite")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -44,29 +37,23 @@ class BenchmarkLimits:
     Raises
     ------
     ConfigError
-        If a field is not finite, not positive, ``f_min_m_s2 >= f_max_m_s2``
-        or ``f_max_m_s2 <= gravity_m_s2``.  The message names the field, its
-        value and the allowed range.
+        If a field is not a finite positive number, ``f_max_m_s2 <= gravity_m_s2`` (no hover)
+        or ``f_min_m_s2 >= f_max_m_s2``.  The message names the field, its value and the
+        allowed range.
     """
 
-    f_min_m_s2: float = _F_LOW_RAW + _MARGIN * (_F_HIGH_RAW - _F_LOW_RAW)
-    f_max_m_s2: float = _F_HIGH_RAW - _MARGIN * (_F_HIGH_RAW - _F_LOW_RAW)
-    max_rate_rad_s: float = 10.0
-    gravity_m_s2: float = 9.81
+    f_min_m_s2: float = bounded(_F_LOW_RAW + _MARGIN * (_F_HIGH_RAW - _F_LOW_RAW),
+                                Interval(0.0, "f_max_m_s2", closed="neither", unit="m/s²"))
+    f_max_m_s2: float = bounded(_F_HIGH_RAW - _MARGIN * (_F_HIGH_RAW - _F_LOW_RAW),
+                                Interval("gravity_m_s2", None, closed="neither", unit="m/s², above g to hover"))
+    max_rate_rad_s: float = bounded(10.0, Interval(0.0, None, closed="neither", unit="rad/s"))
+    gravity_m_s2: float = bounded(9.81, Interval(0.0, None, closed="neither", unit="m/s²"))
 
     def __post_init__(self) -> None:
-        for name in ("f_min_m_s2", "f_max_m_s2", "max_rate_rad_s", "gravity_m_s2"):
-            _check_positive_finite(name, getattr(self, name))
-        if self.f_min_m_s2 >= self.f_max_m_s2:
-            raise ConfigError(
-                f"f_min_m_s2={self.f_min_m_s2!r} is invalid: allowed range is (0, f_max_m_s2={self.f_max_m_s2!r})"
-            )
-        if self.f_max_m_s2 <= self.gravity_m_s2:
-            raise ConfigError(
-                f"f_max_m_s2={self.f_max_m_s2!r} is invalid: must exceed "
-                f"gravity_m_s2={self.gravity_m_s2!r} (allowed range is "
-                f"(max(f_min_m_s2, gravity_m_s2), inf)) for hover to be possible"
-            )
+        # each limit after the one it is relative to: gravity, then f_max above it, then f_min below f_max
+        validate(self, skip=("f_min_m_s2", "f_max_m_s2"))
+        validate(self, only=("f_max_m_s2",))
+        validate(self, only=("f_min_m_s2",))
 
     def _key(self) -> tuple[float, float, float, float]:
         return (
@@ -108,19 +95,14 @@ class InputArc:
         ``None`` for arcs on which the input is constant.
     """
 
-    kind: ArcKind
-    start_s: float
-    end_s: float
+    kind: ArcKind = required(OneOf(ArcKind))
+    start_s: float = required(Interval(unit="s"))
+    end_s: float = required(Interval("start_s", None, unit="s"))
     value: float
     tangent_law: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
-        if self.kind not in tuple(ArcKind):
-            allowed = ", ".join(repr(kind.value) for kind in ArcKind)
-            raise ConfigError(f"kind={self.kind!r} is invalid: allowed {allowed}")
-        object.__setattr__(self, "kind", ArcKind(self.kind))
-        if not self.end_s >= self.start_s:
-            raise ConfigError(f"end_s={self.end_s!r} is invalid: must be >= start_s={self.start_s!r}")
+        validate(self)
 
     @property
     def duration_s(self) -> float:

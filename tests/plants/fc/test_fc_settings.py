@@ -43,3 +43,16 @@ def test_a_bad_field_in_the_room_file_names_the_file_and_the_field(tmp_path):
     path.write_text(_room_toml().replace("latency_s = 0.005", "latency_s = 0.5"))
     with pytest.raises(ConfigError, match=r"room\.toml.*latency_s"):
         load_fc(path)
+
+
+def test_the_command_line_refuses_a_bad_room_file_in_one_line_before_anything_flies(tmp_path, capsys):
+    from aerobat.cli import main
+
+    path = tmp_path / "room.toml"
+    path.write_text(_room_toml().replace('kind = "serial"', 'kind = "radio"'))
+    code = main(["learn", "flip", "--flips", "1", "--dims", "2", "--plant", "fc", "--fc", str(path),
+                 "--trials", "1", "--db", str(tmp_path / "s.sqlite"), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip()
+    assert code != 0 and len(err.splitlines()) == 1, err
+    assert "room.toml" in err and "kind" in err and "'rehearsal', 'serial'" in err, err
+    assert code == 2 and not (tmp_path / "out").exists() and not (tmp_path / "s.sqlite").exists()

@@ -37,7 +37,6 @@ ALLOWED_TEXT_KINDS = {
     ("core/correction.py", "kind == 'inverse'"): _CORRECTION,
     ("core/correction.py", "kind == 'tsvd'"): _CORRECTION,
     ("core/correction.py", "kind == 'damped'"): _CORRECTION,
-    ("core/rules/regularized.py", "kind not in ('tsvd', 'damped')"): _CORRECTION,
     ("core/rules/scaled.py", "kind == 'tsvd'"): _CORRECTION,
     ("core/rules/scaled.py", "kind == 'damped'"): _CORRECTION,
     ("core/rules/registry.py", "kind == 'rule'"): "reads a stored rule table: where its text becomes a ScheduleKind",

@@ -118,14 +118,14 @@ def _die_with(parent_pid: int) -> None:
         os._exit(1)
 
 
-def _real_time_scheduling(firmware_pid: int) -> str:
+def _real_time_scheduling(firmware_pid: int | None) -> str:
     """Put this process and every thread of the firmware under ``SCHED_FIFO`` where allowed; returns how it went."""
     fifo = os.sched_param(WORLD_FIFO_PRIORITY)
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, fifo)
     except (PermissionError, OSError, AttributeError):
         return "nice" if os.getpriority(os.PRIO_PROCESS, 0) < 0 else "normal"
-    with contextlib.suppress(OSError):
+    with contextlib.suppress(OSError, TypeError):  # no firmware process (None): only the world is real-time
         for task in os.listdir(f"/proc/{firmware_pid}/task"):
             with contextlib.suppress(OSError):
                 os.sched_setscheduler(int(task), os.SCHED_FIFO, fifo)

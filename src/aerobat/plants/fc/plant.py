@@ -28,8 +28,8 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
-import sys
 import time
+import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -280,7 +280,7 @@ class FlightControllerPlant(BetaflightPlant):
         except KeyboardInterrupt:  # Ctrl-C is the operator's kill: disarm, then let the session stop
             flight.monitor.kill()
             if self._make_safe(flight, StopReason.KILL) is False:
-                print("aerobat: THE BOARD STILL REPORTS ITSELF ARMED after the kill", file=sys.stderr)
+                warnings.warn("THE BOARD STILL REPORTS ITSELF ARMED after the kill", RuntimeWarning, stacklevel=2)
             raise
         finally:
             self.flight = None

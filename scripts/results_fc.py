@@ -4,6 +4,8 @@
         # the figures of a session learned with --plant fc (e.g. the command in docs/real-vehicle.md)
     .venv/bin/python scripts/results_fc.py lockstep --seed 1
         # the same maneuver and seed through the Betaflight plant in lockstep, open loop (~2 min)
+    .venv/bin/python scripts/results_fc.py lag --trials 2
+        # how the rehearsal's world kept to the wall clock (run it with the machine loaded)
 
 Everything comes from what was stored: each trial's ``info`` carries the world's timekeeping (late
 chunks, largest lag), the frame timing during the maneuver (lateness after the deadline, spread of
@@ -120,6 +122,33 @@ def lockstep(seed: int, trials: int) -> dict[str, Any]:
             "last10_m": float(position[-10:].mean())}
 
 
+def lag(seed: int, trials: int) -> list[dict[str, Any]]:
+    """How the rehearsal's world kept to the wall clock, trial by trial (the nominal 3D triple flip at 8 kHz).
+
+    Load the machine first to see the scheduling at work (e.g. ``sh -c 'while :; do :; done' &`` three
+    times on two cores); the world says how it was scheduled (``fifo`` as root, else ``nice``/``normal``).
+    """
+    from aerobat.core.design import design
+    from aerobat.plants.fc.plant import FlightControllerPlant, RehearsalConnection
+    from aerobat.quadrotor.maneuvers import MultiFlip
+    from aerobat.quadrotor.simulate import NominalModel
+    from aerobat.quadrotor.vehicle import fpv5
+
+    config = fpv5()
+    maneuver = MultiFlip(vehicle=config.vehicle, flips=3, max_rate_rad_s=math.radians(1800), dims=3)
+    program = maneuver.program(design(maneuver, NominalModel(config)).p_nominal)
+    plant = FlightControllerPlant(config, RehearsalConnection({}), seed=seed)
+    rows = []
+    for _ in range(trials):
+        trial = plant.fly(program)
+        world = trial.info["world"]
+        rows.append({"status": trial.status.value, "scheduling": world.get("scheduling"),
+                     "late_chunk_fraction": world["late_chunks"] / max(1, world["chunks"]),
+                     "max_lag_ms": 1e3 * world["max_lag_s"],
+                     "late_maneuver_frames": trial.info.get("maneuver_frames", {}).get("late_frames")})
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="what", required=True)
@@ -129,6 +158,9 @@ def main() -> None:
     lk = sub.add_parser("lockstep", help="the same maneuver through the lockstep Betaflight plant")
     lk.add_argument("--seed", type=int, default=1)
     lk.add_argument("--trials", type=int, default=30)
+    lg = sub.add_parser("lag", help="how the rehearsal's world kept to the wall clock, trial by trial")
+    lg.add_argument("--seed", type=int, default=1)
+    lg.add_argument("--trials", type=int, default=2)
     args = parser.parse_args()
     if args.what == "summary":
         result = summarize(args.db, args.session)
@@ -136,6 +168,8 @@ def main() -> None:
         out.write_text(json.dumps(result, indent=1))
         print(table(result))
         print(f"\n(written to {out})")
+    elif args.what == "lag":
+        print(json.dumps(lag(args.seed, args.trials), indent=1))
     else:
         print(json.dumps(lockstep(args.seed, args.trials), indent=1))
 

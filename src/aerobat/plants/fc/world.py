@@ -17,8 +17,9 @@ When the world falls behind the wall clock (a loaded machine), it does not skip:
 as late and keeps the largest lag, which :meth:`RealTimeWorld.stop` reports (:class:`WorldReport`).
 Where it may (as root), the world raises its priority (:data:`WORLD_NICENESS`) and, while it flies, puts
 itself and its firmware under real-time scheduling (:data:`WORLD_FIFO_PRIORITY`), as a real vehicle never
-waits for a CPU (measured with three busy loops on the 2 cores: chunks late 5–9 % and the largest lag
-17–24 ms with the niceness alone, 0.1 % and 10–11 ms with ``SCHED_FIFO``).
+waits for a CPU (``scripts/results_fc.py lag`` with three busy loops on the 2 cores: chunks late 0.1 %
+and the largest lag 10–12 ms with ``SCHED_FIFO``; 5–9 % and 17–24 ms with the niceness alone, measured
+with :func:`_real_time_scheduling` taken out by hand).
 The world process dies with its owner (``PR_SET_PDEATHSIG``), and the firmware with the world. It runs
 in a session of its own, so the operator's Ctrl-C in the terminal reaches the ground (which disarms the
 flight) and not the world, which flies on until the ground stops it.

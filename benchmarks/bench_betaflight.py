@@ -204,21 +204,21 @@ def bench_watchdog() -> dict[str, Any]:
     nominal = design(TRIPLE, NominalModel(CONFIG))
     program = TRIPLE.program(nominal.p_nominal)
     plant = BetaflightPlant(CONFIG, BetaflightParams().replace(firmware__step_timeout_s=1.0), seed=1)
-    original = Flight.frame
+    original = Flight.run_frames
     stopped: dict[str, float] = {}
 
-    def frame(self: Flight, *args: Any, **kwargs: Any) -> None:
+    def run_frames(self: Flight, *args: Any, **kwargs: Any) -> Any:
         if not stopped and self.time_s >= 3.0 and self.sitl.pid is not None:
             stopped["at"] = time.perf_counter()
             os.kill(self.sitl.pid, signal.SIGSTOP)
-        original(self, *args, **kwargs)
+        return original(self, *args, **kwargs)
 
-    Flight.frame = frame  # type: ignore[method-assign]
+    Flight.run_frames = run_frames  # type: ignore[method-assign]
     try:
         lost = plant.fly(program)
         detected = time.perf_counter() - stopped["at"]
     finally:
-        Flight.frame = original  # type: ignore[method-assign]
+        Flight.run_frames = original  # type: ignore[method-assign]
     started = time.perf_counter()
     again = plant.fly(program)
     return {"lost_status": lost.status.value, "message": lost.message.splitlines()[0], "detected_after_s": detected,

@@ -160,6 +160,18 @@ def _betaflight_kernels(x: np.ndarray, cmd: np.ndarray) -> None:
         run_steps_shm(0, 0, 0, 0, 0, False, 0, 8, step_s, world, block, block[:16].view(np.float32), plant, aux,
                       np.zeros((2, 4)), counters, noise, np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)),
                       np.zeros(N_IO, dtype=np.int64), packet, scratch)
+        # the frame loop around both (a run of no frames), with the argument types Flight passes
+        from aerobat.plants.betaflight import frames as fr
+        from aerobat.plants.betaflight.frame_loop import fly_frames
+
+        rc_block = np.zeros(40, dtype=np.uint8)
+        fly_frames(0, 0, 32, 0, False, False, 0, np.random.default_rng(0), np.zeros(fr.N_CFG, dtype=np.int64),
+                   np.zeros(fr.N_FCFG), np.zeros(fr.N_ST, dtype=np.int64), np.zeros(fr.N_FST), world, block,
+                   block.view(np.float32), plant, aux, np.zeros((2, 4)), counters, packet, scratch, np.zeros((2, 6)),
+                   np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)), np.zeros(4, dtype=np.int64),
+                   np.zeros((4, 16), dtype=np.int64), rc_block, rc_block.view(np.uint16),
+                   np.zeros((1, 16), dtype=np.int64), np.zeros(fr.N_PILOT), np.zeros(3), np.zeros(3), np.zeros(4),
+                   np.zeros(N_LIMITS), np.zeros(3), np.zeros((3, 2)), np.empty((0, 1 + x.shape[0])), np.zeros(14))
     limits = np.zeros(N_LIMITS)
     limits[:] = 1.0
     sticks = np.zeros(4)

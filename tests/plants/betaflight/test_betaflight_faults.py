@@ -12,6 +12,7 @@ import sys
 import textwrap
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -37,11 +38,15 @@ FAKE = Path(__file__).with_name("fake_sitl.py")
 
 def sabotage(monkeypatch: pytest.MonkeyPatch, trials: set[int], at_s: float, how: signal.Signals,
              seen: list[int]) -> None:
-    """Send ``how`` to the firmware of the given trials (1-based) once it has flown ``at_s``."""
-    original = Flight.frame
+    """Send ``how`` to the firmware of the given trials (1-based) once it has flown ``at_s``.
+
+    Checked before each compiled run of frames: the signal goes out at most
+    :data:`~aerobat.plants.betaflight.flight.CHUNK_FRAMES` frames after ``at_s``.
+    """
+    original = Flight.run_frames
     state = {"trial": 0, "flight": None}
 
-    def frame(self: Flight, *args: object, **kwargs: object) -> None:
+    def run_frames(self: Flight, *args: Any, **kwargs: Any) -> Any:
         if state["flight"] is not self:
             state["flight"], state["trial"], state["done"] = self, state["trial"] + 1, False
         if state["trial"] in trials and not state["done"] and self.time_s >= at_s:
@@ -49,9 +54,9 @@ def sabotage(monkeypatch: pytest.MonkeyPatch, trials: set[int], at_s: float, how
             assert self.sitl.pid is not None
             seen.append(self.sitl.pid)
             os.kill(self.sitl.pid, how)
-        original(self, *args, **kwargs)
+        return original(self, *args, **kwargs)
 
-    monkeypatch.setattr(Flight, "frame", frame)
+    monkeypatch.setattr(Flight, "run_frames", run_frames)
 
 
 def test_firmware_killed_mid_trial_is_a_lost_trial_and_learning_goes_on(

@@ -143,7 +143,7 @@ def test_the_compiled_loop_over_shared_memory_with_a_stand_in_firmware() -> None
             flight.frame(tuple([1500] * 16))
         assert flight.sitl.steps == flight.tick == 3 * flight.frame_steps
         assert flight.motors[2] == pytest.approx((flight.tick - 1) * flight.step_s)  # the last step's answer
-        delivered = flight.frames_sent - flight.frames_dropped - len(flight._queue)
+        delivered = flight.frames_sent - flight.frames_dropped - flight.frames_queued
         assert flight.motors[0] == delivered and flight.motors[1] == pytest.approx(1.5)
 
 

@@ -140,6 +140,29 @@ def test_close_kills_and_cleans_up(firmware: tuple[Path, Path]) -> None:
     sitl.close()  # idempotent
 
 
+def test_a_sweep_leaves_a_directory_being_set_up_and_removes_a_dead_owners(tmp_path: Path,
+                                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    # found by two trials starting side by side: a sweep read an owner file the other process had
+    # created but not yet written, and failed on its empty text. The owner file is now written under
+    # another name and renamed, so a sweep sees a whole one or none.
+    from aerobat.plants.betaflight import sitl as sitl_module
+
+    monkeypatch.setattr(sitl_module.tempfile, "gettempdir", lambda: str(tmp_path))
+    being_set_up = tmp_path / (sitl_module._WORKDIR_PREFIX + "new")
+    being_set_up.mkdir()
+    (being_set_up / "owner.partial").write_text("")
+    dead = tmp_path / (sitl_module._WORKDIR_PREFIX + "dead")
+    dead.mkdir()
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    (dead / "owner").write_text(f"{gone.pid} 1\n")
+    mine = tmp_path / (sitl_module._WORKDIR_PREFIX + "mine")
+    mine.mkdir()
+    (mine / "owner").write_text(f"{sitl_module._process_identity(os.getpid())}\n")
+    sitl_module._sweep_stale_workdirs()
+    assert being_set_up.is_dir() and mine.is_dir() and not dead.exists()
+
+
 @pytest.mark.parametrize("ending", ["exit", "sigkill"])
 def test_firmware_never_outlives_its_owner(firmware: tuple[Path, Path], ending: str) -> None:
     binary, eeprom = firmware

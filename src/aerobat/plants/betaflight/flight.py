@@ -8,10 +8,13 @@ after the link latency, right before the state packet of the step it arrives in.
 samples the true state at its rate with seeded noise into a log the supervisor reads with its
 latency. Nothing here decides what to fly: that is the plant's supervisor.
 
-The steps of a frame run in one compiled loop (:mod:`.lockstep`: motion capture, the exchange
-through the C library's ``send``/``recv`` on the process's sockets, the physics; or
-:mod:`.lockstep_shm`, the same over shared memory with ``firmware.exchange = "shm"``), split only
-where an RC frame is due; the process's watchdog takes over whenever an answer is late.
+Frames run in one compiled loop (:mod:`.frame_loop`): the radio's draw and latency queue, the
+noise, the RC packets, and each step's motion capture, exchange (:mod:`.lockstep`: the C
+library's ``send``/``recv`` on the process's sockets; :mod:`.lockstep_shm`: shared memory with
+``firmware.exchange = "shm"``) and physics — and, for :meth:`Flight.run_frames`, the
+supervisor's pilot and checks between frames. Python is back at least every
+:data:`CHUNK_FRAMES` frames and whenever an answer is late: then the process's watchdog takes
+over.
 
 Everything random comes from the generator passed in, so a seed repeats a flight bit for bit;
 the firmware is deterministic in lockstep.
@@ -26,23 +29,15 @@ from pathlib import Path
 import numpy as np
 
 from aerobat.errors import ConfigError
-from aerobat.plants.betaflight.lockstep import (
-    IO_EXCHANGES,
-    IO_LOG,
-    IO_MOCAP_USED,
-    N_IO,
-    NO_ANSWER,
-    NON_FINITE,
-    SEND_FAILED,
-    run_steps,
-)
-from aerobat.plants.betaflight.packets import MOTOR_STRUCT, Exchange
+from aerobat.plants.betaflight import frames as fr
+from aerobat.plants.betaflight.frames import AnglePilot, FramesEnd, FramesRun, Mode, Radio, Until
+from aerobat.plants.betaflight.lockstep import DONE, IO_EXCHANGES, IO_LOG, NO_ANSWER, NON_FINITE, SEND_FAILED
+from aerobat.plants.betaflight.packets import MOTOR_STRUCT, RC_STRUCT, Exchange
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import (
     A_GROUND,
     C_CONTACT,
     C_DELAY,
-    C_TICK,
     N_COUNTERS,
     PACKET_DOUBLES,
     aux_vector,
@@ -53,9 +48,13 @@ from aerobat.plants.betaflight.sitl import SitlProcess
 from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose
 from aerobat.quadrotor.dynamics import N_STATE
 
-__all__ = ["Flight", "NonFinite"]
+__all__ = ["CHUNK_FRAMES", "Flight", "NonFinite"]
 
 _SLICE_S = 0.05  # the compiled shared-memory wait's timeout: then the watchdog takes the step
+
+
+CHUNK_FRAMES = 64
+"""Most frames per compiled call: Python (Ctrl-C, a fault injected by a test) gets a turn every 0.26 s simulated."""
 
 
 class NonFinite(Exception):
@@ -87,7 +86,7 @@ class Flight:
                               f"of gyro periods ({fw.gyro_rate_hz} Hz)")
         self.frame_steps = round(frame_steps)
         self.mocap_every = max(1, round(fw.gyro_rate_hz / params.motion_capture.rate_hz))
-        self.latency_steps = round(params.radio.latency_s / self.step_s)
+        latency_steps = round(params.radio.latency_s / self.step_s)
         self.start_m = np.asarray(start_m, dtype=float)
         ground = float(self.start_m[2] + params.volume.z_m[0])
         self.x = ground_state((float(self.start_m[0]), float(self.start_m[1]), ground))
@@ -104,32 +103,50 @@ class Flight:
         # set point (3) and P, I, D, F per axis (12)
         self.block = np.zeros(MOTOR_STRUCT.size, dtype=np.uint8)
         self.motors = self.block.view(np.float32)
-        self._io = np.zeros(N_IO, dtype=np.int64)
-        self.tick = 0
         self.log = np.empty((4096, MOCAP_COLUMNS))
-        self.log_count = 0
-        self._queue: list[tuple[int, tuple[int, ...]]] = []
-        self.frames_sent = 0
-        self.frames_dropped = 0
+        # the compiled loop's state (frames.S_*), constants and scratch; the radio's latency queue is a ring
+        self._st = np.zeros(fr.N_ST, dtype=np.int64)
+        self._fst = np.zeros(fr.N_FST)
+        queue = latency_steps // self.frame_steps + 4
+        self._queue_due = np.zeros(queue, dtype=np.int64)
+        self._queue_rc = np.zeros((queue, 16), dtype=np.int64)
+        self._rc_block = np.zeros(RC_STRUCT.size, dtype=np.uint8)  # (0.0, 16 channels): the RC packet
+        self._rc_words = self._rc_block.view(np.uint16)
+        self._noise_buffer = np.zeros((self.frame_steps, 6))
+        self._mocap_noise = np.zeros((self.frame_steps // self.mocap_every + 2, 6))
+        self._scratch14 = np.zeros(14)
+        self._no_record = np.empty((0, 1 + N_STATE))
+        self._no_pilot = (np.zeros(fr.N_PILOT), np.zeros(3), np.zeros(3), np.zeros(4), np.zeros(8))
+        volume = params.volume
+        self._volume = np.array([volume.x_m, volume.y_m, volume.z_m], dtype=float)
+        mc = params.motion_capture
+        self._fcfg = np.zeros(fr.N_FCFG)
+        self._fcfg[fr.Q_STEP_S] = self.step_s
+        self._fcfg[fr.Q_DROP_PROBABILITY] = params.radio.drop_probability
+        self._fcfg[fr.Q_POSITION_NOISE_M] = mc.position_noise_m
+        self._fcfg[fr.Q_ATTITUDE_NOISE_RAD] = mc.attitude_noise_rad
+        self._fcfg[fr.Q_MOCAP_LATENCY_S] = mc.latency_s
+        self._cfg = np.zeros(fr.N_CFG, dtype=np.int64)
+        self._cfg[fr.K_EVERY] = self.mocap_every
+        self._cfg[fr.K_LATENCY_STEPS] = latency_steps
+        self._cfg[fr.K_SENSOR_NOISE] = int(params.sensors.gyro_noise_rad_s != 0.0
+                                           or params.sensors.accel_noise_m_s2 != 0.0)
+        self._cfg[fr.K_WAIT_NS] = int(_SLICE_S * 1e9)
         prime(self.x, self.plant, self.aux, self.counters, self._noise(1)[0], self.packet, self.scratch)
         self.firmware_cpu_s: float | None = None
         self.spun = (0.0, 0.0)
-        self._run_steps = run_steps
         if fw.exchange is Exchange.SHM:  # loaded (and its C helper built) before a firmware starts
             from aerobat.plants.betaflight import shm
-            from aerobat.plants.betaflight.lockstep_shm import run_steps_shm
 
-            wait_ns, spin_ns = int(_SLICE_S * 1e9), int(shm.SPIN_S * 1e9)
+            self._cfg[fr.K_EXCHANGE] = fr.X_SHM
+            self._cfg[fr.K_SPIN_NS] = int(shm.SPIN_S * 1e9)
+        from aerobat.plants.betaflight.frame_loop import fly_frames
 
-            def run_shm(_state_fd: int, _motor_fd: int, first: int, *args: object) -> tuple[int, int]:
-                address = self.sitl.shm_address
-                if address is None:  # closed: the Python exchange raises
-                    return SEND_FAILED, first
-                return run_steps_shm(address, spin_ns, wait_ns, first, *args)  # type: ignore[no-any-return]
-
-            self._run_steps = run_shm  # type: ignore[assignment]
+        self._fly_frames = fly_frames
         self.sitl = SitlProcess(binary, eeprom, gyro_rate_hz=fw.gyro_rate_hz, step_timeout_s=fw.step_timeout_s,
                                 exchange=fw.exchange)
+        self._cfg[fr.K_STATE_FD], self._cfg[fr.K_MOTOR_FD] = self.sitl.socket_fds
+        self._cfg[fr.K_RC_FD] = self.sitl.rc_socket_fd
 
     # ------------------------------------------------------------------ lifetime
     def close(self) -> None:
@@ -159,6 +176,11 @@ class Flight:
 
     # ------------------------------------------------------------------ time
     @property
+    def tick(self) -> int:
+        """Gyro steps since power-on."""
+        return int(self._st[fr.S_TICK])
+
+    @property
     def time_s(self) -> float:
         """Simulated time since power-on [s]."""
         return self.tick * self.step_s
@@ -166,6 +188,37 @@ class Flight:
     @property
     def on_floor(self) -> bool:
         return bool(self.counters[C_CONTACT])
+
+    @property
+    def latency_steps(self) -> int:
+        """The radio link's latency in gyro steps (a replay sets 0: its frames act at once)."""
+        return int(self._cfg[fr.K_LATENCY_STEPS])
+
+    @latency_steps.setter
+    def latency_steps(self, steps: int) -> None:
+        if not 0 <= steps <= self._cfg[fr.K_LATENCY_STEPS]:  # the queue is sized for the configured latency
+            raise ValueError(f"latency of {steps} steps: 0 to {self._cfg[fr.K_LATENCY_STEPS]} allowed")
+        self._cfg[fr.K_LATENCY_STEPS] = steps
+
+    @property
+    def log_count(self) -> int:
+        """Motion-capture samples taken so far (rows of :attr:`log`)."""
+        return int(self._st[IO_LOG])
+
+    @property
+    def frames_sent(self) -> int:
+        """Radio frames sent so far (lost ones included)."""
+        return int(self._st[fr.S_SENT])
+
+    @property
+    def frames_dropped(self) -> int:
+        """Radio frames the radio lost so far."""
+        return int(self._st[fr.S_DROPPED])
+
+    @property
+    def frames_queued(self) -> int:
+        """Radio frames on their way (sent, not yet delivered: the link latency)."""
+        return int(self._st[fr.S_Q_COUNT])
 
     def _noise(self, n: int) -> np.ndarray:
         if self.params.sensors.gyro_noise_rad_s == 0.0 and self.params.sensors.accel_noise_m_s2 == 0.0:
@@ -179,13 +232,8 @@ class Flight:
         that stopped altogether is modelled by its channels instead) and otherwise reaches the
         receiver after the link latency.
         """
-        dropped = not lossless and self.rng.random() < self.params.radio.drop_probability
-        self.frames_sent += 1
-        if dropped:
-            self.frames_dropped += 1
-        else:
-            self._queue.append((self.tick + self.latency_steps, tuple(int(c) for c in channels_us)))
-        self._advance(self.frame_steps)
+        self.run_frames(Mode.STREAM, 1, channels_us=np.array([channels_us], dtype=np.int64),
+                        radio=Radio.LOSSLESS if lossless else Radio.LOSSY)
 
     def advance(self, steps: int) -> None:
         """Fly ``steps`` gyro periods with no radio frame: the receiver gets its frames another way.
@@ -194,7 +242,7 @@ class Flight:
         (:mod:`aerobat.plants.fc`); this keeps the UDP receiver silent, so the firmware's
         receiver stays MSP, its default.
         """
-        self._advance(steps)
+        self.run_frames(Mode.STEPS, 1, steps=steps, radio=Radio.NONE)
 
     def release(self) -> None:
         """Take the floor away: from now on the vehicle flies free, as in the air (a replayed flight).
@@ -214,61 +262,105 @@ class Flight:
         parts = rows.shape[0]
         if self.frame_steps % parts:
             raise ValueError(f"{parts} samples do not divide a frame of {self.frame_steps} gyro periods")
-        self.frames_sent += 1
-        self._queue.append((self.tick + self.latency_steps, tuple(int(c) for c in channels_us)))
+        channels = np.array([channels_us], dtype=np.int64)
         for j in range(parts):
-            self._advance(self.frame_steps // parts)
+            self.run_frames(Mode.STREAM if j == 0 else Mode.STEPS, 1, steps=self.frame_steps // parts,
+                            channels_us=channels, radio=Radio.LOSSLESS if j == 0 else Radio.NONE)
             rows[j, 0] = self.time_s
             rows[j, 1:4] = self.x[10:13]
             rows[j, 4:23] = self.motors
 
-    def _advance(self, n: int) -> None:
-        noise = self._noise(n)
-        mc = self.params.motion_capture
-        rows = n // self.mocap_every + 2
-        if self.log_count + rows > self.log.shape[0]:
+    def run_frames(self, mode: Mode, frames: int, *, steps: int | None = None, radio: Radio = Radio.LOSSY,
+                   channels_us: np.ndarray | None = None, pilot: AnglePilot | None = None, check: bool = False,
+                   until: Until = Until.NONE, record: np.ndarray | None = None) -> FramesRun:
+        """Fly up to ``frames`` radio frames of ``steps`` gyro periods (default: one frame period) in compiled code.
+
+        ``mode`` says where each frame's channels come from: ``channels_us`` (k, 16) [us], a row per
+        frame or one for all (:attr:`Mode.STREAM`), or ``pilot``'s sticks (:attr:`Mode.ANGLE`);
+        ``radio`` what the radio does with them. After each frame: a truth row into ``record``
+        (frames, 1 + state: time [s], true state), the flight-volume check around the start
+        (``check``: the floor or a motion-capture sample outside ``params.volume`` ends the run)
+        and the stop condition ``until``.
+
+        Raises :class:`~.errors.FirmwareNotResponding` (the watchdog) and :class:`NonFinite`.
+        """
+        steps = self.frame_steps if steps is None else int(steps)
+        if steps < 1 or frames < 0:
+            raise ValueError(f"{frames} frames of {steps} gyro periods: both must be positive")
+        if mode is Mode.ANGLE and pilot is None:
+            raise ValueError("Mode.ANGLE needs the pilot")
+        if mode is not Mode.STEPS and channels_us is None and pilot is None:
+            raise ValueError(f"{mode.name} needs the channels")
+        if record is not None and record.shape != (frames, 1 + N_STATE):
+            raise ValueError(f"record must be ({frames}, {1 + N_STATE}), not {record.shape}")
+        if steps > self._noise_buffer.shape[0]:
+            self._noise_buffer = np.zeros((steps, 6))
+            self._mocap_noise = np.zeros((steps // self.mocap_every + 2, 6))
+        if pilot is not None:
+            floats = np.array([pilot.period_s, pilot.settle_position_m, pilot.settle_velocity_m_s,
+                               pilot.settle_tilt_rad, float(pilot.settle_hold_frames)])
+            arrays = (floats, np.asarray(pilot.target_m, dtype=float), pilot.integral, pilot.gains, pilot.limits)
+            channels = np.array([pilot.channels_us], dtype=np.int64) if channels_us is None else channels_us
+        else:
+            arrays = self._no_pilot
+            channels = channels_us if channels_us is not None else np.full((1, 16), 1000, dtype=np.int64)
+        channels = np.ascontiguousarray(channels, dtype=np.int64)
+        many = channels.shape[0] > 1
+        if many and channels.shape[0] != frames:
+            raise ValueError(f"{channels.shape[0]} rows of channels for {frames} frames")
+        self._st[fr.S_CALM] = 0
+        self._fst[:] = (math.nan, 0.0, 0.0)
+        done, resume = 0, False
+        status = DONE
+        while done < frames:
+            chunk = min(CHUNK_FRAMES, frames - done)
+            self._reserve_log(chunk * (steps // self.mocap_every + 2))
+            address = self.sitl.shm_address
+            self._cfg[fr.K_SHM] = address if address is not None else 0
+            status, flown = self._fly_frames(
+                int(mode), chunk, steps, int(radio), resume, check, int(until), self.rng, self._cfg, self._fcfg,
+                self._st, self._fst, self.x, self.block, self.motors, self.plant, self.aux, self.pending,
+                self.counters, self.packet, self.scratch, self._noise_buffer, self._mocap_noise, self.log,
+                self._queue_due, self._queue_rc, self._rc_block, self._rc_words,
+                channels[done:done + chunk] if many else channels, *arrays, self.start_m, self._volume,
+                record[done:done + chunk] if record is not None else self._no_record, self._scratch14)
+            self.sitl.steps += int(self._st[IO_EXCHANGES])
+            self._st[IO_EXCHANGES] = 0
+            done += int(flown)
+            resume = False
+            if status == DONE:
+                continue
+            if status == NO_ANSWER:  # the watchdog finishes the exchange (or raises)
+                self.sitl.receive_into(self.block)
+                resume = True
+            elif status == SEND_FAILED:
+                self.sitl.exchange(self.packet, self.block)
+                resume = True
+            elif status == fr.RC_FAILED:  # the Python send raises the right error, or gets it through
+                head = int(self._st[fr.S_Q_HEAD])
+                self.sitl.send_rc(tuple(int(c) for c in self._queue_rc[head]))
+                self._st[fr.S_Q_HEAD] = (head + 1) % self._queue_due.shape[0]
+                self._st[fr.S_Q_COUNT] -= 1
+            elif status == NON_FINITE:
+                self._st[fr.S_TICK] += self._st[fr.S_STEP] + 1
+                self._st[fr.S_IN_FRAME] = 0
+                raise NonFinite(f"non-finite vehicle state at t = {self.time_s:.4f} s")
+            elif status == fr.QUEUE_FULL:
+                raise RuntimeError(f"the radio's latency queue ({self._queue_due.shape[0]} frames) overflowed")
+            else:
+                break
+        airborne = None if math.isnan(self._fst[fr.F_AIRBORNE_S]) else float(self._fst[fr.F_AIRBORNE_S])
+        end = {DONE: FramesEnd.DONE, fr.UNTIL_MET: FramesEnd.MET, fr.CRASH_FLOOR: FramesEnd.FLOOR,
+               fr.CRASH_VOLUME: FramesEnd.VOLUME}[status]
+        return FramesRun(end, done, int(self._st[fr.S_AXIS]) if end is FramesEnd.VOLUME else None, airborne,
+                         float(self._fst[fr.F_WORST_MEASURED_M]), float(self._fst[fr.F_WORST_TRUE_M]))
+
+    def _reserve_log(self, rows: int) -> None:
+        count = self.log_count
+        if count + rows > self.log.shape[0]:
             grown = np.empty((2 * self.log.shape[0] + rows, MOCAP_COLUMNS))
-            grown[: self.log_count] = self.log[: self.log_count]
+            grown[:count] = self.log[:count]
             self.log = grown
-        mocap_noise = np.zeros((rows, 6))
-        if mc.position_noise_m:
-            mocap_noise[:, :3] = mc.position_noise_m * self.rng.standard_normal((rows, 3))
-        if mc.attitude_noise_rad:
-            mocap_noise[:, 3:] = mc.attitude_noise_rad * self.rng.standard_normal((rows, 3))
-        io = self._io
-        io[IO_LOG] = self.log_count
-        io[IO_MOCAP_USED] = 0
-        io[IO_EXCHANGES] = 0
-        sitl = self.sitl
-        state_fd, motor_fd = sitl.socket_fds
-        queue = self._queue
-        tick0 = self.tick
-        i, resume = 0, False
-        try:
-            while i < n:
-                if not resume:
-                    while queue and queue[0][0] <= tick0 + i:  # RC frames reach the receiver first
-                        sitl.send_rc(queue.pop(0)[1])
-                stop = min(n, queue[0][0] - tick0) if queue else n
-                status, i = self._run_steps(state_fd, motor_fd, i, stop, resume, tick0, self.mocap_every,
-                                            self.step_s, self.x, self.block, self.motors, self.plant, self.aux,
-                                            self.pending, self.counters, noise, mocap_noise, self.log, io,
-                                            self.packet, self.scratch)
-                resume = False
-                if status == NO_ANSWER:  # the watchdog finishes the exchange (or raises)
-                    sitl.receive_into(self.block)
-                    resume = True
-                elif status == SEND_FAILED:
-                    sitl.exchange(self.packet, self.block)
-                    resume = True
-                elif status == NON_FINITE:
-                    self.tick = tick0 + i + 1
-                    raise NonFinite(f"non-finite vehicle state at t = {self.tick * self.step_s:.4f} s")
-        finally:
-            self.log_count = int(io[IO_LOG])
-            sitl.steps += int(io[IO_EXCHANGES])
-        self.tick = tick0 + n
-        assert int(self.counters[C_TICK]) == self.tick
 
     # ------------------------------------------------------------------ measurement
     def estimate(self, pos: np.ndarray, vel: np.ndarray, quat: np.ndarray) -> bool:

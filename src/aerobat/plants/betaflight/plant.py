@@ -37,10 +37,11 @@ import numpy as np
 from aerobat.core.plant import Trial, TrialStatus
 from aerobat.plants.betaflight.errors import FirmwareNotResponding
 from aerobat.plants.betaflight.firmware_settings import BetaflightSettings, load_settings
-from aerobat.plants.betaflight.flight import Flight, NonFinite
+from aerobat.plants.betaflight.flight import AnglePilot, Flight, FramesEnd, FramesRun, NonFinite
+from aerobat.plants.betaflight.frames import Mode, Until
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import airframe_plant
-from aerobat.plants.betaflight.pilot import L_CLIMB, StickMap, angle_sticks, program_sticks
+from aerobat.plants.betaflight.pilot import L_CLIMB, StickMap, program_sticks
 from aerobat.plants.betaflight.rc import RC_MIN_US, stick_to_us
 from aerobat.plants.mocap import estimate_final_state, measured_states
 from aerobat.plants.plant_state import StateLayout
@@ -73,11 +74,6 @@ class TrialStop(Exception):
     def __init__(self, status: TrialStatus, message: str) -> None:
         super().__init__(message)
         self.status = status
-
-
-def _tilt(quat: np.ndarray) -> float:
-    x, y = quat[1], quat[2]
-    return math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y))))
 
 
 class BetaflightPlant:
@@ -297,84 +293,63 @@ class BetaflightPlant:
     def power_on_and_arm(self, flight: Flight) -> float:
         """Calibrate on the floor, then arm through AUX1; returns the time the firmware armed."""
         idle = np.array([0.0, 0.0, 0.0, float(RC_MIN_US)])
-        disarmed = self.channels(idle, arm=False, angle=True)
-        for _ in range(flight.frames_for(self.params.pilot.calibration_s)):
-            flight.frame(disarmed)
-        armed = self.channels(idle, arm=True, angle=True)
-        for _ in range(flight.frames_for(1.0)):
-            flight.frame(armed)
-            if min(flight.motor_commands()) > 0.0:
-                return flight.time_s
+        flight.run_frames(Mode.STREAM, flight.frames_for(self.params.pilot.calibration_s),
+                          channels_us=self._rows(self.channels(idle, arm=False, angle=True)))
+        armed = flight.run_frames(Mode.STREAM, flight.frames_for(1.0),
+                                  channels_us=self._rows(self.channels(idle, arm=True, angle=True)), until=Until.ARMED)
+        if armed.end is FramesEnd.MET:
+            return flight.time_s
         raise TrialStop(TrialStatus.ABORTED, "the firmware did not arm within 1 s of the ARM switch")
+
+    @staticmethod
+    def _rows(*channels: tuple[int, ...]) -> np.ndarray:
+        return np.array(channels, dtype=np.int64)
 
     def _estimate(self, flight: Flight) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         pos, vel, quat = np.zeros(3), np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
         flight.estimate(pos, vel, quat)
         return pos, vel, quat
 
-    def fly_to(self, flight: Flight, target: np.ndarray, seconds: float, *, check: bool,
-                     until: Any = None, limits: np.ndarray | None = None) -> bool:
-        """ANGLE-mode frames toward ``target`` for ``seconds`` (or until ``until(pos, vel, quat)`` is true)."""
-        period = 1.0 / self.params.radio.rate_hz
-        sticks = np.zeros(4)
-        for _ in range(flight.frames_for(seconds)):
-            pos, vel, quat = self._estimate(flight)
-            angle_sticks(pos, vel, quat, target, self._integral, self.gains,
-                         self.limits if limits is None else limits, period, sticks)
-            flight.frame(self.channels(sticks, arm=True, angle=True))
-            if check:
-                self._check_volume(flight)
-            if until is not None and until(*self._estimate(flight)):
-                return True
-        return False
+    def fly_to(self, flight: Flight, target: np.ndarray, seconds: float, *, check: bool, until: Until = Until.NONE,
+               limits: np.ndarray | None = None) -> FramesRun:
+        """ANGLE-mode frames toward ``target`` for ``seconds`` or until ``until``; a crash raises :class:`TrialStop`."""
+        pilot = self.params.pilot
+        angle = AnglePilot(np.asarray(target, dtype=float), self._integral, self.gains,
+                           self.limits if limits is None else limits,
+                           self.channels(np.zeros(4), arm=True, angle=True), 1.0 / self.params.radio.rate_hz,
+                           pilot.settle_position_m, pilot.settle_velocity_m_s, pilot.settle_tilt_rad,
+                           max(1, flight.frames_for(pilot.settle_hold_s)))
+        run = flight.run_frames(Mode.ANGLE, flight.frames_for(seconds), pilot=angle, check=check, until=until)
+        self._raise_crash(flight, run)
+        return run
 
-    def _check_volume(self, flight: Flight) -> None:
-        if flight.on_floor:
+    def _raise_crash(self, flight: Flight, run: FramesRun) -> None:
+        if run.end is FramesEnd.FLOOR:
             raise TrialStop(TrialStatus.CRASHED, f"hit the floor at t = {flight.time_s:.3f} s")
-        rows = flight.mocap()
-        if rows.shape[0] == 0:
-            return
-        row = rows[-1]
-        vol = self.params.volume
-        for axis, (lo, hi), name in ((0, vol.x_m, "x"), (1, vol.y_m, "y"), (2, vol.z_m, "z")):
-            rel = row[1 + axis] - self.start_m[axis]
-            if rel < lo or rel > hi:
-                raise TrialStop(TrialStatus.CRASHED, f"left the flight volume at t = {row[0]:.3f} s: {name} = "
+        if run.end is FramesEnd.VOLUME:
+            assert run.axis is not None
+            row = flight.mocap()[-1]
+            lo, hi = (self.params.volume.x_m, self.params.volume.y_m, self.params.volume.z_m)[run.axis]
+            name = "xyz"[run.axis]
+            rel = row[1 + run.axis] - self.start_m[run.axis]
+            raise TrialStop(TrialStatus.CRASHED, f"left the flight volume at t = {row[0]:.3f} s: {name} = "
                                                  f"{rel:+.3f} m beyond the {name} limits [{lo:g}, {hi:g}] m")
 
     def settle(self, flight: Flight) -> tuple[float | None, float]:
         """Take off and fly to the start until within tolerance for the hold time."""
         pilot = self.params.pilot
         self._integral = np.zeros(3)
-        hold = max(1, flight.frames_for(pilot.settle_hold_s))
-        calm = [0]
-        airborne: list[float] = []
-
-        def settled(pos: np.ndarray, vel: np.ndarray, quat: np.ndarray) -> bool:
-            if not airborne and not flight.on_floor:
-                airborne.append(flight.time_s)
-            ok = (np.linalg.norm(pos - self.start_m) < pilot.settle_position_m
-                  and np.linalg.norm(vel) < pilot.settle_velocity_m_s and _tilt(quat) < pilot.settle_tilt_rad)
-            calm[0] = calm[0] + 1 if ok else 0
-            return calm[0] >= hold
-
-        if not self.fly_to(flight, self.start_m, pilot.settle_timeout_s, check=False, until=settled):
+        run = self.fly_to(flight, self.start_m, pilot.settle_timeout_s, check=False, until=Until.SETTLED)
+        if run.end is not FramesEnd.MET:
             raise TrialStop(TrialStatus.ABORTED, f"did not settle at the start within {pilot.settle_timeout_s:g} s")
-        return (airborne[0] if airborne else None), flight.time_s
+        return run.airborne_s, flight.time_s
 
     def hover(self, flight: Flight, seconds: float) -> dict[str, float]:
         """Hover at the start; the largest position error seen (measured and true) [m]."""
         worst = {"seconds": seconds, "max_error_measured_m": 0.0, "max_error_true_m": 0.0}
-
-        def track(pos: np.ndarray, vel: np.ndarray, quat: np.ndarray) -> bool:
-            worst["max_error_measured_m"] = max(worst["max_error_measured_m"],
-                                                float(np.linalg.norm(pos - self.start_m)))
-            worst["max_error_true_m"] = max(worst["max_error_true_m"],
-                                            float(np.linalg.norm(flight.x[0:3] - self.start_m)))
-            return False
-
         if seconds > 0:
-            self.fly_to(flight, self.start_m, seconds, check=True, until=track)
+            run = self.fly_to(flight, self.start_m, seconds, check=True, until=Until.TRACK)
+            worst["max_error_measured_m"], worst["max_error_true_m"] = run.worst_estimated_m, run.worst_true_m
         return worst
 
     def maneuver(self, flight: Flight, compiled: CompiledProgram, truth: list[np.ndarray]) -> float:
@@ -386,14 +361,27 @@ class BetaflightPlant:
         commands[np.arange(n) * period >= compiled.duration_s - 1e-12] = compiled.hover
         sticks = np.zeros(4)
         law = self._pilot_feedback(compiled, start_time) if self.feedback.enabled else None
-        for k in range(n):
-            cmd = commands[k]
-            if law is not None and k * period < compiled.duration_s:
-                cmd = law(flight, k * period, cmd)
-            program_sticks(cmd, self.limits, sticks)
-            flight.frame(self.channels(sticks, arm=True, angle=False))
-            truth.append(np.concatenate([[flight.time_s], flight.x]))
-            self._check_volume(flight)
+        record = np.empty((n, 1 + N_STATE))
+        if law is None:  # the whole stream is known: one compiled run
+            rows = np.empty((n, 16), dtype=np.int64)
+            for k in range(n):
+                program_sticks(commands[k], self.limits, sticks)
+                rows[k] = self.channels(sticks, arm=True, angle=False)
+            run = flight.run_frames(Mode.STREAM, n, channels_us=rows, check=True, record=record)
+        else:  # the pilot's feedback reads the motion capture before each frame
+            for k in range(n):
+                cmd = law(flight, k * period, commands[k]) if k * period < compiled.duration_s else commands[k]
+                program_sticks(cmd, self.limits, sticks)
+                run = flight.run_frames(Mode.STREAM, 1, channels_us=self._rows(self.channels(sticks, arm=True,
+                                                                                             angle=False)),
+                                        check=True, record=record[k:k + 1])
+                if run.end is not FramesEnd.DONE:
+                    run = FramesRun(run.end, k + run.frames, run.axis)
+                    break
+            else:
+                run = FramesRun(FramesEnd.DONE, n)
+        truth.extend(record[:run.frames])
+        self._raise_crash(flight, run)
         self._integral[0:2] = 0.0  # the hover throttle's integral (the pilot's mass error) carries into the return
         return start_time
 
@@ -433,11 +421,11 @@ class BetaflightPlant:
         below = self.start_m + np.array([0.0, 0.0, self.params.volume.z_m[0] - 0.3])
         gentle = self.limits.copy()
         gentle[L_CLIMB] = min(gentle[L_CLIMB], _LANDING_SPEED_M_S)
-        landed = self.fly_to(flight, below, pilot.landing_timeout_s, check=False,
-                                   until=lambda pos, vel, quat: flight.on_floor, limits=gentle)
+        landed = self.fly_to(flight, below, pilot.landing_timeout_s, check=False, until=Until.ON_FLOOR,
+                             limits=gentle).end is FramesEnd.MET
         low = np.array([0.0, 0.0, 0.0, float(RC_MIN_US)])
-        for _ in range(flight.frames_for(0.1)):
-            flight.frame(self.channels(low, arm=True, angle=True))
-        for _ in range(flight.frames_for(0.1)):
-            flight.frame(self.channels(low, arm=False, angle=True))
+        flight.run_frames(Mode.STREAM, flight.frames_for(0.1), channels_us=self._rows(self.channels(low, arm=True,
+                                                                                                    angle=True)))
+        flight.run_frames(Mode.STREAM, flight.frames_for(0.1), channels_us=self._rows(self.channels(low, arm=False,
+                                                                                                    angle=True)))
         return landed, max(flight.motor_commands()) == 0.0

@@ -89,7 +89,8 @@ def _sweep_stale_workdirs() -> None:
     """Remove working directories whose owner process is gone.
 
     An owner killed with SIGKILL cannot clean up (its firmware dies with it,
-    through PR_SET_PDEATHSIG, but the directory stays); the next owner does it.
+    through PR_SET_PDEATHSIG, but the directory stays); the next owner does it. A directory
+    without its owner file yet is being set up by another process and is left alone.
     """
     for workdir in Path(tempfile.gettempdir()).glob(_WORKDIR_PREFIX + "*"):
         try:
@@ -224,7 +225,10 @@ class SitlProcess:
         resources.keep_workdir = self.keep_workdir
         _sweep_stale_workdirs()
         resources.workdir = Path(tempfile.mkdtemp(prefix=_WORKDIR_PREFIX))
-        (resources.workdir / _OWNER_FILE).write_text(f"{_process_identity(os.getpid())}\n")
+        # written whole under another name, then renamed: a sweep in another process never reads it half written
+        partial = resources.workdir / (_OWNER_FILE + ".partial")
+        partial.write_text(f"{_process_identity(os.getpid())}\n")
+        os.replace(partial, resources.workdir / _OWNER_FILE)
         if self.eeprom is not None:
             shutil.copyfile(self.eeprom, resources.workdir / "eeprom.bin")
         self.log_path = resources.workdir / "sitl.log"
@@ -494,6 +498,14 @@ class SitlProcess:
         :meth:`exchange` or :meth:`receive_into`, which apply the watchdog.
         """
         return self._state_socket.fileno(), self._motor_socket.fileno()
+
+    @property
+    def rc_socket_fd(self) -> int:
+        """The RC socket's file descriptor (connected to the receiver; sends time out), for :mod:`.frame_loop`.
+
+        After a failed send, send the frame with :meth:`send_rc`, which raises the right error.
+        """
+        return self._rc_socket.fileno()
 
     def spun_s(self) -> tuple[float, float]:
         """(firmware, driver): time each side has spun so far waiting for the other [s]; zeros over UDP.

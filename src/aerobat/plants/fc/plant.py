@@ -262,7 +262,7 @@ class FlightControllerPlant(BetaflightPlant):
         flight = WallClockFlight(link.msp, link.poses, monitor, rate_hz=self.params.radio.rate_hz,
                                  time_zero_s=link.time_zero_s, start_m=self.start_m, floor_z_m=floor,
                                  command_latency_s=self.params.radio.latency_s,
-                                 rotation_stick_us=self._rotation_stick_us())
+                                 rotation_stick_us=self._rotation_stick_us(), volume=self.params.volume)
         self.flight = flight  # type: ignore[assignment]
         try:
             problems = self._preflight(flight, link.msp)

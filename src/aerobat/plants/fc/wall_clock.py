@@ -26,8 +26,11 @@ from typing import Any
 import numpy as np
 
 from aerobat.plants.betaflight.errors import LinkClosed, LinkTimeout
+from aerobat.plants.betaflight.frame_by_frame import run_frames_by_frame
+from aerobat.plants.betaflight.frames import FramesRun, Mode
 from aerobat.plants.betaflight.msp import MSP_BATTERY_STATE, MSP_SET_RAW_RC, Battery, MspClient
 from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose
+from aerobat.plants.world_params import Volume
 from aerobat.quadrotor.dynamics import N_STATE
 
 from .pose_source import Pose, PoseSource
@@ -66,11 +69,13 @@ class WallClockFlight:
     battery_period_s : how often the battery is asked for (MSP_BATTERY_STATE) during the flight.
     rotation_stick_us : a roll, pitch or yaw stick this far from the centre asks for a rotation (in ACRO,
         the rehearsal's set-point threshold): the frames that first do are noted (``deflections_s``).
+    volume : the flight volume around the start, for the supervisor's checks (:meth:`run_frames`).
     """
 
     def __init__(self, msp: MspClient, poses: PoseSource, monitor: SafetyMonitor, *, rate_hz: float,
                  time_zero_s: float, start_m: np.ndarray, floor_z_m: float, command_latency_s: float,
-                 battery_period_s: float = 1.0, rotation_stick_us: float = 100.0) -> None:
+                 battery_period_s: float = 1.0, rotation_stick_us: float = 100.0,
+                 volume: Volume | None = None) -> None:
         self.msp = msp
         self.poses = poses
         self.monitor = monitor
@@ -78,6 +83,7 @@ class WallClockFlight:
         self.rate_hz = rate_hz
         self.time_zero_s = time_zero_s
         self.start_m = np.asarray(start_m, dtype=float)
+        self.volume = volume
         self.floor_z_m = floor_z_m
         self.step_s = _RESOLUTION_S
         self.latency_steps = round(command_latency_s / _RESOLUTION_S)
@@ -148,6 +154,10 @@ class WallClockFlight:
         self.frames_sent += 1
         self.tick += 1
         self._take_in()
+
+    def run_frames(self, mode: Mode, frames: int, **run: Any) -> FramesRun:
+        """The supervisor's runs of frames, one :meth:`frame` per radio period (:func:`.run_frames_by_frame`)."""
+        return run_frames_by_frame(self, self.volume, mode, frames, **run)
 
     def watch(self, seconds: float) -> None:
         """Send nothing for ``seconds``, taking in poses (after a link loss: the vehicle is the firmware's)."""

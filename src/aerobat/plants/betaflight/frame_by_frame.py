@@ -1,0 +1,109 @@
+"""Runs of radio frames in Python, one ``frame()`` call each: for a flight on the wall clock.
+
+A flight controller on a serial port (:mod:`aerobat.plants.fc`) flies one frame per radio period
+of real time, with safety checks and MSP traffic in between; it cannot hand a run of frames to
+compiled code. :func:`run_frames_by_frame` gives such a flight the same ``run_frames`` as the
+compiled :class:`~.flight.Flight`: the same ANGLE pilot, checks and stop conditions, frame by
+frame, through the flight's ``frame``, ``estimate``, ``mocap``, ``on_floor`` and ``x``. On a
+lockstep :class:`~.flight.Flight` it flies what the compiled loop flies, bit for bit (a test
+holds them to it).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from aerobat.plants.betaflight.frames import AnglePilot, FramesEnd, FramesRun, Mode, Radio, Until
+from aerobat.plants.betaflight.pilot import angle_sticks
+from aerobat.plants.betaflight.rc import RC_MIN_US, stick_to_us
+from aerobat.plants.world_params import Volume
+
+__all__ = ["run_frames_by_frame"]
+
+
+def _estimate(flight: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    pos, vel, quat = np.zeros(3), np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
+    flight.estimate(pos, vel, quat)
+    return pos, vel, quat
+
+
+def _tilt_rad(quat: np.ndarray) -> float:
+    x, y = quat[1], quat[2]
+    return math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y))))
+
+
+def _outside(flight: Any, volume: Volume) -> int | None:
+    """The axis along which the last motion-capture sample is outside the volume around the start, if any."""
+    rows = flight.mocap()
+    if rows.shape[0] == 0:
+        return None
+    row = rows[-1]
+    for axis, (lo, hi) in enumerate((volume.x_m, volume.y_m, volume.z_m)):
+        rel = row[1 + axis] - flight.start_m[axis]
+        if rel < lo or rel > hi:
+            return axis
+    return None
+
+
+def run_frames_by_frame(flight: Any, volume: Volume | None, mode: Mode, frames: int, *, steps: int | None = None,
+                        radio: Radio = Radio.LOSSY, channels_us: np.ndarray | None = None,
+                        pilot: AnglePilot | None = None, check: bool = False, until: Until = Until.NONE,
+                        record: np.ndarray | None = None) -> FramesRun:
+    """:meth:`.flight.Flight.run_frames` through ``flight.frame()``; ``volume``: the flight volume (for ``check``)."""
+    if mode is Mode.STEPS or steps is not None:
+        raise ValueError("a flight on the wall clock flies whole radio frames")
+    if check and volume is None:
+        raise ValueError("checking the flight volume needs the volume")
+    if mode is Mode.ANGLE and pilot is None:
+        raise ValueError("Mode.ANGLE needs the pilot")
+    sticks = np.zeros(4)
+    start = flight.start_m
+    airborne: float | None = None
+    worst_estimated = worst_true = 0.0
+    calm = 0
+    for k in range(frames):
+        if mode is Mode.ANGLE:
+            assert pilot is not None
+            pos, vel, quat = _estimate(flight)
+            angle_sticks(pos, vel, quat, pilot.target_m, pilot.integral, pilot.gains, pilot.limits, pilot.period_s,
+                         sticks)
+            channels: tuple[int, ...] = (stick_to_us(float(sticks[0])), stick_to_us(float(sticks[1])),
+                                         int(round(min(max(float(sticks[3]), RC_MIN_US), 2000.0))),
+                                         stick_to_us(float(sticks[2])), *pilot.channels_us[4:])
+        else:
+            assert channels_us is not None
+            channels = tuple(int(c) for c in channels_us[k if len(channels_us) > 1 else 0])
+        flight.frame(channels, lossless=radio is Radio.LOSSLESS)
+        if record is not None:
+            record[k, 0] = flight.time_s
+            record[k, 1:] = flight.x
+        if check:
+            if flight.on_floor:
+                return FramesRun(FramesEnd.FLOOR, k + 1)
+            axis = _outside(flight, volume)  # type: ignore[arg-type]
+            if axis is not None:
+                return FramesRun(FramesEnd.VOLUME, k + 1, axis)
+        met = False
+        if until is Until.ARMED:
+            met = min(flight.motor_commands()) > 0.0
+        elif until is Until.ON_FLOOR:
+            met = flight.on_floor
+        elif until is Until.TRACK:
+            pos, _, _ = _estimate(flight)
+            worst_estimated = max(worst_estimated, float(np.linalg.norm(pos - start)))
+            worst_true = max(worst_true, float(np.linalg.norm(flight.x[0:3] - start)))
+        elif until is Until.SETTLED:
+            assert pilot is not None
+            pos, vel, quat = _estimate(flight)
+            if airborne is None and not flight.on_floor:
+                airborne = flight.time_s
+            ok = (np.linalg.norm(pos - start) < pilot.settle_position_m
+                  and np.linalg.norm(vel) < pilot.settle_velocity_m_s and _tilt_rad(quat) < pilot.settle_tilt_rad)
+            calm = calm + 1 if ok else 0
+            met = calm >= pilot.settle_hold_frames
+        if met:
+            return FramesRun(FramesEnd.MET, k + 1, None, airborne, worst_estimated, worst_true)
+    return FramesRun(FramesEnd.DONE, frames, None, airborne, worst_estimated, worst_true)

@@ -1,0 +1,294 @@
+"""Radio frames and the supervisor around them in one compiled loop: Python once per chunk of frames.
+
+A trial through the firmware is ~3,700 radio frames of ~32 gyro steps each. The steps of a frame
+have run compiled since :mod:`.lockstep`; the frame around them — the radio's drop draw and
+latency queue, the sensor and motion-capture noise, the RC packets, and the supervisor's ANGLE
+pilot (estimate, sticks, channels, volume check, "settled?") — was Python, ≈ 75 µs a frame, as
+long as the firmware's own work on the frame's steps. While Python worked the firmware waited, went
+to sleep, and cost a wake-up at the next step. :func:`fly_frames` does all of it for a run of
+frames, with the same arithmetic in the same order and the same draws from the same generator
+(numba's ``np.random.Generator`` is NumPy's stream), so a seed repeats a flight bit for bit
+whichever loop flies it.
+
+A call flies one :class:`~.frames.Mode` (steps only, given channels, or the ANGLE pilot's
+frames, sticks from the motion-capture estimate: :func:`.pilot.angle_sticks`) with one
+:class:`~.frames.Radio`; after each frame an optional truth row, the optional flight-volume
+check and an optional :class:`~.frames.Until` stop condition.
+
+A call returns ``(status, frames completed)``. Besides the statuses of :mod:`.lockstep`
+(:data:`~.lockstep.NO_ANSWER`, :data:`~.lockstep.SEND_FAILED`, :data:`~.lockstep.NON_FINITE`:
+the frame in progress stops at step ``st[S_STEP]``, and the caller finishes that step with the
+process's watchdog and calls again with ``resume``), :data:`~.frames.RC_FAILED` (the RC packet at the
+queue's head could not be sent; the caller sends it, drops it from the queue and calls again),
+and the codes of :mod:`.frames` (a stop condition met, a crash, the axis in ``st[S_AXIS]``).
+:class:`.flight.Flight` owns the arrays and drives the calls.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+from numba.core import types
+
+from aerobat.plants.betaflight.frames import (
+    CRASH_FLOOR,
+    CRASH_VOLUME,
+    F_AIRBORNE_S,
+    F_WORST_MEASURED_M,
+    F_WORST_TRUE_M,
+    K_EVERY,
+    K_EXCHANGE,
+    K_LATENCY_STEPS,
+    K_MOTOR_FD,
+    K_RC_FD,
+    K_SENSOR_NOISE,
+    K_SHM,
+    K_SPIN_NS,
+    K_STATE_FD,
+    K_WAIT_NS,
+    P_PERIOD_S,
+    P_SETTLE_HOLD,
+    P_SETTLE_POSITION_M,
+    P_SETTLE_TILT_RAD,
+    P_SETTLE_VELOCITY_M_S,
+    Q_ATTITUDE_NOISE_RAD,
+    Q_DROP_PROBABILITY,
+    Q_MOCAP_LATENCY_S,
+    Q_POSITION_NOISE_M,
+    Q_STEP_S,
+    QUEUE_FULL,
+    RC_FAILED,
+    S_AXIS,
+    S_CALM,
+    S_DROPPED,
+    S_IN_FRAME,
+    S_Q_COUNT,
+    S_Q_HEAD,
+    S_SENT,
+    S_STEP,
+    S_TICK,
+    UNTIL_MET,
+    X_SHM,
+    Mode,
+    Radio,
+    Until,
+)
+from aerobat.plants.betaflight.lockstep import DONE, IO_MOCAP_USED, SEND_FAILED, run_steps
+from aerobat.plants.betaflight.lockstep_shm import run_steps_shm
+from aerobat.plants.betaflight.physics import C_CONTACT
+from aerobat.plants.betaflight.pilot import angle_sticks
+from aerobat.plants.lab_kernels import estimate_pose
+
+__all__ = ["fly_frames"]
+
+# the enums as compile-time integers
+M_STREAM, M_ANGLE = int(Mode.STREAM), int(Mode.ANGLE)
+D_NONE, D_RADIO = int(Radio.NONE), int(Radio.LOSSY)
+U_ARMED, U_SETTLED, U_TRACK, U_ON_FLOOR = int(Until.ARMED), int(Until.SETTLED), int(Until.TRACK), int(Until.ON_FLOOR)
+
+_RC_BYTES = 40  # packets.RC_STRUCT: a double (0.0), then 16 uint16 channels
+_send = types.ExternalFunction("send", types.intp(types.int32, types.uintp, types.uintp, types.int32))
+_publish_rc = types.ExternalFunction("aerobat_shm_publish_rc", types.int64(types.uintp, types.uintp, types.int64))
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def _estimate(log, available, pos, vel, quat):  # pragma: no cover - compiled
+    # a call of its own, compiled as the Python supervisor's estimate_pose was (fastmath)
+    return estimate_pose(log, available, pos, vel, quat)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _estimate_now(log, count, time_s, latency_s, pos, vel, quat):  # pragma: no cover - compiled
+    """The supervisor's estimate at ``time_s``: samples older than the latency (``Flight.estimate``)."""
+    pos[:] = 0.0
+    vel[:] = 0.0
+    quat[0] = 1.0
+    quat[1:] = 0.0
+    rows = np.searchsorted(log[:count, 0], time_s - latency_s + 1e-12, side="right")
+    return _estimate(log, rows, pos, vel, quat)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _norm3(v):  # pragma: no cover - compiled
+    return math.sqrt(np.dot(v, v))
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _stick_us(position):  # pragma: no cover - compiled
+    """rc.stick_to_us: 1000–2000 us, rounded half to even like Python's round."""
+    return np.int64(np.rint(1500.0 + 500.0 * min(max(position, -1.0), 1.0)))
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _send_rc(cfg, queue_rc, head, rc_block, rc_words):  # pragma: no cover - compiled
+    for c in range(16):
+        rc_words[4 + c] = queue_rc[head, c]
+    if cfg[K_EXCHANGE] == X_SHM:
+        return cfg[K_SHM] != 0 and _publish_rc(cfg[K_SHM], rc_block.ctypes.data, _RC_BYTES) >= 0
+    return _send(cfg[K_RC_FD], rc_block.ctypes.data, _RC_BYTES, 0) == _RC_BYTES
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _steps(n, resume, cfg, fcfg, st, x, block, motors, plant, aux, pending, counters, noise, mocap_noise, log,
+           packet, scratch, queue_due, queue_rc, rc_block, rc_words):  # pragma: no cover - compiled
+    """The frame in progress from step ``st[S_STEP]`` to ``n``: RC packets as they come due, exchange, physics."""
+    tick0 = st[S_TICK]
+    size = queue_due.shape[0]
+    i = st[S_STEP]
+    while i < n:
+        if not resume:
+            while st[S_Q_COUNT] > 0 and queue_due[st[S_Q_HEAD]] <= tick0 + i:  # RC frames reach the receiver first
+                if not _send_rc(cfg, queue_rc, st[S_Q_HEAD], rc_block, rc_words):
+                    st[S_STEP] = i
+                    return RC_FAILED
+                st[S_Q_HEAD] = (st[S_Q_HEAD] + 1) % size
+                st[S_Q_COUNT] -= 1
+        stop = min(n, queue_due[st[S_Q_HEAD]] - tick0) if st[S_Q_COUNT] > 0 else n
+        if cfg[K_EXCHANGE] == X_SHM:
+            if cfg[K_SHM] == 0:
+                status = SEND_FAILED  # the region is closed: the Python exchange raises
+            else:
+                status, i = run_steps_shm(cfg[K_SHM], cfg[K_SPIN_NS], cfg[K_WAIT_NS], i, stop, resume, tick0,
+                                          cfg[K_EVERY], fcfg[Q_STEP_S], x, block, motors, plant, aux, pending,
+                                          counters, noise, mocap_noise, log, st, packet, scratch)
+        else:
+            status, i = run_steps(cfg[K_STATE_FD], cfg[K_MOTOR_FD], i, stop, resume, tick0, cfg[K_EVERY],
+                                  fcfg[Q_STEP_S], x, block, motors, plant, aux, pending, counters, noise,
+                                  mocap_noise, log, st, packet, scratch)
+        resume = False
+        if status != DONE:
+            st[S_STEP] = i
+            return status
+    st[S_TICK] = tick0 + n
+    st[S_IN_FRAME] = 0
+    st[S_STEP] = 0
+    return DONE
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _begin_frame(n, drop, rng, cfg, fcfg, st, channel_row, noise, mocap_noise, queue_due,
+                 queue_rc):  # pragma: no cover - compiled
+    """The radio's draw and queue, then the frame's noise draws, in ``Flight``'s order; False: queue full."""
+    if drop != D_NONE:
+        dropped = drop == D_RADIO and rng.random() < fcfg[Q_DROP_PROBABILITY]
+        st[S_SENT] += 1
+        if dropped:
+            st[S_DROPPED] += 1
+        else:
+            size = queue_due.shape[0]
+            if st[S_Q_COUNT] == size:
+                return False
+            slot = (st[S_Q_HEAD] + st[S_Q_COUNT]) % size
+            queue_due[slot] = st[S_TICK] + cfg[K_LATENCY_STEPS]
+            queue_rc[slot, :] = channel_row
+            st[S_Q_COUNT] += 1
+    if cfg[K_SENSOR_NOISE]:
+        for i in range(n):
+            for c in range(6):
+                noise[i, c] = rng.standard_normal()
+    rows = n // cfg[K_EVERY] + 2
+    mocap_noise[:rows, :] = 0.0
+    if fcfg[Q_POSITION_NOISE_M] != 0.0:
+        for r in range(rows):
+            for c in range(3):
+                mocap_noise[r, c] = fcfg[Q_POSITION_NOISE_M] * rng.standard_normal()
+    if fcfg[Q_ATTITUDE_NOISE_RAD] != 0.0:
+        for r in range(rows):
+            for c in range(3):
+                mocap_noise[r, 3 + c] = fcfg[Q_ATTITUDE_NOISE_RAD] * rng.standard_normal()
+    st[IO_MOCAP_USED] = 0
+    st[S_STEP] = 0
+    st[S_IN_FRAME] = 1
+    return True
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _tilt(quat):  # pragma: no cover - compiled
+    x = quat[1]
+    y = quat[2]
+    return math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y))))
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _outside(st, log, start, volume):  # pragma: no cover - compiled
+    """CRASH_FLOOR, CRASH_VOLUME (axis in st) or DONE: the plant's flight-volume check after a frame."""
+    if st[0] == 0:  # no motion-capture sample yet
+        return DONE
+    row = st[0] - 1
+    for axis in range(3):
+        rel = log[row, 1 + axis] - start[axis]
+        if rel < volume[axis, 0] or rel > volume[axis, 1]:
+            st[S_AXIS] = axis
+            return CRASH_VOLUME
+    return DONE
+
+
+@nb.njit(cache=True, error_model="numpy")
+def fly_frames(mode, frames, n, drop, resume, check, until, rng, cfg, fcfg, st, fst, x, block, motors, plant, aux,
+               pending, counters, packet, scratch, noise, mocap_noise, log, queue_due, queue_rc, rc_block, rc_words,
+               channels, pilot, target, integral, gains, limits, start, volume, record,
+               est):  # pragma: no cover - compiled
+    """Up to ``frames`` frames of ``n`` gyro steps; returns (status, frames completed).
+
+    ``channels``: (k, 16) RC channels [us], one row per frame or one for all (:data:`M_ANGLE`:
+    the row its sticks fill in). ``pilot``, ``target``, ``integral``, ``gains``, ``limits``: the
+    ANGLE pilot's (:func:`.pilot.angle_sticks`; the integral is updated in place). ``start`` and
+    ``volume`` (3, 2): the flight volume around the start [m]. ``record``: (frames, 1 + 21) truth
+    rows (time [s], state) after each frame, or empty. ``est``: scratch (3 + 3 + 4 + 4).
+    ``resume``: the frame in progress has its step ``st[S_STEP]`` exchanged, only its physics remains.
+    """
+    pos = est[0:3]
+    vel = est[3:6]
+    quat = est[6:10]
+    sticks = est[10:14]
+    row = channels[0].copy()
+    step_s = fcfg[Q_STEP_S]
+    for k in range(frames):
+        if st[S_IN_FRAME] == 0:
+            if mode == M_STREAM:
+                row[:] = channels[k if channels.shape[0] > 1 else 0]
+            elif mode == M_ANGLE:
+                _estimate_now(log, st[0], st[S_TICK] * step_s, fcfg[Q_MOCAP_LATENCY_S], pos, vel, quat)
+                angle_sticks(pos, vel, quat, target, integral, gains, limits, pilot[P_PERIOD_S], sticks)
+                row[0] = _stick_us(sticks[0])
+                row[1] = _stick_us(sticks[1])
+                row[2] = np.int64(np.rint(min(max(sticks[3], 1000.0), 2000.0)))
+                row[3] = _stick_us(sticks[2])
+            if not _begin_frame(n, drop, rng, cfg, fcfg, st, row, noise, mocap_noise, queue_due, queue_rc):
+                return QUEUE_FULL, k
+        status = _steps(n, resume, cfg, fcfg, st, x, block, motors, plant, aux, pending, counters, noise,
+                        mocap_noise, log, packet, scratch, queue_due, queue_rc, rc_block, rc_words)
+        resume = False
+        if status != DONE:
+            return status, k
+        now_s = st[S_TICK] * step_s
+        if record.shape[0] > 0:
+            record[k, 0] = now_s
+            record[k, 1:] = x
+        if check:
+            if counters[C_CONTACT]:
+                return CRASH_FLOOR, k + 1
+            if _outside(st, log, start, volume) != DONE:
+                return CRASH_VOLUME, k + 1
+        if until == U_ARMED:
+            if min(min(motors[0], motors[1]), min(motors[2], motors[3])) > 0.0:
+                return UNTIL_MET, k + 1
+        elif until == U_ON_FLOOR:
+            if counters[C_CONTACT]:
+                return UNTIL_MET, k + 1
+        elif until == U_SETTLED or until == U_TRACK:
+            _estimate_now(log, st[0], now_s, fcfg[Q_MOCAP_LATENCY_S], pos, vel, quat)
+            if until == U_TRACK:
+                fst[F_WORST_MEASURED_M] = max(fst[F_WORST_MEASURED_M], _norm3(pos - start))
+                fst[F_WORST_TRUE_M] = max(fst[F_WORST_TRUE_M], _norm3(x[0:3] - start))
+            else:
+                if math.isnan(fst[F_AIRBORNE_S]) and not counters[C_CONTACT]:
+                    fst[F_AIRBORNE_S] = now_s
+                ok = (_norm3(pos - start) < pilot[P_SETTLE_POSITION_M]
+                      and _norm3(vel) < pilot[P_SETTLE_VELOCITY_M_S] and _tilt(quat) < pilot[P_SETTLE_TILT_RAD])
+                st[S_CALM] = st[S_CALM] + 1 if ok else 0
+                if st[S_CALM] >= pilot[P_SETTLE_HOLD]:
+                    return UNTIL_MET, k + 1
+    return DONE, frames

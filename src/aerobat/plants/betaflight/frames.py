@@ -1,0 +1,153 @@
+"""Runs of radio frames: what a run flies (:class:`Mode`, :class:`Radio`, :class:`AnglePilot`), when it stops
+(:class:`Until`), how it ended (:class:`FramesRun`), and the compiled loop's codes and slots.
+
+The supervisor (:class:`~.plant.BetaflightPlant`) flies its phases as runs of frames through any
+flight with a ``run_frames`` method: :class:`~.flight.Flight` runs them compiled
+(:mod:`.frame_loop`), a flight on the wall clock frame by frame (:mod:`.frame_by_frame`). A module
+of its own so that both can name these without loading the compiled loop, whose import builds
+and loads the shared-memory exchange's C helper.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum, IntEnum
+
+import numpy as np
+
+__all__ = ["AnglePilot", "CRASH_FLOOR", "CRASH_VOLUME", "F_AIRBORNE_S", "F_WORST_MEASURED_M", "F_WORST_TRUE_M",
+           "FramesEnd", "FramesRun", "K_EVERY", "K_EXCHANGE", "K_LATENCY_STEPS", "K_MOTOR_FD", "K_RC_FD",
+           "K_SENSOR_NOISE", "K_SHM", "K_SPIN_NS", "K_STATE_FD", "K_WAIT_NS", "Mode", "N_CFG", "N_FCFG", "N_FST",
+           "N_PILOT", "N_ST", "P_PERIOD_S", "P_SETTLE_HOLD", "P_SETTLE_POSITION_M", "P_SETTLE_TILT_RAD",
+           "P_SETTLE_VELOCITY_M_S", "QUEUE_FULL", "Q_ATTITUDE_NOISE_RAD", "Q_DROP_PROBABILITY", "Q_MOCAP_LATENCY_S",
+           "Q_POSITION_NOISE_M", "Q_STEP_S", "RC_FAILED", "Radio", "S_AXIS", "S_CALM", "S_DROPPED", "S_IN_FRAME",
+           "S_Q_COUNT", "S_Q_HEAD", "S_SENT", "S_STEP", "S_TICK", "UNTIL_MET", "Until", "X_SHM", "X_UDP"]
+
+# statuses beyond lockstep's DONE, NO_ANSWER, SEND_FAILED, NON_FINITE (0-3)
+RC_FAILED = 4
+"""The RC packet at the queue's head could not be sent (nothing of the step has happened)."""
+UNTIL_MET = 5
+"""The stop condition held after the last frame completed."""
+CRASH_FLOOR = 6
+"""The vehicle touched the floor while the volume was checked."""
+CRASH_VOLUME = 7
+"""The last motion-capture sample left the flight volume (axis in ``st[S_AXIS]``)."""
+QUEUE_FULL = 8
+"""The radio's latency queue overflowed (a sizing bug, never a flight's doing)."""
+
+
+class Mode(IntEnum):
+    """What a run of frames flies."""
+
+    STEPS = 0
+    """Gyro steps with no radio frame (the firmware hears its receiver another way)."""
+    STREAM = 1
+    """Frames whose RC channels are given: one row per frame, or one row for all."""
+    ANGLE = 2
+    """The supervisor's ANGLE-mode frames toward a target, sticks from the motion-capture estimate."""
+
+
+class Radio(IntEnum):
+    """What the radio does with a frame."""
+
+    NONE = 0
+    """No frame is sent (steps only)."""
+    LOSSLESS = 1
+    """The frame always arrives, after the link latency."""
+    LOSSY = 2
+    """The frame is lost with the radio's drop probability (one draw per frame)."""
+
+
+class Until(IntEnum):
+    """A run's stop condition, checked after each frame."""
+
+    NONE = 0
+    ARMED = 1
+    """Every motor command above zero: the firmware armed."""
+    SETTLED = 2
+    """The estimate within the settle tolerances for the hold's frames in a row (records the lift-off)."""
+    TRACK = 3
+    """Never met: records the largest distance from the start, estimated and true."""
+    ON_FLOOR = 4
+    """The vehicle rests on the floor."""
+
+
+X_UDP, X_SHM = 0, 1  # cfg[K_EXCHANGE]: the lockstep exchange
+
+# st (int64): the first three slots are lockstep's io (log rows, mocap noise used, exchanges)
+S_TICK = 3  # gyro steps since power-on at the start of the frame in progress (between frames: now)
+S_Q_HEAD = 4  # the radio's latency queue: ring head and length
+S_Q_COUNT = 5
+S_SENT = 6  # radio frames sent and dropped
+S_DROPPED = 7
+S_STEP = 8  # the step of the frame in progress a call stopped at
+S_IN_FRAME = 9  # 1 while a frame's draws are done and its steps are not
+S_CALM = 10  # consecutive frames within the settle tolerances
+S_AXIS = 11  # the axis that left the volume (CRASH_VOLUME)
+N_ST = 12
+
+# cfg (int64): the flight's constants (K_SHM: the region's address, 0 when closed or over UDP)
+K_EXCHANGE, K_STATE_FD, K_MOTOR_FD, K_RC_FD, K_SHM, K_SPIN_NS, K_WAIT_NS, K_EVERY, K_LATENCY_STEPS, \
+    K_SENSOR_NOISE = range(10)
+N_CFG = 10
+# fcfg (float64)
+Q_STEP_S, Q_DROP_PROBABILITY, Q_POSITION_NOISE_M, Q_ATTITUDE_NOISE_RAD, Q_MOCAP_LATENCY_S = range(5)
+N_FCFG = 5
+# pilot (float64): the supervisor's frame period and settle tolerances
+P_PERIOD_S, P_SETTLE_POSITION_M, P_SETTLE_VELOCITY_M_S, P_SETTLE_TILT_RAD, P_SETTLE_HOLD = range(5)
+N_PILOT = 5
+# fst (float64): what the stop conditions saw
+F_AIRBORNE_S, F_WORST_MEASURED_M, F_WORST_TRUE_M = range(3)
+N_FST = 3
+
+
+class FramesEnd(Enum):
+    """How a run of frames (:meth:`Flight.run_frames`) ended."""
+
+    DONE = "done"
+    """Every frame was flown (a stop condition, if any, never held)."""
+    MET = "met"
+    """The stop condition held after the last frame flown."""
+    FLOOR = "floor"
+    """The volume was checked and the vehicle touched the floor."""
+    VOLUME = "volume"
+    """The volume was checked and the last motion-capture sample was outside it."""
+
+
+@dataclass(frozen=True)
+class FramesRun:
+    """The outcome of :meth:`Flight.run_frames`."""
+
+    end: FramesEnd
+    frames: int
+    """Frames flown."""
+    axis: int | None = None
+    """The axis (0 x, 1 y, 2 z) that left the volume (``VOLUME``)."""
+    airborne_s: float | None = None
+    """:attr:`Until.SETTLED`: when the vehicle first left the floor during the run [s since power-on]."""
+    worst_estimated_m: float = 0.0
+    """:attr:`Until.TRACK`: the largest estimated distance from the start after a frame [m]."""
+    worst_true_m: float = 0.0
+    """:attr:`Until.TRACK`: the largest true distance from the start after a frame [m]."""
+
+
+@dataclass(frozen=True)
+class AnglePilot:
+    """The supervisor's ANGLE pilot for :attr:`Mode.ANGLE` (:func:`.pilot.angle_sticks`).
+
+    ``integral`` (3) is the pilot's integral state, updated in place; ``gains`` (k_p, k_d, k_i,
+    k_yaw) and ``limits`` as :func:`.pilot.angle_sticks` takes them; ``channels`` the 16 RC
+    channels [us] its sticks fill in (the mode switches); the settle tolerances are read by
+    :attr:`Until.SETTLED`.
+    """
+
+    target_m: np.ndarray
+    integral: np.ndarray
+    gains: np.ndarray
+    limits: np.ndarray
+    channels_us: tuple[int, ...]
+    period_s: float
+    settle_position_m: float = 0.0
+    settle_velocity_m_s: float = 0.0
+    settle_tilt_rad: float = 0.0
+    settle_hold_frames: int = 1

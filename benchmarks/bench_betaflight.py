@@ -104,7 +104,11 @@ def bench_firmware_alone(binary: Path, eeprom: Path, steps: int = 40000) -> floa
 
 
 def _params(rate_hz: int = 8000, exchange: str = "udp") -> BetaflightParams:
-    return BetaflightParams().replace(firmware__gyro_rate_hz=rate_hz, firmware__exchange=exchange)
+    # AEROBAT_BENCH_SPIN_US: the shared-memory exchange's spin (firmware.spin_us), for the parallel bench's
+    # spawned workers too (bench_exchanges.py --no-spin sets 0)
+    spin_us = float(os.environ.get("AEROBAT_BENCH_SPIN_US", BetaflightParams().firmware.spin_us))
+    return BetaflightParams().replace(firmware__gyro_rate_hz=rate_hz, firmware__exchange=exchange,
+                                      firmware__spin_us=spin_us)
 
 
 def bench_compiled_at_rest(seconds: float = 5.0, exchange: str = "udp") -> dict[str, Any]:

@@ -8,9 +8,9 @@ after, and the raw figures as JSON on standard error::
     .venv/bin/python benchmarks/bench_exchanges.py                 # UDP, then shared memory (adaptive spin)
     .venv/bin/python benchmarks/bench_exchanges.py --no-spin shm   # shared memory, pure futex waits
 
-``--no-spin`` sets the firmware's ``BF_SITL_SHM_SPIN_US=0`` and the driver's
-:data:`aerobat.plants.betaflight.shm.SPIN_S` to 0 in this process and, through the environment,
-in the spawned workers of the parallel bench (they import this module again).
+``--no-spin`` flies with ``firmware.spin_us = 0`` (both sides sleep on the futex at once), in this
+process and, through ``AEROBAT_BENCH_SPIN_US`` in the environment, in the parallel bench's
+spawned workers.
 """
 
 from __future__ import annotations
@@ -22,18 +22,11 @@ from pathlib import Path
 from typing import Any
 
 if "--no-spin" in sys.argv:
-    os.environ["AEROBAT_BENCH_NO_SPIN"] = "1"
-if os.environ.get("AEROBAT_BENCH_NO_SPIN") == "1":  # also in the parallel bench's spawned workers
-    os.environ["BF_SITL_SHM_SPIN_US"] = "0"
+    os.environ["AEROBAT_BENCH_SPIN_US"] = "0"
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import bench_betaflight as bench  # noqa: E402
-
-from aerobat.plants.betaflight import shm  # noqa: E402
-
-if os.environ.get("AEROBAT_BENCH_NO_SPIN") == "1":
-    shm.SPIN_S = 0.0
 
 
 def measure(exchange: str) -> dict[str, Any]:
@@ -65,7 +58,7 @@ def rows(name: str, m: dict[str, Any]) -> list[str]:
 
 def main() -> None:
     exchanges = [a for a in sys.argv[1:] if a in ("udp", "shm")] or ["udp", "shm"]
-    spin = "no spin" if os.environ.get("AEROBAT_BENCH_NO_SPIN") == "1" else "adaptive spin"
+    spin = "no spin" if os.environ.get("AEROBAT_BENCH_SPIN_US") == "0" else "adaptive spin"
     results = {}
     print("| exchange | what (8 kHz) | measured |\n|---|---|---|")
     for exchange in exchanges:

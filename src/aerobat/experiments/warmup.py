@@ -146,7 +146,7 @@ def _betaflight_kernels(x: np.ndarray, cmd: np.ndarray) -> None:
     from aerobat.plants.lab_kernels import MOCAP_COLUMNS
 
     block = np.zeros(MOTOR_STRUCT.size, dtype=np.uint8)
-    run_steps(-1, -1, 0, 0, False, 0, 8, step_s, world, block, block[:16].view(np.float32), plant, aux,
+    run_steps(-1, -1, 0, 0, 0, 0, 8, step_s, world, block, block[:16].view(np.float32), plant, aux,
               np.zeros((2, 4)), counters, noise, np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)),
               np.zeros(N_IO, dtype=np.int64), packet, scratch)
     # and its shared-memory twin, where the exchange's C helper can be compiled (no compiler: skipped)
@@ -157,7 +157,7 @@ def _betaflight_kernels(x: np.ndarray, cmd: np.ndarray) -> None:
     except FirmwareUnavailable:
         pass
     else:
-        run_steps_shm(0, 0, 0, 0, 0, False, 0, 8, step_s, world, block, block[:16].view(np.float32), plant, aux,
+        run_steps_shm(0, 0, 0, 0, 0, 0, 0, 8, step_s, world, block, block[:16].view(np.float32), plant, aux,
                       np.zeros((2, 4)), counters, noise, np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)),
                       np.zeros(N_IO, dtype=np.int64), packet, scratch)
         # the frame loop around both (a run of no frames), with the argument types Flight passes
@@ -165,7 +165,7 @@ def _betaflight_kernels(x: np.ndarray, cmd: np.ndarray) -> None:
         from aerobat.plants.betaflight.frame_loop import fly_frames
 
         rc_block = np.zeros(40, dtype=np.uint8)
-        fly_frames(0, 0, 32, 0, False, False, 0, np.random.default_rng(0), np.zeros(fr.N_CFG, dtype=np.int64),
+        fly_frames(0, 0, 32, 0, 0, False, 0, np.random.default_rng(0), np.zeros(fr.N_CFG, dtype=np.int64),
                    np.zeros(fr.N_FCFG), np.zeros(fr.N_ST, dtype=np.int64), np.zeros(fr.N_FST), world, block,
                    block.view(np.float32), plant, aux, np.zeros((2, 4)), counters, packet, scratch, np.zeros((2, 6)),
                    np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)), np.zeros(4, dtype=np.int64),

@@ -156,3 +156,19 @@ def test_a_mute_firmware_trips_the_watchdog_over_shared_memory(monkeypatch: pyte
             flight.frame(tuple([1500] * 16))
         assert time.monotonic() - started < 0.3 + 0.2
         assert flight.tick == 0 and flight.sitl.steps == 0
+
+
+@pytest.mark.parametrize("spin_us", [0.0, 7.0])
+def test_the_declared_spin_reaches_the_firmware_and_the_driver(firmware: tuple[Path, Path], spin_us: float) -> None:
+    plant = BetaflightPlant(FPV, SHM.replace(firmware__spin_us=spin_us), seed=3)
+    with plant.open_flight() as flight:
+        flight.frame(tuple([1500] * 16))
+        assert flight.sitl._resources.shm.spin_s == pytest.approx(spin_us * 1e-6)
+        assert flight.sitl.log_path is not None
+        started = flight.sitl.log_path.read_text(errors="replace")
+    assert f"spin up to {spin_us:.0f} us" in started, started[-2000:]
+
+
+def test_a_spin_out_of_range_is_refused_naming_the_field() -> None:
+    with pytest.raises(ConfigError, match="spin_us"):
+        BetaflightParams().replace(firmware__spin_us=5000.0)

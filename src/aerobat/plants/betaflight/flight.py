@@ -31,7 +31,16 @@ import numpy as np
 from aerobat.errors import ConfigError
 from aerobat.plants.betaflight import frames as fr
 from aerobat.plants.betaflight.frames import AnglePilot, FramesEnd, FramesRun, Mode, Radio, Until
-from aerobat.plants.betaflight.lockstep import DONE, IO_EXCHANGES, IO_LOG, NO_ANSWER, NON_FINITE, SEND_FAILED
+from aerobat.plants.betaflight.lockstep import (
+    DONE,
+    IO_EXCHANGES,
+    IO_LOG,
+    IO_RESUME,
+    NO_ANSWER,
+    NON_FINITE,
+    RESUME_STEP,
+    SEND_FAILED,
+)
 from aerobat.plants.betaflight.packets import MOTOR_STRUCT, RC_STRUCT, Exchange
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import (
@@ -53,7 +62,7 @@ __all__ = ["CHUNK_FRAMES", "Flight", "NonFinite"]
 _SLICE_S = 0.05  # the compiled shared-memory wait's timeout: then the watchdog takes the step
 
 
-CHUNK_FRAMES = 64
+CHUNK_FRAMES = 250
 """Most frames per compiled call: Python (Ctrl-C, a fault injected by a test) gets a turn every 0.26 s simulated."""
 
 
@@ -135,16 +144,18 @@ class Flight:
         prime(self.x, self.plant, self.aux, self.counters, self._noise(1)[0], self.packet, self.scratch)
         self.firmware_cpu_s: float | None = None
         self.spun = (0.0, 0.0)
-        if fw.exchange is Exchange.SHM:  # loaded (and its C helper built) before a firmware starts
-            from aerobat.plants.betaflight import shm
-
+        if fw.exchange is Exchange.SHM:
             self._cfg[fr.K_EXCHANGE] = fr.X_SHM
-            self._cfg[fr.K_SPIN_NS] = int(shm.SPIN_S * 1e9)
+            self._cfg[fr.K_SPIN_NS] = round(fw.spin_us * 1e3)
         from aerobat.plants.betaflight.frame_loop import fly_frames
 
         self._fly_frames = fly_frames
+        # compiled (or loaded from numba's cache) before the firmware starts, not in its first frame: a
+        # real-time world would miss its first seconds (a run of no frames flies nothing)
+        self._compiled(Mode.STEPS, 0, self.frame_steps, Radio.NONE, 0, False, Until.NONE,
+                       np.full((1, 16), 1000, dtype=np.int64), self._no_pilot, self._no_record)
         self.sitl = SitlProcess(binary, eeprom, gyro_rate_hz=fw.gyro_rate_hz, step_timeout_s=fw.step_timeout_s,
-                                exchange=fw.exchange)
+                                exchange=fw.exchange, spin_us=fw.spin_us)
         self._cfg[fr.K_STATE_FD], self._cfg[fr.K_MOTOR_FD] = self.sitl.socket_fds
         self._cfg[fr.K_RC_FD] = self.sitl.rc_socket_fd
 
@@ -310,32 +321,28 @@ class Flight:
             raise ValueError(f"{channels.shape[0]} rows of channels for {frames} frames")
         self._st[fr.S_CALM] = 0
         self._fst[:] = (math.nan, 0.0, 0.0)
-        done, resume = 0, False
+        done, resume = 0, 0
         status = DONE
         while done < frames:
             chunk = min(CHUNK_FRAMES, frames - done)
             self._reserve_log(chunk * (steps // self.mocap_every + 2))
             address = self.sitl.shm_address
             self._cfg[fr.K_SHM] = address if address is not None else 0
-            status, flown = self._fly_frames(
-                int(mode), chunk, steps, int(radio), resume, check, int(until), self.rng, self._cfg, self._fcfg,
-                self._st, self._fst, self.x, self.block, self.motors, self.plant, self.aux, self.pending,
-                self.counters, self.packet, self.scratch, self._noise_buffer, self._mocap_noise, self.log,
-                self._queue_due, self._queue_rc, self._rc_block, self._rc_words,
-                channels[done:done + chunk] if many else channels, *arrays, self.start_m, self._volume,
-                record[done:done + chunk] if record is not None else self._no_record, self._scratch14)
+            status, flown = self._compiled(mode, chunk, steps, radio, resume, check, until,
+                                           channels[done:done + chunk] if many else channels, arrays,
+                                           record[done:done + chunk] if record is not None else self._no_record)
             self.sitl.steps += int(self._st[IO_EXCHANGES])
             self._st[IO_EXCHANGES] = 0
             done += int(flown)
-            resume = False
+            resume = 0
             if status == DONE:
                 continue
             if status == NO_ANSWER:  # the watchdog finishes the exchange (or raises)
                 self.sitl.receive_into(self.block)
-                resume = True
+                resume = int(self._st[IO_RESUME])
             elif status == SEND_FAILED:
                 self.sitl.exchange(self.packet, self.block)
-                resume = True
+                resume = RESUME_STEP
             elif status == fr.RC_FAILED:  # the Python send raises the right error, or gets it through
                 head = int(self._st[fr.S_Q_HEAD])
                 self.sitl.send_rc(tuple(int(c) for c in self._queue_rc[head]))
@@ -354,6 +361,15 @@ class Flight:
                fr.CRASH_VOLUME: FramesEnd.VOLUME}[status]
         return FramesRun(end, done, int(self._st[fr.S_AXIS]) if end is FramesEnd.VOLUME else None, airborne,
                          float(self._fst[fr.F_WORST_MEASURED_M]), float(self._fst[fr.F_WORST_TRUE_M]))
+
+    def _compiled(self, mode: Mode, frames: int, steps: int, radio: Radio, resume: int, check: bool, until: Until,
+                  channels: np.ndarray, pilot: tuple[np.ndarray, ...], record: np.ndarray) -> tuple[int, int]:
+        return self._fly_frames(  # type: ignore[no-any-return]
+            int(mode), frames, steps, int(radio), resume, check, int(until), self.rng, self._cfg, self._fcfg,
+            self._st, self._fst, self.x, self.block, self.motors, self.plant, self.aux, self.pending,
+            self.counters, self.packet, self.scratch, self._noise_buffer, self._mocap_noise, self.log,
+            self._queue_due, self._queue_rc, self._rc_block, self._rc_words, channels, *pilot, self.start_m,
+            self._volume, record, self._scratch14)
 
     def _reserve_log(self, rows: int) -> None:
         count = self.log_count

@@ -157,7 +157,7 @@ def _steps(n, resume, cfg, fcfg, st, x, block, motors, plant, aux, pending, coun
             status, i = run_steps(cfg[K_STATE_FD], cfg[K_MOTOR_FD], i, stop, resume, tick0, cfg[K_EVERY],
                                   fcfg[Q_STEP_S], x, block, motors, plant, aux, pending, counters, noise,
                                   mocap_noise, log, st, packet, scratch)
-        resume = False
+        resume = 0
         if status != DONE:
             st[S_STEP] = i
             return status
@@ -237,7 +237,8 @@ def fly_frames(mode, frames, n, drop, resume, check, until, rng, cfg, fcfg, st, 
     ANGLE pilot's (:func:`.pilot.angle_sticks`; the integral is updated in place). ``start`` and
     ``volume`` (3, 2): the flight volume around the start [m]. ``record``: (frames, 1 + 21) truth
     rows (time [s], state) after each frame, or empty. ``est``: scratch (3 + 3 + 4 + 4).
-    ``resume``: the frame in progress has its step ``st[S_STEP]`` exchanged, only its physics remains.
+    ``resume`` (0 or :data:`.lockstep.RESUME_STEP` / ``RESUME_STORE``): how much of the frame in
+    progress's step ``st[S_STEP]`` is done (after the watchdog took its motor packet).
     """
     pos = est[0:3]
     vel = est[3:6]
@@ -260,7 +261,7 @@ def fly_frames(mode, frames, n, drop, resume, check, until, rng, cfg, fcfg, st, 
                 return QUEUE_FULL, k
         status = _steps(n, resume, cfg, fcfg, st, x, block, motors, plant, aux, pending, counters, noise,
                         mocap_noise, log, packet, scratch, queue_due, queue_rc, rc_block, rc_words)
-        resume = False
+        resume = 0
         if status != DONE:
             return status, k
         now_s = st[S_TICK] * step_s

@@ -74,17 +74,17 @@ class Until(IntEnum):
 
 X_UDP, X_SHM = 0, 1  # cfg[K_EXCHANGE]: the lockstep exchange
 
-# st (int64): the first three slots are lockstep's io (log rows, mocap noise used, exchanges)
-S_TICK = 3  # gyro steps since power-on at the start of the frame in progress (between frames: now)
-S_Q_HEAD = 4  # the radio's latency queue: ring head and length
-S_Q_COUNT = 5
-S_SENT = 6  # radio frames sent and dropped
-S_DROPPED = 7
-S_STEP = 8  # the step of the frame in progress a call stopped at
-S_IN_FRAME = 9  # 1 while a frame's draws are done and its steps are not
-S_CALM = 10  # consecutive frames within the settle tolerances
-S_AXIS = 11  # the axis that left the volume (CRASH_VOLUME)
-N_ST = 12
+# st (int64): the first N_IO slots are lockstep's io (log rows, mocap noise used, exchanges, resume)
+S_TICK = 4  # gyro steps since power-on at the start of the frame in progress (between frames: now)
+S_Q_HEAD = 5  # the radio's latency queue: ring head and length
+S_Q_COUNT = 6
+S_SENT = 7  # radio frames sent and dropped
+S_DROPPED = 8
+S_STEP = 9  # the step of the frame in progress a call stopped at
+S_IN_FRAME = 10  # 1 while a frame's draws are done and its steps are not
+S_CALM = 11  # consecutive frames within the settle tolerances
+S_AXIS = 12  # the axis that left the volume (CRASH_VOLUME)
+N_ST = 13
 
 # cfg (int64): the flight's constants (K_SHM: the region's address, 0 when closed or over UDP)
 K_EXCHANGE, K_STATE_FD, K_MOTOR_FD, K_RC_FD, K_SHM, K_SPIN_NS, K_WAIT_NS, K_EVERY, K_LATENCY_STEPS, \

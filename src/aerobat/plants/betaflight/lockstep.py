@@ -8,9 +8,10 @@ sockets. Python is back in charge between runs (RC frames, the supervisor) and w
 exchange does not complete at once:
 
 * ``recv`` returns after the motor socket's kernel receive timeout (``SO_RCVTIMEO``, 50 ms) at
-  the latest: the loop stops with :data:`NO_ANSWER` and the caller finishes that step with the
-  process's watchdog (:meth:`.sitl.SitlProcess.receive_into`), which raises when the firmware
-  is gone or silent for the step timeout. No read waits without a timeout.
+  the latest: the loop stops with :data:`NO_ANSWER` and the caller finishes that step's
+  exchange with the process's watchdog (:meth:`.sitl.SitlProcess.receive_into`), which raises
+  when the firmware is gone or silent for the step timeout, and calls again with ``resume =
+  io[IO_RESUME]``. No read waits without a timeout.
 * A failed ``send`` stops it with :data:`SEND_FAILED` (the caller retries in Python, which
   raises the right error); a non-finite state with :data:`NON_FINITE`.
 
@@ -25,11 +26,11 @@ from __future__ import annotations
 import numba as nb
 from numba.core import types
 
-from aerobat.plants.betaflight.physics import step
+from aerobat.plants.betaflight.physics import C_DELAY, advance, step, store_motors
 from aerobat.plants.lab_kernels import mocap_sample
 
-__all__ = ["DONE", "IO_EXCHANGES", "IO_LOG", "IO_MOCAP_USED", "N_IO", "NON_FINITE", "NO_ANSWER", "SEND_FAILED",
-           "run_steps"]
+__all__ = ["DONE", "IO_EXCHANGES", "IO_LOG", "IO_MOCAP_USED", "IO_RESUME", "N_IO", "NON_FINITE", "NO_ANSWER",
+           "RESUME_STEP", "RESUME_STORE", "SEND_FAILED", "run_steps"]
 
 DONE = 0
 """All steps of the run were taken."""
@@ -44,7 +45,13 @@ NON_FINITE = 3
 IO_LOG = 0  # rows in the motion-capture log
 IO_MOCAP_USED = 1  # rows of mocap noise consumed
 IO_EXCHANGES = 2  # motor packets received by the loop (added up)
-N_IO = 3
+IO_RESUME = 3  # after NO_ANSWER: how to resume the step once the watchdog has its packet (RESUME_*)
+N_IO = 4
+
+RESUME_STEP = 1
+"""Resume a step whose exchange is done: store its motor packet and run its physics."""
+RESUME_STORE = 2
+"""Resume a step whose exchange and physics are done (run ahead): store its motor packet."""
 
 _MSG_TRUNC = 0x20  # recv returns the datagram's real length: a packet of another size is never taken
 # the C library's calls, resolved by name when the compiled code is loaded (so it caches)
@@ -57,14 +64,21 @@ def run_steps(state_fd, motor_fd, first, stop, resume, tick0, every, step_s, x, 
               counters, noise, mocap_noise, log, io, packet, scratch):  # pragma: no cover - compiled
     """Steps ``first`` … ``stop - 1`` of a run starting at tick ``tick0``; returns (status, the step it stopped at).
 
-    ``resume``: the exchange of step ``first`` is already done (its motor packet is in ``block``),
-    only its physics remains. ``block`` (uint8, the firmware→driver packet's size) receives each
-    packet; ``motors`` is the float32 view of its first 16 bytes.
+    ``resume`` (0, :data:`RESUME_STEP`, :data:`RESUME_STORE`): how much of step ``first`` is done;
+    its motor packet is then in ``block``. ``block`` (uint8, the firmware→driver packet's size)
+    receives each packet; ``motors`` is the float32 view of its first 16 bytes. With an output
+    delay of a step or more, each step's physics runs while the firmware computes its answer
+    (:func:`.physics.advance`), and the answer is stored when it comes.
     """
     size = block.shape[0]
+    ahead = counters[C_DELAY] >= 1
     for i in range(first, stop):
         tick = tick0 + i
-        if not (resume and i == first):
+        if resume != 0 and i == first:
+            if resume == RESUME_STORE:
+                store_motors(motors, pending, tick)
+                continue
+        else:
             if tick % every == 0:
                 row = io[IO_LOG]
                 mocap_sample(x, tick * step_s, mocap_noise[io[IO_MOCAP_USED]], log[row])
@@ -72,9 +86,15 @@ def run_steps(state_fd, motor_fd, first, stop, resume, tick0, every, step_s, x, 
                 io[IO_MOCAP_USED] += 1
             if _send(state_fd, packet.ctypes.data, packet.nbytes, 0) != packet.nbytes:
                 return SEND_FAILED, i
+            if ahead and advance(x, plant, aux, pending, counters, noise[i], packet, scratch):
+                return NON_FINITE, i
             if _recv(motor_fd, block.ctypes.data, size, _MSG_TRUNC) != size:
+                io[IO_RESUME] = RESUME_STORE if ahead else RESUME_STEP
                 return NO_ANSWER, i
             io[IO_EXCHANGES] += 1
+            if ahead:
+                store_motors(motors, pending, tick)
+                continue
         if step(x, motors, plant, aux, pending, counters, noise[i], packet, scratch):
             return NON_FINITE, i
     return DONE, stop

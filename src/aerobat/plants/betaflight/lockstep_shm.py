@@ -20,11 +20,14 @@ from aerobat.plants.betaflight.lockstep import (
     IO_EXCHANGES,
     IO_LOG,
     IO_MOCAP_USED,
+    IO_RESUME,
     NO_ANSWER,
     NON_FINITE,
+    RESUME_STEP,
+    RESUME_STORE,
     SEND_FAILED,
 )
-from aerobat.plants.betaflight.physics import step
+from aerobat.plants.betaflight.physics import C_DELAY, advance, step, store_motors
 from aerobat.plants.betaflight.shm import library
 from aerobat.plants.lab_kernels import mocap_sample
 
@@ -42,9 +45,14 @@ def run_steps_shm(shm, spin_ns, wait_ns, first, stop, resume, tick0, every, step
                   scratch):  # pragma: no cover - compiled
     """:func:`.lockstep.run_steps` over the region at ``shm`` (spin at most ``spin_ns``, wait up to ``wait_ns``)."""
     size = block.shape[0]
+    ahead = counters[C_DELAY] >= 1
     for i in range(first, stop):
         tick = tick0 + i
-        if not (resume and i == first):
+        if resume != 0 and i == first:
+            if resume == RESUME_STORE:
+                store_motors(motors, pending, tick)
+                continue
+        else:
             if tick % every == 0:
                 row = io[IO_LOG]
                 mocap_sample(x, tick * step_s, mocap_noise[io[IO_MOCAP_USED]], log[row])
@@ -52,9 +60,15 @@ def run_steps_shm(shm, spin_ns, wait_ns, first, stop, resume, tick0, every, step
                 io[IO_MOCAP_USED] += 1
             if _publish_state(shm, packet.ctypes.data, packet.nbytes) < 0:
                 return SEND_FAILED, i
+            if ahead and advance(x, plant, aux, pending, counters, noise[i], packet, scratch):
+                return NON_FINITE, i
             if _wait_motor(shm, block.ctypes.data, size, spin_ns, wait_ns) != size:
+                io[IO_RESUME] = RESUME_STORE if ahead else RESUME_STEP
                 return NO_ANSWER, i
             io[IO_EXCHANGES] += 1
+            if ahead:
+                store_motors(motors, pending, tick)
+                continue
         if step(x, motors, plant, aux, pending, counters, noise[i], packet, scratch):
             return NON_FINITE, i
     return DONE, stop

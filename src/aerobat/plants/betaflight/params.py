@@ -218,11 +218,16 @@ class Firmware:
         hung (killed; the trial is lost, the next one starts a fresh firmware).
     exchange : how the per-step packets travel: ``"udp"`` (loopback sockets) or ``"shm"``
         (shared memory, :mod:`aerobat.plants.betaflight.shm`); the same flight bit for bit.
+    spin_us : over shared memory, the longest the firmware and the driver each busy-wait for
+        the other before sleeping on a futex (adaptive below it). 20 µs suits one instance with
+        a core to spare (each side keeps a core); with as many instances as cores set 0, or
+        spinning instances take the cores from each other (docs/performance.md, issue 27).
     """
 
     gyro_rate_hz: int = bounded(8000, OneOf(GYRO_RATES_HZ, unit="Hz"))
     step_timeout_s: float = bounded(2.0, Interval(0.05, 60.0, unit="s"))
     exchange: Exchange = bounded(Exchange.UDP, OneOf(Exchange))
+    spin_us: float = bounded(20.0, Interval(0.0, 1000.0, unit="µs"))
 
     def __post_init__(self) -> None:
         validate(self)

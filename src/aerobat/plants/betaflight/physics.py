@@ -61,11 +61,13 @@ __all__ = [
     "N_AUX",
     "N_COUNTERS",
     "PACKET_DOUBLES",
+    "advance",
     "airframe_plant",
     "aux_vector",
     "ground_state",
     "prime",
     "step",
+    "store_motors",
     "thrust_curve",
     "write_packet",
 ]
@@ -260,13 +262,32 @@ def step(x, motors, plant, aux, pending, counters, noise, packet, scratch):  # p
     ``pending`` (D+1, 4): ring of motor commands for the output delay of D steps (``counters``).
     ``noise`` (6,): standard normal draws for the next packet's gyro and accelerometer noise.
     ``scratch`` (6, N_STATE): work space. Returns 1 if the state went non-finite, else 0.
+    :func:`store_motors` then :func:`advance`.
+    """
+    store_motors(motors, pending, counters[C_TICK])
+    return advance(x, plant, aux, pending, counters, noise, packet, scratch)
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def store_motors(motors, pending, tick):  # pragma: no cover - compiled
+    """Put the motor packet answering step ``tick`` into the output delay's ring ``pending``."""
+    slots = pending.shape[0]
+    for j in range(4):
+        pending[tick % slots, j] = motors[j]
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def advance(x, plant, aux, pending, counters, noise, packet, scratch):  # pragma: no cover - compiled
+    """:func:`step` without storing the motor packet: the world one gyro period on, with the delayed command.
+
+    With an output delay of at least one step (``counters[C_DELAY] >= 1``) the command acting in
+    this step was stored steps ago, so this can run before the step's own motor packet arrives
+    (:func:`store_motors` it afterwards): the physics overlaps the firmware's work.
     """
     h = aux[A_STEP]
     tick = counters[C_TICK]
     delay = counters[C_DELAY]
     slots = pending.shape[0]
-    for j in range(4):
-        pending[tick % slots, j] = motors[j]
     applied = (tick - delay) % slots if tick >= delay else -1
     ft = scratch[5]
     for j in range(4):

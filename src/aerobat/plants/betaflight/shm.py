@@ -35,7 +35,8 @@ SHM_SIZE = 4096
 LIBRARY_NAME = "libaerobat_shm.so"
 _SOURCE = Path(__file__).with_name("shm_exchange.c")
 SPIN_S = 20e-6
-"""The longest the driver spins for the firmware's answer before it sleeps on the futex [s] (adaptive below it)."""
+"""The default longest spin of the driver for the firmware's answer before it sleeps on the futex [s]
+(adaptive below it): :attr:`.params.Firmware.spin_us`."""
 
 _OFF_DRIVER_SPIN_NS = 80  # shm_exchange.c's SHM_OFF_DRIVER_SPIN_NS
 _OFF_FIRMWARE_SPIN_NS = 136  # SHM_OFF_SPIN_NS
@@ -108,7 +109,9 @@ class ShmRegion:
     unmaps it; the memory is freed when the firmware's mapping is gone too.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, spin_s: float = SPIN_S) -> None:
+        self.spin_s = spin_s
+        """The longest the driver spins for an answer before it sleeps [s] (:meth:`wait_motor`)."""
         self._lib = library()
         self.fd: int | None = os.memfd_create("aerobat-betaflight-lockstep", os.MFD_CLOEXEC)
         try:
@@ -157,7 +160,7 @@ class ShmRegion:
     def wait_motor(self, block: Any, timeout_s: float) -> bool:
         """Wait up to ``timeout_s`` for the answer to the last state packet, into ``block`` (writable, its size)."""
         pointer, size = _pointer(block)
-        return bool(self._lib.aerobat_shm_wait_motor(self.address, pointer, size, int(SPIN_S * 1e9),
+        return bool(self._lib.aerobat_shm_wait_motor(self.address, pointer, size, int(self.spin_s * 1e9),
                                                      int(timeout_s * 1e9)) == size)
 
 

@@ -175,6 +175,10 @@ class SitlProcess:
         Keep the temporary directory (log, eeprom) after :meth:`close`.
     exchange : Exchange or str
         How the per-step packets travel: ``"udp"`` (sockets) or ``"shm"`` (shared memory).
+    spin_us : float
+        Shared memory only: the longest either side busy-waits for the other before it sleeps
+        on a futex [us] (adaptive below it; 0: always sleep). The firmware gets it as
+        ``BF_SITL_SHM_SPIN_US``.
     """
 
     def __init__(
@@ -188,6 +192,7 @@ class SitlProcess:
         start_timeout_s: float = 10.0,
         keep_workdir: bool = False,
         exchange: Exchange | str = Exchange.UDP,
+        spin_us: float = 20.0,
     ) -> None:
         if 1_000_000 % gyro_rate_hz != 0 or not 500 <= gyro_rate_hz <= 8000:
             raise ValueError(f"gyro_rate_hz must divide 1e6 and be in 500..8000, got {gyro_rate_hz}")
@@ -205,6 +210,9 @@ class SitlProcess:
             self.exchange_kind = Exchange(exchange)
         except ValueError:
             raise ValueError(f"exchange = {exchange!r}: allowed 'udp' or 'shm'") from None
+        if not 0.0 <= spin_us <= 1_000_000.0:
+            raise ValueError(f"spin_us = {spin_us!r}: allowed 0 to 1e6")
+        self.spin_us = float(spin_us)
         self._resources = _Resources()
         self._finalizer = weakref.finalize(self, self._resources.release)
         self._finalizer.atexit = True
@@ -247,9 +255,10 @@ class SitlProcess:
             if self.exchange_kind is Exchange.SHM:
                 from .shm import ShmRegion
 
-                resources.shm = ShmRegion()
+                resources.shm = ShmRegion(spin_s=self.spin_us * 1e-6)
                 pass_fds = (resources.shm.fd,)
                 env["BF_SITL_SHM_FD"] = str(resources.shm.fd)
+                env["BF_SITL_SHM_SPIN_US"] = str(round(self.spin_us))
             with open(self.log_path, "wb") as log:
                 resources.process = subprocess.Popen(
                     [str(self.binary), "127.0.0.1"],

@@ -364,7 +364,7 @@ class Flight:
 
     def _compiled(self, mode: Mode, frames: int, steps: int, radio: Radio, resume: int, check: bool, until: Until,
                   channels: np.ndarray, pilot: tuple[np.ndarray, ...], record: np.ndarray) -> tuple[int, int]:
-        return self._fly_frames(  # type: ignore[no-any-return]
+        return self._fly_frames(  # type: ignore[no-any-return, call-arg]
             int(mode), frames, steps, int(radio), resume, check, int(until), self.rng, self._cfg, self._fcfg,
             self._st, self._fst, self.x, self.block, self.motors, self.plant, self.aux, self.pending,
             self.counters, self.packet, self.scratch, self._noise_buffer, self._mocap_noise, self.log,

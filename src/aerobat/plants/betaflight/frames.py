@@ -102,7 +102,7 @@ N_FST = 3
 
 
 class FramesEnd(Enum):
-    """How a run of frames (:meth:`Flight.run_frames`) ended."""
+    """How a run of frames (:meth:`.flight.Flight.run_frames`) ended."""
 
     DONE = "done"
     """Every frame was flown (a stop condition, if any, never held)."""
@@ -116,7 +116,7 @@ class FramesEnd(Enum):
 
 @dataclass(frozen=True)
 class FramesRun:
-    """The outcome of :meth:`Flight.run_frames`."""
+    """The outcome of :meth:`.flight.Flight.run_frames`."""
 
     end: FramesEnd
     frames: int

@@ -1,11 +1,12 @@
-"""The lockstep exchange and the physics in one compiled loop: many gyro steps per Python call.
+"""The lockstep exchange and the physics in one compiled loop: the steps of a frame in one call.
 
-:func:`run_steps` does what :meth:`.flight.Flight._advance` would do step by step in Python —
-sample motion capture, send the state packet, receive the firmware's motor packet, advance the
-physics one gyro period (:func:`.physics.step`) — for a run of steps in which no RC frame is due,
-calling the C library's ``send`` and ``recv`` directly on the :class:`~.sitl.SitlProcess`'s UDP
-sockets. Python is back in charge between runs (RC frames, the supervisor) and whenever the
-exchange does not complete at once:
+:func:`run_steps` does, step after step, what a Python loop would — sample motion capture, send
+the state packet, receive the firmware's motor packet, advance the physics one gyro period
+(:func:`.physics.step`) — for a run of steps in which no RC frame is due, calling the C
+library's ``send`` and ``recv`` directly on the :class:`~.sitl.SitlProcess`'s UDP sockets. With
+an output delay of a step or more the physics runs between the send and the receive, while the
+firmware works (:func:`.physics.advance`). The frame loop (:mod:`.frame_loop`) calls it between
+RC frames; it returns whenever the exchange does not complete at once:
 
 * ``recv`` returns after the motor socket's kernel receive timeout (``SO_RCVTIMEO``, 50 ms) at
   the latest: the loop stops with :data:`NO_ANSWER` and the caller finishes that step's

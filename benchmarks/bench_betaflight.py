@@ -202,6 +202,7 @@ def bench_trials(rate_hz: int, seeds: tuple[int, ...] = (1, 2, 3), exchange: str
                      "firmware_cpu_s": trial.info["firmware_cpu_s"], "firmware_spin_s": trial.info["firmware_spin_s"],
                      "load_1min": os.getloadavg()[0], "digest": _trial_digest(trial),
                      "wall_s": trial.info["wall_s"], "simulated_s": trial.info["simulated_s"],
+                     "compiled_calls": trial.info["compiled_calls"],
                      "position_error_m": float(np.linalg.norm(error[[0, 2, 5]])),
                      "flip_angle_error_deg": math.degrees(error[4])})
     again = BetaflightPlant(CONFIG, params, seed=seeds[0]).fly(program)

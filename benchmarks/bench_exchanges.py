@@ -45,7 +45,8 @@ def rows(name: str, m: dict[str, Any]) -> list[str]:
         f"{rest['wall_per_firmware_cpu']:.2f} (firmware {rest['firmware_us_per_step']:.1f} µs CPU per step, "
         f"{1e6 * rest['firmware_spin_s'] / rest['steps']:.1f} µs of it spinning) |",
         f"| {name} | triple-flip trial, real-time factor (median; seeds 1–3) | {trials['factor_median']:.1f}× "
-        f"({factors}); bit-identical: {trials['bit_identical']} |",
+        f"({factors}); bit-identical: {trials['bit_identical']}; calls into the compiled loop: "
+        f"{trials['trials'][0]['compiled_calls']} |",
         f"| {name} | triple-flip trial, wall ÷ firmware CPU (median) | {trials['overhead_median']:.2f} |",
         f"| {name} | triple-flip trial, wall ÷ firmware CPU less its spinning (median) | "
         f"{trials['overhead_work_median']:.2f} |",

@@ -171,7 +171,8 @@ def _betaflight_kernels(x: np.ndarray, cmd: np.ndarray) -> None:
                    np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)), np.zeros(4, dtype=np.int64),
                    np.zeros((4, 16), dtype=np.int64), rc_block, rc_block.view(np.uint16),
                    np.zeros((1, 16), dtype=np.int64), np.zeros(fr.N_PILOT), np.zeros(3), np.zeros(3), np.zeros(4),
-                   np.zeros(N_LIMITS), np.zeros(3), np.zeros((3, 2)), np.empty((0, 1 + x.shape[0])), np.zeros(14))
+                   np.zeros(N_LIMITS), np.zeros(3), np.zeros((3, 2)), np.empty((0, 1 + x.shape[0])), np.zeros(22),
+                   np.zeros((1, 4)), np.zeros(1), np.zeros((1, 3)), np.zeros(12), np.zeros(10), np.zeros(6))
     limits = np.zeros(N_LIMITS)
     limits[:] = 1.0
     sticks = np.zeros(4)

@@ -30,7 +30,7 @@ import numpy as np
 
 from aerobat.errors import ConfigError
 from aerobat.plants.betaflight import frames as fr
-from aerobat.plants.betaflight.frames import AnglePilot, FramesEnd, FramesRun, Mode, Radio, Until
+from aerobat.plants.betaflight.frames import AnglePilot, FramesEnd, FramesRun, Mode, ProgramPilot, Radio, Until
 from aerobat.plants.betaflight.lockstep import (
     DONE,
     IO_EXCHANGES,
@@ -123,9 +123,10 @@ class Flight:
         self._rc_words = self._rc_block.view(np.uint16)
         self._noise_buffer = np.zeros((self.frame_steps, 6))
         self._mocap_noise = np.zeros((self.frame_steps // self.mocap_every + 2, 6))
-        self._scratch14 = np.zeros(14)
+        self._scratch = np.zeros(22)  # the loop's estimate, sticks, command and quaternion
         self._no_record = np.empty((0, 1 + N_STATE))
         self._no_pilot = (np.zeros(fr.N_PILOT), np.zeros(3), np.zeros(3), np.zeros(4), np.zeros(8))
+        self._no_program = (np.zeros((1, 4)), np.zeros(1), np.zeros((1, 3)), np.zeros(12), np.zeros(10), np.zeros(6))
         volume = params.volume
         self._volume = np.array([volume.x_m, volume.y_m, volume.z_m], dtype=float)
         mc = params.motion_capture
@@ -150,10 +151,12 @@ class Flight:
         from aerobat.plants.betaflight.frame_loop import fly_frames
 
         self._fly_frames = fly_frames
+        self.compiled_calls = 0
+        """Calls into the compiled frame loop so far (Python's turns in the flight)."""
         # compiled (or loaded from numba's cache) before the firmware starts, not in its first frame: a
         # real-time world would miss its first seconds (a run of no frames flies nothing)
         self._compiled(Mode.STEPS, 0, self.frame_steps, Radio.NONE, 0, False, Until.NONE,
-                       np.full((1, 16), 1000, dtype=np.int64), self._no_pilot, self._no_record)
+                       np.full((1, 16), 1000, dtype=np.int64), self._no_pilot, self._no_program, self._no_record)
         self.sitl = SitlProcess(binary, eeprom, gyro_rate_hz=fw.gyro_rate_hz, step_timeout_s=fw.step_timeout_s,
                                 exchange=fw.exchange, spin_us=fw.spin_us)
         self._cfg[fr.K_STATE_FD], self._cfg[fr.K_MOTOR_FD] = self.sitl.socket_fds
@@ -282,12 +285,13 @@ class Flight:
             rows[j, 4:23] = self.motors
 
     def run_frames(self, mode: Mode, frames: int, *, steps: int | None = None, radio: Radio = Radio.LOSSY,
-                   channels_us: np.ndarray | None = None, pilot: AnglePilot | None = None, check: bool = False,
-                   until: Until = Until.NONE, record: np.ndarray | None = None) -> FramesRun:
+                   channels_us: np.ndarray | None = None, pilot: AnglePilot | ProgramPilot | None = None,
+                   check: bool = False, until: Until = Until.NONE, record: np.ndarray | None = None) -> FramesRun:
         """Fly up to ``frames`` radio frames of ``steps`` gyro periods (default: one frame period) in compiled code.
 
         ``mode`` says where each frame's channels come from: ``channels_us`` (k, 16) [us], a row per
-        frame or one for all (:attr:`Mode.STREAM`), or ``pilot``'s sticks (:attr:`Mode.ANGLE`);
+        frame or one for all (:attr:`Mode.STREAM`), or ``pilot``'s sticks (:attr:`Mode.ANGLE`: an
+        :class:`~.frames.AnglePilot`; :attr:`Mode.PROGRAM`: a :class:`~.frames.ProgramPilot`);
         ``radio`` what the radio does with them. After each frame: a truth row into ``record``
         (frames, 1 + state: time [s], true state), the flight-volume check around the start
         (``check``: the floor or a motion-capture sample outside ``params.volume`` ends the run)
@@ -298,8 +302,10 @@ class Flight:
         steps = self.frame_steps if steps is None else int(steps)
         if steps < 1 or frames < 0:
             raise ValueError(f"{frames} frames of {steps} gyro periods: both must be positive")
-        if mode is Mode.ANGLE and pilot is None:
-            raise ValueError("Mode.ANGLE needs the pilot")
+        if mode is Mode.ANGLE and not isinstance(pilot, AnglePilot):
+            raise ValueError("Mode.ANGLE needs an AnglePilot")
+        if mode is Mode.PROGRAM and not (isinstance(pilot, ProgramPilot) and pilot.commands.shape == (frames, 4)):
+            raise ValueError(f"Mode.PROGRAM needs a ProgramPilot with ({frames}, 4) commands")
         if mode is not Mode.STEPS and channels_us is None and pilot is None:
             raise ValueError(f"{mode.name} needs the channels")
         if record is not None and record.shape != (frames, 1 + N_STATE):
@@ -307,13 +313,31 @@ class Flight:
         if steps > self._noise_buffer.shape[0]:
             self._noise_buffer = np.zeros((steps, 6))
             self._mocap_noise = np.zeros((steps // self.mocap_every + 2, 6))
-        if pilot is not None:
-            floats = np.array([pilot.period_s, pilot.settle_position_m, pilot.settle_velocity_m_s,
-                               pilot.settle_tilt_rad, float(pilot.settle_hold_frames)])
+        program = self._no_program
+        if isinstance(pilot, AnglePilot):
+            floats = np.zeros(fr.N_PILOT)
+            floats[:fr.P_SETTLE_HOLD + 1] = (pilot.period_s, pilot.settle_position_m, pilot.settle_velocity_m_s,
+                                             pilot.settle_tilt_rad, float(pilot.settle_hold_frames))
             arrays = (floats, np.asarray(pilot.target_m, dtype=float), pilot.integral, pilot.gains, pilot.limits)
-            channels = np.array([pilot.channels_us], dtype=np.int64) if channels_us is None else channels_us
+        elif isinstance(pilot, ProgramPilot):
+            floats = np.zeros(fr.N_PILOT)
+            floats[fr.P_PERIOD_S] = pilot.period_s
+            arrays = (floats, *self._no_pilot[1:4], pilot.limits)
+            commands = np.ascontiguousarray(pilot.commands, dtype=float)
+            law = pilot.law
+            if law is not None:
+                floats[fr.P_FEEDBACK] = 1.0
+                floats[[fr.P_DURATION_S, fr.P_START_TIME_S, fr.P_AHEAD_S, fr.P_REFERENCE_DT_S, fr.P_LAW_LATENCY_S]] = (
+                    law.duration_s, law.start_time_s, law.ahead_s, law.reference_dt_s, law.mocap_latency_s)
+                program = (commands, law.gains, np.ascontiguousarray(law.reference), law.state, np.empty(10),
+                           np.empty(6))
+            else:
+                program = (commands, *self._no_program[1:])
         else:
             arrays = self._no_pilot
+        if pilot is not None:
+            channels = np.array([pilot.channels_us], dtype=np.int64) if channels_us is None else channels_us
+        else:
             channels = channels_us if channels_us is not None else np.full((1, 16), 1000, dtype=np.int64)
         channels = np.ascontiguousarray(channels, dtype=np.int64)
         many = channels.shape[0] > 1
@@ -328,8 +352,12 @@ class Flight:
             self._reserve_log(chunk * (steps // self.mocap_every + 2))
             address = self.sitl.shm_address
             self._cfg[fr.K_SHM] = address if address is not None else 0
+            if mode is Mode.PROGRAM:
+                arrays[0][fr.P_FIRST_FRAME] = done
             status, flown = self._compiled(mode, chunk, steps, radio, resume, check, until,
                                            channels[done:done + chunk] if many else channels, arrays,
+                                           (program[0][done:done + chunk], *program[1:])
+                                           if mode is Mode.PROGRAM else program,
                                            record[done:done + chunk] if record is not None else self._no_record)
             self.sitl.steps += int(self._st[IO_EXCHANGES])
             self._st[IO_EXCHANGES] = 0
@@ -363,13 +391,15 @@ class Flight:
                          float(self._fst[fr.F_WORST_MEASURED_M]), float(self._fst[fr.F_WORST_TRUE_M]))
 
     def _compiled(self, mode: Mode, frames: int, steps: int, radio: Radio, resume: int, check: bool, until: Until,
-                  channels: np.ndarray, pilot: tuple[np.ndarray, ...], record: np.ndarray) -> tuple[int, int]:
+                  channels: np.ndarray, pilot: tuple[np.ndarray, ...], program: tuple[np.ndarray, ...],
+                  record: np.ndarray) -> tuple[int, int]:
+        self.compiled_calls += 1
         return self._fly_frames(  # type: ignore[no-any-return, call-arg]
             int(mode), frames, steps, int(radio), resume, check, int(until), self.rng, self._cfg, self._fcfg,
             self._st, self._fst, self.x, self.block, self.motors, self.plant, self.aux, self.pending,
             self.counters, self.packet, self.scratch, self._noise_buffer, self._mocap_noise, self.log,
             self._queue_due, self._queue_rc, self._rc_block, self._rc_words, channels, *pilot, self.start_m,
-            self._volume, record, self._scratch14)
+            self._volume, record, self._scratch, *program)
 
     def _reserve_log(self, rows: int) -> None:
         count = self.log_count

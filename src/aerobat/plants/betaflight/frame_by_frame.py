@@ -16,10 +16,21 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.plants.betaflight.frames import AnglePilot, FramesEnd, FramesRun, Mode, Radio, Until
-from aerobat.plants.betaflight.pilot import angle_sticks
+from aerobat.plants.betaflight.frames import (
+    AnglePilot,
+    FeedbackLaw,
+    FramesEnd,
+    FramesRun,
+    Mode,
+    ProgramPilot,
+    Radio,
+    Until,
+)
+from aerobat.plants.betaflight.pilot import angle_sticks, program_sticks
 from aerobat.plants.betaflight.rc import RC_MIN_US, stick_to_us
 from aerobat.plants.world_params import Volume
+from aerobat.quadrotor.dynamics import quaternion_from_rotation_vector, quaternion_multiply
+from aerobat.quadrotor.feedback import apply_feedback, relay_deviation
 
 __all__ = ["run_frames_by_frame"]
 
@@ -33,6 +44,29 @@ def _estimate(flight: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def _tilt_rad(quat: np.ndarray) -> float:
     x, y = quat[1], quat[2]
     return math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y))))
+
+
+def _apply_law(flight: Any, law: FeedbackLaw, tau: float, command: np.ndarray, scratch: np.ndarray,
+               relay: np.ndarray) -> np.ndarray:
+    """The pilot's feedback law: ``command`` corrected from the latest motion capture (a copy)."""
+    cmd = command.copy()
+    rows = flight.mocap()
+    available = int(np.searchsorted(rows[:, 0], flight.time_s - law.mocap_latency_s + 1e-12, side="right"))
+    if available == 0:
+        return cmd
+    row = rows[available - 1]
+    # the latest attitude, carried forward by the commanded rates to when this frame acts
+    step = quaternion_from_rotation_vector(cmd[1:4] * (flight.time_s - row[0] + law.ahead_s))
+    q = quaternion_multiply(row[4:8], step)
+    state = law.state
+    state[0:4] = q / np.linalg.norm(q)
+    if relay_deviation(rows, available, law.start_time_s, flight.start_m, law.reference, law.reference_dt_s,
+                       scratch, relay):
+        state[4:10] = relay
+        state[10] = row[0]
+        state[11] = 1.0
+    apply_feedback(cmd, state, law.gains, law.reference, tau, flight.time_s, scratch)
+    return cmd
 
 
 def _outside(flight: Any, volume: Volume) -> int | None:
@@ -50,26 +84,36 @@ def _outside(flight: Any, volume: Volume) -> int | None:
 
 def run_frames_by_frame(flight: Any, volume: Volume | None, mode: Mode, frames: int, *, steps: int | None = None,
                         radio: Radio = Radio.LOSSY, channels_us: np.ndarray | None = None,
-                        pilot: AnglePilot | None = None, check: bool = False, until: Until = Until.NONE,
-                        record: np.ndarray | None = None) -> FramesRun:
+                        pilot: AnglePilot | ProgramPilot | None = None, check: bool = False,
+                        until: Until = Until.NONE, record: np.ndarray | None = None) -> FramesRun:
     """:meth:`.flight.Flight.run_frames` through ``flight.frame()``; ``volume``: the flight volume (for ``check``)."""
     if mode is Mode.STEPS or steps is not None:
         raise ValueError("a flight on the wall clock flies whole radio frames")
     if check and volume is None:
         raise ValueError("checking the flight volume needs the volume")
-    if mode is Mode.ANGLE and pilot is None:
-        raise ValueError("Mode.ANGLE needs the pilot")
+    if mode is Mode.ANGLE and not isinstance(pilot, AnglePilot):
+        raise ValueError("Mode.ANGLE needs an AnglePilot")
+    if mode is Mode.PROGRAM and not isinstance(pilot, ProgramPilot):
+        raise ValueError("Mode.PROGRAM needs a ProgramPilot")
     sticks = np.zeros(4)
+    scratch, relay = np.empty(10), np.empty(6)
     start = flight.start_m
     airborne: float | None = None
     worst_estimated = worst_true = 0.0
     calm = 0
     for k in range(frames):
-        if mode is Mode.ANGLE:
-            assert pilot is not None
+        if isinstance(pilot, AnglePilot) and mode is Mode.ANGLE:
             pos, vel, quat = _estimate(flight)
             angle_sticks(pos, vel, quat, pilot.target_m, pilot.integral, pilot.gains, pilot.limits, pilot.period_s,
                          sticks)
+        elif isinstance(pilot, ProgramPilot) and mode is Mode.PROGRAM:
+            cmd = pilot.commands[k]
+            tau = k * pilot.period_s
+            if pilot.law is not None and tau < pilot.law.duration_s:
+                cmd = _apply_law(flight, pilot.law, tau, cmd, scratch, relay)
+            program_sticks(cmd, pilot.limits, sticks)
+        if mode is Mode.ANGLE or mode is Mode.PROGRAM:
+            assert pilot is not None
             channels: tuple[int, ...] = (stick_to_us(float(sticks[0])), stick_to_us(float(sticks[1])),
                                          int(round(min(max(float(sticks[3]), RC_MIN_US), 2000.0))),
                                          stick_to_us(float(sticks[2])), *pilot.channels_us[4:])
@@ -96,7 +140,7 @@ def run_frames_by_frame(flight: Any, volume: Volume | None, mode: Mode, frames: 
             worst_estimated = max(worst_estimated, float(np.linalg.norm(pos - start)))
             worst_true = max(worst_true, float(np.linalg.norm(flight.x[0:3] - start)))
         elif until is Until.SETTLED:
-            assert pilot is not None
+            assert isinstance(pilot, AnglePilot)
             pos, vel, quat = _estimate(flight)
             if airborne is None and not flight.on_floor:
                 airborne = flight.time_s

@@ -48,11 +48,18 @@ from aerobat.plants.betaflight.frames import (
     K_SPIN_NS,
     K_STATE_FD,
     K_WAIT_NS,
+    P_AHEAD_S,
+    P_DURATION_S,
+    P_FEEDBACK,
+    P_FIRST_FRAME,
+    P_LAW_LATENCY_S,
     P_PERIOD_S,
+    P_REFERENCE_DT_S,
     P_SETTLE_HOLD,
     P_SETTLE_POSITION_M,
     P_SETTLE_TILT_RAD,
     P_SETTLE_VELOCITY_M_S,
+    P_START_TIME_S,
     Q_ATTITUDE_NOISE_RAD,
     Q_DROP_PROBABILITY,
     Q_MOCAP_LATENCY_S,
@@ -78,13 +85,14 @@ from aerobat.plants.betaflight.frames import (
 from aerobat.plants.betaflight.lockstep import DONE, IO_MOCAP_USED, SEND_FAILED, run_steps
 from aerobat.plants.betaflight.lockstep_shm import run_steps_shm
 from aerobat.plants.betaflight.physics import C_CONTACT
-from aerobat.plants.betaflight.pilot import angle_sticks
+from aerobat.plants.betaflight.pilot import angle_sticks, program_sticks
 from aerobat.plants.lab_kernels import estimate_pose
+from aerobat.quadrotor.feedback import apply_feedback, relay_deviation
 
 __all__ = ["fly_frames"]
 
 # the enums as compile-time integers
-M_STREAM, M_ANGLE = int(Mode.STREAM), int(Mode.ANGLE)
+M_STREAM, M_ANGLE, M_PROGRAM = int(Mode.STREAM), int(Mode.ANGLE), int(Mode.PROGRAM)
 D_NONE, D_RADIO = int(Radio.NONE), int(Radio.LOSSY)
 U_ARMED, U_SETTLED, U_TRACK, U_ON_FLOOR = int(Until.ARMED), int(Until.SETTLED), int(Until.TRACK), int(Until.ON_FLOOR)
 
@@ -108,6 +116,56 @@ def _estimate_now(log, count, time_s, latency_s, pos, vel, quat):  # pragma: no 
     quat[1:] = 0.0
     rows = np.searchsorted(log[:count, 0], time_s - latency_s + 1e-12, side="right")
     return _estimate(log, rows, pos, vel, quat)
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def _relay(log, available, start_time, origin, ref, ref_dt, sample, out):  # pragma: no cover - compiled
+    # calls of their own, compiled as the Python pilot's were (fastmath)
+    return relay_deviation(log, available, start_time, origin, ref, ref_dt, sample, out)
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def _apply(cmd, state, gains, ref, tau, t, scratch):  # pragma: no cover - compiled
+    apply_feedback(cmd, state, gains, ref, tau, t, scratch)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _feedback_law(cmd, log, count, now_s, tau, pilot, origin, gains, ref, onboard, scratch, relay,
+                  quat):  # pragma: no cover - compiled
+    """The pilot's feedback law on ``cmd`` in place: the arithmetic of frame_by_frame's, NumPy's order."""
+    available = np.searchsorted(log[:count, 0], now_s - pilot[P_LAW_LATENCY_S] + 1e-12, side="right")
+    if available == 0:
+        return
+    row = available - 1
+    lead = now_s - log[row, 0] + pilot[P_AHEAD_S]
+    v0 = cmd[1] * lead
+    v1 = cmd[2] * lead
+    v2 = cmd[3] * lead
+    quat[0] = v0
+    quat[1] = v1
+    quat[2] = v2
+    angle = math.sqrt(np.dot(quat[0:3], quat[0:3]))  # quaternion_from_rotation_vector
+    if angle < 1e-15:
+        d = math.sqrt(1.0 + 0.25 * angle * angle)
+        w2, x2, y2, z2 = 1.0 / d, 0.5 * v0 / d, 0.5 * v1 / d, 0.5 * v2 / d
+    else:
+        c = math.cos(angle / 2)
+        s = math.sin(angle / 2)
+        w2, x2, y2, z2 = c, s * (v0 / angle), s * (v1 / angle), s * (v2 / angle)
+    w1, x1, y1, z1 = log[row, 4], log[row, 5], log[row, 6], log[row, 7]  # quaternion_multiply
+    quat[0] = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
+    quat[1] = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
+    quat[2] = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
+    quat[3] = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
+    norm = math.sqrt(np.dot(quat, quat))
+    for i in range(4):
+        onboard[i] = quat[i] / norm
+    if _relay(log, available, pilot[P_START_TIME_S], origin, ref, pilot[P_REFERENCE_DT_S], scratch, relay):
+        for i in range(6):
+            onboard[4 + i] = relay[i]
+        onboard[10] = log[row, 0]
+        onboard[11] = 1.0
+    _apply(cmd, onboard, gains, ref, tau, now_s, scratch)
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -228,8 +286,8 @@ def _outside(st, log, start, volume):  # pragma: no cover - compiled
 @nb.njit(cache=True, error_model="numpy")
 def fly_frames(mode, frames, n, drop, resume, check, until, rng, cfg, fcfg, st, fst, x, block, motors, plant, aux,
                pending, counters, packet, scratch, noise, mocap_noise, log, queue_due, queue_rc, rc_block, rc_words,
-               channels, pilot, target, integral, gains, limits, start, volume, record,
-               est):  # pragma: no cover - compiled
+               channels, pilot, target, integral, gains, limits, start, volume, record, est, commands, fb_gains,
+               reference, onboard, fb_scratch, relay):  # pragma: no cover - compiled
     """Up to ``frames`` frames of ``n`` gyro steps; returns (status, frames completed).
 
     ``channels``: (k, 16) RC channels [us], one row per frame or one for all (:data:`M_ANGLE`:
@@ -237,6 +295,9 @@ def fly_frames(mode, frames, n, drop, resume, check, until, rng, cfg, fcfg, st, 
     ANGLE pilot's (:func:`.pilot.angle_sticks`; the integral is updated in place). ``start`` and
     ``volume`` (3, 2): the flight volume around the start [m]. ``record``: (frames, 1 + 21) truth
     rows (time [s], state) after each frame, or empty. ``est``: scratch (3 + 3 + 4 + 4).
+    :data:`Mode.PROGRAM`: ``commands`` (frames, 4) a row per frame, as sticks through ``limits``;
+    with ``pilot[P_FEEDBACK]`` the feedback law first (``fb_gains``, ``reference``, the onboard
+    state ``onboard`` updated in place, scratch ``fb_scratch`` (10) and ``relay`` (6)).
     ``resume`` (0 or :data:`.lockstep.RESUME_STEP` / ``RESUME_STORE``): how much of the frame in
     progress's step ``st[S_STEP]`` is done (after the watchdog took its motor packet).
     """
@@ -250,9 +311,18 @@ def fly_frames(mode, frames, n, drop, resume, check, until, rng, cfg, fcfg, st, 
         if st[S_IN_FRAME] == 0:
             if mode == M_STREAM:
                 row[:] = channels[k if channels.shape[0] > 1 else 0]
-            elif mode == M_ANGLE:
-                _estimate_now(log, st[0], st[S_TICK] * step_s, fcfg[Q_MOCAP_LATENCY_S], pos, vel, quat)
-                angle_sticks(pos, vel, quat, target, integral, gains, limits, pilot[P_PERIOD_S], sticks)
+            elif mode == M_ANGLE or mode == M_PROGRAM:
+                if mode == M_ANGLE:
+                    _estimate_now(log, st[0], st[S_TICK] * step_s, fcfg[Q_MOCAP_LATENCY_S], pos, vel, quat)
+                    angle_sticks(pos, vel, quat, target, integral, gains, limits, pilot[P_PERIOD_S], sticks)
+                else:
+                    cmd = est[14:18]
+                    cmd[:] = commands[k]
+                    tau = (pilot[P_FIRST_FRAME] + k) * pilot[P_PERIOD_S]
+                    if pilot[P_FEEDBACK] != 0.0 and tau < pilot[P_DURATION_S]:
+                        _feedback_law(cmd, log, st[0], st[S_TICK] * step_s, tau, pilot, start, fb_gains, reference,
+                                      onboard, fb_scratch, relay, est[18:22])
+                    program_sticks(cmd, limits, sticks)
                 row[0] = _stick_us(sticks[0])
                 row[1] = _stick_us(sticks[1])
                 row[2] = np.int64(np.rint(min(max(sticks[3], 1000.0), 2000.0)))

@@ -16,12 +16,14 @@ from enum import Enum, IntEnum
 import numpy as np
 
 __all__ = ["AnglePilot", "CRASH_FLOOR", "CRASH_VOLUME", "F_AIRBORNE_S", "F_WORST_MEASURED_M", "F_WORST_TRUE_M",
-           "FramesEnd", "FramesRun", "K_EVERY", "K_EXCHANGE", "K_LATENCY_STEPS", "K_MOTOR_FD", "K_RC_FD",
-           "K_SENSOR_NOISE", "K_SHM", "K_SPIN_NS", "K_STATE_FD", "K_WAIT_NS", "Mode", "N_CFG", "N_FCFG", "N_FST",
-           "N_PILOT", "N_ST", "P_PERIOD_S", "P_SETTLE_HOLD", "P_SETTLE_POSITION_M", "P_SETTLE_TILT_RAD",
-           "P_SETTLE_VELOCITY_M_S", "QUEUE_FULL", "Q_ATTITUDE_NOISE_RAD", "Q_DROP_PROBABILITY", "Q_MOCAP_LATENCY_S",
-           "Q_POSITION_NOISE_M", "Q_STEP_S", "RC_FAILED", "Radio", "S_AXIS", "S_CALM", "S_DROPPED", "S_IN_FRAME",
-           "S_Q_COUNT", "S_Q_HEAD", "S_SENT", "S_STEP", "S_TICK", "UNTIL_MET", "Until", "X_SHM", "X_UDP"]
+           "FeedbackLaw", "FramesEnd", "FramesRun", "K_EVERY", "K_EXCHANGE", "K_LATENCY_STEPS", "K_MOTOR_FD",
+           "K_RC_FD", "K_SENSOR_NOISE", "K_SHM", "K_SPIN_NS", "K_STATE_FD", "K_WAIT_NS", "Mode", "N_CFG", "N_FCFG",
+           "N_FST", "N_PILOT", "N_ST", "P_AHEAD_S", "P_DURATION_S", "P_FEEDBACK", "P_FIRST_FRAME",
+           "P_LAW_LATENCY_S", "P_PERIOD_S", "P_REFERENCE_DT_S", "P_SETTLE_HOLD", "P_SETTLE_POSITION_M",
+           "P_SETTLE_TILT_RAD", "P_SETTLE_VELOCITY_M_S", "P_START_TIME_S", "ProgramPilot", "QUEUE_FULL",
+           "Q_ATTITUDE_NOISE_RAD", "Q_DROP_PROBABILITY", "Q_MOCAP_LATENCY_S", "Q_POSITION_NOISE_M", "Q_STEP_S",
+           "RC_FAILED", "Radio", "S_AXIS", "S_CALM", "S_DROPPED", "S_IN_FRAME", "S_Q_COUNT", "S_Q_HEAD", "S_SENT",
+           "S_STEP", "S_TICK", "UNTIL_MET", "Until", "X_SHM", "X_UDP"]
 
 # statuses beyond lockstep's DONE, NO_ANSWER, SEND_FAILED, NON_FINITE (0-3)
 RC_FAILED = 4
@@ -45,6 +47,8 @@ class Mode(IntEnum):
     """Frames whose RC channels are given: one row per frame, or one row for all."""
     ANGLE = 2
     """The supervisor's ANGLE-mode frames toward a target, sticks from the motion-capture estimate."""
+    PROGRAM = 3
+    """A maneuver's commands as ACRO sticks, a row per frame, with the pilot's feedback law if any."""
 
 
 class Radio(IntEnum):
@@ -95,7 +99,10 @@ Q_STEP_S, Q_DROP_PROBABILITY, Q_POSITION_NOISE_M, Q_ATTITUDE_NOISE_RAD, Q_MOCAP_
 N_FCFG = 5
 # pilot (float64): the supervisor's frame period and settle tolerances
 P_PERIOD_S, P_SETTLE_POSITION_M, P_SETTLE_VELOCITY_M_S, P_SETTLE_TILT_RAD, P_SETTLE_HOLD = range(5)
-N_PILOT = 5
+# … and the program pilot's: its duration, the maneuver's start, the look-ahead, the reference's step,
+# whether the feedback law runs, the run's first frame's index in the program, the law's capture latency
+P_DURATION_S, P_START_TIME_S, P_AHEAD_S, P_REFERENCE_DT_S, P_FEEDBACK, P_FIRST_FRAME, P_LAW_LATENCY_S = range(5, 12)
+N_PILOT = 12
 # fst (float64): what the stop conditions saw
 F_AIRBORNE_S, F_WORST_MEASURED_M, F_WORST_TRUE_M = range(3)
 N_FST = 3
@@ -151,3 +158,41 @@ class AnglePilot:
     settle_velocity_m_s: float = 0.0
     settle_tilt_rad: float = 0.0
     settle_hold_frames: int = 1
+
+
+@dataclass(frozen=True)
+class FeedbackLaw:
+    """The offboard pilot's feedback law during a maneuver (:mod:`aerobat.quadrotor.feedback`).
+
+    Before each of the program's frames (until its ``duration_s``) the pilot takes the latest
+    motion-capture sample older than the capture's latency ``mocap_latency_s``, carries its attitude forward by the
+    commanded rates to when the frame acts (``ahead_s``: the radio's latency), relays the position
+    deviation from the ``reference`` (samples every ``reference_dt_s``, from the maneuver's start
+    ``start_time_s``) and corrects the command (:func:`~aerobat.quadrotor.feedback.apply_feedback`
+    with ``gains``). ``state`` is the onboard estimate, updated in place.
+    """
+
+    gains: np.ndarray
+    reference: np.ndarray
+    reference_dt_s: float
+    state: np.ndarray
+    duration_s: float
+    start_time_s: float
+    ahead_s: float
+    mocap_latency_s: float
+
+
+@dataclass(frozen=True)
+class ProgramPilot:
+    """A maneuver streamed as ACRO sticks for :attr:`Mode.PROGRAM` (:func:`.pilot.program_sticks`).
+
+    ``commands`` (frames, 4): collective [m/s²] and body rates p, q, r [rad/s] FLU, a row per frame;
+    ``limits`` the stick map's; ``channels_us`` the 16 RC channels [us] the sticks fill in (the mode
+    switches); ``law`` the pilot's feedback (None: open loop).
+    """
+
+    commands: np.ndarray
+    limits: np.ndarray
+    channels_us: tuple[int, ...]
+    period_s: float
+    law: FeedbackLaw | None = None

@@ -37,24 +37,22 @@ import numpy as np
 from aerobat.core.plant import Trial, TrialStatus
 from aerobat.plants.betaflight.errors import FirmwareNotResponding
 from aerobat.plants.betaflight.firmware_settings import BetaflightSettings, load_settings
-from aerobat.plants.betaflight.flight import AnglePilot, Flight, FramesEnd, FramesRun, NonFinite
-from aerobat.plants.betaflight.frames import Mode, Until
+from aerobat.plants.betaflight.flight import Flight, NonFinite
+from aerobat.plants.betaflight.frames import AnglePilot, FeedbackLaw, FramesEnd, FramesRun, Mode, ProgramPilot, Until
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import airframe_plant
-from aerobat.plants.betaflight.pilot import L_CLIMB, StickMap, program_sticks
+from aerobat.plants.betaflight.pilot import L_CLIMB, StickMap
 from aerobat.plants.betaflight.rc import RC_MIN_US, stick_to_us
 from aerobat.plants.mocap import estimate_final_state, measured_states
 from aerobat.plants.plant_state import StateLayout
-from aerobat.quadrotor.dynamics import N_STATE, quaternion_from_rotation_vector, quaternion_multiply
+from aerobat.quadrotor.dynamics import N_STATE
 from aerobat.quadrotor.feedback import (
     Feedback,
     FeedbackScheme,
-    apply_feedback,
     as_feedback,
     feedback_vector,
     onboard_state,
     reference_from_trajectory,
-    relay_deviation,
 )
 from aerobat.quadrotor.program import CompiledProgram, Program
 from aerobat.quadrotor.simulate import simulate
@@ -227,7 +225,9 @@ class BetaflightPlant:
                 "wall_per_firmware_cpu": elapsed / cpu if cpu else math.nan,
                 # over shared memory the waits spin first: CPU time spent waiting, not working (wall
                 # time spinning: under load it includes preemption)
-                "firmware_spin_s": spun, "driver_spin_s": driver_spun}
+                "firmware_spin_s": spun, "driver_spin_s": driver_spun,
+                # Python's turns: calls into the compiled frame loop (the firmware may nap in each)
+                "compiled_calls": flight.compiled_calls - 1 if flight is not None else 0}
 
     @staticmethod
     def _failed(status: TrialStatus, message: str, info: dict[str, Any],
@@ -359,61 +359,22 @@ class BetaflightPlant:
         n = flight.frames_for(compiled.duration_s + _MARGIN_S)
         commands = compiled.evaluate(np.arange(n) * period)
         commands[np.arange(n) * period >= compiled.duration_s - 1e-12] = compiled.hover
-        sticks = np.zeros(4)
-        law = self._pilot_feedback(compiled, start_time) if self.feedback.enabled else None
+        program = ProgramPilot(commands, self.limits, self.channels(np.zeros(4), arm=True, angle=False), period,
+                               self._feedback_law(compiled, start_time) if self.feedback.enabled else None)
         record = np.empty((n, 1 + N_STATE))
-        if law is None:  # the whole stream is known: one compiled run
-            rows = np.empty((n, 16), dtype=np.int64)
-            for k in range(n):
-                program_sticks(commands[k], self.limits, sticks)
-                rows[k] = self.channels(sticks, arm=True, angle=False)
-            run = flight.run_frames(Mode.STREAM, n, channels_us=rows, check=True, record=record)
-        else:  # the pilot's feedback reads the motion capture before each frame
-            for k in range(n):
-                cmd = law(flight, k * period, commands[k]) if k * period < compiled.duration_s else commands[k]
-                program_sticks(cmd, self.limits, sticks)
-                run = flight.run_frames(Mode.STREAM, 1, channels_us=self._rows(self.channels(sticks, arm=True,
-                                                                                             angle=False)),
-                                        check=True, record=record[k:k + 1])
-                if run.end is not FramesEnd.DONE:
-                    run = FramesRun(run.end, k + run.frames, run.axis)
-                    break
-            else:
-                run = FramesRun(FramesEnd.DONE, n)
+        run = flight.run_frames(Mode.PROGRAM, n, pilot=program, check=True, record=record)
         truth.extend(record[:run.frames])
         self._raise_crash(flight, run)
         self._integral[0:2] = 0.0  # the hover throttle's integral (the pilot's mass error) carries into the return
         return start_time
 
-    def _pilot_feedback(self, compiled: CompiledProgram, start_time: float) -> Any:
-        """The feedback law as the offboard pilot runs it: ``law(flight, τ, cmd) -> corrected cmd``."""
+    def _feedback_law(self, compiled: CompiledProgram, start_time: float) -> FeedbackLaw:
+        """The feedback law as the offboard pilot runs it, around the nominal trajectory of ``compiled``."""
         nominal = simulate(compiled, self.config, record=True)
         reference = reference_from_trajectory(nominal.times_s, nominal.states, self.feedback.gains.reference_rate_hz)
         state, _ = onboard_state()
-        scratch, relay = np.empty(10), np.empty(6)
-        ahead = self.params.radio.latency_s
-
-        def law(flight: Flight, tau: float, command: np.ndarray) -> np.ndarray:
-            cmd = command.copy()
-            rows = flight.mocap()
-            available = int(np.searchsorted(rows[:, 0], flight.time_s - self.params.motion_capture.latency_s
-                                            + 1e-12, side="right"))
-            if available == 0:
-                return cmd
-            row = rows[available - 1]
-            # the latest attitude, carried forward by the commanded rates to when this frame acts
-            step = quaternion_from_rotation_vector(cmd[1:4] * (flight.time_s - row[0] + ahead))
-            q = quaternion_multiply(row[4:8], step)
-            state[0:4] = q / np.linalg.norm(q)
-            if relay_deviation(rows, available, start_time, self.start_m, reference.samples, reference.dt_s,
-                               scratch, relay):
-                state[4:10] = relay
-                state[10] = row[0]
-                state[11] = 1.0
-            apply_feedback(cmd, state, self._fb_vector, reference.samples, tau, flight.time_s, scratch)
-            return cmd
-
-        return law
+        return FeedbackLaw(self._fb_vector, reference.samples, reference.dt_s, state, compiled.duration_s, start_time,
+                           self.params.radio.latency_s, self.params.motion_capture.latency_s)
 
     def land_and_disarm(self, flight: Flight) -> tuple[bool, bool]:
         """Descend onto the floor, throttle down and disarm; (landed, disarmed)."""

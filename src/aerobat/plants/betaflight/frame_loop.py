@@ -84,6 +84,7 @@ from aerobat.plants.betaflight.frames import (
 )
 from aerobat.plants.betaflight.lockstep import DONE, IO_MOCAP_USED, SEND_FAILED, run_steps
 from aerobat.plants.betaflight.lockstep_shm import run_steps_shm
+from aerobat.plants.betaflight.packets import RC_STRUCT
 from aerobat.plants.betaflight.physics import C_CONTACT
 from aerobat.plants.betaflight.pilot import angle_sticks, program_sticks
 from aerobat.plants.lab_kernels import estimate_pose
@@ -96,7 +97,7 @@ M_STREAM, M_ANGLE, M_PROGRAM = int(Mode.STREAM), int(Mode.ANGLE), int(Mode.PROGR
 D_NONE, D_RADIO = int(Radio.NONE), int(Radio.LOSSY)
 U_ARMED, U_SETTLED, U_TRACK, U_ON_FLOOR = int(Until.ARMED), int(Until.SETTLED), int(Until.TRACK), int(Until.ON_FLOOR)
 
-_RC_BYTES = 40  # packets.RC_STRUCT: a double (0.0), then 16 uint16 channels
+_RC_BYTES = RC_STRUCT.size  # a double (0.0), then 16 uint16 channels: 40 bytes
 _send = types.ExternalFunction("send", types.intp(types.int32, types.uintp, types.uintp, types.int32))
 _publish_rc = types.ExternalFunction("aerobat_shm_publish_rc", types.int64(types.uintp, types.uintp, types.int64))
 

@@ -185,3 +185,14 @@ def test_the_compiled_supervisor_flies_a_trial_bit_for_bit_like_the_frame_by_fra
         assert trial.ok, trial.message
         seen.append(_trial_record(trial, plant))
     assert seen[0] == seen[1]
+
+
+def test_the_link_latency_can_be_lowered_and_raised_again_up_to_the_configured_one() -> None:
+    with _fake_flight() as flight:
+        configured = flight.latency_steps
+        assert configured > 0
+        flight.latency_steps = 0
+        flight.latency_steps = configured  # back up: the queue was sized for it
+        assert flight.latency_steps == configured
+        with pytest.raises(ValueError, match="latency of"):
+            flight.latency_steps = configured + 1

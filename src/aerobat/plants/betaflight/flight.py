@@ -116,6 +116,7 @@ class Flight:
         # the compiled loop's state (frames.S_*), constants and scratch; the radio's latency queue is a ring
         self._st = np.zeros(fr.N_ST, dtype=np.int64)
         self._fst = np.zeros(fr.N_FST)
+        self._max_latency_steps = latency_steps  # the radio's latency queue is sized for this
         queue = latency_steps // self.frame_steps + 4
         self._queue_due = np.zeros(queue, dtype=np.int64)
         self._queue_rc = np.zeros((queue, 16), dtype=np.int64)
@@ -210,8 +211,8 @@ class Flight:
 
     @latency_steps.setter
     def latency_steps(self, steps: int) -> None:
-        if not 0 <= steps <= self._cfg[fr.K_LATENCY_STEPS]:  # the queue is sized for the configured latency
-            raise ValueError(f"latency of {steps} steps: 0 to {self._cfg[fr.K_LATENCY_STEPS]} allowed")
+        if not 0 <= steps <= self._max_latency_steps:  # the queue is sized for the configured latency
+            raise ValueError(f"latency of {steps} steps: 0 to {self._max_latency_steps} allowed")
         self._cfg[fr.K_LATENCY_STEPS] = steps
 
     @property

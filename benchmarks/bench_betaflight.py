@@ -63,7 +63,7 @@ def _trial_digest(trial: Any) -> str:
 
 def bench_lockstep(binary: Path, eeprom: Path) -> dict[str, Any]:
     """Motor packets per state packet, and the firmware's task rates in simulated time."""
-    plant = BetaflightPlant(CONFIG, seed=1)
+    plant = BetaflightPlant(CONFIG, _params(exchange="udp"), seed=1)  # reads the motor socket
     with plant.open_flight() as flight:
         plant.power_on_and_arm(flight)
         for _ in range(flight.frames_for(0.5)):

@@ -16,6 +16,7 @@ import pytest
 from aerobat import hummingbird
 from aerobat.cli import main
 from aerobat.core.design import design
+from aerobat.errors import ConfigError
 from aerobat.experiments.execution import DaskExecutor, LocalExecutor
 from aerobat.experiments.job import Job, run_job
 from aerobat.experiments.studies import RobustnessRanges, robustness_jobs, sample_arena, summarize_robustness
@@ -163,3 +164,43 @@ def test_a_refused_scheduler_leaves_no_client_for_the_garbage_collector(address)
     finally:
         gc.enable()
     assert not alive
+
+
+def test_a_study_runs_as_many_jobs_at_once_as_its_plant_leaves_cores(jobs, tmp_path, monkeypatch):
+    """Without ``workers``: the cores ÷ the cores one job's plant keeps busy (a spinning Betaflight keeps two)."""
+    from aerobat.experiments.execution import default_workers
+    from aerobat.experiments.studies import runner
+    from aerobat.plants import PlantChoice
+    from aerobat.plants.betaflight.params import BetaflightParams
+
+    monkeypatch.setattr(os, "cpu_count", lambda: 8)
+    assert default_workers() == 8 and default_workers(2) == 4 and default_workers(16) == 1
+    for bad in (0, -1, True, 1.5):
+        with pytest.raises(ConfigError, match=r"^cores_per_job = .*: allowed integers ≥ 1$"):
+            default_workers(bad)
+    spun = PlantChoice("betaflight")  # shared memory, spin ≤ 20 µs: the defaults
+    assert spun.cores() == 2 and PlantChoice("arena").cores() == 1
+    assert PlantChoice("betaflight", BetaflightParams().replace(firmware__spin_us=0.0)).cores() == 1
+    assert PlantChoice("betaflight", BetaflightParams().replace(firmware__exchange="udp")).cores() == 1
+    flown = [Job(f"b{k}", "learn", {**jobs[k].spec, "plant": PlantChoice("betaflight", seed=k).to_table()})
+             for k in range(2)]
+    assert runner.job_cores(jobs) == 1 and runner.job_cores([*jobs, *flown]) == 2 and runner.job_cores([]) == 1
+
+    asked: list[int | None] = []
+
+    class Stop(Exception):
+        pass
+
+    def make_executor(*, scheduler=None, workers=None):
+        asked.append(workers)
+        raise Stop
+
+    monkeypatch.setattr(runner, "make_executor", make_executor)
+    with Store(tmp_path / "s.sqlite") as store:
+        for given, expected in ((None, 4), (3, 3)):
+            with pytest.raises(Stop):
+                runner.run_study(store, "robustness", {}, [*jobs, *flown], workers=given)
+            assert asked.pop() == expected
+        with pytest.raises(Stop):
+            runner.run_study(store, "robustness", {}, jobs)
+        assert asked.pop() == 8

@@ -14,7 +14,6 @@ import dataclasses
 import functools
 import json
 import math
-import os
 import shlex
 import signal
 import time
@@ -100,14 +99,16 @@ def study_eta(elapsed_s: float, ran: int, remaining: int, job_walls_s: list[floa
 
 
 def run_cli_study(args: argparse.Namespace, kind: str, run: Callable[..., Any],
-                  written: tuple[str, ...] = ()) -> tuple[Any, Path]:
+                  written: tuple[str, ...] = (), *, cores: int = 1) -> tuple[Any, Path]:
     """Run a study with progress lines; returns (what ``run`` returned, output folder).
 
     ``run(store, **options)`` runs the study (one of :mod:`aerobat.experiments.studies.run_and_report`'s
     calls, or :func:`~aerobat.experiments.studies.runner.run_study` bound to a specification and
     jobs) with the options of :func:`~aerobat.experiments.studies.runner.run_study`. Failed jobs are
     the caller's to report. ``written``: the files the caller writes into the folder afterwards
-    (checked before any job runs).
+    (checked before any job runs). ``cores``: the cores one job's plant keeps busy
+    (:meth:`~aerobat.plants.PlantChoice.cores`): without ``--workers``, the machine's cores ÷ ``cores``
+    jobs run at once, as :func:`~aerobat.experiments.studies.runner.run_study` decides from the jobs.
     """
     if args.out is not None:  # an unusable --out (the store itself, a file, no text) is refused before anything runs
         folder = output_dir(text_path(args.out, "--out"))
@@ -115,15 +116,18 @@ def run_cli_study(args: argparse.Namespace, kind: str, run: Callable[..., Any],
     out_console = console(getattr(args, "json", False))
     started = time.perf_counter()
     state: dict[str, Any] = {"first": 0, "walls": []}
-    workers = None if args.scheduler is not None else (args.workers or os.cpu_count() or 1)
+    from aerobat.experiments.execution import default_workers
+
+    workers = None if args.scheduler is not None else (args.workers or default_workers(cores))
 
     def on_start(study_id: int, todo: int, done: int) -> None:
         state["first"] = done
         state["study"] = study_id
         state["total"] = todo + done
         state["out"] = _study_folder(args, store, study_id, written)
+        at_once = "" if workers is None else f", {workers} at a time"
         out_console.print(f"study {study_id} ({kind}): {todo} jobs to run, {done} already done "
-                          f"(resume with --resume {study_id})", soft_wrap=True)
+                          f"(resume with --resume {study_id}){at_once}", soft_wrap=True)
         out_console.file.flush()
 
     def progress(done: int, total: int, job: Any, outcome: Any) -> None:
@@ -227,7 +231,8 @@ def _cmd_robustness(args: argparse.Namespace) -> int:
                             rule=rule, tolerance_m=args.tolerance_m, plant=args.plant, base=base,
                             feedback=args.feedback)
     study, out = run_cli_study(args, "robustness", run,
-                               written=("trials_to_tolerance.png", "success_vs_property.png", "robustness.json"))
+                               written=("trials_to_tolerance.png", "success_vs_property.png", "robustness.json"),
+                               cores=PlantChoice(args.plant, base).cores())
     outcome = study.outcome
     study.write(out)
     summary = study.summary
@@ -308,7 +313,7 @@ def _cmd_rules(args: argparse.Namespace) -> int:
     config, maneuver, nominal = _design(args)
     run = functools.partial(rules_study, maneuver=maneuver, design=nominal, model=config, methods=methods,
                             seeds=args.seeds, trials=args.trials, plant=plant, tolerance_m=args.tolerance_m)
-    study, out = run_cli_study(args, "rules", run, written=("rules.csv", "rules.png"))
+    study, out = run_cli_study(args, "rules", run, written=("rules.csv", "rules.png"), cores=plant.cores())
     outcome = study.outcome
     study.write(out)
     rows = study.rows
@@ -353,7 +358,8 @@ def _cmd_feedback(args: argparse.Namespace) -> int:
     run = functools.partial(feedback_study, maneuver=maneuver, design=nominal, model=config, schemes=schemes,
                             scenarios=scenarios, seeds=args.seeds, trials=args.trials, plant=plant, rule=args.rule,
                             tolerance_m=args.tolerance_m)
-    study, out = run_cli_study(args, "feedback", run, written=("feedback.csv", "feedback.png"))
+    study, out = run_cli_study(args, "feedback", run, written=("feedback.csv", "feedback.png"),
+                               cores=plant.cores())
     outcome = study.outcome
     study.write(out)
     rows = study.rows
@@ -389,7 +395,8 @@ def add_execution_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scheduler", default=None,
                    help="Dask scheduler address tcp://HOST:PORT (default: $DASK_SCHEDULER_ADDRESS, else local)")
     p.add_argument("--workers", type=bounded_int(1, 1024), default=None,
-                   help="local worker processes (default: all cores)")
+                   help="local worker processes (default: all cores; half of them for a Betaflight plant "
+                        "over spinning shared memory, whose instances keep two cores each)")
     p.add_argument("--resume", default=None, metavar="STUDY", type=session_ref,
                    help="continue a study (id or 'last'): run only the jobs not done, failed ones included "
                         "(default: a new study)")

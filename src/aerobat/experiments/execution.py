@@ -26,7 +26,7 @@ from aerobat.errors import ConfigError
 from aerobat.experiments.job import Job, JobResult, JobStatus, run_job
 from aerobat.experiments.lifetime import process_pool
 
-__all__ = ["DaskExecutor", "Executor", "LocalExecutor", "make_executor"]
+__all__ = ["DaskExecutor", "Executor", "LocalExecutor", "default_workers", "make_executor"]
 
 
 def _collect(future: Any) -> JobResult:
@@ -214,6 +214,17 @@ class DaskExecutor:
     def close(self) -> None:
         if self._own:
             self.client.close()
+
+
+def default_workers(cores_per_job: int = 1) -> int:
+    """How many jobs run at once on this machine by default: its cores ÷ the cores a job keeps busy.
+
+    A job whose plant keeps two cores busy (a Betaflight firmware over spinning shared memory:
+    :meth:`aerobat.plants.PlantChoice.cores`) runs ``cpu_count // 2`` at a time, at least one.
+    """
+    if isinstance(cores_per_job, bool) or not isinstance(cores_per_job, int) or cores_per_job < 1:
+        raise ConfigError(f"cores_per_job = {cores_per_job!r}: allowed integers ≥ 1")
+    return max(1, (os.cpu_count() or 1) // cores_per_job)
 
 
 def make_executor(*, scheduler: str | None = None, workers: int | None = None) -> Executor:

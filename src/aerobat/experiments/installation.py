@@ -237,7 +237,9 @@ def _build_sitl(say: Progress) -> tuple[str, SetupStep, str]:
     from aerobat.plants.betaflight.errors import FirmwareUnavailable
 
     if _sitl_piece().present:
-        _build_shm_helper()
+        failed = _build_shm_helper()
+        if failed:
+            return ("betaflight", SetupStep.FAILED, failed)
         return ("betaflight", SetupStep.DONE, f"already built: {_sitl_path()}")
     compiler = _compiler_piece()
     if not compiler.present:
@@ -247,16 +249,23 @@ def _build_sitl(say: Progress) -> tuple[str, SetupStep, str]:
         binary = ensure_sitl(progress=say)
     except FirmwareUnavailable as exc:
         return ("betaflight", SetupStep.FAILED, " ".join(str(exc).splitlines()[:2]))
-    _build_shm_helper()
+    failed = _build_shm_helper()
+    if failed:
+        return ("betaflight", SetupStep.FAILED, failed)
     return ("betaflight", SetupStep.DONE, f"built: {binary}")
 
 
-def _build_shm_helper() -> None:
-    """The shared-memory exchange's C helper (a second, cached; a failure shows when ``exchange = "shm"`` is used)."""
+def _build_shm_helper() -> str:
+    """The shared-memory exchange's C helper (a second, cached): "" when built, else why not.
+
+    The plant's default exchange needs it (``firmware.exchange = "shm"``); ``"udp"`` does not.
+    """
     from aerobat.plants.betaflight.errors import FirmwareUnavailable
     from aerobat.plants.betaflight.shm import ensure_library
 
     try:
         ensure_library()
-    except FirmwareUnavailable:
-        pass
+    except FirmwareUnavailable as exc:
+        return ("the shared-memory helper (firmware.exchange = \"shm\", the default) did not build: "
+                + " ".join(str(exc).splitlines()[:2]) + '; firmware.exchange = "udp" flies without it')
+    return ""

@@ -82,6 +82,12 @@ def _betaflight(config: VehicleConfig, settings: Any, seed: int, feedback: Any =
     return BetaflightPlant(config, settings, seed=seed, feedback=feedback)
 
 
+def _betaflight_cores(settings: Any) -> int:
+    from aerobat.plants.betaflight.params import instance_cores
+
+    return instance_cores(settings)
+
+
 def _betaflight_load(path: str | Path) -> Any:
     from aerobat.plants.betaflight.params import load_betaflight
 
@@ -170,7 +176,7 @@ PLANTS.register("betaflight", PlantSpec(
     "betaflight", "a 5-inch racer flown by Betaflight 4.6's own firmware (SITL in lockstep) in the arena",
     _betaflight, load_settings=_betaflight_load, settings_from_table=_betaflight_from_table,
     settings_to_table=_betaflight_to_table, default_settings=_betaflight_default, option="--betaflight",
-    feedback=_ALL_SCHEMES, default_feedback=DEFAULT_SCHEME))
+    feedback=_ALL_SCHEMES, default_feedback=DEFAULT_SCHEME, cores=_betaflight_cores))
 PLANTS.register("fc", PlantSpec(
     "fc", "a Betaflight flight controller over MSP on the wall clock: a board on a serial port with motion "
           "capture, or the real firmware rehearsed in real time",

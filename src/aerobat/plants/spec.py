@@ -43,6 +43,9 @@ class PlantSpec:
     default_feedback : the scheme used when none is chosen.
     design_model : the plant takes ``design_model=`` (the model the programs were designed on, when it is
         not the vehicle the plant is built around): its feedback tracks that model's flight.
+    cores : ``cores(settings) -> int``, the cores one instance keeps busy (None: 1). A study runs
+        ``cpu_count // cores`` instances at once unless told otherwise
+        (:func:`aerobat.experiments.execution.default_workers`).
     """
 
     name: str
@@ -57,6 +60,7 @@ class PlantSpec:
     feedback: tuple[FeedbackScheme, ...] = (FeedbackScheme.NONE,)
     default_feedback: FeedbackScheme = FeedbackScheme.NONE
     design_model: bool = False
+    cores: Callable[[Any], int] | None = None
 
     def check_feedback(self, feedback: Feedback) -> None:
         """Raise ConfigError if this plant cannot run ``feedback``'s scheme."""
@@ -103,6 +107,11 @@ class PlantChoice:
         feedback = Feedback(spec.default_feedback) if self.feedback is None else as_feedback(self.feedback)
         spec.check_feedback(feedback)
         object.__setattr__(self, "feedback", feedback)
+
+    def cores(self) -> int:
+        """The cores one instance of this plant keeps busy (its kind's ``cores``; 1 if it says none)."""
+        spec = self.spec
+        return 1 if spec.cores is None else int(spec.cores(self.settings))
 
     @property
     def spec(self) -> PlantSpec:

@@ -33,6 +33,7 @@ from aerobat.quadrotor.vehicle import fpv5
 FPV = fpv5()
 FLIP = MultiFlip(vehicle=FPV.vehicle, flips=1, max_rate_rad_s=math.radians(800), dims=2)
 DESIGN = design(FLIP, NominalModel(FPV))
+UDP = BetaflightParams().replace(firmware__exchange="udp")  # sockets; shared memory (default): test_betaflight_shm.py
 FAKE = Path(__file__).with_name("fake_sitl.py")
 
 
@@ -63,7 +64,7 @@ def test_firmware_killed_mid_trial_is_a_lost_trial_and_learning_goes_on(
         firmware: tuple[Path, Path], monkeypatch: pytest.MonkeyPatch) -> None:
     killed: list[int] = []
     sabotage(monkeypatch, {2}, at_s=5.0, how=signal.SIGKILL, seen=killed)  # during the second trial
-    plant = BetaflightPlant(FPV, seed=11)
+    plant = BetaflightPlant(FPV, UDP, seed=11)  # shared memory (the default): test_betaflight_shm.py
     session = learn(FLIP, DESIGN, plant, iterations=3)
     statuses = [it.status for it in session.iterations]
     assert statuses == [IterationStatus.OK, IterationStatus.LOST, IterationStatus.OK, IterationStatus.OK]
@@ -77,7 +78,7 @@ def test_watchdog_restarts_a_firmware_that_stops_answering(
         firmware: tuple[Path, Path], monkeypatch: pytest.MonkeyPatch) -> None:
     stopped: list[int] = []
     sabotage(monkeypatch, {1}, at_s=3.0, how=signal.SIGSTOP, seen=stopped)
-    plant = BetaflightPlant(FPV, BetaflightParams().replace(firmware__step_timeout_s=0.5), seed=12)
+    plant = BetaflightPlant(FPV, UDP.replace(firmware__step_timeout_s=0.5), seed=12)
     started = time.monotonic()
     trial = plant.fly(FLIP.program(DESIGN.p_nominal))
     assert trial.status is TrialStatus.LOST and "no motor packet within 0.5 s" in trial.message

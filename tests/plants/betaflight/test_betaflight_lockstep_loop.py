@@ -112,7 +112,7 @@ def test_firmware_cpu_time_is_part_of_the_trial_timing(firmware: tuple[Path, Pat
 
 
 def _fake_flight() -> Flight:
-    params = BetaflightParams()
+    params = BetaflightParams().replace(firmware__exchange="udp")  # the stand-in firmware's sockets
     return Flight(FAKE, None, params, airframe_plant(params), np.zeros(3),  # type: ignore[arg-type]
                   np.random.default_rng(0), 9.81)
 
@@ -132,7 +132,7 @@ def test_a_stray_datagram_is_skipped_and_the_answer_taken() -> None:
 
 def test_a_mute_firmware_trips_the_watchdog_inside_the_compiled_loop(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("FAKE_SITL_MODE", "mute")
-    params = BetaflightParams().replace(firmware__step_timeout_s=0.3)
+    params = BetaflightParams().replace(firmware__step_timeout_s=0.3, firmware__exchange="udp")
     with Flight(FAKE, None, params, airframe_plant(params), np.zeros(3),  # type: ignore[arg-type]
                 np.random.default_rng(0), 9.81) as flight:
         started = time.monotonic()

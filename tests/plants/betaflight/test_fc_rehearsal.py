@@ -81,6 +81,15 @@ def _no_process_left(connection: RehearsalConnection) -> None:
 
 
 
+def test_the_world_sleeps_while_it_waits_instead_of_spinning() -> None:
+    """Spinning firmware and driver under SCHED_FIFO held both cores from the ground: its link went silent."""
+    from aerobat.plants.fc.world import world_params
+
+    assert world_params(None).firmware.spin_us == 0.0 and BetaflightParams().firmware.spin_us > 0.0
+    given = fc_params(radio=Radio(rate_hz=100.0))
+    assert world_params(given) == given.replace(firmware__spin_us=0.0)
+
+
 def test_a_trial_flies_in_real_time_over_the_serial_path_and_reports_its_timing(firmware: tuple[Path, Path]) -> None:
     plant, connection = _plant(firmware, fc_params(radio=Radio(rate_hz=100.0)))  # 8 kHz, as in lockstep
     trial = plant.fly(FLIP.program(P0))

@@ -23,14 +23,14 @@ from aerobat.core.learning import Iteration, SessionStatus
 from aerobat.core.registry import from_spec
 from aerobat.core.rules import RuleChoice
 from aerobat.errors import ConfigError
-from aerobat.experiments.execution import Executor, make_executor
+from aerobat.experiments.execution import Executor, default_workers, make_executor
 from aerobat.experiments.job import Job, JobResult, JobStatus
 from aerobat.experiments.setup import plant_record_config
 from aerobat.plants import PlantChoice
 from aerobat.store import Store
 from aerobat.store.records import StudyKind
 
-__all__ = ["FailedJob", "StudyOutcome", "run_study"]
+__all__ = ["FailedJob", "StudyOutcome", "job_cores", "run_study"]
 
 
 @dataclass(frozen=True)
@@ -134,6 +134,7 @@ def run_study(
     jobs : all of the study's jobs.
     resume : continue this study (id or ``last``) instead of creating one.
     executor : run the jobs here (default: :func:`make_executor` with ``workers``/``scheduler``).
+    workers : jobs at once in the local pool (default: the machine's cores ÷ :func:`job_cores`).
     progress : called after each committed outcome.
     on_start : ``on_start(study_id, to_run, already_done)`` before the first job is submitted.
     command : the command line, kept with the study.
@@ -144,6 +145,8 @@ def run_study(
     if len(set(keys)) != len(keys):
         raise ConfigError(f"study {kind}: job keys repeat")
     own = executor is None
+    if own and workers is None:
+        workers = default_workers(job_cores(jobs))
     # the executor first: an unusable scheduler address is refused before a study is created or announced
     runner = make_executor(scheduler=scheduler, workers=workers) if executor is None else executor
     try:
@@ -175,6 +178,19 @@ def run_study(
                    for j in store.study_jobs(study_id) if j.status is JobStatus.FAILED)
     return StudyOutcome(study_id, len(jobs), len(todo), len(jobs) - len(todo), failed,
                         store.study_results(study_id))
+
+
+def job_cores(jobs: Iterable[Job]) -> int:
+    """The most cores one of ``jobs`` keeps busy: its plant's (:meth:`~aerobat.plants.PlantChoice.cores`), else 1."""
+    seen: dict[str, int] = {}
+    for job in jobs:
+        table = job.spec.get("plant")
+        if not isinstance(table, Mapping):
+            continue
+        key = json.dumps(table, sort_keys=True, default=str)
+        if key not in seen:
+            seen[key] = PlantChoice.from_table(table, source=f"job {job.key} plant").cores()
+    return max(seen.values(), default=1)
 
 
 def _plain(value: Any) -> Any:

@@ -41,6 +41,7 @@ __all__ = [
     "Pilot",
     "Radio",
     "Sensors",
+    "instance_cores",
     "load_betaflight",
     "params_to_table",
     "save_betaflight",
@@ -216,17 +217,18 @@ class Firmware:
         fast in wall time (docs/plants.md compares both).
     step_timeout_s : wall time a lockstep step may wait for the firmware before it is declared
         hung (killed; the trial is lost, the next one starts a fresh firmware).
-    exchange : how the per-step packets travel: ``"udp"`` (loopback sockets) or ``"shm"``
-        (shared memory, :mod:`aerobat.plants.betaflight.shm`); the same flight bit for bit.
+    exchange : how the per-step packets travel: ``"shm"`` (shared memory,
+        :mod:`aerobat.plants.betaflight.shm`; 50-60× real time for the 3D triple flip on this
+        project's 2-core machine) or ``"udp"`` (loopback sockets; 5-6×). The same flight bit for bit.
     spin_us : over shared memory, the longest the firmware and the driver each busy-wait for
-        the other before sleeping on a futex (adaptive below it). 20 µs suits one instance with
-        a core to spare (each side keeps a core); with as many instances as cores set 0, or
-        spinning instances take the cores from each other (docs/performance.md, issue 27).
+        the other before sleeping on a futex (adaptive below it). With it an instance keeps two
+        cores busy (:func:`instance_cores`: studies run ``cpu_count // 2`` at once); 0 sleeps at
+        once, for as many instances as cores (docs/performance.md, issue 27).
     """
 
     gyro_rate_hz: int = bounded(8000, OneOf(GYRO_RATES_HZ, unit="Hz"))
     step_timeout_s: float = bounded(2.0, Interval(0.05, 60.0, unit="s"))
-    exchange: Exchange = bounded(Exchange.UDP, OneOf(Exchange))
+    exchange: Exchange = bounded(Exchange.SHM, OneOf(Exchange))
     spin_us: float = bounded(20.0, Interval(0.0, 1000.0, unit="µs"))
 
     def __post_init__(self) -> None:
@@ -266,6 +268,18 @@ class BetaflightParams:
         """Copy with whole sections or ``section__field=value`` changes."""
         changed: BetaflightParams = replace_sections(self, sections)
         return changed
+
+
+def instance_cores(params: BetaflightParams) -> int:
+    """The cores one flying instance keeps busy: 2 over spinning shared memory, else 1.
+
+    With ``exchange = "shm"`` and ``spin_us > 0`` the firmware and the driver each wait for the
+    other spinning on a core of their own; two such instances on two cores step fewer times a
+    second together (180,000-200,000) than one alone (450,000-590,000), so a study runs
+    ``cpu_count // 2`` of them (docs/performance.md, issue 27).
+    """
+    fw = params.firmware
+    return 2 if fw.exchange is Exchange.SHM and fw.spin_us > 0 else 1
 
 
 def load_betaflight(path: str | Path) -> BetaflightParams:

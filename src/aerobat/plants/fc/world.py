@@ -38,10 +38,13 @@ import sys
 import time
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from aerobat.plants.betaflight.params import BetaflightParams
 
 __all__ = ["POSE_DATAGRAM", "SET_POINT_JUMP_DEG_S", "WORLD_FIFO_PRIORITY", "WORLD_NICENESS", "RealTimeWorld",
-           "WorldReport"]
+           "WorldReport", "world_params"]
 
 POSE_DATAGRAM = struct.Struct("<Id3d4d?3d")
 """One motion-capture sample: frame number, measurement time [s since start], position (3) [m],
@@ -133,6 +136,19 @@ def _real_time_scheduling(firmware_pid: int | None) -> str:
     return "fifo"
 
 
+def world_params(params: BetaflightParams | None) -> BetaflightParams:
+    """The world's plant settings: ``params`` (default: the plant's) with the exchange's spin off.
+
+    Paced to the wall clock, the world idles most of each chunk; its firmware and driver sleep while
+    they wait for each other (``firmware.spin_us = 0``) instead of spinning, which under
+    ``SCHED_FIFO`` held both cores from the ground station, whose link to the firmware then went
+    silent (``link_lost`` in the rehearsal's drills).
+    """
+    from aerobat.plants.betaflight.params import BetaflightParams
+
+    return (params or BetaflightParams()).replace(firmware__spin_us=0.0)
+
+
 def _world_main(conn: Any, parent_pid: int, plant_args: dict[str, Any], pose_port: int, chunk_s: float) -> None:
     """The world process: build the flight, report its UART port, fly paced until told to stop."""
     _die_with(parent_pid)
@@ -145,7 +161,7 @@ def _world_main(conn: Any, parent_pid: int, plant_args: dict[str, Any], pose_por
         os.nice(WORLD_NICENESS)
     from aerobat.plants.betaflight.plant import BetaflightPlant
 
-    plant = BetaflightPlant(**plant_args)
+    plant = BetaflightPlant(**{**plant_args, "params": world_params(plant_args.get("params"))})
     flight = plant.open_flight()
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:

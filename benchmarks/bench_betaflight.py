@@ -266,24 +266,24 @@ def run() -> tuple[list[tuple[str, str, str]], dict[str, Any]]:
         ("lockstep: motor packets per state packet", "exactly 1",
          f"{lock['motor_packets']}/{lock['state_packets']}, extra packet queued: {lock['extra_motor_packet']}"),
         ("lockstep: firmware task rates in simulated time (CLI `tasks`)", "gyro/PID 8 kHz", tasks),
-        ("lockstep steps/s, firmware alone at rest, one Python call per step (8 kHz)", "—",
+        ("UDP: lockstep steps/s, firmware alone at rest, one Python call per step (8 kHz)", "—",
          f"{alone:,.0f} ({alone / 8000:.1f}× real time)"),
-        ("compiled loop on the floor (exchange + physics, one Python call per radio frame): "
-         "wall ÷ firmware CPU", "≤ 1.5×",
+        ("UDP (`firmware.exchange = \"udp\"`): compiled loop on the floor (exchange + physics, one Python call "
+         "per radio frame): wall ÷ firmware CPU", "≤ 1.5×",
          f"{at_rest['wall_per_firmware_cpu']:.2f}× ({at_rest['steps_s']:,.0f} steps/s, "
          f"{at_rest['steps_s'] / 8000:.1f}× real time; firmware {at_rest['firmware_us_per_step']:.1f} µs CPU "
          f"per step, driver {1e6 * at_rest['driver_cpu_s'] / at_rest['steps']:.1f} µs)"),
-        ("one Betaflight trial (3D triple flip, 8 kHz): wall ÷ firmware CPU", "≤ 1.5×",
+        ("UDP: one Betaflight trial (3D triple flip, 8 kHz): wall ÷ firmware CPU", "≤ 1.5×",
          f"{t8['overhead_median']:.2f}× (median of 3)"),
-        ("one Betaflight trial (3D triple flip, 8 kHz), real-time factor", "≥ 8× quiet",
+        ("UDP: one Betaflight trial (3D triple flip, 8 kHz), real-time factor", "≥ 8× quiet",
          f"{t8['factor_median']:.1f}× (median of 3; {t8['wall_median_s']:.2f} s wall per "
          f"{t8['trials'][0]['simulated_s']:.1f} s simulated)"),
-        ("the same at 4 kHz gyro", "—", f"{t4['factor_median']:.1f}× ({t4['wall_median_s']:.2f} s wall)"),
-        ("2 trials side by side ÷ 1 alone, steps/s (spawned workers, 8 kHz)", "≥ 1.8×",
+        ("UDP: the same at 4 kHz gyro", "—", f"{t4['factor_median']:.1f}× ({t4['wall_median_s']:.2f} s wall)"),
+        ("UDP: 2 trials side by side ÷ 1 alone, steps/s (spawned workers, 8 kHz)", "≥ 1.8×",
          f"{parallel['ratio_median']:.2f}× (median of {len(parallel['ratios'])} interleaved rounds: "
          + ", ".join(f"{r:.2f}" for r in parallel["ratios"])
          + f"); seed 1 bit-identical alone and in parallel: {parallel['seed_identical_in_parallel']}"),
-        ("shared-memory exchange (`firmware.exchange = \"shm\"`), on the floor: wall ÷ firmware CPU "
+        ("shared memory (`firmware.exchange = \"shm\"`, the default), on the floor: wall ÷ firmware CPU "
          "(its spinning counts as CPU)", "≤ 1.5×",
          f"{shm_rest['wall_per_firmware_cpu']:.2f}× ({shm_rest['steps_s']:,.0f} steps/s, "
          f"{shm_rest['steps_s'] / 8000:.1f}× real time; firmware {shm_rest['firmware_us_per_step']:.1f} µs CPU "
@@ -306,7 +306,7 @@ def run() -> tuple[list[tuple[str, str, str]], dict[str, Any]]:
         ("same seed, same trial", "bit for bit", f"8 kHz: {t8['bit_identical']}, 4 kHz: {t4['bit_identical']}, "
          f"shared memory: {shm8['bit_identical']}; UDP and shared memory alike (seeds 1–3): "
          f"{[r['digest'] for r in t8['trials']] == [r['digest'] for r in shm8['trials']]}"),
-        ("watchdog: firmware stopped (SIGSTOP) → trial lost", "≤ step timeout + 0.1 s",
+        ("watchdog (shared memory): firmware stopped (SIGSTOP) → trial lost", "≤ step timeout + 0.1 s",
          f"{dog['detected_after_s']:.2f} s with a 1 s step timeout ({dog['lost_status']}); next trial "
          f"{dog['next_trial']} on a fresh firmware in {dog['next_trial_wall_s']:.2f} s"),
     ]

@@ -137,7 +137,7 @@ def _betaflight_kernels(x: np.ndarray, cmd: np.ndarray) -> None:
     counters[C_CONTACT] = 1
     noise = np.zeros((2, 6))
     packet = np.zeros(PACKET_DOUBLES)
-    scratch = np.zeros((6, x.shape[0]))
+    scratch = np.zeros((7, x.shape[0]))  # the physics' six rows and the shared-memory loop's held sample
     prime(world, plant, aux, counters, noise[0], packet, scratch)
     step(world, np.zeros(4, dtype=np.float32), plant, aux, np.zeros((2, 4)), counters, noise[1], packet, scratch)
     # the compiled lockstep loop (a run of no steps: nothing is sent)
@@ -157,11 +157,13 @@ def _betaflight_kernels(x: np.ndarray, cmd: np.ndarray) -> None:
     except FirmwareUnavailable:
         pass
     else:
-        run_steps_shm(0, 0, 0, 0, 0, 0, 0, 8, step_s, world, block, block[:16].view(np.float32), plant, aux,
-                      np.zeros((2, 4)), counters, noise, np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)),
-                      np.zeros(N_IO, dtype=np.int64), packet, scratch)
         # the frame loop around both (a run of no frames), with the argument types Flight passes
         from aerobat.plants.betaflight import frames as fr
+
+        run_steps_shm(0, 0, 0, 0, 0, 0, 0, 8, step_s, world, block, block[:16].view(np.float32), plant, aux,
+                      np.zeros((2, 4)), counters, noise, np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)),
+                      np.zeros(fr.N_ST, dtype=np.int64), packet, scratch, np.random.default_rng(0),
+                      np.zeros(fr.N_CFG, dtype=np.int64), np.zeros(fr.N_FCFG))
         from aerobat.plants.betaflight.frame_loop import fly_frames
 
         rc_block = np.zeros(40, dtype=np.uint8)

@@ -106,7 +106,7 @@ class Flight:
         self.counters[C_DELAY] = delay
         self.counters[C_CONTACT] = 1
         self.pending = np.zeros((delay + 1, 4))
-        self.scratch = np.zeros((6, N_STATE))
+        self.scratch = np.zeros((fr.HELD_ROW + 1, N_STATE))  # the physics' six rows, a held sample's state
         self.packet = np.zeros(PACKET_DOUBLES)
         # the firmware's packet, whole (packets.MOTOR_STRUCT): 4 motor commands, then the rate loop's
         # set point (3) and P, I, D, F per axis (12)

@@ -32,6 +32,7 @@ import numba as nb
 import numpy as np
 from numba.core import types
 
+from aerobat.plants.betaflight.frame_noise import ALL, begin_draws, draw_noise
 from aerobat.plants.betaflight.frames import (
     CRASH_FLOOR,
     CRASH_VOLUME,
@@ -43,7 +44,6 @@ from aerobat.plants.betaflight.frames import (
     K_LATENCY_STEPS,
     K_MOTOR_FD,
     K_RC_FD,
-    K_SENSOR_NOISE,
     K_SHM,
     K_SPIN_NS,
     K_STATE_FD,
@@ -60,10 +60,8 @@ from aerobat.plants.betaflight.frames import (
     P_SETTLE_TILT_RAD,
     P_SETTLE_VELOCITY_M_S,
     P_START_TIME_S,
-    Q_ATTITUDE_NOISE_RAD,
     Q_DROP_PROBABILITY,
     Q_MOCAP_LATENCY_S,
-    Q_POSITION_NOISE_M,
     Q_STEP_S,
     QUEUE_FULL,
     RC_FAILED,
@@ -190,9 +188,13 @@ def _send_rc(cfg, queue_rc, head, rc_block, rc_words):  # pragma: no cover - com
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _steps(n, resume, cfg, fcfg, st, x, block, motors, plant, aux, pending, counters, noise, mocap_noise, log,
+def _steps(n, resume, rng, cfg, fcfg, st, x, block, motors, plant, aux, pending, counters, noise, mocap_noise, log,
            packet, scratch, queue_due, queue_rc, rc_block, rc_words):  # pragma: no cover - compiled
-    """The frame in progress from step ``st[S_STEP]`` to ``n``: RC packets as they come due, exchange, physics."""
+    """The frame in progress from step ``st[S_STEP]`` to ``n``: RC packets as they come due, exchange, physics.
+
+    The frame's noise is drawn as the steps need it and while the firmware works (shared memory),
+    or all at once before the first step (UDP); all of it before the frame ends.
+    """
     tick0 = st[S_TICK]
     size = queue_due.shape[0]
     i = st[S_STEP]
@@ -211,8 +213,9 @@ def _steps(n, resume, cfg, fcfg, st, x, block, motors, plant, aux, pending, coun
             else:
                 status, i = run_steps_shm(cfg[K_SHM], cfg[K_SPIN_NS], cfg[K_WAIT_NS], i, stop, resume, tick0,
                                           cfg[K_EVERY], fcfg[Q_STEP_S], x, block, motors, plant, aux, pending,
-                                          counters, noise, mocap_noise, log, st, packet, scratch)
+                                          counters, noise, mocap_noise, log, st, packet, scratch, rng, cfg, fcfg)
         else:
+            draw_noise(ALL, rng, cfg, fcfg, st, noise, mocap_noise)
             status, i = run_steps(cfg[K_STATE_FD], cfg[K_MOTOR_FD], i, stop, resume, tick0, cfg[K_EVERY],
                                   fcfg[Q_STEP_S], x, block, motors, plant, aux, pending, counters, noise,
                                   mocap_noise, log, st, packet, scratch)
@@ -220,6 +223,7 @@ def _steps(n, resume, cfg, fcfg, st, x, block, motors, plant, aux, pending, coun
         if status != DONE:
             st[S_STEP] = i
             return status
+    draw_noise(ALL, rng, cfg, fcfg, st, noise, mocap_noise)  # the next draws are the next frame's
     st[S_TICK] = tick0 + n
     st[S_IN_FRAME] = 0
     st[S_STEP] = 0
@@ -229,7 +233,7 @@ def _steps(n, resume, cfg, fcfg, st, x, block, motors, plant, aux, pending, coun
 @nb.njit(cache=True, error_model="numpy")
 def _begin_frame(n, drop, rng, cfg, fcfg, st, channel_row, noise, mocap_noise, queue_due,
                  queue_rc):  # pragma: no cover - compiled
-    """The radio's draw and queue, then the frame's noise draws, in ``Flight``'s order; False: queue full."""
+    """The radio's draw and queue, then the frame's noise draws laid out (taken by the steps); False: queue full."""
     if drop != D_NONE:
         dropped = drop == D_RADIO and rng.random() < fcfg[Q_DROP_PROBABILITY]
         st[S_SENT] += 1
@@ -243,20 +247,7 @@ def _begin_frame(n, drop, rng, cfg, fcfg, st, channel_row, noise, mocap_noise, q
             queue_due[slot] = st[S_TICK] + cfg[K_LATENCY_STEPS]
             queue_rc[slot, :] = channel_row
             st[S_Q_COUNT] += 1
-    if cfg[K_SENSOR_NOISE]:
-        for i in range(n):
-            for c in range(6):
-                noise[i, c] = rng.standard_normal()
-    rows = n // cfg[K_EVERY] + 2
-    mocap_noise[:rows, :] = 0.0
-    if fcfg[Q_POSITION_NOISE_M] != 0.0:
-        for r in range(rows):
-            for c in range(3):
-                mocap_noise[r, c] = fcfg[Q_POSITION_NOISE_M] * rng.standard_normal()
-    if fcfg[Q_ATTITUDE_NOISE_RAD] != 0.0:
-        for r in range(rows):
-            for c in range(3):
-                mocap_noise[r, 3 + c] = fcfg[Q_ATTITUDE_NOISE_RAD] * rng.standard_normal()
+    begin_draws(n, cfg, fcfg, st, mocap_noise)  # the frame's noise: drawn by the steps (frame_noise)
     st[IO_MOCAP_USED] = 0
     st[S_STEP] = 0
     st[S_IN_FRAME] = 1
@@ -330,7 +321,7 @@ def fly_frames(mode, frames, n, drop, resume, check, until, rng, cfg, fcfg, st, 
                 row[3] = _stick_us(sticks[2])
             if not _begin_frame(n, drop, rng, cfg, fcfg, st, row, noise, mocap_noise, queue_due, queue_rc):
                 return QUEUE_FULL, k
-        status = _steps(n, resume, cfg, fcfg, st, x, block, motors, plant, aux, pending, counters, noise,
+        status = _steps(n, resume, rng, cfg, fcfg, st, x, block, motors, plant, aux, pending, counters, noise,
                         mocap_noise, log, packet, scratch, queue_due, queue_rc, rc_block, rc_words)
         resume = 0
         if status != DONE:

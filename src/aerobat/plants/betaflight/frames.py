@@ -16,14 +16,15 @@ from enum import Enum, IntEnum
 import numpy as np
 
 __all__ = ["AnglePilot", "CRASH_FLOOR", "CRASH_VOLUME", "F_AIRBORNE_S", "F_WORST_MEASURED_M", "F_WORST_TRUE_M",
-           "FeedbackLaw", "FramesEnd", "FramesRun", "K_EVERY", "K_EXCHANGE", "K_LATENCY_STEPS", "K_MOTOR_FD",
-           "K_RC_FD", "K_SENSOR_NOISE", "K_SHM", "K_SPIN_NS", "K_STATE_FD", "K_WAIT_NS", "Mode", "N_CFG", "N_FCFG",
-           "N_FST", "N_PILOT", "N_ST", "P_AHEAD_S", "P_DURATION_S", "P_FEEDBACK", "P_FIRST_FRAME",
+           "FeedbackLaw", "FramesEnd", "FramesRun", "HELD_ROW", "K_EVERY", "K_EXCHANGE", "K_LATENCY_STEPS",
+           "K_MOTOR_FD", "K_RC_FD", "K_SENSOR_NOISE", "K_SHM", "K_SPIN_NS", "K_STATE_FD", "K_WAIT_NS", "Mode",
+           "N_CFG", "N_FCFG", "N_FST", "N_PILOT", "N_ST", "P_AHEAD_S", "P_DURATION_S", "P_FEEDBACK", "P_FIRST_FRAME",
            "P_LAW_LATENCY_S", "P_PERIOD_S", "P_REFERENCE_DT_S", "P_SETTLE_HOLD", "P_SETTLE_POSITION_M",
            "P_SETTLE_TILT_RAD", "P_SETTLE_VELOCITY_M_S", "P_START_TIME_S", "ProgramPilot", "QUEUE_FULL",
            "Q_ATTITUDE_NOISE_RAD", "Q_DROP_PROBABILITY", "Q_MOCAP_LATENCY_S", "Q_POSITION_NOISE_M", "Q_STEP_S",
-           "RC_FAILED", "Radio", "S_AXIS", "S_CALM", "S_DROPPED", "S_IN_FRAME", "S_Q_COUNT", "S_Q_HEAD", "S_SENT",
-           "S_STEP", "S_TICK", "UNTIL_MET", "Until", "X_SHM", "X_UDP"]
+           "RC_FAILED", "Radio", "S_AXIS", "S_CALM", "S_DRAWN", "S_DRAW_STEPS", "S_DRAW_TOTAL", "S_DROPPED",
+           "S_HELD", "S_IN_FRAME", "S_Q_COUNT", "S_Q_HEAD", "S_SENT", "S_STEP", "S_TICK", "UNTIL_MET", "Until",
+           "X_SHM", "X_UDP"]
 
 # statuses beyond lockstep's DONE, NO_ANSWER, SEND_FAILED, NON_FINITE (0-3)
 RC_FAILED = 4
@@ -88,7 +89,12 @@ S_STEP = 9  # the step of the frame in progress a call stopped at
 S_IN_FRAME = 10  # 1 while a frame's draws are done and its steps are not
 S_CALM = 11  # consecutive frames within the settle tolerances
 S_AXIS = 12  # the axis that left the volume (CRASH_VOLUME)
-N_ST = 13
+S_DRAWN = 13  # the frame in progress's noise draws done so far (frame_noise.draw_noise), of
+S_DRAW_TOTAL = 14  # all of them (sensor noise, then motion-capture noise)
+S_DRAW_STEPS = 15  # the frame in progress's steps (the draws' layout)
+S_HELD = 16  # 1 + the tick of a motion-capture sample waiting for its noise (its state in scratch[HELD_ROW]), or 0
+N_ST = 17
+HELD_ROW = 6  # scratch's row (after the physics' six) that holds a sample's state until its noise is drawn
 
 # cfg (int64): the flight's constants (K_SHM: the region's address, 0 when closed or over UDP)
 K_EXCHANGE, K_STATE_FD, K_MOTOR_FD, K_RC_FD, K_SHM, K_SPIN_NS, K_WAIT_NS, K_EVERY, K_LATENCY_STEPS, \

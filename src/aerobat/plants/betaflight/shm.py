@@ -83,6 +83,7 @@ def library() -> ctypes.CDLL:
         i64, ptr = ctypes.c_int64, ctypes.c_void_p
         for name, args in (("aerobat_shm_publish_state", (ptr, ptr, i64)), ("aerobat_shm_publish_rc", (ptr, ptr, i64)),
                            ("aerobat_shm_wait_motor", (ptr, ptr, i64, i64, i64)),
+                           ("aerobat_shm_poll_motor", (ptr, ptr, i64)),
                            ("aerobat_shm_wait_state", (ptr, ptr, i64, i64, i64, i64)),
                            ("aerobat_shm_take_rc", (ptr, ptr, i64, i64))):
             function = getattr(lib, name)

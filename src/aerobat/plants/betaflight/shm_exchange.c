@@ -12,8 +12,9 @@
  * re-checks the word and futex-waits on it with a timeout. After a wait that ended while
  * spinning the budget is twice that wait plus 2 us (at most the maximum); after one that had to
  * sleep it halves (the peer was not running: spinning on only takes a core from it); every 32nd
- * wait spins the maximum. No wait here is without a timeout:
- * a timeout returns 0 and the caller (Python's watchdog) decides.
+ * wait spins the maximum. The driver's wait for the motor packet spins the whole maximum (see
+ * aerobat_shm_wait_motor). No wait here is without a timeout: a timeout returns 0 and the caller
+ * (Python's watchdog) decides.
  *
  * The last three functions are the firmware's side, for the tests' stand-in firmware.
  */
@@ -74,15 +75,18 @@ static void add_ns(uint64_t *counter, int64_t ns)
 }
 
 /* Wait until *word differs from (differ != 0) or equals (differ == 0) value; 1 if so, 0 after timeout_ns.
- * Spin up to the adaptive budget at adapt (at most max_spin_ns), then sleep; the time spent spinning is
- * added to *spun. */
+ * Spin up to the adaptive budget at adapt (at most max_spin_ns, at least min_spin_ns), then sleep; the
+ * time spent spinning is added to *spun. */
 static int wait_word(uint32_t *word, uint32_t *sleeping, uint64_t *spun, uint8_t *adapt, uint32_t value, int differ,
-                     int64_t max_spin_ns, int64_t timeout_ns)
+                     int64_t max_spin_ns, int64_t min_spin_ns, int64_t timeout_ns)
 {
     uint64_t *budget = (uint64_t *)adapt;
     uint32_t *waits = (uint32_t *)(adapt + 8);
     const int64_t start = monotonic_ns();
-    const int64_t spin_ns = ++*waits % 32 == 0 ? max_spin_ns : (int64_t)*budget;
+    int64_t spin_ns = ++*waits % 32 == 0 ? max_spin_ns : (int64_t)*budget;
+    if (spin_ns < min_spin_ns) {
+        spin_ns = min_spin_ns;
+    }
     int64_t now = start;
     int spinning = 1;
     for (;;) {
@@ -160,7 +164,10 @@ int64_t aerobat_shm_publish_rc(void *shm, const void *rc, int64_t n)
 }
 
 /* Wait for the motor packet answering the last state packet and copy its n bytes into motor.
- * Returns n, or 0 when none came within timeout_ns (spinning at most spin_ns, then asleep). */
+ * Returns n, or 0 when none came within timeout_ns (spinning spin_ns, then asleep). The driver spins
+ * its whole budget, not an adaptive part of it: a firmware step that runs a slow task takes several
+ * microseconds, and a driver asleep by then costs a futex wake on both sides (the firmware, kept
+ * waiting for the late driver, falls asleep too; docs/performance.md, issue 27). */
 int64_t aerobat_shm_wait_motor(void *shm, void *motor, int64_t n, int64_t spin_ns, int64_t timeout_ns)
 {
     if (n < 0 || n > SHM_MOTOR_MAX) {
@@ -169,7 +176,22 @@ int64_t aerobat_shm_wait_motor(void *shm, void *motor, int64_t n, int64_t spin_n
     const uint32_t target = __atomic_load_n(WORD(shm, SHM_OFF_STATE_SEQ), __ATOMIC_RELAXED);
     if (!wait_word(WORD(shm, SHM_OFF_MOTOR_SEQ), WORD(shm, SHM_OFF_MOTOR_WAIT),
                    (uint64_t *)((uint8_t *)shm + SHM_OFF_DRIVER_SPIN_NS), (uint8_t *)shm + SHM_OFF_DRIVER_ADAPT,
-                   target, 0, spin_ns, timeout_ns)) {
+                   target, 0, spin_ns, spin_ns, timeout_ns)) {
+        return 0;
+    }
+    memcpy(motor, (uint8_t *)shm + SHM_OFF_MOTOR, (size_t)n);
+    return n;
+}
+
+/* The motor packet answering the last state packet, if it came: its n bytes copied into motor and n
+ * returned; 0 if it has not come yet (no wait). Lets the driver work while the firmware computes. */
+int64_t aerobat_shm_poll_motor(void *shm, void *motor, int64_t n)
+{
+    if (n < 0 || n > SHM_MOTOR_MAX) {
+        return -1;
+    }
+    const uint32_t target = __atomic_load_n(WORD(shm, SHM_OFF_STATE_SEQ), __ATOMIC_RELAXED);
+    if (__atomic_load_n(WORD(shm, SHM_OFF_MOTOR_SEQ), __ATOMIC_ACQUIRE) != target) {
         return 0;
     }
     memcpy(motor, (uint8_t *)shm + SHM_OFF_MOTOR, (size_t)n);
@@ -183,7 +205,7 @@ int64_t aerobat_shm_wait_state(void *shm, void *state, int64_t n, int64_t seen, 
     uint32_t *seq = WORD(shm, SHM_OFF_STATE_SEQ);
     if (n < 0 || n > SHM_STATE_MAX
         || !wait_word(seq, WORD(shm, SHM_OFF_STATE_WAIT), (uint64_t *)((uint8_t *)shm + SHM_OFF_SPIN_NS),
-                      (uint8_t *)shm + SHM_OFF_FIRMWARE_ADAPT, (uint32_t)seen, 1, spin_ns, timeout_ns)) {
+                      (uint8_t *)shm + SHM_OFF_FIRMWARE_ADAPT, (uint32_t)seen, 1, spin_ns, 0, timeout_ns)) {
         return -1;
     }
     const uint32_t now = __atomic_load_n(seq, __ATOMIC_ACQUIRE);

@@ -204,3 +204,12 @@ def test_a_study_runs_as_many_jobs_at_once_as_its_plant_leaves_cores(jobs, tmp_p
         with pytest.raises(Stop):
             runner.run_study(store, "robustness", {}, jobs)
         assert asked.pop() == 8
+
+
+def test_a_study_says_when_its_jobs_want_more_cores_than_there_are():
+    from aerobat.cli.study import crowding_note
+
+    assert crowding_note(1, 2, 2) == "" and crowding_note(2, 1, 2) == "" and crowding_note(None, 2, 2) == ""
+    note = crowding_note(2, 2, 2)
+    assert note.startswith("note: 2 jobs at a time, each keeping 2 cores busy") and "--workers 1 " in note
+    assert "--workers 4 " in crowding_note(5, 2, 8)

@@ -14,6 +14,7 @@ import dataclasses
 import functools
 import json
 import math
+import os
 import shlex
 import signal
 import time
@@ -98,6 +99,15 @@ def study_eta(elapsed_s: float, ran: int, remaining: int, job_walls_s: list[floa
 
 
 
+def crowding_note(workers: int | None, cores: int, cpu_count: int) -> str:
+    """A line when ``workers`` jobs whose plants keep ``cores`` cores busy each need more cores than there are."""
+    if workers is None or cores <= 1 or workers * cores <= cpu_count:
+        return ""
+    return (f"note: {workers} jobs at a time, each keeping {cores} cores busy (a Betaflight firmware over spinning "
+            f"shared memory), on {cpu_count} cores: they take the cores from each other and the study runs "
+            f"slower than with --workers {max(1, cpu_count // cores)} (docs/performance.md, issue 27)")
+
+
 def run_cli_study(args: argparse.Namespace, kind: str, run: Callable[..., Any],
                   written: tuple[str, ...] = (), *, cores: int = 1) -> tuple[Any, Path]:
     """Run a study with progress lines; returns (what ``run`` returned, output folder).
@@ -119,6 +129,9 @@ def run_cli_study(args: argparse.Namespace, kind: str, run: Callable[..., Any],
     from aerobat.experiments.execution import default_workers
 
     workers = None if args.scheduler is not None else (args.workers or default_workers(cores))
+    crowded = crowding_note(workers, cores, os.cpu_count() or 1)
+    if crowded:
+        out_console.print(crowded, soft_wrap=True)
 
     def on_start(study_id: int, todo: int, done: int) -> None:
         state["first"] = done

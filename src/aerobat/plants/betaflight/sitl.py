@@ -307,12 +307,14 @@ class SitlProcess:
         process = self._resources.process
         assert process is not None
         deadline = time.monotonic() + self.start_timeout_s
+        pause_s = 0.0005  # the firmware is ready in ~10 ms: look often at first, then every 10 ms
         while time.monotonic() < deadline:
             if _READY_MARK in _tail(self.log_path, 200):
                 return True
             if process.poll() is not None:
                 return False
-            time.sleep(0.01)
+            time.sleep(pause_s)
+            pause_s = min(0.01, 2 * pause_s)
         raise FirmwareNotResponding(
             f"the SITL firmware did not get ready within {self.start_timeout_s} s",
             _tail(self.log_path),

@@ -44,7 +44,9 @@ _poll_motor = types.ExternalFunction("aerobat_shm_poll_motor", types.int64(types
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
 def _take_held_sample(step_s, rng, cfg, fcfg, io, noise, mocap_noise, log, scratch):  # pragma: no cover - compiled
-    """The held motion-capture sample, once the frame's draws up to its noise are taken (all of them)."""
+    """The held motion-capture sample, if one is held, once the frame's draws up to its noise are taken (all)."""
+    if io[S_HELD] == 0:
+        return
     draw_noise(ALL, rng, cfg, fcfg, io, noise, mocap_noise)
     row = io[IO_LOG]
     mocap_sample(scratch[HELD_ROW], (io[S_HELD] - 1) * step_s, mocap_noise[io[IO_MOCAP_USED]], log[row])
@@ -77,20 +79,17 @@ def run_steps_shm(shm, spin_ns, wait_ns, first, stop, resume, tick0, every, step
         else:
             published = _publish_state(shm, packet.ctypes.data, packet.nbytes) >= 0
             if tick % every == 0:
-                if io[S_HELD] != 0:
-                    _take_held_sample(step_s, rng, cfg, fcfg, io, noise, mocap_noise, log, scratch)
+                _take_held_sample(step_s, rng, cfg, fcfg, io, noise, mocap_noise, log, scratch)
                 scratch[HELD_ROW, :] = x
                 io[S_HELD] = tick + 1
                 if io[S_DRAWN] >= io[S_DRAW_TOTAL]:
                     _take_held_sample(step_s, rng, cfg, fcfg, io, noise, mocap_noise, log, scratch)
             if not published:
-                if io[S_HELD] != 0:
-                    _take_held_sample(step_s, rng, cfg, fcfg, io, noise, mocap_noise, log, scratch)
+                _take_held_sample(step_s, rng, cfg, fcfg, io, noise, mocap_noise, log, scratch)
                 return SEND_FAILED, i
             draw_noise(sensor_draws_through(i), rng, cfg, fcfg, io, noise, mocap_noise)
             if ahead and advance(x, plant, aux, pending, counters, noise[i], packet, scratch):
-                if io[S_HELD] != 0:
-                    _take_held_sample(step_s, rng, cfg, fcfg, io, noise, mocap_noise, log, scratch)
+                _take_held_sample(step_s, rng, cfg, fcfg, io, noise, mocap_noise, log, scratch)
                 return NON_FINITE, i
             answered = False
             while io[S_DRAWN] < io[S_DRAW_TOTAL]:  # the frame's other draws while the firmware works
@@ -101,8 +100,7 @@ def run_steps_shm(shm, spin_ns, wait_ns, first, stop, resume, tick0, every, step
             if io[S_HELD] != 0 and io[S_DRAWN] >= io[S_DRAW_TOTAL]:
                 _take_held_sample(step_s, rng, cfg, fcfg, io, noise, mocap_noise, log, scratch)
             if not answered and _wait_motor(shm, block.ctypes.data, size, spin_ns, wait_ns) != size:
-                if io[S_HELD] != 0:
-                    _take_held_sample(step_s, rng, cfg, fcfg, io, noise, mocap_noise, log, scratch)
+                _take_held_sample(step_s, rng, cfg, fcfg, io, noise, mocap_noise, log, scratch)
                 io[IO_RESUME] = RESUME_STORE if ahead else RESUME_STEP
                 return NO_ANSWER, i
             io[IO_EXCHANGES] += 1
@@ -111,9 +109,7 @@ def run_steps_shm(shm, spin_ns, wait_ns, first, stop, resume, tick0, every, step
                 continue
         draw_noise(sensor_draws_through(i), rng, cfg, fcfg, io, noise, mocap_noise)
         if step(x, motors, plant, aux, pending, counters, noise[i], packet, scratch):
-            if io[S_HELD] != 0:
-                _take_held_sample(step_s, rng, cfg, fcfg, io, noise, mocap_noise, log, scratch)
+            _take_held_sample(step_s, rng, cfg, fcfg, io, noise, mocap_noise, log, scratch)
             return NON_FINITE, i
-    if io[S_HELD] != 0:
-        _take_held_sample(step_s, rng, cfg, fcfg, io, noise, mocap_noise, log, scratch)
+    _take_held_sample(step_s, rng, cfg, fcfg, io, noise, mocap_noise, log, scratch)
     return DONE, stop

@@ -237,22 +237,18 @@ def _build_sitl(say: Progress) -> tuple[str, SetupStep, str]:
     from aerobat.plants.betaflight.errors import FirmwareUnavailable
 
     if _sitl_piece().present:
-        failed = _build_shm_helper()
-        if failed:
-            return ("betaflight", SetupStep.FAILED, failed)
-        return ("betaflight", SetupStep.DONE, f"already built: {_sitl_path()}")
-    compiler = _compiler_piece()
-    if not compiler.present:
-        return ("betaflight", SetupStep.SKIPPED, f"not built: {compiler.detail} ({compiler.how_to_get})")
-    say("building the Betaflight 4.6 SITL (a few minutes, once)")
-    try:
-        binary = ensure_sitl(progress=say)
-    except FirmwareUnavailable as exc:
-        return ("betaflight", SetupStep.FAILED, " ".join(str(exc).splitlines()[:2]))
+        done = f"already built: {_sitl_path()}"
+    else:
+        compiler = _compiler_piece()
+        if not compiler.present:
+            return ("betaflight", SetupStep.SKIPPED, f"not built: {compiler.detail} ({compiler.how_to_get})")
+        say("building the Betaflight 4.6 SITL (a few minutes, once)")
+        try:
+            done = f"built: {ensure_sitl(progress=say)}"
+        except FirmwareUnavailable as exc:
+            return ("betaflight", SetupStep.FAILED, " ".join(str(exc).splitlines()[:2]))
     failed = _build_shm_helper()
-    if failed:
-        return ("betaflight", SetupStep.FAILED, failed)
-    return ("betaflight", SetupStep.DONE, f"built: {binary}")
+    return ("betaflight", SetupStep.FAILED, failed) if failed else ("betaflight", SetupStep.DONE, done)
 
 
 def _build_shm_helper() -> str:

@@ -137,7 +137,9 @@ def _betaflight_kernels(x: np.ndarray, cmd: np.ndarray) -> None:
     counters[C_CONTACT] = 1
     noise = np.zeros((2, 6))
     packet = np.zeros(PACKET_DOUBLES)
-    scratch = np.zeros((7, x.shape[0]))  # the physics' six rows and the shared-memory loop's held sample
+    from aerobat.plants.betaflight.frames import HELD_ROW
+
+    scratch = np.zeros((HELD_ROW + 1, x.shape[0]))  # the physics' six rows and the shared-memory loop's held sample
     prime(world, plant, aux, counters, noise[0], packet, scratch)
     step(world, np.zeros(4, dtype=np.float32), plant, aux, np.zeros((2, 4)), counters, noise[1], packet, scratch)
     # the compiled lockstep loop (a run of no steps: nothing is sent)

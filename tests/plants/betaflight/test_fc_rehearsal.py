@@ -111,7 +111,8 @@ def test_the_operators_kill_disarms_in_flight(firmware: tuple[Path, Path]) -> No
     plant, connection = _plant(firmware)
     _when_airborne(plant, plant.kill)
     trial = plant.fly(FLIP.program(P0))
-    assert trial.status is TrialStatus.ABORTED and trial.info["safety_stop"] == "kill", trial.message
+    assert trial.status is TrialStatus.ABORTED and trial.info.get("safety_stop") == "kill", \
+        (trial.status, trial.info.get("safety_stop"), trial.message)
     _ended_disarmed(trial)
 
 
@@ -129,7 +130,8 @@ def test_leaving_the_geofence_disarms(firmware: tuple[Path, Path]) -> None:
     floor = plant.params.volume.z_m[0]
     plant.safety = dataclasses.replace(plant.safety, fence_z_m=(floor - 0.1, floor + 1.0))  # the take-off crosses it
     trial = plant.fly(FLIP.program(P0))
-    assert trial.status is TrialStatus.CRASHED and trial.info["safety_stop"] == "geofence", trial.message
+    assert trial.status is TrialStatus.CRASHED and trial.info.get("safety_stop") == "geofence", \
+        (trial.status, trial.info.get("safety_stop"), trial.message)
     _ended_disarmed(trial)
 
 
@@ -137,7 +139,8 @@ def test_a_motion_capture_dropout_disarms(firmware: tuple[Path, Path]) -> None:
     plant, connection = _plant(firmware)
     _when_airborne(plant, lambda: connection.current.poses.blind(2.0))  # type: ignore[union-attr]
     trial = plant.fly(FLIP.program(P0))
-    assert trial.status is TrialStatus.ABORTED and trial.info["safety_stop"] == "mocap_lost", trial.message
+    assert trial.status is TrialStatus.ABORTED and trial.info.get("safety_stop") == "mocap_lost", \
+        (trial.status, trial.info.get("safety_stop"), trial.message)
     _ended_disarmed(trial)
 
 
@@ -146,7 +149,8 @@ def test_a_link_loss_leaves_the_vehicle_to_the_firmwares_failsafe_which_disarms_
     plant, connection = _plant(firmware)
     _when_airborne(plant, lambda: connection.current.bridge.close())  # type: ignore[union-attr]
     trial = plant.fly(FLIP.program(P0))
-    assert trial.status is TrialStatus.ABORTED and trial.info["safety_stop"] == "link_lost", trial.message
+    assert trial.status is TrialStatus.ABORTED and trial.info.get("safety_stop") == "link_lost", \
+        (trial.status, trial.info.get("safety_stop"), trial.message)
     _ended_disarmed(trial)  # nobody disarmed it over the link: Betaflight's RX-loss failsafe (DROP) did
     _no_process_left(connection)
 

@@ -34,6 +34,8 @@ import struct
 from enum import StrEnum
 from typing import NamedTuple
 
+from aerobat.quadrotor.xframe import MOTOR_POSITIONS_FRD, MOTOR_SPIN_CCW
+
 __all__ = [
     "Exchange",
     "MOTOR_COUNT",
@@ -68,10 +70,6 @@ the P, I, D, F terms per axis (roll, pitch, yaw: 12). Its layout is defined here
 MOTOR_PACKET_FLOATS = 19
 MOTOR_COUNT = 4
 
-MOTOR_POSITIONS_FRD: tuple[tuple[float, float], ...] = ((1.0, 1.0), (-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0))
-"""Unit (x forward, y right) direction of each packet slot's motor from the centre (QUADX)."""
-MOTOR_SPIN_CCW: tuple[bool, ...] = (True, True, False, False)
-"""Whether each packet slot's propeller spins counter-clockwise seen from above."""
 
 
 class SitlState(NamedTuple):

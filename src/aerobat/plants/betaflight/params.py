@@ -12,7 +12,6 @@ versioned ``settings.toml`` applied through Betaflight's CLI (:mod:`.firmware_se
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,6 +31,7 @@ from aerobat.core.bounds import Interval, Items, OneOf, bounded, validate
 from aerobat.plants.betaflight.packets import Exchange
 from aerobat.plants.betaflight.tune import Tune
 from aerobat.plants.world_params import Aerodynamics, Disturbances, Drift, MotionCapture, Volume
+from aerobat.quadrotor.xframe import Airframe
 
 __all__ = [
     "GYRO_RATES_HZ",
@@ -54,71 +54,6 @@ _XYZ = "three numbers (x, y, z)"
 _MASS = Interval(0.05, 20.0, unit="kg")
 _GAIN = Interval(0.0, 100.0, closed="right")
 """A position-loop gain of the pilot, in (0, 100]."""
-
-
-@dataclass(frozen=True, kw_only=True)
-class Airframe:
-    """The physical X-frame vehicle (defaults: the 5-inch racer of ``vehicles/fpv5.toml``).
-
-    Attributes
-    ----------
-    mass_kg, inertia_kg_m2 : rigid body [kg], principal inertia (x, y, z) [kg m²].
-    motor_x_m, motor_y_m : motor distance from the centre along body x (forward) and y [m];
-        motors sit at (±x, ±y) in Betaflight's QUADX order.
-    com_offset_m : centre of mass relative to the frame centre, body FLU [m].
-    thrust_max_n : per-rotor thrust at motor command 1.
-    curve_min_speed_ratio, curve_shape : the steady-state thrust curve
-        ``f(u) = f_max [(1 − r) √(k u² + (1 − k) u) + r]²`` (r, k) for motor command u ∈ (0, 1];
-        a stopped motor (u = 0, disarmed) gives no thrust.
-    motor_tau_up_s, motor_tau_down_s : first-order thrust time constants, rising and falling [s].
-    thrust_gains : per-motor thrust multipliers, Betaflight packet order (motor and prop spread).
-    kappa_m : rotor drag-torque to thrust ratio [m].
-    rotor_inertia_kg_m2 : inertia of one rotor (propeller and motor bell) about its axis; its
-        reaction torque when the rotor speeds up or slows down acts on yaw.
-    thrust_coefficient_n_s2 : k in f = k Ω² (relates thrust to rotor speed for that torque).
-    output_delay_s : time from the firmware's motor output to the ESC acting on it [s]
-        (DShot frame and ESC processing; lockstep computes the loop in zero time).
-    """
-
-    mass_kg: float = bounded(0.752, _MASS)
-    inertia_kg_m2: tuple[float, float, float] = bounded(
-        (2.5e-3, 2.1e-3, 4.3e-3), Items.each(Interval(1e-6, 10.0, unit="kg m²"), 3, _XYZ))
-    motor_x_m: float = bounded(0.075, Interval(0.01, 2.0, unit="m"))
-    motor_y_m: float = bounded(0.10, Interval(0.01, 2.0, unit="m"))
-    com_offset_m: tuple[float, float, float] = bounded(
-        (0.003, -0.002, 0.0), Items.each(Interval(-0.05, 0.05, unit="m"), 3, _XYZ))
-    thrust_max_n: float = bounded(8.5, Interval(0.1, 1000.0, unit="N"))
-    curve_min_speed_ratio: float = bounded(341.75 / 3100.0, Interval(0.0, 0.9))
-    curve_shape: float = bounded(0.5, Interval(0.0, 1.0))
-    motor_tau_up_s: float = bounded(0.033, Interval(1e-3, 1.0, unit="s"))
-    motor_tau_down_s: float = bounded(0.033, Interval(1e-3, 1.0, unit="s"))
-    thrust_gains: tuple[float, float, float, float] = bounded(
-        (1.00, 0.98, 1.01, 0.97), Items.each(Interval(0.5, 1.5), 4, "four numbers (motors 1-4)"))
-    kappa_m: float = bounded(0.022, Interval(1e-4, 0.5, unit="m"))
-    rotor_inertia_kg_m2: float = bounded(8e-6, Interval(0.0, 1e-2, unit="kg m²"))
-    thrust_coefficient_n_s2: float = bounded(1.562522e-6, Interval(1e-9, 1e-2, unit="N s²"))
-    output_delay_s: float = bounded(125e-6, Interval(0.0, 0.05, unit="s"))
-
-    def __post_init__(self) -> None:
-        validate(self)
-
-    def thrust_n(self, command: float) -> float:
-        """Steady-state thrust of one rotor at motor command ``command`` (0 = stopped)."""
-        if command <= 0.0:
-            return 0.0
-        u = min(command, 1.0)
-        r, k = self.curve_min_speed_ratio, self.curve_shape
-        return self.thrust_max_n * ((1.0 - r) * math.sqrt(k * u * u + (1.0 - k) * u) + r) ** 2
-
-    def command_for_thrust(self, thrust_n: float) -> float:
-        """Inverse of :meth:`thrust_n` on (0, 1] (clamped to the curve's range)."""
-        r, k = self.curve_min_speed_ratio, self.curve_shape
-        s = (math.sqrt(max(thrust_n, 0.0) / self.thrust_max_n) - r) / (1.0 - r)
-        s = min(max(s, 0.0), 1.0)
-        if k == 0.0:
-            return s * s
-        # k u² + (1 − k) u − s² = 0
-        return min(((k - 1.0) + math.sqrt((1.0 - k) ** 2 + 4.0 * k * s * s)) / (2.0 * k), 1.0)
 
 
 @dataclass(frozen=True, kw_only=True)

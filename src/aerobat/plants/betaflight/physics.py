@@ -25,23 +25,10 @@ import math
 import numba as nb
 import numpy as np
 
-from aerobat.plants.betaflight.packets import MOTOR_POSITIONS_FRD, MOTOR_SPIN_CCW
+from aerobat.plants.betaflight.packets import MOTOR_SPIN_CCW
 from aerobat.plants.betaflight.params import BetaflightParams
-from aerobat.quadrotor.dynamics import (
-    N_STATE,
-    P_FMAX,
-    P_FMIN,
-    P_IZZ,
-    P_KYAW,
-    P_MX,
-    P_MY,
-    P_RATE_DN,
-    P_RATE_UP,
-    normalize_quaternion,
-    plant_derivative,
-    plant_vector,
-)
-from aerobat.quadrotor.vehicle import VehicleParams
+from aerobat.quadrotor.dynamics import N_STATE, P_IZZ, normalize_quaternion, plant_derivative
+from aerobat.quadrotor.xframe import add_rotor_reaction, curve_thrust, xframe_plant
 
 __all__ = [
     "A_ACCEL_NOISE",
@@ -107,30 +94,14 @@ def airframe_plant(params: BetaflightParams, *, thrust_gains: tuple[float, float
                    gust_amplitude_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0),
                    gust_frequency_hz: float = 0.0, gust_phase_rad: float = 0.0) -> np.ndarray:
     """The plant vector of :mod:`aerobat.quadrotor.dynamics` for the X-frame airframe in packet order."""
-    a = params.airframe
     aero = params.aerodynamics
-    carrier = VehicleParams(mass_kg=a.mass_kg, arm_length_m=math.hypot(a.motor_x_m, a.motor_y_m),
-                            inertia_xx_kg_m2=a.inertia_kg_m2[0], inertia_yy_kg_m2=a.inertia_kg_m2[1],
-                            inertia_zz_kg_m2=a.inertia_kg_m2[2], motor_rate_up_per_s=1.0 / a.motor_tau_up_s,
-                            motor_rate_down_per_s=1.0 / a.motor_tau_down_s, rotor_thrust_min_n=0.0,
-                            rotor_thrust_max_n=a.thrust_max_n, collective_reduced_min_m_s2=1.0,
-                            collective_reduced_max_m_s2=20.0, drag_constant_m=a.kappa_m)
     extra: dict = {}
     if aero.enabled:
         extra = {"body_drag_n_s2_m2": aero.body_drag_n_s2_m2, "rotor_drag_s_m": aero.rotor_drag_s_m,
                  "rotational_damping_n_m_s": aero.rotational_damping_n_m_s}
-    plant = plant_vector(carrier, thrust_gains=thrust_gains or a.thrust_gains, wind_m_s=wind_m_s,
-                         gust_amplitude_m_s=gust_amplitude_m_s, gust_frequency_hz=gust_frequency_hz,
-                         gust_phase_rad=gust_phase_rad, **extra)
-    for slot, ((fwd, right), ccw) in enumerate(zip(MOTOR_POSITIONS_FRD, MOTOR_SPIN_CCW, strict=True)):
-        plant[P_MX + slot] = fwd * a.motor_x_m - a.com_offset_m[0]
-        plant[P_MY + slot] = -right * a.motor_y_m - a.com_offset_m[1]  # FRD right = FLU −y
-        plant[P_KYAW + slot] = -a.kappa_m if ccw else a.kappa_m
-    plant[P_FMIN] = 0.0
-    plant[P_FMAX] = a.thrust_max_n
-    plant[P_RATE_UP] = 1.0 / a.motor_tau_up_s
-    plant[P_RATE_DN] = 1.0 / a.motor_tau_down_s
-    return plant
+    return xframe_plant(params.airframe, thrust_gains=thrust_gains, wind_m_s=wind_m_s,
+                        gust_amplitude_m_s=gust_amplitude_m_s, gust_frequency_hz=gust_frequency_hz,
+                        gust_phase_rad=gust_phase_rad, **extra)
 
 
 def aux_vector(params: BetaflightParams, *, step_s: float, ground_z_m: float, gravity_m_s2: float) -> np.ndarray:
@@ -165,33 +136,15 @@ def ground_state(position_m: tuple[float, float, float]) -> np.ndarray:
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def thrust_curve(u, aux):  # pragma: no cover - compiled
     """Steady-state rotor thrust [N] at motor command ``u`` (0 or less: stopped)."""
-    if u <= 0.0:
-        return 0.0
-    if u > 1.0:
-        u = 1.0
-    k = aux[A_CURVE_K]
-    r = aux[A_CURVE_R]
-    s = (1.0 - r) * math.sqrt(k * u * u + (1.0 - k) * u) + r
-    return aux[A_FMAX] * s * s
+    return curve_thrust(u, aux[A_FMAX], aux[A_CURVE_R], aux[A_CURVE_K])
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def derivative(t, x, ft, plant, aux, dx):  # pragma: no cover - compiled
-    """:func:`~aerobat.quadrotor.dynamics.plant_derivative` plus the rotors' reaction torque on yaw.
-
-    Spinning a rotor up takes a torque J_r Ω̇ that the motor's stator puts on the body, the other
-    way round (Ω = √(f/k), so Ω̇ = ḟ / (2 √(k f))). On a racer it acts faster than the drag moment
-    κ f, which only follows once the rotor has sped up.
-    """
+    """:func:`~aerobat.quadrotor.dynamics.plant_derivative` plus the rotors' reaction torque on yaw
+    (:func:`~aerobat.quadrotor.xframe.add_rotor_reaction`)."""
     plant_derivative(t, x, ft, plant, dx)
-    jr = aux[A_ROTOR_J]
-    if jr > 0.0:
-        k = aux[A_THRUST_COEF]
-        torque = 0.0
-        for j in range(4):
-            f = max(x[13 + j], 1e-3)
-            torque -= aux[A_SPIN + j] * jr * dx[13 + j] / (2.0 * math.sqrt(k * f))
-        dx[12] += torque / plant[P_IZZ]
+    add_rotor_reaction(x, dx, aux[A_ROTOR_J], aux[A_THRUST_COEF], aux[A_SPIN:A_SPIN + 4], plant[P_IZZ])
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy")

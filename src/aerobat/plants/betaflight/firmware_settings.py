@@ -143,6 +143,18 @@ class BetaflightSettings:
                 return entry.default
         raise KeyError(name)
 
+    def resolved(self, name: str) -> str:
+        """The value the firmware runs: the configured one, else the build's default (its own table)."""
+        try:
+            return self.value(name)
+        except KeyError:
+            from .sitl_table import load_table
+
+            entry = load_table().get(name)
+            if entry is None:
+                raise
+            return entry.default
+
     def aux_us(self, **active: bool) -> tuple[int, ...]:
         """AUX1..AUX12 pulses that switch the named modes on or off.
 
@@ -157,12 +169,17 @@ class BetaflightSettings:
             aux[mode.aux - 1] = mode.on_us if on else mode.off_us
         return tuple(aux)
 
-    def rate_deg_s(self, axis: str, stick: float) -> float:
+    def deadband_us(self, axis: str) -> float:
+        """The stick deadband [µs of 500] on ``axis`` (``deadband`` or ``yaw_deadband``; aerobat's settings: 0)."""
+        return float(self.value("yaw_deadband" if axis == "yaw" else "deadband")) if self.tune is not None else 0.0
+
+    def rate_deg_s(self, axis: str, stick: float, *, deadband: bool = True) -> float:
         """Commanded body rate [deg/s] for a stick deflection in ACRO (fc/rc.c, every ``rates_type``).
 
         ACTUAL: ``rate = 10*rc_rate*x + max(0, 10*srate - 10*rc_rate) * (|x|*(x^5*e + x*(1-e)))`` with
         ``e = expo/100``; BETAFLIGHT, RACEFLIGHT, KISS and QUICK as ``applyBetaflightRates`` & co.
-        The stick first loses the ``deadband`` (``yaw_deadband``) in us of 500, and the rate is clamped
+        The stick first loses the ``deadband`` (``yaw_deadband``) in us of 500 (``deadband=False``: the
+        curve of the deflection past it), and the rate is clamped
         to ``+-rate_limit``. RC smoothing (a filter, not a curve) is not modelled.
         """
         kind = self.value("rates_type").strip('"').upper()
@@ -170,7 +187,7 @@ class BetaflightSettings:
         srate = float(self.value(f"{axis}_srate"))
         expo = float(self.value(f"{axis}_expo")) / 100.0
         limit = float(self.value(f"{axis}_rate_limit"))
-        band = float(self.value("yaw_deadband" if axis == "yaw" else "deadband")) if self.tune is not None else 0.0
+        band = self.deadband_us(axis) if deadband else 0.0
         x = min(max(stick, -1.0), 1.0)
         if band > 0.0:
             x = math.copysign(max(abs(x) * 500.0 - band, 0.0) / (500.0 - band), x)

@@ -29,6 +29,30 @@ import numpy as np
 
 from aerobat.plants.betaflight.firmware_settings import BetaflightSettings
 from aerobat.plants.betaflight.params import Airframe
+from aerobat.quadrotor.firmware.sticks import (
+    L_ANGLE_LIMIT,
+    L_CLIMB,
+    L_CURVE_K,
+    L_CURVE_R,
+    L_DEADBAND,
+    L_FMAX,
+    L_GRAVITY,
+    L_IDLE,
+    L_MASS,
+    L_MIN_CHECK,
+    L_MOTOR_TABLE,
+    L_RATE_MAX,
+    L_RATE_TABLES,
+    L_ROLL_TABLE,
+    L_THROTTLE_TABLE,
+    L_TILT,
+    N_LIMITS,
+    N_TABLE,
+    program_sticks,
+    stick_for_rate,
+    throttle_for_collective,
+    throttle_for_motor,
+)
 
 __all__ = [
     "L_ANGLE_LIMIT",
@@ -44,27 +68,11 @@ __all__ = [
     "StickMap",
     "angle_sticks",
     "program_sticks",
+    "stick_for_rate",
     "throttle_for_collective",
+    "throttle_for_motor",
 ]
 
-# limits vector of the compiled pilot
-L_TILT = 0  # largest tilt asked for [rad]
-L_CLIMB = 1  # vertical speed limit [m/s]
-L_GRAVITY = 2
-L_ANGLE_LIMIT = 3  # Betaflight's angle_limit [rad]: full stick in ANGLE mode
-L_RATE_MAX = 4  # rate at full stick in ACRO [rad/s] (before the rate_limit clamp)
-L_MASS = 5  # the pilot's vehicle mass [kg]
-L_FMAX = 6  # thrust curve: f_max [N], min-speed ratio r, shape k
-L_CURVE_R = 7
-L_CURVE_K = 8
-L_IDLE = 9  # motor_idle as a motor command
-L_MIN_CHECK = 10  # throttle pulse where the throttle starts [us]
-L_RATE_TABLES = 11  # 1: the rate curves are the tables below (a tune's), 0: linear with L_RATE_MAX
-L_THROTTLE_TABLE = 12  # 1: the throttle curve is the table below, 0: linear with L_IDLE and L_MIN_CHECK
-N_TABLE = 129  # samples per table: stick |x| = i/(N-1), or throttle pulse 1000 + 1000 i/(N-1) us
-L_ROLL_TABLE = 13  # rate [rad/s] at stick i/(N-1), roll, pitch, yaw one after the other
-L_MOTOR_TABLE = L_ROLL_TABLE + 3 * N_TABLE  # motor command at pulse 1000 + 1000 i/(N-1) us
-N_LIMITS = L_MOTOR_TABLE + N_TABLE
 _HOVER_WINDOW_M = 0.5  # height error within which the hover-throttle integral acts [m]
 _HOVER_AUTHORITY = 0.35  # the largest collective the hover integral adds or takes away [fraction of g]
 
@@ -91,6 +99,7 @@ class StickMap:
     airframe: Airframe
     rate_tables_rad_s: tuple[tuple[float, ...], ...] | None = None
     motor_table: tuple[float, ...] | None = None
+    deadbands_us: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @classmethod
     def from_settings(cls, settings: BetaflightSettings, airframe: Airframe, mass_kg: float) -> StickMap:
@@ -98,13 +107,15 @@ class StickMap:
 
         aerobat's own settings have linear rate curves, the same on every axis (rate = stick × full rate);
         a tune's curves of any ``rates_type`` (and a throttle curve that is not the identity) are sampled
-        into tables that the pilot inverts (:func:`stick_for_rate`).
+        into tables that the pilot inverts (:func:`stick_for_rate`). A tune's stick deadband is stepped
+        over: the tables are the curves of the deflection past it, so the smallest rate asked for reaches
+        the firmware instead of vanishing in the deadband.
         """
         rates = {axis: settings.rate_deg_s(axis, 1.0 - 1e-9) for axis in ("roll", "pitch", "yaw")}
         tables = None
         if not settings.linear_rates() or len({round(r, 3) for r in rates.values()}) != 1:
             grid = np.linspace(0.0, 1.0, N_TABLE)
-            tables = tuple(tuple(math.radians(settings.rate_deg_s(axis, float(x))) for x in grid)
+            tables = tuple(tuple(math.radians(settings.rate_deg_s(axis, float(x), deadband=False)) for x in grid)
                            for axis in ("roll", "pitch", "yaw"))
             for axis, table in zip(("roll", "pitch", "yaw"), tables, strict=True):
                 if np.any(np.diff(table) < 0.0) or table[-1] <= 0.0:
@@ -123,6 +134,7 @@ class StickMap:
             airframe=airframe,
             rate_tables_rad_s=tables,
             motor_table=motor,
+            deadbands_us=(settings.deadband_us("roll"), settings.deadband_us("pitch"), settings.deadband_us("yaw")),
         )
 
     def full_rates_deg_s(self) -> tuple[float, float, float]:
@@ -153,76 +165,8 @@ class StickMap:
         if self.motor_table is not None:
             out[L_THROTTLE_TABLE] = 1.0
             out[L_MOTOR_TABLE:L_MOTOR_TABLE + N_TABLE] = self.motor_table
+        out[L_DEADBAND:L_DEADBAND + 3] = self.deadbands_us
         return out
-
-
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
-def stick_for_rate(rate, axis, limits):  # pragma: no cover - compiled
-    """Stick in [−1, 1] that commands ``rate`` [rad/s] on ``axis`` (0 roll, 1 pitch, 2 yaw; Betaflight's sense)."""
-    if limits[L_RATE_TABLES] == 0.0:
-        return min(max(rate / limits[L_RATE_MAX], -1.0), 1.0)
-    base = L_ROLL_TABLE + axis * N_TABLE
-    target = abs(rate)
-    if target >= limits[base + N_TABLE - 1]:
-        return 1.0 if rate > 0.0 else -1.0
-    low = 0
-    high = N_TABLE - 1
-    while high - low > 1:  # the last sample at or below the target (the curve rises)
-        middle = (low + high) // 2
-        if limits[base + middle] <= target:
-            low = middle
-        else:
-            high = middle
-    r0 = limits[base + low]
-    r1 = limits[base + high]
-    x = (low + (target - r0) / (r1 - r0)) / (N_TABLE - 1) if r1 > r0 else high / (N_TABLE - 1)
-    return x if rate >= 0.0 else -x
-
-
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
-def throttle_for_motor(u, limits):  # pragma: no cover - compiled
-    """Throttle pulse [us] for the motor command ``u`` (the firmware's throttle curve, inverted)."""
-    if limits[L_THROTTLE_TABLE] == 0.0:
-        idle = limits[L_IDLE]
-        fraction = min(max((u - idle) / (1.0 - idle), 0.0), 1.0)
-        return limits[L_MIN_CHECK] + fraction * (2000.0 - limits[L_MIN_CHECK])
-    base = L_MOTOR_TABLE
-    if u <= limits[base]:
-        return 1000.0
-    for i in range(1, N_TABLE):
-        m1 = limits[base + i]
-        if m1 >= u:
-            m0 = limits[base + i - 1]
-            f = (u - m0) / (m1 - m0) if m1 > m0 else 1.0
-            return 1000.0 + 1000.0 * (i - 1 + f) / (N_TABLE - 1)
-    return 2000.0
-
-
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
-def throttle_for_collective(collective, limits):  # pragma: no cover - compiled
-    """Throttle pulse [us] for a mass-normalised collective [m/s²] (the pilot's inverted model)."""
-    per_rotor = max(collective, 0.0) * limits[L_MASS] / 4.0
-    r = limits[L_CURVE_R]
-    k = limits[L_CURVE_K]
-    s = (math.sqrt(per_rotor / limits[L_FMAX]) - r) / (1.0 - r)
-    s = min(max(s, 0.0), 1.0)
-    if k > 0.0:
-        u = ((k - 1.0) + math.sqrt((1.0 - k) ** 2 + 4.0 * k * s * s)) / (2.0 * k)
-    else:
-        u = s * s
-    return throttle_for_motor(u, limits)
-
-
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
-def program_sticks(cmd, limits, out):  # pragma: no cover - compiled
-    """ACRO sticks for a program command (collective [m/s²], p̂, q̂, r̂ [rad/s], body FLU).
-
-    ``out`` = (roll, pitch, yaw) sticks in [−1, 1] and the throttle pulse [us].
-    """
-    out[0] = stick_for_rate(cmd[1], 0, limits)
-    out[1] = stick_for_rate(cmd[2], 1, limits)
-    out[2] = stick_for_rate(-cmd[3], 2, limits)
-    out[3] = throttle_for_collective(cmd[0], limits)
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy")

@@ -54,6 +54,7 @@ from aerobat.quadrotor.feedback import (
     onboard_state,
     reference_from_trajectory,
 )
+from aerobat.quadrotor.firmware.sticks import frames_of
 from aerobat.quadrotor.program import CompiledProgram, Program
 from aerobat.quadrotor.simulate import simulate
 from aerobat.quadrotor.vehicle import VehicleConfig
@@ -357,8 +358,8 @@ class BetaflightPlant:
         period = 1.0 / self.params.radio.rate_hz
         start_time = flight.time_s + flight.latency_steps * flight.step_s
         n = flight.frames_for(compiled.duration_s + _MARGIN_S)
-        commands = compiled.evaluate(np.arange(n) * period)
-        commands[np.arange(n) * period >= compiled.duration_s - 1e-12] = compiled.hover
+        # each frame carries the program's mean over its period: the switch times survive the radio
+        commands = frames_of(compiled, period, n)
         program = ProgramPilot(commands, self.limits, self.channels(np.zeros(4), arm=True, angle=False), period,
                                self._feedback_law(compiled, start_time) if self.feedback.enabled else None)
         record = np.empty((n, 1 + N_STATE))

@@ -46,6 +46,7 @@ from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.pilot import program_sticks
 from aerobat.plants.betaflight.plant import BetaflightPlant
 from aerobat.plants.betaflight.rc import RC_MIN_US
+from aerobat.quadrotor.firmware.sticks import frames_of
 from aerobat.quadrotor.program import CompiledProgram, Program
 from aerobat.quadrotor.vehicle import VehicleConfig
 
@@ -287,9 +288,8 @@ class FlightControllerPlant(BetaflightPlant):
 
     def _dry_run(self, flight: WallClockFlight, compiled: CompiledProgram, info: dict[str, Any]) -> Trial:
         """The program's frames at the radio rate with ARM off (ACRO, as the maneuver streams them)."""
-        period = 1.0 / self.params.radio.rate_hz
         n = flight.frames_for(compiled.duration_s)
-        commands = compiled.evaluate(np.arange(n) * period)
+        commands = frames_of(compiled, 1.0 / self.params.radio.rate_hz, n)
         sticks = np.zeros(4)
         start = flight.time_s
         for k in range(n):

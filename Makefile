@@ -8,7 +8,8 @@ STAMP := $(VENV)/.stamp-installed
 # checks only a function's own file, not the kernels it inlines from other files, so any change
 # under these folders clears aerobat's cache and compiles it again.
 COMPILED := $(VENV)/.stamp-compiled
-KERNEL_SOURCES := $(wildcard src/aerobat/quadrotor/*.py src/aerobat/plants/*.py src/aerobat/plants/arena/*.py \
+KERNEL_SOURCES := $(wildcard src/aerobat/quadrotor/*.py src/aerobat/quadrotor/firmware/*.py src/aerobat/plants/*.py \
+	src/aerobat/plants/arena/*.py \
 	src/aerobat/plants/betaflight/*.py \
 	src/aerobat/logs/blackbox_*.py)
 OUT ?= out

@@ -147,9 +147,10 @@ class _Evaluations:
     would give; Newton's iterates, their Jacobians' centre points and the final J at p⁰ recur.
     """
 
-    def __init__(self, maneuver: Maneuver, model: FinalStateModel) -> None:
+    def __init__(self, maneuver: Maneuver, model: FinalStateModel, relative_step: float = 1e-3) -> None:
         self.maneuver = maneuver
         self.model = model
+        self.relative_step = relative_step
         self.known: dict[bytes, np.ndarray] = {}
 
     def __call__(self, params: np.ndarray) -> np.ndarray:
@@ -202,7 +203,7 @@ def finite_difference_jacobian(
 
 def _jacobian(evaluate: _Evaluations, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:func:`finite_difference_jacobian` through the design's evaluations (one batch, nothing repeated)."""
-    batch, steps = _difference_batch(evaluate.maneuver, p, 1e-3)
+    batch, steps = _difference_batch(evaluate.maneuver, p, evaluate.relative_step)
     return _jacobian_from(evaluate(batch), steps)
 
 
@@ -215,6 +216,7 @@ class _DesignArguments:
     tsvd_rtol: float = bounded(1e-3, Interval(low=0.0, as_float=True))
     damping: float = bounded(1e-3, Interval(low=0.0, as_float=True))
     max_iterations: int = bounded(100, Integer(1, 1_000_000))
+    relative_step: float = bounded(1e-3, Interval(low=0.0, high=1.0, closed="right", as_float=True))
 
     def __post_init__(self) -> None:
         validate(self)
@@ -230,13 +232,16 @@ def design(
     tsvd_rtol: float = 1e-3,
     damping: float = 1e-3,
     max_iterations: int = 100,
+    relative_step: float = 1e-3,
     raise_on_failure: bool = False,
 ) -> Design:
     """Find p⁰ with e(p⁰) = 0 on ``model`` from the guess, then J and C (Sect. 3 step 2).
 
     A bounded trust-region least-squares solve on scaled errors, with batched
     finite-difference Jacobians. The result says whether it converged and why
-    not; with ``raise_on_failure`` a failure raises :class:`DesignFailed`.
+    not; with ``raise_on_failure`` a failure raises :class:`DesignFailed`. ``relative_step``: the
+    Jacobian's central differences step this fraction of each parameter's scale (a model with fine
+    structure in its response, such as a flight controller's discrete frames, asks for wider ones).
     """
     start = time.perf_counter()
     check_maneuver(maneuver)
@@ -244,7 +249,7 @@ def design(
         raise ConfigError(f"model: expected a final-state model (e.g. NominalModel(config)), got "
                           f"{type(model).__name__} {short_repr(model)}")
     options = _DesignArguments(correction=correction, tolerance=tolerance, tsvd_rtol=tsvd_rtol, damping=damping,
-                               max_iterations=max_iterations)
+                               max_iterations=max_iterations, relative_step=relative_step)
     tolerance, tsvd_rtol, damping = options.tolerance, options.tsvd_rtol, options.damping
     max_iterations = options.max_iterations
     check_type("raise_on_failure", raise_on_failure, (bool, np.bool_), "True or False")
@@ -255,7 +260,7 @@ def design(
     p_scales = parameter_scales(maneuver.parameters)
     e_scales = error_scales(maneuver.errors)
     x0 = np.clip(guess, lower, upper)
-    evaluate = _Evaluations(maneuver, model)
+    evaluate = _Evaluations(maneuver, model, options.relative_step)
 
     def residual(p: np.ndarray) -> np.ndarray:
         return evaluate(p[None, :])[0] / e_scales

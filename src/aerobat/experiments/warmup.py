@@ -30,9 +30,9 @@ __all__ = ["warm_up"]
 def warm_up(workers: int = 2) -> float:
     """Compile (or load from numba's cache) every kernel a command uses; returns the seconds it took.
 
-    The kernels fall into two groups of about equal compile time (the playback kernels with the
-    ones RotorPy and Betaflight call, and the arena's trial), compiled in ``workers`` processes
-    side by side (numba writes each cache file atomically, so a kernel both need is safe).
+    The kernels fall into three groups (the playback kernels with the ones RotorPy and Betaflight
+    call, the arena's trial, and the firmware design model), compiled in ``workers`` processes side
+    by side (numba writes each cache file atomically, so a kernel two need is safe).
     """
     start = time.perf_counter()
     if workers > 1:
@@ -46,7 +46,7 @@ def warm_up(workers: int = 2) -> float:
     return time.perf_counter() - start
 
 
-PARTS = ("playback", "arena")
+PARTS = ("playback", "arena", "firmware")
 
 
 def _warm_part(part: str) -> None:
@@ -56,6 +56,19 @@ def _warm_part(part: str) -> None:
 
     config = hummingbird()
     program = Program(switches=(Switch(time_s=0.0, channel="rate_p", value=1.0),), duration_s=0.05)
+    if part == "firmware":  # the Betaflight plants' design model (quadrotor.firmware), both fidelities
+        from aerobat.plants.betaflight.design_model import firmware_design_model
+        from aerobat.plants.betaflight.params import BetaflightParams
+        from aerobat.quadrotor.firmware.sticks import frames_of
+        from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
+
+        frames_of(program.compile(), 0.004, 16)  # the plant's frames of a program
+        fpv5 = vehicle_from_name_or_file("fpv5")
+        for fidelity in ("design", "exact"):
+            model = firmware_design_model(fpv5, BetaflightParams(), fidelity=fidelity)
+            model.final_states([program])
+            model.trajectory(program)
+        return
     if part == "arena":
         from aerobat.plants.arena import Arena
 

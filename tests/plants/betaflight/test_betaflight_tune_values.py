@@ -161,3 +161,17 @@ def test_the_table_knows_each_settings_type_and_range() -> None:
     assert table.get("p_roll").checked("١٢").verdict == "malformed"
     assert table.get("profile_name").checked("a#b").verdict == "rejected"  # the CLI takes the rest for a comment
 
+
+def test_the_tune_command_reads_a_tune_without_flying(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    path = tmp_path / "t.txt"
+    path.write_text(f"{V460}set p_roll = 50\nset rates_type = KISS\nset roll_rc_rate = 70\n")
+    assert main(["tune", str(path), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert {"name": "p_roll", "value": "50", "line": 2, "where": "line 2"} in data["applied"]
+    assert "set p_roll = 50" in data["commands"] and data["rates_type"] == "KISS"
+    bad = _log(tmp_path, b"H profile_name:" + DELS + b"\n")
+    assert main(["tune", str(bad)]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and "header field profile_name" in err

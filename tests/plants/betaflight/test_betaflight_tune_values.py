@@ -175,3 +175,41 @@ def test_the_tune_command_reads_a_tune_without_flying(tmp_path: Path, capsys: py
     assert main(["tune", str(bad)]) == 2
     out, err = capsys.readouterr()
     assert out == "" and err.count("\n") == 1 and "header field profile_name" in err
+
+
+def test_lines_end_where_the_firmwares_cli_ends_them(tmp_path: Path) -> None:
+    """Found by the tunes fuzz phase: Python's splitlines() and strip() also cut at a form feed, U+2028, a TAB."""
+    for text, where in ((f"{V460}set p_roll = 45\x0c\n", r"line 2: p_roll = '45\\x0c': the control character 0x0c"),
+                        (f"{V460}set p_roll = 4\u20285\n", r"line 2: p_roll = '4\\u20285': the non-ASCII character"),
+                        (f"{V460}set p_roll = 45\t\n", r"line 2: p_roll = '45\\t': the control character 0x09")):
+        with pytest.raises(TuneError, match=where):
+            parse_cli(text, source="f.txt")
+    with pytest.raises(TuneError, match=r"header field thr_mid:.50\\t.: the control character 0x09 \(TAB\)"):
+        load_tune(_log(tmp_path, b"H thr_mid:50\t\n"))
+    crlf = tmp_path / "crlf.bbl"
+    crlf.write_bytes(HEADER.replace(b"\n", b"\r\n") + b"I\x00")  # a CR before the LF ends the line
+    assert translate(load_tune(crlf)).values()["p_roll"] == "47"
+    latin = tmp_path / "latin.txt"
+    latin.write_bytes(f"{V460}set p_roll = 45\n".encode() + b"set profile_name = caf\xe9\n")
+    with pytest.raises(TuneError, match=r"latin\.txt: line 3: byte 0xe9 is not UTF-8 text"):
+        load_tune(latin)
+
+
+def test_a_file_larger_than_any_tune_is_refused_at_once(tmp_path: Path) -> None:
+    """Found by the tunes fuzz phase: a 16 MB diff took 9 s and 500 MB; a header of 500,000 lines 4 s."""
+    from aerobat.plants.betaflight.tune import MAX_CLI_BYTES, MAX_HEADER_LINES
+
+    big = tmp_path / "big.txt"
+    big.write_bytes(V460.encode() + b"set p_roll = 45\n" * (MAX_CLI_BYTES // 16 + 1))
+    with pytest.raises(TuneError, match=r"big\.txt: \d+ bytes, larger than any Betaflight CLI diff or dump"):
+        load_tune(big)
+    long = tmp_path / "long.bbl"
+    long.write_bytes(HEADER + b"".join(b"H Field %d:1\n" % k for k in range(MAX_HEADER_LINES)) + b"I")
+    with pytest.raises(TuneError, match=rf"long\.bbl: the header at byte 0 has more than {MAX_HEADER_LINES} lines"):
+        load_tune(long)
+    many = tmp_path / "many.bbl"
+    many.write_bytes(HEADER + b"I\x00" + HEADER.replace(b"47,85,38", b"50,85,38") + b"I\x00"
+                     + b"H Product:x\nH Firmware revision:Betaflight 4.2.9\nI\n" * 100_000)
+    assert translate(load_tune(many, log_index=2)).values()["p_roll"] == "50"
+    with pytest.raises(TuneError, match=r"holds 100002 log\(s\), allowed 1\.\.100002"):
+        load_tune(many, log_index=100_003)

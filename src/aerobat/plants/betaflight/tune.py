@@ -38,6 +38,8 @@ __all__ = ["Tune", "TuneError", "TuneKind", "load_tune", "parse_cli", "read_blac
            "tune_from_blackbox_header"]
 
 MAX_TUNE_BYTES = 64 * 1024 * 1024  # a blackbox file is read only up to its headers, but never more than this
+MAX_CLI_BYTES = 1024 * 1024  # a Betaflight `dump all` is about 100 KiB; a larger text is no diff or dump
+MAX_HEADER_LINES = 1000  # Betaflight 4.2-4.6 write 130-250 header lines a log
 
 SECTIONS = ("master", "profile", "rateprofile", "command")
 _VERSION = re.compile(r"Betaflight\s*/?\s*(?:\S+\s+\(\S+\)\s+)?(\d+)\.(\d+)\.(\d+)")
@@ -49,6 +51,7 @@ _SETTING_NAME = re.compile(r"[a-z0-9_]+")
 # "# INAV/MATEKF722SE 7.1.2 ...", "# EmuFlight / HELIOSPRING (HESP) 0.4.1 ..."
 _FIRMWARE_LINE = re.compile(r"#\s*([A-Za-z][A-Za-z0-9_-]*)\s*/\s*\S.*?\b(\d+\.\d+\.\d+)\b")
 _BOM = "\ufeff"
+_LINE_END = re.compile(r"\r\n|\r|\n")  # the firmware's CLI ends a line at CR or LF, nothing else
 # commands a diff/dump holds besides `set` (cli/cli.c cmdTable); their arguments are not checked here
 _COMMANDS = frozenset({
     "adjrange", "aux", "beacon", "beeper", "board_name", "color", "dma", "feature", "gpspids", "led", "manufacturer_id",
@@ -205,7 +208,8 @@ def _read(path: Path, limit: int = MAX_TUNE_BYTES) -> bytes:
 def parse_cli(text: str, *, source: str) -> Tune:
     """Parse a Betaflight CLI ``diff`` or ``dump``.
 
-    A byte-order mark before the first line is skipped.
+    A byte-order mark before the first line is skipped. Lines end at CR, LF or CR LF, as the firmware's
+    CLI reads them (a form feed or U+2028 is a character of the line, and refused as such).
 
     Raises
     ------
@@ -219,8 +223,8 @@ def parse_cli(text: str, *, source: str) -> Tune:
     section, index = "master", 0
     active = {"profile": 0, "rateprofile": 0}
     lines: list[tuple[str, int, str, str, int]] = []
-    for number, raw in enumerate(text.removeprefix(_BOM).splitlines(), start=1):
-        line = raw.strip()
+    for number, raw in enumerate(_LINE_END.split(text.removeprefix(_BOM)), start=1):
+        line = raw.strip(" ")
         where = f"{source}: line {number}"
         if not line:
             continue
@@ -270,23 +274,44 @@ def parse_cli(text: str, *, source: str) -> Tune:
 def read_blackbox_headers(data: bytes) -> list[dict[str, str]]:
     """The header of every log in a blackbox file: ``{name: raw value}`` of its ``H name:value`` lines.
 
-    A log starts at ``H Product:``; its header ends at the first line not starting with ``H ``.
+    A log starts at ``H Product:``; its header ends at the first line not starting with ``H ``. A line
+    ends at LF (a CR before it is dropped); a name and a value lose their surrounding spaces, nothing
+    else (a TAB or DEL stays, for :func:`tune_from_blackbox_header` to refuse).
     """
-    headers = []
+    return [_header_at(data, start) for start in _log_starts(data)]
+
+
+def _log_starts(data: bytes) -> list[int]:
+    """Where each log's header starts: an ``H Product:`` after the previous header (the log's frames between)."""
+    starts = []
     start = data.find(b"H Product:")
     while start >= 0:
-        header: dict[str, str] = {}
-        position = start
-        while data.startswith(b"H ", position):
-            end = data.find(b"\n", position)
-            end = len(data) if end < 0 else end
-            name, sep, value = data[position + 2:end].decode("latin-1").partition(":")
-            if sep:
-                header.setdefault(name.strip(), value.strip())
-            position = end + 1
-        headers.append(header)
-        start = data.find(b"H Product:", position)
-    return headers
+        starts.append(start)
+        start = data.find(b"H Product:", _header_lines(data, start)[-1])
+    return starts
+
+
+def _header_lines(data: bytes, start: int) -> list[int]:
+    """Where each line of the header at ``start`` begins, and where the header ends (the last entry)."""
+    lines = [start]
+    while data.startswith(b"H ", lines[-1]):
+        if len(lines) > MAX_HEADER_LINES:
+            raise TuneError(f"the header at byte {start} has more than {MAX_HEADER_LINES} lines (a Betaflight "
+                            "log's has 130-250): not a Betaflight blackbox log")
+        end = data.find(b"\n", lines[-1])
+        lines.append(len(data) + 1 if end < 0 else end + 1)
+    return lines
+
+
+def _header_at(data: bytes, start: int) -> dict[str, str]:
+    """The header that starts at ``start``: ``{name: value}`` of its ``H name:value`` lines (the first of a name)."""
+    header: dict[str, str] = {}
+    lines = _header_lines(data, start)
+    for begin, end in zip(lines, lines[1:], strict=False):
+        name, sep, value = data[begin + 2:end].rstrip(b"\n").removesuffix(b"\r").decode("latin-1").partition(":")
+        if sep:
+            header.setdefault(name.strip(" "), value.strip(" "))
+    return header
 
 
 # Header fields that are several CLI settings (blackbox/blackbox.c writes them as "a,b,c").
@@ -380,7 +405,7 @@ def tune_from_blackbox_header(header: Mapping[str, str], *, source: str) -> Tune
     """
     if not isinstance(header, Mapping):
         raise TuneError(f"{source}: expected a mapping of header names to values, got {type(header).__name__}")
-    firmware = _escaped(str(header.get("Firmware revision", "")).strip())
+    firmware = _escaped(str(header.get("Firmware revision", "")).strip(" "))
     if not firmware:
         raise TuneError(f"{source}: the header has no 'Firmware revision' (is it a Betaflight blackbox log?)")
     if not firmware.lower().startswith("betaflight"):
@@ -389,7 +414,7 @@ def tune_from_blackbox_header(header: Mapping[str, str], *, source: str) -> Tune
     lines: list[tuple[str, int, str, str, int]] = []
     fields: list[str] = []
     for number, (raw_name, raw) in enumerate(header.items(), start=1):
-        name, value = str(raw_name), str(raw).strip()
+        name, value = str(raw_name), str(raw).strip(" ")
         fields.append(_escaped(name))
         where = f"{source}: header field {fields[-1]}:{shown(value)}"
         cli = _RENAME.get(name, name)
@@ -429,22 +454,31 @@ def load_tune(path: str | Path, *, log_index: int | None = None) -> Tune:
     Raises
     ------
     TuneError
-        The file cannot be read, is neither form, has no log ``log_index``, or has a bad line.
+        The file cannot be read, is neither form, has no log ``log_index``, has a bad line, or is
+        larger than a Betaflight diff or dump (:data:`MAX_CLI_BYTES`) or header (:data:`MAX_HEADER_LINES`).
     """
     path = Path(path)
     data = _read(path).removeprefix(_BOM.encode())
     if data.lstrip().startswith(b"H Product:") or b"\nH Product:" in data[:4096]:
-        headers = read_blackbox_headers(data)
+        try:
+            starts = _log_starts(data)  # only the log asked for is read whole
+        except TuneError as error:
+            raise TuneError(f"{path}: {error}") from None
         log_index = 1 if log_index is None else log_index
-        if isinstance(log_index, bool) or not isinstance(log_index, int) or not 1 <= log_index <= len(headers):
-            raise TuneError(f"{path}: --tune-log-index {log_index!r}: the file holds {len(headers)} log(s), "
-                            f"allowed 1..{len(headers)}")
-        return tune_from_blackbox_header(headers[log_index - 1], source=f"{path}#log{log_index}")
+        if isinstance(log_index, bool) or not isinstance(log_index, int) or not 1 <= log_index <= len(starts):
+            raise TuneError(f"{path}: --tune-log-index {log_index!r}: the file holds {len(starts)} log(s), "
+                            f"allowed 1..{len(starts)}")
+        source = f"{path}#log{log_index}"
+        return tune_from_blackbox_header(_header_at(data, starts[log_index - 1]), source=source)
+    if len(data) > MAX_CLI_BYTES:
+        raise TuneError(f"{path}: {len(data)} bytes, larger than any Betaflight CLI diff or dump (at most "
+                        f"{MAX_CLI_BYTES // 1024} KiB) and no blackbox log (no 'H Product:' header)")
     try:
         text = data.decode("utf-8")
-    except UnicodeDecodeError:
-        raise TuneError(f"{path}: neither a Betaflight CLI diff/dump (text) nor a blackbox log (no 'H Product:' "
-                        "header)") from None
+    except UnicodeDecodeError as error:
+        line = data[:error.start].count(b"\n") + 1
+        raise TuneError(f"{path}: line {line}: byte 0x{data[error.start]:02x} is not UTF-8 text: neither a Betaflight "
+                        "CLI diff/dump nor a blackbox log (no 'H Product:' header)") from None
     if log_index is not None:
         raise TuneError(f"{path}: --tune-log-index {log_index}: the file is a CLI diff/dump, not a blackbox log")
     return parse_cli(text, source=str(path))

@@ -70,8 +70,9 @@ def _is_folder(cmd: Any, opt: Any) -> bool:
 
 SMALL = ["--flips", "1", "--dims", "2", "--max-rate-deg-s", "800"]
 # A cheap valid command line of each command ({program}: a valid program file; {tune}: a valid Betaflight diff;
-# {new}: a file or folder that does not exist yet). Positionals by dest, then options; the option under test replaces its own entry. A command with
-# no entry here is reported as not covered (the log commands need a real flight log).
+# {new}: a file or folder that does not exist yet). Positionals by dest, then options; the option under test
+# replaces its own entry. A command with no entry here is reported as not covered (the log commands need a real
+# flight log).
 BASES: dict[str, tuple[dict[str, str], list[str]]] = {
     "simulate": ({"program": "{program}"}, []),
     "fly": ({"program": "{program}"}, ["--plant", "nominal", "--trials", "1"]),

@@ -99,7 +99,7 @@ class Expect(StrEnum):
     ANY = "any"  # any clean outcome; on exit 0 the oracle
 
 
-@dataclasses.dataclass
+@dataclasses.dataclass(frozen=True)
 class TuneCase:
     klass: str
     data: bytes

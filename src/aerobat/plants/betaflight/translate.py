@@ -334,7 +334,9 @@ def translate(tune: Tune, table: SitlTable | None = None) -> TuneReport:
     Raises
     ------
     TuneError
-        A setting no Betaflight version aerobat knows has (the message names the file and line).
+        A setting no Betaflight version aerobat knows has, or a value that is no value of its setting's
+        type as the firmware reads it (the message names the file, the line or header field, the
+        setting and what it allows).
     """
     builder = _Builder(tune, table or load_table())
     settings = builder.d_terms(tune.active_settings())

@@ -277,6 +277,11 @@ def read_blackbox_headers(data: bytes) -> list[dict[str, str]]:
     A log starts at ``H Product:``; its header ends at the first line not starting with ``H ``. A line
     ends at LF (a CR before it is dropped); a name and a value lose their surrounding spaces, nothing
     else (a TAB or DEL stays, for :func:`tune_from_blackbox_header` to refuse).
+
+    Raises
+    ------
+    TuneError
+        A header of more than :data:`MAX_HEADER_LINES` lines (no Betaflight log's).
     """
     return [_header_at(data, start) for start in _log_starts(data)]
 

@@ -69,9 +69,10 @@ def _is_folder(cmd: Any, opt: Any) -> bool:
 
 
 SMALL = ["--flips", "1", "--dims", "2", "--max-rate-deg-s", "800"]
-# A cheap valid command line of each command ({program}: a valid program file; {new}: a file or folder that does
-# not exist yet). Positionals by dest, then options; the option under test replaces its own entry. A command with
-# no entry here is reported as not covered (the log commands need a real flight log).
+# A cheap valid command line of each command ({program}: a valid program file; {tune}: a valid Betaflight diff;
+# {new}: a file or folder that does not exist yet). Positionals by dest, then options; the option under test
+# replaces its own entry. A command with no entry here is reported as not covered (the log commands need a real
+# flight log).
 BASES: dict[str, tuple[dict[str, str], list[str]]] = {
     "simulate": ({"program": "{program}"}, []),
     "fly": ({"program": "{program}"}, ["--plant", "nominal", "--trials", "1"]),
@@ -95,6 +96,7 @@ BASES: dict[str, tuple[dict[str, str], list[str]]] = {
     "compare": ({"a": "1", "b": "1"}, []), "delete": ({"session": "1"}, []),  # no --yes: refused, nothing deleted
     "browse": ({}, ["--export", "{new}"]),  # static pages: served pages would run until the budget stops them
     "setup": ({}, ["--check"]),  # only looks
+    "tune": ({"file": "{tune}"}, []),  # reads and translates a tune; nothing flies
 }
 
 
@@ -130,6 +132,9 @@ def build_cases(cmds: list[Any], fx: Any, root: Path, uncovered: list[str]) -> l
     if not fifo.exists():
         os.mkfifo(fifo)
     make_fifo = f"mkfifo {shlex.quote(str(fifo))}"
+    tune = fifo.with_name("tune.txt")
+    tune.write_text("# Betaflight / STM32F7X2 (S7X2) 4.3.1 Jul 13 2022 / 03:32:52 (8d4f005) MSP API: 1.44\n"
+                    "set p_roll = 50\n")
     store = str(fx.store)
     cases: list[Case] = []
     counter = 0
@@ -142,6 +147,8 @@ def build_cases(cmds: list[Any], fx: Any, root: Path, uncovered: list[str]) -> l
     def fill(word: str) -> str:
         if "{program}" in word:
             return word.replace("{program}", str(fx.dir / "single_flip.toml"))
+        if "{tune}" in word:
+            return word.replace("{tune}", str(tune))
         if "{new}" in word:
             nonlocal counter
             counter += 1

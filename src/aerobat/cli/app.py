@@ -84,10 +84,11 @@ def _commands(only: str | None = None) -> list:
         setup,
         simulate,
         study,
+        tune,
         vehicles,
     )
 
-    return [simulate, design, learn, sessions, browse, benchmark, study, identify, vehicles, log, setup]
+    return [simulate, design, learn, sessions, browse, benchmark, study, identify, vehicles, log, tune, setup]
 
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:

@@ -411,6 +411,25 @@ def plant_choice_from_args(args: argparse.Namespace) -> Any:
     return with_tune_from_args(args, choice)
 
 
+def read_tune(path: str | Path, log_index: int | None = None) -> tuple[Any, dict[str, float], str]:
+    """What the tune in ``path`` becomes on the SITL, checked as the firmware would be configured; nothing runs.
+
+    Returns the :class:`~aerobat.plants.betaflight.translate.TuneReport`, the tune's full-stick rates
+    [deg/s] per axis and its ``rates_type``. A tune that cannot be read, names an unknown setting or
+    holds a value that is no value of its setting is bad input (:class:`~aerobat.errors.ConfigError`).
+    """
+    from aerobat.plants.betaflight.configure import check_commands
+    from aerobat.plants.betaflight.firmware_settings import load_settings
+    from aerobat.plants.betaflight.translate import translate
+    from aerobat.plants.betaflight.tune import load_tune
+
+    report = translate(load_tune(path, log_index=log_index))  # unknown settings raise here, naming the file and line
+    tuned = load_settings().with_tune(report)
+    check_commands(tuned)  # the last check before the firmware's CLI, as configuring it runs it
+    rates = {axis: tuned.rate_deg_s(axis, 1.0) for axis in ("roll", "pitch", "yaw")}
+    return report, rates, tuned.value("rates_type")
+
+
 def with_tune_from_args(args: argparse.Namespace, choice: Any) -> Any:
     """``choice`` with ``--tune FILE`` (``--tune-log-index N``) applied; prints what the tune became (stderr).
 
@@ -427,18 +446,13 @@ def with_tune_from_args(args: argparse.Namespace, choice: Any) -> Any:
     import dataclasses
 
     from aerobat.plants import PlantChoice
-    from aerobat.plants.betaflight.translate import translate
-    from aerobat.plants.betaflight.tune import load_tune
 
-    tune = load_tune(tune_path, log_index=log_index)
-    report = translate(tune)  # unknown settings raise here, naming the file and line
-    from aerobat.plants.betaflight.firmware_settings import load_settings
-
-    tuned = load_settings().with_tune(report)
-    rates = ", ".join(f"{axis} {tuned.rate_deg_s(axis, 1.0):.0f}" for axis in ("roll", "pitch", "yaw"))
-    print(f"{report.text()}\n  the tune's full-stick rates [deg/s] ({tuned.value('rates_type')}): {rates}; the pilot's "
+    report, rates, rates_type = read_tune(tune_path, log_index)
+    shown = ", ".join(f"{axis} {rate:.0f}" for axis, rate in rates.items())
+    print(f"{report.text()}\n  the tune's full-stick rates [deg/s] ({rates_type}): {shown}; the pilot's "
           "sticks invert its rate and throttle curves", file=sys.stderr)
-    return PlantChoice(choice.kind, dataclasses.replace(choice.settings, tune=tune), choice.seed, choice.feedback)
+    return PlantChoice(choice.kind, dataclasses.replace(choice.settings, tune=report.tune), choice.seed,
+                       choice.feedback)
 
 
 def rule_choice_from_args(args: argparse.Namespace) -> Any:

@@ -2,6 +2,7 @@ from __future__ import annotations
 
 import pytest
 
+from aerobat.errors import ConfigError
 from aerobat.plants.betaflight.errors import ConfigureFailed, LinkClosed, LinkTimeout
 from aerobat.plants.betaflight.firmware_cli import CliClient
 
@@ -13,8 +14,10 @@ class FakeCli:
         self.answers = answers
         self.out = b""
         self.closed = False
+        self.sent: list[bytes] = []
 
     def write(self, data: bytes) -> None:
+        self.sent.append(data)
         text = data.decode()
         if text == "#":
             self.out += b"\r\nEntering CLI Mode, type 'exit' to reboot, or 'help'\r\n\r\n# "
@@ -62,3 +65,22 @@ def test_no_prompt_times_out() -> None:
 
     with pytest.raises(LinkTimeout):
         CliClient(Silent({}), timeout_s=0.05).enter()
+
+
+@pytest.mark.parametrize("line", [
+    "set profile_name = " + "\x7f" * 19 + "set p_roll = 123",  # DEL erases the character before it (issue 45 E3)
+    "set profile_name = a\rset p_roll = 123", "set profile_name = a\nsave", "set craft_name = a\x00b",
+    "set craft_name = a\tb", "set craft_name = \x04", "set craft_name = été", "set craft_name = " + "A" * 300,
+    "set profile_name = a#b", "set profile_name = a?b", "", "   ",
+])
+def test_a_line_the_firmware_would_not_run_as_written_is_never_sent(line: str) -> None:
+    """Defence in depth: whatever the caller checked, the client sends only what the CLI runs as written."""
+    fake = FakeCli({})
+    cli = CliClient(fake, quiet_s=0.0)
+    cli.enter()
+    sent = len(fake.sent)
+    with pytest.raises(ConfigError, match="not sent") as caught:
+        cli.command(line)
+    assert isinstance(caught.value, ValueError) and str(caught.value).isprintable() and str(caught.value).isascii()
+    assert fake.sent[sent:] == []
+    assert cli.command("set craft_name = " + "A" * 16 + " ") == ""  # printable, 255 characters at most: sent

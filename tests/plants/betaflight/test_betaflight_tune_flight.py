@@ -21,6 +21,7 @@ from aerobat.quadrotor.vehicle import fpv5
 
 DIFF = Path("/work/shared/data/betaflight-configs/tii-racing-kakuteh7-4.3.1-diff.txt")
 FPV = fpv5()
+HOVER = Path(__file__).resolve().parents[3] / "src" / "aerobat" / "examples" / "hover.toml"
 
 
 def _flip(max_rate_deg_s: float) -> tuple[MultiFlip, object]:
@@ -84,6 +85,45 @@ def test_a_bad_tune_is_refused_before_anything_flies(tmp_path: Path, capsys: pyt
     assert main([*learn, "--plant", "betaflight", "--tune-log-index", "2"]) == 2  # a diff holds no logs
     assert "--tune-log-index" in capsys.readouterr().err
     assert not db.exists()  # nothing flown, nothing stored
+
+
+def test_a_crafted_header_never_reaches_the_firmware(firmware: tuple[Path, Path], tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 45 E3 end to end: 19 DELs in a header value erased ``set profile_name = `` on the firmware's line,
+    which then ran ``set p_roll = 123``. Now the header is bad input before any firmware starts, and the CLI
+    client refuses the line itself; written raw to the real firmware, the same bytes do set p_roll."""
+    import time
+
+    from aerobat.errors import ConfigError
+    from aerobat.plants.betaflight.sitl_table import load_table
+
+    binary, eeprom = firmware
+    payload = "\x7f" * 19 + "set p_roll = 123"
+    log = tmp_path / "crafted.bbl"
+    log.write_bytes(b"H Product:Blackbox flight data recorder by Nicholas Sherlock\n"
+                    b"H Firmware revision:Betaflight 4.2.9 (e097f4ab7) STM32F7X2\n"
+                    b"H rollPID:47,85,38\nH profile_name:" + payload.encode() + b"\n")
+    started = time.time()
+    assert main(["fly", str(HOVER), "--plant", "betaflight", "--tune", str(log), "--trials", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{log}#log1: header field profile_name:" in err and "0x7f (DEL)" in err
+    configured = [path for path in binary.parent.glob("eeprom-*.cli.txt") if path.stat().st_mtime >= started]
+    assert not any("p_roll set to 123" in path.read_text(errors="replace") for path in configured)
+    line = "set profile_name = " + payload
+    default = load_table().get("p_roll").default
+    with SitlProcess(binary, eeprom) as sitl:
+        stepper = AtRestStepper(sitl)
+        try:
+            with sitl.open_link() as link:
+                link.cli.enter()
+                with pytest.raises(ConfigError, match=r"not sent: the control character 0x7f \(DEL\)"):
+                    link.cli.command(line)
+                assert f"p_roll = {default}" in link.cli.command("get p_roll")
+                link.transport.write(line.encode() + b"\n")  # what the client refuses to send
+                answers = link.cli.command("get p_roll") + link.cli.command("get p_roll")
+                assert re.search(r"p_roll (set to|=) 123\b", answers), answers
+        finally:
+            stepper.stop()
 
 
 @pytest.mark.skipif(not DIFF.is_file(), reason="the shared real data is absent")

@@ -9,6 +9,11 @@ task runs, applies ``settings.toml`` over TCP, sends ``save`` (the SITL writes
 ``eeprom.bin`` and exits), checks the saved values in a second process, and
 caches ``eeprom.bin``. Flying processes start from a copy of it and never open
 the CLI.
+
+Before a firmware starts, :func:`check_commands` holds every command against the
+CLI's line rules and every ``set`` value against the build's table
+(``sitl_settings.json``): whatever made the settings (``settings.toml``, a tune,
+code), nothing reaches the CLI that it would run otherwise or read back changed.
 """
 
 from __future__ import annotations
@@ -23,17 +28,22 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from aerobat.errors import ConfigError
+
 from .build import ensure_sitl
+from .cli_grammar import line_problem, shown
 from .errors import BetaflightError, ConfigureFailed, FirmwareNotResponding
 from .firmware_settings import BetaflightSettings, load_settings
 from .packets import SitlState
 from .sitl import SitlProcess
+from .sitl_table import Verdict, load_table
 
 __all__ = [
     "ARMING_DIAGNOSIS_TIMEOUT_S",
     "AT_REST_LEVEL",
     "AtRestStepper",
     "check_arms",
+    "check_commands",
     "ensure_eeprom",
     "step_at_rest",
 ]
@@ -108,6 +118,39 @@ def _apply(sitl: SitlProcess, settings: BetaflightSettings, say: Progress) -> st
 
 
 _GET_PATTERN = re.compile(r"^(\w+) = (.*?)\s*$", re.MULTILINE)
+_SET_COMMAND = re.compile(r"set ([a-z0-9_]+) = (.*)")
+
+
+def check_commands(settings: BetaflightSettings) -> None:
+    """Refuse the settings unless the CLI runs each of their commands as written and takes each ``set`` value.
+
+    Every command must be a line the firmware's CLI runs as written (:func:`.cli_grammar.line_problem`);
+    every ``set NAME = VALUE`` must name a setting of this SITL build and give it a value the build
+    accepts (:meth:`.sitl_table.SettingRange.checked`), written as the firmware prints it back (what
+    :func:`_verify` compares).
+
+    Raises
+    ------
+    ConfigError
+        Naming the settings (and the tune), the command and what is wrong; nothing is started.
+    """
+    table = load_table()
+    origin = str(settings.path) + (f" with the tune {settings.tune.tune.source}" if settings.tune is not None else "")
+    for command in settings.cli_commands():
+        problem = line_problem(command)
+        match = _SET_COMMAND.fullmatch(command) if problem is None else None
+        if match is not None:
+            name, value = match.groups()
+            entry = table.get(name)
+            checked = entry.checked(value) if entry is not None else None
+            if checked is None:
+                problem = f"{name} is not a setting of this SITL build ({table.firmware})"
+            elif checked.verdict is not Verdict.ACCEPTED:
+                problem = checked.reason
+            elif checked.value.upper() != value.upper():
+                problem = f"the firmware would read it back as {checked.value!r}; write that"
+        if problem is not None:
+            raise ConfigError(f"{origin}: {shown(command, 80)}: {problem}")
 
 
 def _verify(sitl: SitlProcess, settings: BetaflightSettings) -> None:
@@ -203,14 +246,18 @@ def ensure_eeprom(
 
     Raises
     ------
+    ConfigError
+        A command the CLI would not run as written, or a value the build does not take
+        (:func:`check_commands`); nothing was started.
     ConfigureFailed
         The CLI rejected a command, or the saved eeprom does not hold the values.
     FirmwareUnavailable, FirmwareNotResponding
         The firmware could not be built or started.
     """
     say = progress or (lambda _line: None)
-    binary = Path(binary) if binary is not None else ensure_sitl(cache_dir, progress=progress)
     settings = settings if settings is not None else load_settings(settings_path)
+    check_commands(settings)
+    binary = Path(binary) if binary is not None else ensure_sitl(cache_dir, progress=progress)
     eeprom = binary.parent / f"eeprom-{settings.sha256[:12]}.bin"
     if eeprom.is_file():
         return eeprom

@@ -2,7 +2,8 @@
 
 Every firmware or link problem is a :class:`~aerobat.errors.PlantError` (the
 plant cannot fly); a bad settings file is a :class:`~aerobat.errors.ConfigError`
-raised where the file is read::
+raised where the file is read, and so is a CLI line the firmware would not run as
+written (:class:`CliLineRefused`, never sent)::
 
     PlantError
     └── BetaflightError
@@ -14,14 +15,18 @@ raised where the file is read::
         │   └── MspError            the firmware answered an MSP request with an error
         └── FirmwareNotResponding   a lockstep step got no motor packet in time
             └── FirmwareExited      … because the firmware process is gone
+
+    ConfigError
+    └── CliLineRefused              a CLI line with a control or non-ASCII character, '#', '?', or too long
 """
 
 from __future__ import annotations
 
-from aerobat.errors import PlantError
+from aerobat.errors import ConfigError, PlantError
 
 __all__ = [
     "BetaflightError",
+    "CliLineRefused",
     "ConfigureFailed",
     "FirmwareExited",
     "FirmwareNotResponding",
@@ -39,6 +44,11 @@ class BetaflightError(PlantError):
 
 class FirmwareUnavailable(BetaflightError):
     """The SITL firmware cannot be obtained or built; the message says why and what to do."""
+
+
+class CliLineRefused(ConfigError):
+    """A line :class:`~.firmware_cli.CliClient` does not send: the firmware's CLI would not run it as written
+    (:func:`~.cli_grammar.line_problem`). A :class:`ValueError`, so a caller's bad argument reads as one."""
 
 
 class ConfigureFailed(BetaflightError):

@@ -4,6 +4,12 @@ The CLI prompt is ``"\\r\\n# "`` (``cliPrompt`` in cli/cli.c); errors are
 printed as ``###ERROR IN <command>: <message>###``. The firmware echoes what
 it receives.
 
+A command is sent only if the firmware runs it exactly as written
+(:func:`.cli_grammar.line_problem`): one line of printable ASCII without ``#``
+or ``?``, at most 255 characters. Anything else (a DEL erases the character
+before it in the interactive CLI, a CR ends the line) is refused with
+:class:`~.errors.CliLineRefused` before a byte leaves.
+
 Entering the CLI sets the CLI arming-disable flag for the life of the
 process, even after ``exit noreboot``: a flying process must never open it.
 """
@@ -12,7 +18,8 @@ from __future__ import annotations
 
 import time
 
-from .errors import ConfigureFailed, LinkClosed, LinkTimeout
+from .cli_grammar import line_problem, shown
+from .errors import CliLineRefused, ConfigureFailed, LinkClosed, LinkTimeout
 from .transport import Transport
 
 __all__ = ["CLI_PROMPT", "CliClient"]
@@ -76,11 +83,18 @@ class CliClient:
             Time to wait for the prompt (default: the client's).
         check : bool
             Raise :class:`ConfigureFailed` when the output reports an error.
+
+        Raises
+        ------
+        CliLineRefused
+            The firmware would not run ``line`` as written (a control or non-ASCII character, ``#``,
+            ``?``, more than 255 characters, or more than one line); nothing was sent.
         """
+        problem = line_problem(line)
+        if problem is not None:
+            raise CliLineRefused(f"CLI command {shown(line)} not sent: {problem}")
         if not self.active:
             raise RuntimeError("call enter() first")
-        if "\n" in line or "\r" in line:
-            raise ValueError("one command per call")
         self._transport.write(line.encode("ascii") + b"\n")
         output = self._read_until_prompt(self._timeout_s if timeout_s is None else timeout_s)
         output = output[: -len(CLI_PROMPT)]

@@ -44,7 +44,8 @@ def _sections(dump: str) -> tuple[dict[str, str], tuple[str, ...]]:
 
 def _parse_get(name: str, output: str) -> dict[str, Any]:
     """The block of ``get NAME`` output that belongs to ``name`` exactly."""
-    entry: dict[str, Any] = {"low": None, "high": None, "values": [], "default": "", "array": 0, "string": False}
+    entry: dict[str, Any] = {"low": None, "high": None, "values": [], "default": "", "array": 0, "string": False,
+                             "min_length": 0, "max_length": 0}
     lines = output.replace("\r", "").split("\n")
     mine = False
     for line in lines:
@@ -65,6 +66,7 @@ def _parse_get(name: str, output: str) -> dict[str, Any]:
             entry["array"] = int(line.split(":", 1)[1])
         elif line.startswith("String length:"):
             entry["string"] = True
+            entry["min_length"], entry["max_length"] = (int(n) for n in re.findall(r"\d+", line)[:2])
         elif line.startswith("Default value:"):
             entry["default"] = line.split(":", 1)[1].strip()
     return entry

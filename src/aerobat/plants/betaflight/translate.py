@@ -22,15 +22,21 @@ config/simplified_tuning.c), so the stored PIDs are what the quad flew; aerobat 
 ``simplified_tuning apply``.
 
 A name that is neither a 4.6 setting nor in the rename table below is an error naming the line
-(:class:`~.tune.TuneError`): a typo must not be flown as the default.
+(:class:`~.tune.TuneError`): a typo must not be flown as the default. So is a value that is not one
+of its setting's type as the firmware's CLI reads it (``1e2``, ``45.9``, ``4_5`` or ``abc`` for an
+integer: :class:`~.sitl_table.Verdict` ``MALFORMED``), whatever the version that wrote it; a value
+of the right type that 4.6 does not take (out of range, a lookup name it does not have) is refused.
+Every value applied is written as the firmware prints it back (``+045`` → ``45``).
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
+from .cli_grammar import parse_integer, shown
 from .firmware_settings import PINNED
-from .sitl_table import SitlTable, load_table
+from .sitl_table import SitlTable, Verdict, load_table
 from .tune import Tune, TuneError, TuneKind
 
 __all__ = ["PINNED", "TuneReport", "translate"]
@@ -124,6 +130,7 @@ _MEANING_CHANGED: dict[str, tuple[tuple[int, int], str]] = {
 _D_DEFAULTS = {(4, 2): {"roll": (35, 23), "pitch": (38, 25), "yaw": (0, 0)},
                (4, 3): {"roll": (40, 30), "pitch": (46, 34), "yaw": (0, 0)}}
 _FEATURES_APPLIED = frozenset({"ANTI_GRAVITY"})
+_FEATURE = re.compile(r"(-?)([A-Za-z0-9_]+)")
 
 
 @dataclass(frozen=True)
@@ -152,6 +159,22 @@ class TuneReport:
                 out[name] = value
         return out
 
+    def to_table(self) -> dict[str, object]:
+        """The report as JSON-ready data: the tune's origin, each list as rows with named fields, the commands."""
+        t = self.tune
+        return {
+            "source": t.source, "firmware": t.firmware, "version": t.version_text, "kind": t.kind.value,
+            "active_profile": t.active_profile, "active_rateprofile": t.active_rateprofile,
+            "applied": [{"name": n, "value": v, "line": line, "where": t.where(line)} for n, v, line in self.applied],
+            "translated": [{"from": o, "from_value": ov, "name": n, "value": nv, "line": line, "where": t.where(line),
+                            "why": why} for o, ov, n, nv, line, why in self.translated],
+            "refused": [{"name": n, "value": v, "line": line, "where": t.where(line), "why": why}
+                        for n, v, line, why in self.refused],
+            "pinned": [{"name": n, "value": v, "why": why} for n, v, why in self.pinned],
+            "notes": list(self.notes),
+            "commands": list(self.commands),
+        }
+
     def text(self) -> str:
         """The report as people read it (one line per setting)."""
         t = self.tune
@@ -162,10 +185,10 @@ class TuneReport:
                 f"profile {t.active_profile}, rate profile {t.active_rateprofile}: {len(self.applied)} applied, "
                 f"{len(self.translated)} translated, {len(refused)} refused, {len(self.pinned)} pinned"
                 + (f" ({len(header)} log header lines are no setting)" if header else "")]
-        rows = [f"  applied     {n} = {v}  (line {line})" for n, v, line in self.applied]
-        rows += [f"  translated  {o} = {ov} -> {n} = {nv}  (line {line}: {why})"
+        rows = [f"  applied     {n} = {v}  ({t.where(line)})" for n, v, line in self.applied]
+        rows += [f"  translated  {o} = {ov} -> {n} = {nv}  ({t.where(line)}: {why})"
                  for o, ov, n, nv, line, why in self.translated]
-        rows += [f"  refused     {n} = {v}  (line {line}: {why})" for n, v, line, why in refused]
+        rows += [f"  refused     {n} = {v}  ({t.where(line)}: {why})" for n, v, line, why in refused]
         if header:
             rows.append(f"  not applied {len(header)} log header lines that are no setting: {', '.join(header)}")
         rows += [f"  pinned      {n}{' = ' + v if v else ''}  ({why})" for n, v, why in self.pinned]
@@ -195,6 +218,10 @@ class _Builder:
         self.features: list[str] = []
         self.notes: list[str] = []
 
+    def malformed(self, name: str, value: str, line: int, reason: str) -> TuneError:
+        """Bad input: ``name = value`` at ``line`` is no value of its setting's type (the message says what is)."""
+        return TuneError(f"{self.tune.source}: {self.tune.where(line)}: {name} = {shown(value)}: {reason}")
+
     def put(self, old: str, old_value: str, name: str, value: str, line: int, why: str = "") -> None:
         entry = self.table.get(name)
         if entry is None:
@@ -202,11 +229,13 @@ class _Builder:
                       if name in self.table.all_names else "not a Betaflight 4.6 setting")
             self.refused.append((old, old_value, line, reason if old == name else f"{name}: {reason}"))
             return
-        problem = entry.check(value)
-        if problem is not None:
-            self.refused.append((old, old_value, line, f"4.6's {name} = {value}: {problem}"))
+        checked = entry.checked(value)
+        if checked.verdict is Verdict.MALFORMED:
+            raise self.malformed(old if old == name else f"{old} (4.6's {name})", value, line, checked.reason)
+        if checked.verdict is Verdict.REJECTED:
+            self.refused.append((old, old_value, line, f"4.6's {name} = {checked.value}: {checked.reason}"))
             return
-        value = value.strip().upper() if entry.values else value.strip()
+        value = checked.value
         self.sets[name] = value
         if old == name and not why:
             self.applied.append((name, value, line))
@@ -239,8 +268,8 @@ class _Builder:
             self.put(name, value, new, new_value, line, f"renamed in {since}")
             return
         if self.table.get(name) is None and name not in self.table.all_names:
-            raise TuneError(f"{self.tune.source}: line {line}: unknown setting {name!r} (not a Betaflight 4.6 "
-                            "setting, and not a 4.2-4.5 name aerobat translates)")
+            raise TuneError(f"{self.tune.source}: {self.tune.where(line)}: unknown setting {shown(name)} (not a "
+                            "Betaflight 4.6 setting, and not a 4.2-4.5 name aerobat translates)")
         self.put(name, value, name, value, line)
 
     def d_terms(self, settings: list[tuple[str, str, str, int]]) -> list[tuple[str, str, str, int]]:
@@ -258,8 +287,8 @@ class _Builder:
                 rest.append((section, name, value, line))
         defaults = _D_DEFAULTS[(4, 2) if _older(self.tune.version, (4, 3)) else (4, 3)]
         for axis, pair in pairs.items():
-            d_max = int(pair["max"][0]) if "max" in pair else defaults[axis][0]
-            d_min = int(pair["min"][0]) if "min" in pair else defaults[axis][1]
+            d_max = self.d_term(f"d_{axis}", *pair["max"]) if "max" in pair else defaults[axis][0]
+            d_min = self.d_term(f"d_min_{axis}", *pair["min"]) if "min" in pair else defaults[axis][1]
             line = min(entry[1] for entry in pair.values())
             base = d_min if 0 < d_min < d_max else d_max
             why = (f"before 4.6 d_{axis} = {d_max} was the maximum D and d_min_{axis} = {d_min} the base "
@@ -270,14 +299,24 @@ class _Builder:
             self.put(old, f"{d_max},{d_min}", f"d_max_{axis}", str(d_max), line, why)
         return rest
 
+    def d_term(self, name: str, value: str, line: int) -> int:
+        """The integer a pre-4.6 D term is, in any range (:meth:`put` refuses one 4.6 does not take)."""
+        number = parse_integer(value.strip(" "))
+        if number is None:
+            entry = self.table.get("d_roll")
+            raise self.malformed(name, value, line, "not an integer as the firmware reads one (an optional sign and "
+                                 f"decimal digits); {entry.allowed() if entry else 'allowed an integer'}")
+        return number
+
     def command(self, word: str, args: str, line: int) -> None:
         if word == "feature":
-            name = args.strip().lstrip("-").upper()
+            match = _FEATURE.fullmatch(args.strip())
+            name = match.group(2).upper() if match else args.strip().lstrip("-").upper()
             if name == "AIRMODE":
                 self.pinned.append(("feature AIRMODE", args, "flips need PID authority at zero throttle"))
-            elif name in _FEATURES_APPLIED and name in self.table.features:
-                self.features.append(f"feature {args.strip().upper()}")
-                self.applied.append((f"feature {name}", "off" if args.strip().startswith("-") else "on", line))
+            elif match and name in _FEATURES_APPLIED and name in self.table.features:
+                self.features.append(f"feature {match.group(1)}{name}")
+                self.applied.append((f"feature {name}", "off" if match.group(1) else "on", line))
             else:
                 self.refused.append((f"feature {name}", args, line, "hardware feature (receiver, telemetry, OSD, "
                                      "LED, GPS, ...) or not in the SITL"))
@@ -295,7 +334,9 @@ def translate(tune: Tune, table: SitlTable | None = None) -> TuneReport:
     Raises
     ------
     TuneError
-        A setting no Betaflight version aerobat knows has (the message names the file and line).
+        A setting no Betaflight version aerobat knows has, or a value that is no value of its setting's
+        type as the firmware reads it (the message names the file, the line or header field, the
+        setting and what it allows).
     """
     builder = _Builder(tune, table or load_table())
     settings = builder.d_terms(tune.active_settings())

@@ -10,13 +10,15 @@ and cached per session state; the 3D replay is the one ``aerobat replay`` writes
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
+import os
 import re
 import shutil
 import tempfile
 import threading
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +27,7 @@ import numpy as np
 from aerobat.browse.catalog import json_text, session_rows, study_rows
 from aerobat.core.learning import IterationStatus, SessionStatus
 from aerobat.errors import ConfigError, SessionNotFound
+from aerobat.fileio import check_output, check_output_folder, make_output_folder, write_output
 from aerobat.store import Store
 from aerobat.store.records import JobStatus
 
@@ -278,9 +281,13 @@ class Site:
         return save_figure(fig, path)
 
     # ---------------------------------------------------------- export
-    def export(self, folder: Path, *, compare: Sequence[int] = ()) -> list[Path]:
-        """Write every page, figure and default replay as static files under ``folder``; the files written."""
-        pages = ["index.html"]
+    def export_pages(self, compare: Sequence[int] = ()) -> list[str]:
+        """The relative paths :meth:`export` writes, ``index.html`` last.
+
+        ``compare.html`` and its figure are exported only for the sessions in ``compare``; a session's
+        figures are listed only if it has a measured trial (and, in a static site, is not a study's).
+        """
+        pages = []
         for row in session_rows(self.store):
             pages.append(f"session-{row.id}.html")
             if row.n_measured and self._draws(row.study_id):
@@ -289,27 +296,49 @@ class Site:
         for study in study_rows(self.store):
             pages.append(f"study-{study.id}.html")
             pages += [f"study-{study.id}/{name}" for name in self._study_figures(study.out_dir)]
-        written = []
-        for page in pages:
-            try:
-                _, data = self.get(page)
-            except NotFound:
-                continue  # a session without a figure: its page says so
-            written.append(_write(folder / page, data))
         if compare:
-            key = "-".join(map(str, compare))
-            written.append(_write(folder / "compare.html",
-                                  self.get("compare.html", {"ids": ",".join(map(str, compare))})[1]))
-            written.append(_write(folder / "compare" / f"{key}.png", self.get(f"compare/{key}.png")[1]))
+            pages += ["compare.html", f"compare/{'-'.join(map(str, compare))}.png"]
+        return [*pages, "index.html"]
+
+    def export(self, folder: Path, *, compare: Sequence[int] = (), stores: Iterable[Any] = ()) -> list[Path]:
+        """Write every page, figure and default replay as static files under ``folder``; the files written.
+
+        Every name is checked before the first page is drawn (:func:`aerobat.fileio.check_output`,
+        :func:`~aerobat.fileio.check_output_folder`): a name that is the store (this one, ``stores``
+        or the default one, through any link, or its ``-wal``/``-shm``), a dangling link, a folder, a
+        FIFO, a device or an SQLite file where a page goes, or a link or a file where a subfolder goes,
+        is refused with :class:`ConfigError` and nothing is written. Each file is then written by
+        :func:`aerobat.fileio.write_output`: into a temporary file that replaces the name, so a file
+        or a link already there is replaced (the file a link points to is untouched) and a write that
+        fails — a full disk is :class:`DiskFull` — leaves the old file whole and no part of the new one.
+        ``index.html`` is written last: a folder with a new index holds every page it links to.
+        """
+        protected = (self.store.path, *stores)
+        compare = [self._session(str(sid)) for sid in compare]
+        pages = self.export_pages(compare)
+        for sub in sorted({Path(page).parent for page in pages} - {Path(".")}):
+            check_output_folder(folder / sub, option="--export")
+        for page in pages:
+            if os.path.lexists(folder / page):
+                check_output(folder / page, option="--export", force=True, stores=protected, devices=False)
+        if not os.path.isdir(folder):  # the folder the caller named may be a link to one: that is followed
+            make_output_folder(folder, option="--export")
+        written: list[Path] = []
+        made: list[Path] = []  # subfolders this export created: removed again if a failure leaves them empty
+        try:
+            for page in pages:
+                try:
+                    query = {"ids": ",".join(map(str, compare))} if page == "compare.html" else None
+                    data = self.get(page, query)[1]
+                except NotFound:
+                    continue  # a session without a figure: its page says so
+                sub = (folder / page).parent
+                if sub != folder and not os.path.isdir(sub):
+                    made.append(make_output_folder(sub, option="--export"))
+                written.append(write_output(folder / page, data, option="--export", stores=protected))
+        except BaseException:
+            for sub in made:
+                with contextlib.suppress(OSError):
+                    sub.rmdir()  # only if empty
+            raise
         return written
-
-
-def _write(path: Path, data: bytes) -> Path:
-    from aerobat.errors import OutputError
-
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_bytes(data)
-    except OSError as exc:
-        raise OutputError(f"--export {path}: cannot write: {exc.strerror or exc}") from None
-    return path

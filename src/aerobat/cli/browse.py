@@ -36,12 +36,12 @@ def _cmd_browse(args: argparse.Namespace) -> int:
     if compare and args.export is None:
         raise ConfigError("--compare: only with --export (served pages compare any sessions you check)")
     if args.export is not None:
-        folder = output_dir(args.export)
         started = time.perf_counter()
         with Site(db, static=True, study_figures=args.study_figures) as site:
             for sid in compare:
                 site.store.resolve_session(sid)
-            written = site.export(folder, compare=compare)
+            folder = output_dir(args.export, "--export")
+            written = site.export(folder, compare=compare, stores=(db,))
         seconds = time.perf_counter() - started
         if args.json:
             print(json.dumps({"folder": str(folder), "files": len(written), "seconds": round(seconds, 3)}))

@@ -31,16 +31,31 @@ from aerobat.fileio import check_output, check_output_folder, make_output_folder
 from aerobat.store import Store
 from aerobat.store.records import JobStatus
 
-__all__ = ["NotFound", "Site"]
+__all__ = ["MAX_COMPARED", "MAX_ID", "NotFound", "Site"]
 
 
 class NotFound(SessionNotFound):
     """A page the store has nothing for (an unknown session, study, figure or path)."""
 
 
-_PAGE = re.compile(r"^(?:(index)\.html|session-(\d+)\.html|study-(\d+)\.html|compare\.html|api/session-(\d+)\.json"
-                   r"|session-(\d+)/(learning|side_views)\.png|session-(\d+)/replay-(\d+|default)\.html"
-                   r"|study-(\d+)/([\w.-]+\.png)|compare/(\d+(?:-\d+)+)\.png)$")
+MAX_ID = 2**63 - 1
+"""The largest id a store can hold (SQLite's largest integer): a page for a larger one does not exist."""
+MAX_COMPARED = 50
+"""The most sessions one comparison shows."""
+
+_N = "([0-9]+)"  # an id: ASCII digits only (a regular expression's \d also matches "١")
+_PAGE = re.compile(
+    rf"^(?:(index)\.html|session-{_N}\.html|study-{_N}\.html|compare\.html|api/session-{_N}\.json"
+    rf"|session-{_N}/(learning|side_views)\.png|session-{_N}/replay-([0-9]+|default)\.html"
+    rf"|study-{_N}/([\w.-]+\.png)|compare/([0-9]+(?:-[0-9]+)+)\.png)$")
+
+
+def _id(text: str, what: str) -> int:
+    """The id a page names (digits); :class:`NotFound` for one no store can hold (not parsed: a 5,000-digit
+    number would be refused by Python's integer conversion limit, and a 20-digit one by SQLite)."""
+    if len(text) > len(str(MAX_ID)) or int(text) > MAX_ID:
+        raise NotFound(f"no {what} {text[:20]}{'…' if len(text) > 20 else ''} (ids go up to {MAX_ID})")
+    return int(text)
 
 
 def _environment() -> Any:
@@ -77,8 +92,9 @@ class Site:
         self._env = _environment()
 
     def close(self) -> None:
-        """Close the store and remove the temporary figure cache."""
-        self.store.close()
+        """Close the store (after the page being drawn, if any) and remove the temporary figure cache."""
+        with self._lock:
+            self.store.close()
         if self._own_cache:
             shutil.rmtree(self.cache, ignore_errors=True)
 
@@ -108,35 +124,37 @@ class Site:
             if g[4]:
                 return "image/png", self.session_figure(self._session(g[4]), g[5]).read_bytes()
             if g[6]:
-                trial = None if g[7] == "default" else int(g[7])
+                trial = None if g[7] == "default" else _id(g[7], "trial")
                 return "text/html", self.replay(self._session(g[6]), trial).read_bytes()
             if g[8]:
                 return "image/png", self.study_figure(self._study(g[8]), g[9]).read_bytes()
             if g[10]:
-                return "image/png", self.compare_figure([int(v) for v in g[10].split("-")]).read_bytes()
+                return "image/png", self.compare_figure(self._ids(g[10], "compare figure ")).read_bytes()
             ids = (query or {}).get("ids", "")
-            return "text/html", self.compare_page(self._ids(ids)).encode()
+            return "text/html", self.compare_page(self._ids(ids, "compare: ids=")).encode()
 
     def _session(self, text: str) -> int:
         try:
-            return self.store.resolve_session(int(text))
+            return self.store.resolve_session(_id(text, "session"))
         except SessionNotFound as exc:
             raise NotFound(str(exc)) from None
 
     def _study(self, text: str) -> int:
         try:
-            return self.store.resolve_study(int(text))
+            return self.store.resolve_study(_id(text, "study"))
         except SessionNotFound as exc:
             raise NotFound(str(exc)) from None
 
-    def _ids(self, text: str) -> list[int]:
-        try:
-            ids = [int(v) for v in re.split(r"[,\s-]+", text.strip()) if v]
-        except ValueError:
-            raise ConfigError(f"compare: ids={text!r}: expected session ids separated by commas") from None
-        if len(ids) < 2:
-            raise ConfigError(f"compare: ids={text!r}: choose two or more sessions")
-        return [self._session(str(i)) for i in ids]
+    def _ids(self, text: str, where: str) -> list[int]:
+        """Two to :data:`MAX_COMPARED` distinct sessions, in the order given (repeats dropped)."""
+        words = [v for v in re.split(r"[,\s-]+", text.strip()) if v]
+        shown = repr(text if len(text) <= 60 else text[:60] + "…")
+        if not all(v.isascii() and v.isdigit() for v in words):
+            raise ConfigError(f"{where}{shown}: expected session ids separated by commas")
+        ids = list(dict.fromkeys(_id(v, "session") for v in words))
+        if not 2 <= len(ids) <= MAX_COMPARED:
+            raise ConfigError(f"{where}{shown}: choose two to {MAX_COMPARED} different sessions")
+        return [self._session(str(sid)) for sid in ids]
 
     def _render(self, template: str, **values: Any) -> str:
         return str(self._env.get_template(template).render(static=self.static, db=str(self.store.path), **values))

@@ -328,8 +328,9 @@ class Site:
         is refused with :class:`ConfigError` and nothing is written. Each file is then written by
         :func:`aerobat.fileio.write_output`: into a temporary file that replaces the name, so a file
         or a link already there is replaced (the file a link points to is untouched) and a write that
-        fails — a full disk is :class:`DiskFull` — leaves the old file whole and no part of the new one.
-        ``index.html`` is written last: a folder with a new index holds every page it links to.
+        fails — a full disk is :class:`~aerobat.errors.DiskFull` — leaves the old file whole and no
+        part of the new one. ``index.html`` is written last: a folder with a new index holds every
+        page it links to.
         """
         protected = (self.store.path, *stores)
         compare = [self._session(str(sid)) for sid in compare]

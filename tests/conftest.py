@@ -35,3 +35,28 @@ def _ctrl_c_raises_keyboard_interrupt():
     yield
     if previous is not None:  # None: a handler not installed from Python, which cannot be put back
         signal.signal(signal.SIGINT, previous)
+
+
+@pytest.fixture
+def small_tmpfs(tmp_path):
+    """``small_tmpfs(size="64k")``: a folder with a tmpfs of that size mounted on it (a disk that fills up).
+
+    Every tmpfs is unmounted after the test; the test is skipped, with the reason, where none can be
+    mounted (``tests/full_disk.py``). Fill one up with ``full_disk.fill_up``.
+    """
+    from full_disk import mount_tmpfs, unmount
+
+    mounted: list[Path] = []
+
+    def mount(size: str = "64k") -> Path:
+        folder = tmp_path / f"tmpfs-{len(mounted)}"
+        folder.mkdir()
+        reason = mount_tmpfs(folder, size)
+        if reason is not None:
+            pytest.skip(f"no full disk to test on: {reason}")
+        mounted.append(folder)
+        return folder
+
+    yield mount
+    for folder in reversed(mounted):
+        unmount(folder)

@@ -37,10 +37,12 @@ __all__ = [
     "STORE_SIBLINGS",
     "atomic_output",
     "check_output",
+    "check_output_folder",
     "claim_folder",
     "default_folder",
     "default_store_path",
     "folder_owner",
+    "make_output_folder",
     "read_input",
     "read_input_text",
     "store_sibling_suffix",
@@ -303,6 +305,45 @@ def write_output(path: Any, data: str | bytes, *, option: str | None = None, sto
 
 
 # ------------------------------------------------------------------ output folders
+
+
+def check_output_folder(path: Any, *, option: str | None = None) -> Path:
+    """Refuse, before any work, a folder a command will create and write files into; returns it as a Path.
+
+    For the folders a command makes *inside* the folder the user named (``--export DIR``'s
+    ``session-3/``): refused (:class:`ConfigError`) when it is a symbolic link — its files would
+    land wherever the link points, outside the folder the user named — or exists and is not a
+    folder. A missing folder is fine (:func:`make_output_folder` creates it).
+    """
+    path = _as_path(path, option)
+    name = _named(path, option)
+    try:
+        info = os.lstat(path)
+    except FileNotFoundError:
+        return path
+    except OSError as exc:
+        raise ConfigError(f"{name}: {exc.strerror or exc}") from None
+    if stat.S_ISLNK(info.st_mode):
+        raise ConfigError(f"{name}: a symbolic link (to {os.readlink(path)}); a folder of its own is written "
+                          f"there: remove the link or choose another folder")
+    if not stat.S_ISDIR(info.st_mode):
+        raise ConfigError(f"{name}: exists and is not a folder ({_kind(info.st_mode)}); a folder is written there")
+    return path
+
+
+def make_output_folder(path: Any, *, option: str | None = None) -> Path:
+    """Create the folder ``path`` (and its parents) after :func:`check_output_folder`; returns it.
+
+    :class:`DiskFull` when there is no room for it, :class:`OutputError` when it cannot be made.
+    """
+    path = check_output_folder(path, option=option)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:  # a file, or a dangling link, appeared meanwhile
+        raise ConfigError(f"{_named(path, option)}: exists and is not a folder") from None
+    except OSError as exc:
+        raise _write_error(path, option, exc) from None
+    return path
 
 
 def folder_owner(store: Any, kind: str, number: int, started: str = "") -> str:

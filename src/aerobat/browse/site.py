@@ -10,13 +10,15 @@ and cached per session state; the 3D replay is the one ``aerobat replay`` writes
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
+import os
 import re
 import shutil
 import tempfile
 import threading
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -25,19 +27,35 @@ import numpy as np
 from aerobat.browse.catalog import json_text, session_rows, study_rows
 from aerobat.core.learning import IterationStatus, SessionStatus
 from aerobat.errors import ConfigError, SessionNotFound
+from aerobat.fileio import check_output, check_output_folder, make_output_folder, write_output
 from aerobat.store import Store
 from aerobat.store.records import JobStatus
 
-__all__ = ["NotFound", "Site"]
+__all__ = ["MAX_COMPARED", "MAX_ID", "NotFound", "Site"]
 
 
 class NotFound(SessionNotFound):
     """A page the store has nothing for (an unknown session, study, figure or path)."""
 
 
-_PAGE = re.compile(r"^(?:(index)\.html|session-(\d+)\.html|study-(\d+)\.html|compare\.html|api/session-(\d+)\.json"
-                   r"|session-(\d+)/(learning|side_views)\.png|session-(\d+)/replay-(\d+|default)\.html"
-                   r"|study-(\d+)/([\w.-]+\.png)|compare/(\d+(?:-\d+)+)\.png)$")
+MAX_ID = 2**63 - 1
+"""The largest id a store can hold (SQLite's largest integer): a page for a larger one does not exist."""
+MAX_COMPARED = 50
+"""The most sessions one comparison shows."""
+
+_N = "([0-9]+)"  # an id: ASCII digits only (a regular expression's \d also matches "١")
+_PAGE = re.compile(
+    rf"^(?:(index)\.html|session-{_N}\.html|study-{_N}\.html|compare\.html|api/session-{_N}\.json"
+    rf"|session-{_N}/(learning|side_views)\.png|session-{_N}/replay-([0-9]+|default)\.html"
+    rf"|study-{_N}/([\w.-]+\.png)|compare/([0-9]+(?:-[0-9]+)+)\.png)$")
+
+
+def _id(text: str, what: str) -> int:
+    """The id a page names (digits); :class:`NotFound` for one no store can hold (not parsed: a 5,000-digit
+    number would be refused by Python's integer conversion limit, and a 20-digit one by SQLite)."""
+    if len(text) > len(str(MAX_ID)) or int(text) > MAX_ID:
+        raise NotFound(f"no {what} {text[:20]}{'…' if len(text) > 20 else ''} (ids go up to {MAX_ID})")
+    return int(text)
 
 
 def _environment() -> Any:
@@ -74,8 +92,9 @@ class Site:
         self._env = _environment()
 
     def close(self) -> None:
-        """Close the store and remove the temporary figure cache."""
-        self.store.close()
+        """Close the store (after the page being drawn, if any) and remove the temporary figure cache."""
+        with self._lock:
+            self.store.close()
         if self._own_cache:
             shutil.rmtree(self.cache, ignore_errors=True)
 
@@ -105,35 +124,37 @@ class Site:
             if g[4]:
                 return "image/png", self.session_figure(self._session(g[4]), g[5]).read_bytes()
             if g[6]:
-                trial = None if g[7] == "default" else int(g[7])
+                trial = None if g[7] == "default" else _id(g[7], "trial")
                 return "text/html", self.replay(self._session(g[6]), trial).read_bytes()
             if g[8]:
                 return "image/png", self.study_figure(self._study(g[8]), g[9]).read_bytes()
             if g[10]:
-                return "image/png", self.compare_figure([int(v) for v in g[10].split("-")]).read_bytes()
+                return "image/png", self.compare_figure(self._ids(g[10], "compare figure ")).read_bytes()
             ids = (query or {}).get("ids", "")
-            return "text/html", self.compare_page(self._ids(ids)).encode()
+            return "text/html", self.compare_page(self._ids(ids, "compare: ids=")).encode()
 
     def _session(self, text: str) -> int:
         try:
-            return self.store.resolve_session(int(text))
+            return self.store.resolve_session(_id(text, "session"))
         except SessionNotFound as exc:
             raise NotFound(str(exc)) from None
 
     def _study(self, text: str) -> int:
         try:
-            return self.store.resolve_study(int(text))
+            return self.store.resolve_study(_id(text, "study"))
         except SessionNotFound as exc:
             raise NotFound(str(exc)) from None
 
-    def _ids(self, text: str) -> list[int]:
-        try:
-            ids = [int(v) for v in re.split(r"[,\s-]+", text.strip()) if v]
-        except ValueError:
-            raise ConfigError(f"compare: ids={text!r}: expected session ids separated by commas") from None
-        if len(ids) < 2:
-            raise ConfigError(f"compare: ids={text!r}: choose two or more sessions")
-        return [self._session(str(i)) for i in ids]
+    def _ids(self, text: str, where: str) -> list[int]:
+        """Two to :data:`MAX_COMPARED` distinct sessions, in the order given (repeats dropped)."""
+        words = [v for v in re.split(r"[,\s-]+", text.strip()) if v]
+        shown = repr(text if len(text) <= 60 else text[:60] + "…")
+        if not all(v.isascii() and v.isdigit() for v in words):
+            raise ConfigError(f"{where}{shown}: expected session ids separated by commas")
+        ids = list(dict.fromkeys(_id(v, "session") for v in words))
+        if not 2 <= len(ids) <= MAX_COMPARED:
+            raise ConfigError(f"{where}{shown}: choose two to {MAX_COMPARED} different sessions")
+        return [self._session(str(sid)) for sid in ids]
 
     def _render(self, template: str, **values: Any) -> str:
         return str(self._env.get_template(template).render(static=self.static, db=str(self.store.path), **values))
@@ -278,9 +299,13 @@ class Site:
         return save_figure(fig, path)
 
     # ---------------------------------------------------------- export
-    def export(self, folder: Path, *, compare: Sequence[int] = ()) -> list[Path]:
-        """Write every page, figure and default replay as static files under ``folder``; the files written."""
-        pages = ["index.html"]
+    def export_pages(self, compare: Sequence[int] = ()) -> list[str]:
+        """The relative paths :meth:`export` writes, ``index.html`` last.
+
+        ``compare.html`` and its figure are exported only for the sessions in ``compare``; a session's
+        figures are listed only if it has a measured trial (and, in a static site, is not a study's).
+        """
+        pages = []
         for row in session_rows(self.store):
             pages.append(f"session-{row.id}.html")
             if row.n_measured and self._draws(row.study_id):
@@ -289,27 +314,50 @@ class Site:
         for study in study_rows(self.store):
             pages.append(f"study-{study.id}.html")
             pages += [f"study-{study.id}/{name}" for name in self._study_figures(study.out_dir)]
-        written = []
-        for page in pages:
-            try:
-                _, data = self.get(page)
-            except NotFound:
-                continue  # a session without a figure: its page says so
-            written.append(_write(folder / page, data))
         if compare:
-            key = "-".join(map(str, compare))
-            written.append(_write(folder / "compare.html",
-                                  self.get("compare.html", {"ids": ",".join(map(str, compare))})[1]))
-            written.append(_write(folder / "compare" / f"{key}.png", self.get(f"compare/{key}.png")[1]))
+            pages += ["compare.html", f"compare/{'-'.join(map(str, compare))}.png"]
+        return [*pages, "index.html"]
+
+    def export(self, folder: Path, *, compare: Sequence[int] = (), stores: Iterable[Any] = ()) -> list[Path]:
+        """Write every page, figure and default replay as static files under ``folder``; the files written.
+
+        Every name is checked before the first page is drawn (:func:`aerobat.fileio.check_output`,
+        :func:`~aerobat.fileio.check_output_folder`): a name that is the store (this one, ``stores``
+        or the default one, through any link, or its ``-wal``/``-shm``), a dangling link, a folder, a
+        FIFO, a device or an SQLite file where a page goes, or a link or a file where a subfolder goes,
+        is refused with :class:`ConfigError` and nothing is written. Each file is then written by
+        :func:`aerobat.fileio.write_output`: into a temporary file that replaces the name, so a file
+        or a link already there is replaced (the file a link points to is untouched) and a write that
+        fails — a full disk is :class:`~aerobat.errors.DiskFull` — leaves the old file whole and no
+        part of the new one. ``index.html`` is written last: a folder with a new index holds every
+        page it links to.
+        """
+        protected = (self.store.path, *stores)
+        compare = [self._session(str(sid)) for sid in compare]
+        pages = self.export_pages(compare)
+        for sub in sorted({Path(page).parent for page in pages} - {Path(".")}):
+            check_output_folder(folder / sub, option="--export")
+        for page in pages:
+            if os.path.lexists(folder / page):
+                check_output(folder / page, option="--export", force=True, stores=protected, devices=False)
+        if not os.path.isdir(folder):  # the folder the caller named may be a link to one: that is followed
+            make_output_folder(folder, option="--export")
+        written: list[Path] = []
+        made: list[Path] = []  # subfolders this export created: removed again if a failure leaves them empty
+        try:
+            for page in pages:
+                try:
+                    query = {"ids": ",".join(map(str, compare))} if page == "compare.html" else None
+                    data = self.get(page, query)[1]
+                except NotFound:
+                    continue  # a session without a figure: its page says so
+                sub = (folder / page).parent
+                if sub != folder and not os.path.isdir(sub):
+                    made.append(make_output_folder(sub, option="--export"))
+                written.append(write_output(folder / page, data, option="--export", stores=protected))
+        except BaseException:
+            for sub in made:
+                with contextlib.suppress(OSError):
+                    sub.rmdir()  # only if empty
+            raise
         return written
-
-
-def _write(path: Path, data: bytes) -> Path:
-    from aerobat.errors import OutputError
-
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_bytes(data)
-    except OSError as exc:
-        raise OutputError(f"--export {path}: cannot write: {exc.strerror or exc}") from None
-    return path

@@ -29,7 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.errors import MissingDependency, OutputError
+from aerobat.errors import MissingDependency
+from aerobat.fileio import atomic_output
 from aerobat.store import Store
 
 __all__ = ["GAP_S", "McapSummary", "write_session_mcap"]
@@ -95,7 +96,13 @@ def _json_safe(value: Any) -> Any:
 
 
 def write_session_mcap(store: Store, session_id: int, path: str | Path) -> McapSummary:
-    """Write session ``session_id``'s trials to an MCAP file at ``path`` (see the module's description)."""
+    """Write session ``session_id``'s trials to an MCAP file at ``path`` (see the module's description).
+
+    Written by :func:`aerobat.fileio.atomic_output`: into a temporary file next to ``path`` that then
+    replaces it, so a link at ``path`` is replaced (never written through), the store is never written
+    (:class:`~aerobat.errors.ConfigError`), and a write that fails leaves the old file whole (a full
+    disk is :class:`~aerobat.errors.DiskFull`).
+    """
     try:
         from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
         from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
@@ -115,11 +122,7 @@ def write_session_mcap(store: Store, session_id: int, path: str | Path) -> McapS
     start_ns = clock_ns = _epoch_ns(rec.started_at)
     first_ns: int | None = None
     last_ns = start_ns
-    try:
-        stream = path.open("wb")
-    except OSError as exc:
-        raise OutputError(f"--output {path}: cannot write: {exc.strerror or exc}") from None
-    with stream:
+    with atomic_output(path, option="--output", stores=(store.path,)) as stream:
         writer = Writer(stream)
         writer.start(profile="", library="aerobat")
         pose_schema = register_schema(writer, PoseInFrame)

@@ -331,7 +331,7 @@ def _apply_family_defaults(args: argparse.Namespace) -> None:
 
 
 def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | None = None,
-                      default: str = "arena", feedback: bool = True) -> None:
+                      default: str | None = "arena", feedback: bool = True) -> None:
     """``--plant`` and each plant's settings file, ``--seed``, and ``--feedback`` unless the command fixes it."""
     from aerobat.plants import PLANTS
 
@@ -349,12 +349,24 @@ def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | No
         p.add_argument("--tune-log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
                        help="which log of a blackbox file holding several gives the tune (default: 1)")
     p.add_argument("--seed", type=bounded_int(*SEEDS.bounds()), default=0, help="seed of the plant's random generator")
+    add_design_model_option(p)
     if not feedback:
         return
     p.add_argument("--feedback", choices=choices_of(FeedbackScheme), default=None,
                    help="what the vehicle's onboard loop mixes into the program: none is the paper's open "
                         "loop, attitude, tracking; see docs/feedback.md (default: the plant's best measured, "
                         "tracking on the arena and Betaflight, none on RotorPy)")
+
+
+def add_design_model_option(p: argparse.ArgumentParser) -> None:
+    """``--design-model``: the model the nominal design runs on."""
+    from aerobat.plants import DesignModel
+
+    p.add_argument("--design-model", choices=choices_of(DesignModel), default=None,
+                   help="the model the nominal design (p⁰, J, C) runs on: paper (its P rate loop and nominal "
+                        "motors) or firmware (the plant's flight controller as configured: rates, RC smoothing, "
+                        "PID with feedforward, filters, mixer, throttle path; docs/method.md) (default: firmware "
+                        "on betaflight and fc, paper elsewhere)")
 
 
 def add_db_option(p: argparse.ArgumentParser) -> None:

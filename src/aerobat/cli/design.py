@@ -8,29 +8,47 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.cli.common import HelpFormatter, add_maneuver_options, console, maneuver_from_args
-from aerobat.errors import DesignFailed
+from aerobat.cli.common import (
+    HelpFormatter,
+    add_maneuver_options,
+    add_plant_options,
+    console,
+    maneuver_from_args,
+    plant_choice_from_args,
+)
+from aerobat.errors import ConfigError, DesignFailed
 
 __all__ = ["register"]
 
 
 def _cmd_design(args: argparse.Namespace) -> int:
-    from aerobat.core.design import design
-    from aerobat.quadrotor.simulate import NominalModel
+    from aerobat.experiments.designing import nominal_design
     from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
 
     config = vehicle_from_name_or_file(args.vehicle)
     maneuver = maneuver_from_args(args, config)
+    if args.plant is None and (args.tune is not None or args.design_model == "firmware"):
+        raise ConfigError(f"{'--tune' if args.tune is not None else '--design-model firmware'}: name the plant "
+                          f"whose firmware flies the program (--plant betaflight or fc)")
+    plant = plant_choice_from_args(args) if args.plant is not None else None
     if args.program is not None:  # refused before the design: the store (D1), an existing file without --force
         from pathlib import Path
 
         from aerobat.cli.common import refuse_overwrite
 
         refuse_overwrite(Path(args.program), store_path=None, force=args.force, option="--program")
-    result = design(maneuver, NominalModel(config), correction=args.correction)
+    nominal = nominal_design(maneuver, config, plant=plant, design_model=args.design_model,
+                             correction=args.correction)
+    result = nominal.design
     if args.json:
-        print(json.dumps(result.to_json_dict()))
+        print(json.dumps({**result.to_json_dict(), "design_model": nominal.model.value,
+                          "design_model_description": nominal.description,
+                          "design_model_compute_s": nominal.compute_s}))
     else:
+        console().print(f"design model: {nominal.model.value} — {nominal.description}")
+        if nominal.paper is not None:
+            console().print(f"  started from the paper model's p⁰ ({nominal.paper.evaluations} simulations); both "
+                            f"stages {nominal.compute_s:.2f} s")
         _print_design(result)
     if not result.converged:
         raise DesignFailed(result.message, result)
@@ -53,7 +71,7 @@ def _write_program(maneuver: Any, result: Any, args: argparse.Namespace) -> None
     refuse_overwrite(path, store_path=None, force=args.force, option="--program")  # never the default store (D1)
     program = dataclasses.replace(maneuver.program(result.p_nominal), provenance=(
         f"aerobat {__version__}: aerobat {' '.join(args.argv)} (the nominal design p⁰ of {maneuver.name} on "
-        f"{args.vehicle})"))
+        f"{args.vehicle}{', for --plant ' + args.plant if args.plant else ''})"))
     try:
         save_program(program, path)
     except OSError as exc:
@@ -80,4 +98,5 @@ def register(sub: Any) -> None:
     p.add_argument("--program", metavar="FILE.toml", default=None,
                    help="write the nominal program p⁰ to FILE, for `aerobat fly` (default: none)")
     p.add_argument("--force", action="store_true", help="replace --program if it exists")
+    add_plant_options(p, default=None, feedback=False)
     p.set_defaults(func=_cmd_design)

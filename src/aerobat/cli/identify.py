@@ -88,6 +88,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
                 run = identify(plant, prior, store=store, flips=not args.no_flips,
                                max_angle_rad=math.radians(args.max_angle_deg), max_attempts=args.max_attempts,
                                max_flights=args.max_flights, options=options, on_flight=on_flight,
+                               design_model=args.design_model,
                                command=args.argv, name=args.name or out.stem)
             except IdentificationFailed as exc:
                 raise IdentificationFailed(f"{exc} (the flights are stored in {store.path}; fly the missing trials "

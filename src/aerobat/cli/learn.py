@@ -140,7 +140,8 @@ def _cmd_learn(args: argparse.Namespace) -> int:
             run = start_session(store, maneuver, model=config, plant=plant, rule=rule,
                                 iterations=args.iterations if args.iterations is not None else 30,
                                 correction=args.correction, start_params=start, warm_start_from=source,
-                                force=args.force, command=args.argv, plant_model=plant_config)
+                                force=args.force, command=args.argv, plant_model=plant_config,
+                                design_model=args.design_model)
         else:
             run = resume_session(store, args.resume, iterations=args.iterations, take_over=args.take_over)
             if args.maneuver is not None or args.maneuver_source is not None:
@@ -172,6 +173,8 @@ def _check_same_session(args: argparse.Namespace, store: Any, run: Any) -> None:
         differences.append(f"--vehicle {args.vehicle} differs from the stored vehicle")
     if rule_choice_from_args(args).to_table() != run.rule_choice.to_table():
         differences.append(f"--rule {args.rule} --gamma {args.gamma} (stored: {run.rule_choice.to_table()})")
+    if args.design_model is not None and args.design_model != run.design_model.value:
+        differences.append(f"--design-model {args.design_model} (stored: {run.design_model.value})")
     if args.correction != run.design.correction_kind:
         differences.append(f"--correction {args.correction} (stored: {run.design.correction_kind})")
     if differences:
@@ -203,6 +206,7 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
     say(f"session {sid} {verb} in {store.path}: {run.maneuver.name} on {run.plant_choice.kind} "
         f"(seed {run.plant_choice.seed}, feedback {run.plant_choice.feedback.scheme.value}, rule "
         f"{run.rule_choice.label}), {run.measured} of {plural(run.target, 'measured iteration')} done")
+    say(f"  designed on the {run.design_model.value} model: {run.design_model_description}")
     if not run.exact:
         say(f"  note: resumed trials will not repeat an uninterrupted run exactly: {run.inexact_because}")
 

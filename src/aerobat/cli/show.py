@@ -18,6 +18,8 @@ def print_stored_session(store: Any, session_id: int, *, iterations: bool, heade
     leaves out the per-iteration rows and keeps their summary."""
     from rich.table import Table
 
+    from aerobat.experiments.designing import design_model_of
+
     rec = store.session(session_id)
     mrec = store.maneuver(rec.maneuver_id)
     drec = store.design(rec.design_id)
@@ -35,6 +37,8 @@ def print_stored_session(store: Any, session_id: int, *, iterations: bool, heade
             f"  design:     {drec.status}, residual {drec.residual_norm:.3g}, correction {drec.correction_kind}, "
             f"condition number {drec.condition_number:.3g}",
         ]
+        kind, description = design_model_of(store.vehicle(drec.vehicle_id).config)
+        lines.append(f"  designed on the {kind.value} model: {description}")
         lines.append(f"  vehicle:    {rec.vehicle}" + ("" if rec.plant_vehicle in ("", rec.vehicle) else
                                                        f" (the plant flew {rec.plant_vehicle})"))
         if rec.study_id is not None:

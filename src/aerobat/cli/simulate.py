@@ -87,15 +87,17 @@ def _cmd_fly(args: argparse.Namespace) -> int:
         program = load_program(args.program)
     else:
         from aerobat.cli.common import maneuver_from_args
-        from aerobat.core.design import design
-        from aerobat.quadrotor.simulate import NominalModel
+        from aerobat.experiments.designing import nominal_design
 
         args.maneuver = None
         maneuver = maneuver_from_args(args, config)
-        nominal = design(maneuver, NominalModel(config))
-        if not nominal.converged:
-            raise DesignFailed(f"design failed, nothing to fly: {nominal.message}", nominal)
-        program = maneuver.program(nominal.p_nominal)
+        nominal = nominal_design(maneuver, config, plant=plant_choice_from_args(args), design_model=args.design_model)
+        if not nominal.design.converged:
+            raise DesignFailed(f"design failed on the {nominal.model.value} model, nothing to fly: "
+                               f"{nominal.design.message}", nominal.design)
+        if not args.json:
+            print(f"flying the nominal design p⁰ of the {nominal.model.value} model ({nominal.description})")
+        program = maneuver.program(nominal.design.p_nominal)
     folder = check_plot_files(args, ("trials.png", "trials.json"))
     choice = plant_choice_from_args(args)
     plant = choice.build(config)

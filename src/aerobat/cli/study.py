@@ -17,6 +17,7 @@ import math
 import os
 import shlex
 import signal
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -28,6 +29,7 @@ from aerobat.cli.common import (
     CommandFailed,
     HelpFormatter,
     add_db_option,
+    add_design_model_option,
     add_maneuver_options,
     add_plant_options,
     bounded_int,
@@ -207,17 +209,21 @@ def report_failures(outcome: Any) -> None:
                             f"{lines}{more}; run them again with --resume {outcome.study_id}")
 
 
-def _design(args: argparse.Namespace) -> tuple[Any, Any, Any]:
-    from aerobat.core.design import design
-    from aerobat.quadrotor.simulate import NominalModel
+def _design(args: argparse.Namespace, plant: Any) -> tuple[Any, Any, Any]:
+    """The study's nominal design for ``plant`` (a :class:`~aerobat.experiments.designing.NominalDesign`)."""
+    from aerobat.experiments.designing import nominal_design
     from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
 
     config = vehicle_from_name_or_file(args.vehicle)
     maneuver = maneuver_from_args(args, config)
-    result = design(maneuver, NominalModel(config), correction=args.correction)
-    if not result.converged:
-        raise DesignFailed(f"design failed: {result.message}", result)
-    return config, maneuver, result
+    nominal = nominal_design(maneuver, config, plant=plant, design_model=getattr(args, "design_model", None),
+                             correction=args.correction)
+    if not nominal.design.converged:
+        raise DesignFailed(f"design failed on the {nominal.model.value} model: {nominal.design.message}",
+                           nominal.design)
+    print(f"designed on the {nominal.model.value} model ({nominal.description}) in {nominal.compute_s:.1f} s",
+          file=sys.stderr, flush=True)
+    return config, maneuver, nominal
 
 
 # ----------------------------------------------------------------- robustness
@@ -238,7 +244,7 @@ def _cmd_robustness(args: argparse.Namespace) -> int:
             if args.plant == "betaflight" else None)
     if args.plant != "betaflight" and getattr(args, "tune", None) is not None:
         raise ConfigError(f"--tune applies only with --plant betaflight (got --plant {args.plant})")
-    config, maneuver, nominal = _design(args)
+    config, maneuver, nominal = _design(args, PlantChoice(args.plant, base))
     run = functools.partial(robustness_study, maneuver=maneuver, design=nominal, model=config,
                             vehicles=args.vehicles, iterations=args.iterations, seed=args.seed, ranges=ranges,
                             rule=rule, tolerance_m=args.tolerance_m, plant=args.plant, base=base,
@@ -323,7 +329,7 @@ def _cmd_rules(args: argparse.Namespace) -> int:
     plant = plant_choice_from_args(args)
     check_methods(methods)  # every method's package is there before a single job runs
     plant.spec.check_available()
-    config, maneuver, nominal = _design(args)
+    config, maneuver, nominal = _design(args, plant)
     run = functools.partial(rules_study, maneuver=maneuver, design=nominal, model=config, methods=methods,
                             seeds=args.seeds, trials=args.trials, plant=plant, tolerance_m=args.tolerance_m)
     study, out = run_cli_study(args, "rules", run, written=("rules.csv", "rules.png"), cores=plant.cores())
@@ -367,7 +373,7 @@ def _cmd_feedback(args: argparse.Namespace) -> int:
     plant.spec.check_available()
     for scheme in schemes:
         plant.spec.check_feedback(Feedback(scheme))
-    config, maneuver, nominal = _design(args)
+    config, maneuver, nominal = _design(args, plant)
     run = functools.partial(feedback_study, maneuver=maneuver, design=nominal, model=config, schemes=schemes,
                             scenarios=scenarios, seeds=args.seeds, trials=args.trials, plant=plant, rule=args.rule,
                             tolerance_m=args.tolerance_m)
@@ -448,6 +454,7 @@ def register(sub: Any) -> None:
                                                    "(default: aerobat's own settings)")
     rob.add_argument("--tune-log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
                      help="which log of a blackbox file gives the tune (default: 1)")
+    add_design_model_option(rob)
     add_execution_options(rob)
     rob.set_defaults(func=_stoppable(_cmd_robustness))
 

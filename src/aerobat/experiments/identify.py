@@ -40,8 +40,9 @@ from aerobat.core.design import Design, DesignStatus
 from aerobat.core.learning import Iteration, IterationStatus, SessionStatus, step_to
 from aerobat.core.plant import Plant, StatefulPlant, Trial, TrialStatus
 from aerobat.errors import ConfigError, IdentificationFailed, OutputError
+from aerobat.experiments.designing import resolve_design_model
 from aerobat.experiments.setup import plant_choice_from_record, plant_record_config
-from aerobat.plants import PlantChoice
+from aerobat.plants import DesignModel, PlantChoice
 from aerobat.quadrotor.feedback import OPEN_LOOP
 from aerobat.quadrotor.identification import (
     FitOptions,
@@ -158,7 +159,8 @@ def _sequence_design(sequence: IdentificationSequence) -> Design:
 def identify(plant: PlantChoice, prior: VehicleConfig, *, store: Store | None = None, flips: bool = True,
              max_angle_rad: float = 0.5, max_attempts: int = 2, max_flights: int = 12,
              options: FitOptions | None = None, on_flight: Callable[[Flight], None] | None = None,
-             command: Sequence[str] = (), name: str = "identified") -> IdentificationRun:
+             command: Sequence[str] = (), name: str = "identified",
+             design_model: DesignModel | str | None = None) -> IdentificationRun:
     """Fly the identification sequence built on ``prior`` on ``plant`` and fit the model.
 
     Parameters
@@ -176,6 +178,8 @@ def identify(plant: PlantChoice, prior: VehicleConfig, *, store: Store | None = 
     on_flight : called after each flight (progress output).
     command : the command line, kept with the session.
     name : the identified vehicle's name.
+    design_model : the model the slow flips are designed on (None: the plant's default, its firmware's
+        on ``betaflight`` and ``fc``; the fit's own model is the paper's either way).
 
     Raises
     ------
@@ -184,7 +188,11 @@ def identify(plant: PlantChoice, prior: VehicleConfig, *, store: Store | None = 
     """
     started = time.perf_counter()
     plant = dataclasses.replace(plant, feedback=OPEN_LOOP)
-    trials, notes = identification_sequence(prior, flips=flips, max_angle_rad=max_angle_rad)
+    flip_model = None
+    if resolve_design_model(plant, design_model) is DesignModel.FIRMWARE and flips:
+        assert plant.spec.firmware_model is not None
+        flip_model = plant.spec.firmware_model(prior, plant.settings)[0]  # the slow flips fly as designed
+    trials, notes = identification_sequence(prior, flips=flips, max_angle_rad=max_angle_rad, flip_model=flip_model)
     sequence = IdentificationSequence(prior, trials)
     flying = plant.build(prior)
     session_id = None

@@ -12,6 +12,7 @@ from aerobat.core.codec import Form, encode_value
 from aerobat.core.learning import IterationStatus, SessionStatus
 from aerobat.core.registry import from_spec
 from aerobat.errors import ConfigError
+from aerobat.experiments.designing import design_model_of
 from aerobat.plotting.files import save_figure
 from aerobat.plotting.learning import plot_learning
 from aerobat.plotting.vehicle import plot_side_views
@@ -62,6 +63,8 @@ def session_json(store: Store, session_id: int, *, trajectories: bool = False, f
         "error_names": list(mrec.error_names), "error_units": list(mrec.error_units),
         "error_kinds": list(mrec.error_kinds),
         "parameter_names": list(mrec.parameter_names), "parameter_units": list(mrec.parameter_units),
+        "design_model": dict(zip(("kind", "description"), design_model_of(store.vehicle(drec.vehicle_id).config),
+                                 strict=True)),
         "p_nominal": drec.p_nominal.tolist(), "start_params": rec.start_params.tolist(),
         "iterations": iterations, "final_params": rec.current_params.tolist(),
         "status": rec.display_state, "message": rec.message, "seed": rec.seed, "rule": rec.rule,

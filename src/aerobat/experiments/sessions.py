@@ -31,16 +31,16 @@ import numpy as np
 
 from aerobat.config import as_float_array, check_int, check_type, short_repr
 from aerobat.core.bounds import ITERATIONS
-from aerobat.core.design import Design, design
+from aerobat.core.design import Design
 from aerobat.core.learning import Iteration, IterationStatus, Learner, SessionStatus, learn
 from aerobat.core.maneuver import Maneuver, check_maneuver, position_indices
 from aerobat.core.plant import Plant, StatefulPlant, repeats_exactly
 from aerobat.core.registry import from_spec
 from aerobat.core.rules import RuleChoice
 from aerobat.errors import ConfigError, DesignFailed, StoreError
+from aerobat.experiments.designing import NominalDesign, design_model_of, design_vehicle_table, nominal_design
 from aerobat.experiments.setup import build_rule, plant_choice_from_record, plant_record_config
-from aerobat.plants import PlantChoice
-from aerobat.quadrotor.simulate import NominalModel
+from aerobat.plants import DesignModel, PlantChoice
 from aerobat.quadrotor.vehicle import VehicleConfig, vehicle_from_table, vehicle_table
 from aerobat.store import Store
 
@@ -102,6 +102,9 @@ class StoredSession:
     exact: bool = True
     inexact_because: str = ""
     warnings: list[str] = field(default_factory=list)
+    design_model: DesignModel = DesignModel.PAPER
+    """Which model designed it (the stored design is kept on resume)."""
+    design_model_description: str = ""
 
     @property
     def measured(self) -> int:
@@ -195,6 +198,7 @@ def start_session(
     command: Sequence[str] = (),
     study_id: int | None = None,
     plant_model: VehicleConfig | None = None,
+    design_model: DesignModel | str | None = None,
 ) -> StoredSession:
     """Create a stored session: design (unless given), build the rule and the plant, record them.
 
@@ -210,7 +214,10 @@ def start_session(
     plant : which plant flies (default: the arena, seed 0).
     rule : the update rule (default: the paper's).
     iterations : measured iterations to learn.
-    design_result : a design already computed for ``maneuver`` on ``model`` (else computed here).
+    design_result : a design already computed for ``maneuver`` on ``model`` (a
+        :class:`~aerobat.experiments.designing.NominalDesign` says which model it ran on; else computed here).
+    design_model : the model to design on when designing here: ``"paper"`` or ``"firmware"`` (None: the
+        plant's default, the firmware's on ``betaflight`` and ``fc``; :func:`~.designing.nominal_design`).
     correction : right inverse used for C when designing here (``tsvd``, ``inverse``, ``damped``).
     start_params : start from these parameters (e.g. another session's) instead of p⁰.
     warm_start_from : the session ``start_params`` came from.
@@ -230,15 +237,21 @@ def start_session(
     plant = PlantChoice("arena") if plant is None else check_type("plant", plant, PlantChoice, "a PlantChoice")
     rule = RuleChoice() if rule is None else check_type("rule", rule, RuleChoice, "a RuleChoice")
     if design_result is not None:
-        check_type("design_result", design_result, Design, "a Design (from aerobat.design()) or None")
+        check_type("design_result", design_result, (Design, NominalDesign),
+                   "a Design (from aerobat.design()), a NominalDesign or None")
     if isinstance(command, str) or not isinstance(command, Sequence) or not all(isinstance(a, str) for a in command):
         raise ConfigError(f"command: expected a list of strings, got {short_repr(command)}")
     if warm_start_from is not None:
         check_int("warm_start_from", warm_start_from, low=1)
     if study_id is not None:
         check_int("study_id", study_id, low=1)
-    result = design_result if design_result is not None else design(maneuver, NominalModel(model),
-                                                                     correction=correction)  # type: ignore[arg-type]
+    if design_result is None:
+        nominal: NominalDesign | None = nominal_design(maneuver, model, plant=plant, design_model=design_model,
+                                                       correction=correction)
+    else:
+        nominal = design_result if isinstance(design_result, NominalDesign) else None
+    result = nominal.design if nominal is not None else design_result
+    assert isinstance(result, Design)
     if not result.converged and not (force and np.all(np.isfinite(result.correction))):
         raise DesignFailed(f"design failed, nothing to learn: {result.message}"
                            + ("" if force else " (force=True / --force learns anyway)"), result)
@@ -249,11 +262,13 @@ def start_session(
              else as_float_array("start_params", start_params, (len(maneuver.parameters),)))
     learner = Learner(maneuver, result, rule=update_rule, params=start)
     session_id = store.create_session(
-        vehicle=vehicle_table(base), design_vehicle=vehicle_table(model), plant_kind=plant.kind,
+        vehicle=vehicle_table(base), design_vehicle=design_vehicle_table(model, nominal), plant_kind=plant.kind,
         plant_config=plant_record_config(plant), maneuver=maneuver, design=result, seed=plant.seed,
         rule=rule.to_table(), target_iterations=target, start_params=start, warm_start_from=warm_start_from,
         command=command, study_id=study_id)
-    return StoredSession(store, session_id, maneuver, result, model, plant, rule, flying, learner, target)
+    kind, description = design_model_of(design_vehicle_table(model, nominal))
+    return StoredSession(store, session_id, maneuver, result, model, plant, rule, flying, learner, target,
+                         design_model=kind, design_model_description=description)
 
 
 def resume_session(store: Store, ref: int | str, *, iterations: int | None = None,
@@ -285,7 +300,8 @@ def resume_session(store: Store, ref: int | str, *, iterations: int | None = Non
     maneuver = from_spec(mrec.spec, source=f"{where} maneuver")
     drec = store.design(rec.design_id)
     prec = store.plant(rec.plant_id)
-    model = vehicle_from_table(store.vehicle(drec.vehicle_id).config, source=f"{where} design vehicle")
+    design_table = store.vehicle(drec.vehicle_id).config
+    model = vehicle_from_table(design_table, source=f"{where} design vehicle")
     plant_vehicle = vehicle_from_table(store.vehicle(prec.vehicle_id).config, source=f"{where} plant vehicle")
     target = rec.target_iterations if iterations is None else _check_target(iterations)
     if target <= rec.n_measured and (rec.state is SessionStatus.COMPLETED or target < rec.n_measured):
@@ -327,8 +343,10 @@ def resume_session(store: Store, ref: int | str, *, iterations: int | None = Non
     store.claim_session(session_id, take_over=take_over)
     if target != rec.target_iterations:
         store.set_target(session_id, target)
+    kind, description = design_model_of(design_table)
     return StoredSession(store, session_id, maneuver, result, model, plant_choice, rule_choice, plant, learner,
-                         target, resumed=True, exact=exact, inexact_because=because)
+                         target, resumed=True, exact=exact, inexact_because=because, design_model=kind,
+                         design_model_description=description)
 
 
 KERNEL_ARITHMETIC_SINCE = "0.3.0"

@@ -26,7 +26,7 @@ from aerobat.config import dataclass_from_table, dataclass_to_table
 from aerobat.core.plant import Plant, StatefulPlant, Trial, TrialStatus
 from aerobat.plants.arena import Arena, ArenaParams, load_arena
 from aerobat.plants.nominal import NominalPlant
-from aerobat.plants.spec import PLANTS, PlantChoice, PlantSpec
+from aerobat.plants.spec import PLANTS, DesignModel, PlantChoice, PlantSpec
 from aerobat.quadrotor.feedback import DEFAULT_SCHEME, FeedbackScheme
 from aerobat.quadrotor.vehicle import VehicleConfig
 
@@ -37,6 +37,7 @@ __all__ = [
     "NominalPlant",
     "Plant",
     "PlantChoice",
+    "DesignModel",
     "PlantSpec",
     "StatefulPlant",
     "Trial",
@@ -80,6 +81,17 @@ def _betaflight(config: VehicleConfig, settings: Any, seed: int, feedback: Any =
     from aerobat.plants.betaflight.plant import BetaflightPlant
 
     return BetaflightPlant(config, settings, seed=seed, feedback=feedback)
+
+
+def _betaflight_firmware_model(config: VehicleConfig, settings: Any) -> tuple[Any, dict[str, Any]]:
+    from aerobat.plants.betaflight.design_model import firmware_design_model, model_table
+
+    model = firmware_design_model(config, settings)
+    return model, model_table(model)
+
+
+def _fc_firmware_model(config: VehicleConfig, settings: Any) -> tuple[Any, dict[str, Any]]:
+    return _betaflight_firmware_model(config, settings.betaflight)
 
 
 def _betaflight_cores(settings: Any) -> int:
@@ -176,11 +188,12 @@ PLANTS.register("betaflight", PlantSpec(
     "betaflight", "a 5-inch racer flown by Betaflight 4.6's own firmware (SITL in lockstep) in the arena",
     _betaflight, load_settings=_betaflight_load, settings_from_table=_betaflight_from_table,
     settings_to_table=_betaflight_to_table, default_settings=_betaflight_default, option="--betaflight",
-    feedback=_ALL_SCHEMES, default_feedback=DEFAULT_SCHEME, cores=_betaflight_cores))
+    feedback=_ALL_SCHEMES, default_feedback=DEFAULT_SCHEME, cores=_betaflight_cores,
+    firmware_model=_betaflight_firmware_model))
 PLANTS.register("fc", PlantSpec(
     "fc", "a Betaflight flight controller over MSP on the wall clock: a board on a serial port with motion "
           "capture, or the real firmware rehearsed in real time",
     _fc, load_settings=_fc_load, settings_from_table=_fc_from_table, settings_to_table=_fc_to_table,
     default_settings=_fc_default, requires=(("serial", "fc"),), option="--fc", feedback=_ALL_SCHEMES,
     # the paper flies open loop; the pilot-side feedback runs at the radio rate on motion capture
-    default_feedback=FeedbackScheme.NONE))
+    default_feedback=FeedbackScheme.NONE, firmware_model=_fc_firmware_model))

@@ -11,6 +11,7 @@ from __future__ import annotations
 import importlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +22,25 @@ from aerobat.errors import ConfigError, MissingDependency
 from aerobat.quadrotor.feedback import OPEN_LOOP, Feedback, FeedbackScheme, as_feedback
 from aerobat.quadrotor.vehicle import VehicleConfig
 
-__all__ = ["PLANTS", "PlantChoice", "PlantSpec"]
+__all__ = ["PLANTS", "DesignModel", "PlantChoice", "PlantSpec"]
+
+
+class DesignModel(StrEnum):
+    """Which model a nominal design runs on (Sect. 5: p⁰, J and C)."""
+
+    PAPER = "paper"
+    """The paper's first-principles model: rigid body, first-order motors, the onboard P rate loop
+    (:class:`aerobat.quadrotor.simulate.NominalModel`)."""
+    FIRMWARE = "firmware"
+    """The plant's flight controller as configured, around the vehicle the user believes
+    (:class:`aerobat.quadrotor.firmware.FirmwareModel`; plants with a firmware only)."""
+
+    @property
+    def meaning(self) -> str:
+        """One sentence for listings and help."""
+        return {DesignModel.PAPER: "the paper's model (its P rate loop and nominal motors)",
+                DesignModel.FIRMWARE: "the plant's flight controller as configured (rates, RC smoothing, PID with "
+                                      "feedforward, filters, mixer, throttle path) around the airframe"}[self]
 
 
 @dataclass(frozen=True)
@@ -46,6 +65,9 @@ class PlantSpec:
     cores : ``cores(settings) -> int``, the cores one instance keeps busy (None: 1). A study runs
         ``cpu_count // cores`` instances at once unless told otherwise
         (:func:`aerobat.experiments.execution.default_workers`).
+    firmware_model : ``firmware_model(config, settings) -> (model, table)``: the design model that
+        contains the plant's flight controller, around the vehicle ``config``, and its stored form
+        (None: the plant has no firmware to model; designs run on the paper's model).
     """
 
     name: str
@@ -61,6 +83,23 @@ class PlantSpec:
     default_feedback: FeedbackScheme = FeedbackScheme.NONE
     design_model: bool = False
     cores: Callable[[Any], int] | None = None
+    firmware_model: Callable[[VehicleConfig, Any], tuple[Any, dict[str, Any]]] | None = None
+
+    @property
+    def design_models(self) -> tuple[DesignModel, ...]:
+        """The design models this plant offers."""
+        return (DesignModel.PAPER, DesignModel.FIRMWARE) if self.firmware_model is not None else (DesignModel.PAPER,)
+
+    @property
+    def default_design_model(self) -> DesignModel:
+        """The model a design runs on unless told otherwise: the firmware's where there is one."""
+        return DesignModel.FIRMWARE if self.firmware_model is not None else DesignModel.PAPER
+
+    def check_design_model(self, kind: DesignModel) -> None:
+        """Raise ConfigError if this plant cannot design on ``kind``."""
+        if kind not in self.design_models:
+            raise ConfigError(f"--design-model {kind.value}: the {self.name} plant designs on "
+                              f"{', '.join(k.value for k in self.design_models)} (no firmware to model)")
 
     def check_feedback(self, feedback: Feedback) -> None:
         """Raise ConfigError if this plant cannot run ``feedback``'s scheme."""

@@ -18,10 +18,11 @@ import numpy as np
 from aerobat.core.design import Design
 from aerobat.core.maneuver import Maneuver
 from aerobat.errors import ConfigError
+from aerobat.experiments.designing import NominalDesign, job_design
 from aerobat.experiments.job import Job
 from aerobat.plants import ArenaParams, PlantChoice
 from aerobat.quadrotor.feedback import Feedback, FeedbackScheme
-from aerobat.quadrotor.vehicle import VehicleConfig, vehicle_table
+from aerobat.quadrotor.vehicle import VehicleConfig
 
 __all__ = ["SCENARIOS", "feedback_study_jobs", "parse_scenarios", "parse_schemes", "summarize_feedback"]
 
@@ -84,11 +85,11 @@ def parse_scenarios(text: str, *, plant: str, source: str = "--scenarios") -> li
     return names
 
 
-def feedback_study_jobs(maneuver: Maneuver, design: Design, model: VehicleConfig, *,
+def feedback_study_jobs(maneuver: Maneuver, design: Design | NominalDesign, model: VehicleConfig, *,
                         schemes: list[FeedbackScheme], scenarios: list[str], seeds: int, trials: int,
                         plant: PlantChoice, rule: str = "paper", tolerance_m: float = 0.12) -> list[Job]:
     """Every (scenario, scheme) on the same ``seeds`` plant seeds (``plant.seed``, ``plant.seed + 1``, …)."""
-    design_table = {k: v for k, v in design.to_json_dict().items() if k != "maneuver"}
+    design_table, model_table = job_design(design, model)
     jobs = []
     for scenario in scenarios:
         settings = plant.settings
@@ -98,7 +99,7 @@ def feedback_study_jobs(maneuver: Maneuver, design: Design, model: VehicleConfig
             choice = PlantChoice(plant.kind, settings, plant.seed, Feedback(scheme, plant.feedback.gains))
             for k in range(seeds):
                 jobs.append(Job(key=f"{scenario}-{scheme.value}-seed-{plant.seed + k:04d}", kind="rule_run", spec={
-                    "maneuver": maneuver.spec(), "design": design_table, "model": vehicle_table(model),
+                    "maneuver": maneuver.spec(), "design": design_table, "model": model_table,
                     "plant": {**choice.to_table(), "seed": plant.seed + k}, "method": rule, "trials": trials,
                     "tolerance_m": tolerance_m, "scenario": scenario, "scheme": scheme.value}))
     return jobs

@@ -22,12 +22,13 @@ from aerobat.core.design import Design
 from aerobat.core.maneuver import Maneuver
 from aerobat.core.rules import RuleChoice
 from aerobat.errors import ConfigError
+from aerobat.experiments.designing import NominalDesign, job_design
 from aerobat.experiments.job import Job
 from aerobat.plants.arena.params import ArenaParams
 from aerobat.plants.betaflight.params import BetaflightParams, params_to_table
 from aerobat.plants.spec import PLANTS
 from aerobat.quadrotor.feedback import Feedback, as_feedback
-from aerobat.quadrotor.vehicle import VehicleConfig, vehicle_table
+from aerobat.quadrotor.vehicle import VehicleConfig
 
 __all__ = [
     "SAMPLED_PROPERTIES",
@@ -191,7 +192,8 @@ def sample_arena(ranges: RobustnessRanges, seed: int) -> tuple[dict[str, Any], d
     return dataclass_to_table(params), props
 
 
-def robustness_jobs(maneuver: Maneuver, design: Design, model: VehicleConfig, *, vehicles: int, iterations: int,
+def robustness_jobs(maneuver: Maneuver, design: Design | NominalDesign,
+                    model: VehicleConfig, *, vehicles: int, iterations: int,
                     seed: int, ranges: RobustnessRanges | None = None, rule: RuleChoice | None = None,
                     tolerance_m: float = 0.12, plant: str = "arena", base: Any = None,
                     feedback: Any = None) -> list[Job]:
@@ -208,7 +210,7 @@ def robustness_jobs(maneuver: Maneuver, design: Design, model: VehicleConfig, *,
     spec = PLANTS.get(plant, source="robustness --plant")
     fb = Feedback(spec.default_feedback) if feedback is None else as_feedback(feedback)
     spec.check_feedback(fb)
-    design_table = {k: v for k, v in design.to_json_dict().items() if k != "maneuver"}
+    design_table, model_table = job_design(design, model)
     jobs = []
     for k in range(vehicles):
         sample_seed = seed * 1_000_003 + k
@@ -220,7 +222,7 @@ def robustness_jobs(maneuver: Maneuver, design: Design, model: VehicleConfig, *,
         if fb.enabled:
             table["feedback"] = fb.to_table()
         jobs.append(Job(key=f"vehicle-{k:05d}", kind="learn", spec={
-            "maneuver": maneuver.spec(), "design": design_table, "model": vehicle_table(model), "plant": table,
+            "maneuver": maneuver.spec(), "design": design_table, "model": model_table, "plant": table,
             "properties": props, "iterations": iterations, "rule": rule.label, "tolerance_m": tolerance_m,
         }))
     return jobs

@@ -13,9 +13,10 @@ from aerobat.core.maneuver import Maneuver
 from aerobat.core.rules import RULES, RuleChoice
 from aerobat.errors import ConfigError
 from aerobat.experiments.baselines import BASELINES
+from aerobat.experiments.designing import NominalDesign, job_design
 from aerobat.experiments.job import Job
 from aerobat.plants import PlantChoice
-from aerobat.quadrotor.vehicle import VehicleConfig, vehicle_table
+from aerobat.quadrotor.vehicle import VehicleConfig
 
 __all__ = ["DEFAULT_METHODS", "check_method_names", "parse_methods", "rules_study_jobs", "summarize_rules"]
 
@@ -48,13 +49,14 @@ def all_methods() -> list[str]:
     return [*RULES.names(), *(f"{r}+isc" for r in RULES.names()), *BASELINES]
 
 
-def rules_study_jobs(maneuver: Maneuver, design: Design, model: VehicleConfig, *, methods: list[str], seeds: int,
+def rules_study_jobs(maneuver: Maneuver, design: Design | NominalDesign,
+                     model: VehicleConfig, *, methods: list[str], seeds: int,
                      trials: int, plant: PlantChoice, tolerance_m: float = 0.12) -> list[Job]:
     """Every method on the same ``seeds`` plant seeds (``plant.seed``, ``plant.seed + 1``, …)."""
-    design_table = {k: v for k, v in design.to_json_dict().items() if k != "maneuver"}
+    design_table, model_table = job_design(design, model)
     return [
         Job(key=f"{method}-seed-{plant.seed + k:04d}", kind="rule_run", spec={
-            "maneuver": maneuver.spec(), "design": design_table, "model": vehicle_table(model),
+            "maneuver": maneuver.spec(), "design": design_table, "model": model_table,
             "plant": {**plant.to_table(), "seed": plant.seed + k}, "method": method, "trials": trials,
             "tolerance_m": tolerance_m})
         for method in methods for k in range(seeds)

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any, TypedDict, Unpack
 from aerobat.core.design import Design
 from aerobat.core.maneuver import Maneuver
 from aerobat.errors import ConfigError
+from aerobat.experiments.designing import NominalDesign
 from aerobat.experiments.execution import Executor
 from aerobat.experiments.studies.envelope import envelope_jobs
 from aerobat.experiments.studies.feedback import feedback_study_jobs
@@ -84,7 +85,8 @@ def feedback_spec(maneuver: Maneuver, *, schemes: Sequence[FeedbackScheme], scen
             "seeds": seeds, "trials": trials, "plant": plant.to_table(), "rule": rule, "tolerance_m": tolerance_m}
 
 
-def feedback_study(store: Store, maneuver: Maneuver, design: Design, model: VehicleConfig, *,
+def feedback_study(store: Store, maneuver: Maneuver, design: Design | NominalDesign,
+                   model: VehicleConfig, *,
                    schemes: Sequence[FeedbackScheme], scenarios: Sequence[str], seeds: int, trials: int,
                    plant: PlantChoice, rule: str = "paper", tolerance_m: float = 0.12,
                    **options: Unpack[StudyRunOptions]) -> FeedbackReport:
@@ -112,7 +114,8 @@ def rules_spec(maneuver: Maneuver, *, methods: Sequence[str], seeds: int, trials
             "plant": plant.to_table(), "tolerance_m": tolerance_m}
 
 
-def rules_study(store: Store, maneuver: Maneuver, design: Design, model: VehicleConfig, *, methods: Sequence[str],
+def rules_study(store: Store, maneuver: Maneuver, design: Design | NominalDesign,
+                model: VehicleConfig, *, methods: Sequence[str],
                 seeds: int, trials: int, plant: PlantChoice, tolerance_m: float = 0.12,
                 **options: Unpack[StudyRunOptions]) -> RulesReport:
     """Every update rule or baseline in ``methods`` learning ``maneuver`` on ``seeds`` plant seeds; its report.
@@ -146,7 +149,8 @@ def robustness_spec(maneuver: Maneuver, *, vehicles: int, iterations: int, seed:
     return spec
 
 
-def robustness_study(store: Store, maneuver: Maneuver, design: Design, model: VehicleConfig, *, vehicles: int,
+def robustness_study(store: Store, maneuver: Maneuver, design: Design | NominalDesign,
+                     model: VehicleConfig, *, vehicles: int,
                      iterations: int, seed: int, ranges: RobustnessRanges | None = None,
                      rule: RuleChoice | None = None, tolerance_m: float = 0.12, plant: str = "arena",
                      base: Any = None, feedback: Any = None,

@@ -23,7 +23,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
+from aerobat.config import dataclass_to_table
 from aerobat.plants.betaflight.firmware_settings import BetaflightSettings, load_settings
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.pilot import StickMap
@@ -31,7 +33,7 @@ from aerobat.quadrotor.firmware import Fidelity, FirmwareConfig, FirmwareModel
 from aerobat.quadrotor.firmware.config import ASSUMED, READ
 from aerobat.quadrotor.vehicle import VehicleConfig
 
-__all__ = ["firmware_config", "firmware_design_model", "plant_settings"]
+__all__ = ["firmware_config", "firmware_design_model", "model_table", "plant_settings"]
 
 
 def plant_settings(params: BetaflightParams) -> BetaflightSettings:
@@ -88,3 +90,11 @@ def _drag(config: VehicleConfig, params: BetaflightParams) -> dict[str, object]:
         return {}
     return {"body_drag_n_s2_m2": aero.body_drag_n_s2_m2, "rotor_drag_s_m": aero.rotor_drag_s_m,
             "rotational_damping_n_m_s": aero.rotational_damping_n_m_s}
+
+
+def model_table(model: FirmwareModel) -> dict[str, Any]:
+    """The model's stored form: what it is built from (firmware values, airframe, radio, drag, fidelity)."""
+    return {"kind": "firmware", "description": model.description, "fidelity": model.fidelity.value,
+            "firmware": model.firmware.to_table(), "airframe": dataclass_to_table(model.airframe),
+            "radio_rate_hz": 1.0 / model.radio_period_s,
+            "aerodynamics": {k: list(v) if isinstance(v, tuple) else v for k, v in model.aerodynamics.items()}}

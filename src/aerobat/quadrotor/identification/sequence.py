@@ -105,8 +105,8 @@ def _program(name: str, switches: list[tuple[float, str, float]], duration_s: fl
                    duration_s=duration_s, hover_collective_m_s2=hover, name=name)
 
 
-def identification_sequence(prior: VehicleConfig, *, flips: bool = True,
-                            max_angle_rad: float = 0.5) -> tuple[tuple[IdentificationTrial, ...], list[str]]:
+def identification_sequence(prior: VehicleConfig, *, flips: bool = True, max_angle_rad: float = 0.5,
+                            flip_model: Any = None) -> tuple[tuple[IdentificationTrial, ...], list[str]]:
     """The default trials for a vehicle believed to be ``prior``, and notes on any left out.
 
     Parameters
@@ -114,6 +114,8 @@ def identification_sequence(prior: VehicleConfig, *, flips: bool = True,
     prior : the vehicle one believes one has (amplitudes and the slow flips are built on it).
     flips : include the two slow flips (roll and pitch, one turn at 720°/s).
     max_angle_rad : largest attitude a rate doublet may reach [rad] (safe angles).
+    flip_model : the model the slow flips are designed on (a final-state model, e.g. the plant's
+        firmware model, started from the paper model's p⁰); None: the paper's model of ``prior``.
     """
     if not 0.05 <= max_angle_rad <= 1.2:
         raise ConfigError(f"max_angle_rad = {max_angle_rad:g} is out of range: allowed [0.05, 1.2] rad")
@@ -158,6 +160,8 @@ def identification_sequence(prior: VehicleConfig, *, flips: bool = True,
         for kind, axis in flip_axes:
             flip = MultiFlip(vehicle=v, flips=1, max_rate_rad_s=math.radians(720.0), dims=2, axis=axis)
             result = design(flip, model)  # type: ignore[arg-type]
+            if flip_model is not None and result.converged:
+                result = design(flip, flip_model, p_guess=result.p_nominal)
             if not result.converged:
                 notes.append(f"slow {axis} flip left out: it cannot be designed on {prior.name}: {result.message}")
                 continue

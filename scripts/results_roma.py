@@ -2,14 +2,17 @@
 
 Run (needs ../shared/data and the Betaflight SITL; about 1.5 min a seed on two cores):
 
-    .venv/bin/python scripts/results_roma.py                 # seeds 1 2 3
+    .venv/bin/python scripts/results_roma.py                 # seeds 0 1 2 3, designed on the firmware
+    .venv/bin/python scripts/results_roma.py --design-model paper
     .venv/bin/python scripts/results_roma.py --seeds 1 --json
 
 1. ``aerobat identify --log diatone-roma-f5.bbl:1`` (0.55 kg and motors at ±0.08 m given, as the
    log does not know them) writes the design model and the Betaflight plant's airframe;
 2. ``aerobat learn flip --flips 3 --dims 3 --max-rate-deg-s 600`` designs the 3D triple flip on
-   the identified model and learns it open loop through Betaflight running the tune in the same
-   log's header (its rates top out at 667 °/s, so the coast rate is 600 °/s, not 1800).
+   the identified vehicle (``--design-model``: the firmware model by default, the tune's own
+   Betaflight around the identified airframe; ``paper``: the paper's model) and learns it open loop
+   through Betaflight running the tune in the same log's header (its rates top out at 667 °/s, so
+   the coast rate is 600 °/s, not 1800).
 
 It prints, per seed, the first attempt's miss, the last-10 mean, and the trials flown, measured
 and lost, read back from the store; docs/plants.md quotes them.
@@ -44,7 +47,7 @@ def _aerobat(argv: list[str]) -> None:
         raise SystemExit(f"aerobat {' '.join(argv)} exited {code}:\n{out.getvalue()[-2000:]}")
 
 
-def run(seeds: list[int], work: Path, trials: int = 30) -> dict[str, Any]:
+def run(seeds: list[int], work: Path, trials: int = 30, design_model: str = "firmware") -> dict[str, Any]:
     """Identify once, then learn the triple flip once per seed; every number read from the store."""
     from aerobat.store import Store
 
@@ -58,6 +61,7 @@ def run(seeds: list[int], work: Path, trials: int = 30) -> dict[str, Any]:
         started = time.perf_counter()
         _aerobat(["learn", *FLIP, "--vehicle", str(vehicle), "--plant", "betaflight", "--betaflight", str(airframe),
                   "--tune", str(LOG), "--feedback", "none", "--trials", str(trials), "--seed", str(seed),
+                  "--design-model", design_model,
                   "--db", str(db), "--out", str(work / f"seed-{seed}")])
         with Store(db, create=False) as store:
             sid = store.list_sessions()[-1].id
@@ -68,12 +72,14 @@ def run(seeds: list[int], work: Path, trials: int = 30) -> dict[str, Any]:
                      "lost": len(records) - len(errors), "first_m": errors[0],
                      "last10_mean_m": float(np.mean(errors[-10:])), "best_m": min(errors),
                      "wall_s": round(time.perf_counter() - started, 1)})
-    return {"identify_s": round(identify_s, 1), "seeds": rows}
+    return {"identify_s": round(identify_s, 1), "design_model": design_model, "seeds": rows}
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3], help="plant seeds, one session each")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3], help="plant seeds, one session each")
+    parser.add_argument("--design-model", choices=("paper", "firmware"), default="firmware",
+                        help="the model the triple flip is designed on")
     parser.add_argument("--trials", type=int, default=30, help="trials per session")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args(argv)
@@ -81,11 +87,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"results_roma.py: {LOG} is absent (the shared flight logs are not here)", file=sys.stderr)
         return 2
     with tempfile.TemporaryDirectory(prefix="aerobat-roma-") as work:
-        result = run(args.seeds, Path(work), trials=args.trials)
+        result = run(args.seeds, Path(work), trials=args.trials, design_model=args.design_model)
     if args.json:
         print(json.dumps(result))
         return 0
-    print(f"identified from {LOG.name}:1 in {result['identify_s']:.1f} s")
+    print(f"identified from {LOG.name}:1 in {result['identify_s']:.1f} s; designed on the {args.design_model} model")
     print("seed  trials  measured  lost  first [m]  last-10 mean [m]  best [m]  wall [s]")
     for r in result["seeds"]:
         print(f"{r['seed']:4d}  {r['trials']:6d}  {r['measured']:8d}  {r['lost']:4d}  {r['first_m']:9.3f}  "

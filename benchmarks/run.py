@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import os
 import platform
 import re
@@ -217,6 +218,34 @@ def bench_design(rounds: int = 15) -> dict:
     return out
 
 
+def bench_firmware_design(rounds: int = 5) -> dict:
+    """The 3D triple flip at 1800 °/s designed on the Betaflight plant's firmware model (both stages), and the
+    model's speed: gyro periods (8 kHz) flown per second on one thread."""
+    from aerobat.experiments.designing import nominal_design
+    from aerobat.plants import PlantChoice
+    from aerobat.plants.betaflight.design_model import firmware_design_model
+    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.quadrotor.simulate import set_batch_threads
+    from aerobat.quadrotor.vehicle import fpv5
+
+    config = fpv5()
+    flip = MultiFlip(vehicle=config.vehicle, flips=3, max_rate_rad_s=math.radians(1800), dims=3)
+    plant = PlantChoice("betaflight", feedback="none")
+    nominal = nominal_design(flip, config, plant=plant)  # compiled and cached
+    t = interleaved({"design": lambda: nominal_design(flip, config, plant=plant)}, rounds)["design"]
+    model = firmware_design_model(config, BetaflightParams())
+    program = flip.program(nominal.design.p_nominal)
+    set_batch_threads(1)
+    try:
+        one = interleaved({"fly": lambda: model.final_states([program])}, 9)["fly"]
+    finally:
+        set_batch_threads(None)
+    steps = program.duration_s * model.firmware.gyro_rate_hz
+    return {"load": load(), "median_s": statistics.median(t), "min_s": min(t), "status": nominal.design.status.value,
+            "evaluations": nominal.design.evaluations + (nominal.paper.evaluations if nominal.paper else 0),
+            "flight_ms": statistics.median(one) * 1e3, "steps_per_s": steps / statistics.median(one)}
+
+
 # ---------------------------------------------------------------- processes
 
 ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]")
@@ -364,6 +393,7 @@ def measure(quick: bool = False) -> dict:
     kernel = bench_kernel(rounds=11 if quick else 31)
     batch = bench_batch(n=200 if quick else 1000, rounds=5 if quick else 15)
     des = bench_design(rounds=5 if quick else 15)
+    firmware = bench_firmware_design(rounds=2 if quick else 5)
     first = bench_first_learn(cold=not quick)
     cli = bench_cli()
     arena = bench_arena()
@@ -376,7 +406,9 @@ def measure(quick: bool = False) -> dict:
         "design_2d_s": des[2]["median_s"],
         "first_learn_start_s": first["warm"]["first_trial_s"],
         "first_learn_start_empty_cache_s": first.get("cold", {}).get("first_trial_s"),
+        "design_firmware_3d_s": firmware["median_s"],
         "kernel": kernel, "batch": batch, "design": {str(k): v for k, v in des.items()}, "first_learn": first,
+        "firmware_design": firmware,
         "cli": cli, "arena": arena, "machine": machine(), "cores": os.cpu_count(),
         "measured": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "stolen_s": None if stolen_before is None or stolen_after is None else stolen_after - stolen_before,
@@ -401,6 +433,13 @@ def report(r: dict, betaflight: list[str] | None = None) -> str:
         ("design of the 2D triple flip (p⁰, J, C), warm", "—",
          f"{d['2']['median_s'] * 1e3:.0f} ms median, {d['2']['min_s'] * 1e3:.0f} ms best "
          f"({d['2']['evaluations']} simulations)"),
+        ("design of the 3D triple flip at 1800 °/s on the Betaflight firmware model (fpv5, aerobat's settings): "
+         "the paper's model, then the firmware model from its p⁰", "≤ 10 s",
+         f"**{r['firmware_design']['median_s']:.2f} s** median, {r['firmware_design']['min_s']:.2f} s best "
+         f"({r['firmware_design']['evaluations']} simulations, {r['firmware_design']['status']})"),
+        ("the firmware model flying that p⁰ (0.94 s at 8 kHz), one thread", "—",
+         f"{r['firmware_design']['flight_ms']:.1f} ms ({r['firmware_design']['steps_per_s'] / 1e6:.2f} M gyro "
+         f"periods/s)"),
         ("first `aerobat learn flip --flips 3 --dims 3 --plant arena --trials 1` after `make setup`: "
          "start to its first trial line", "≤ 3 s", f"**{f['warm']['first_trial_s']:.2f} s**"),
     ]

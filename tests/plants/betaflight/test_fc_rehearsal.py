@@ -107,6 +107,41 @@ def test_a_trial_flies_in_real_time_over_the_serial_path_and_reports_its_timing(
     _no_process_left(connection)
 
 
+def _may_set_fifo() -> bool:
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+    except PermissionError:
+        return False
+    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    return True
+
+
+@pytest.mark.skipif(not _may_set_fifo(), reason="the rehearsal holds its deadlines under load with real-time "
+                                                 "priority, which needs root or CAP_SYS_NICE here")
+def test_a_trial_keeps_its_deadlines_with_two_busy_loops_beside_it(firmware: tuple[Path, Path]) -> None:
+    """Issue 45 E12: on a busy machine the ground's frames and poses kept the wall clock only by luck (the
+    pre-flight once measured motion capture at 20 Hz). The ground now flies real-time too, where allowed."""
+    loops = [subprocess.Popen(["sh", "-c", "while :; do :; done"], start_new_session=True) for _ in range(2)]
+    try:
+        plant, connection = _plant(firmware, fc_params(radio=Radio(rate_hz=100.0)))  # 8 kHz, as in lockstep
+        trial = plant.fly(FLIP.program(P0))
+    finally:
+        for loop in loops:
+            loop.kill()
+            loop.wait(timeout=10)
+    assert trial.status is TrialStatus.OK, trial.message
+    info = trial.info
+    assert info["ground_scheduling"] == "fifo" and info["world"]["scheduling"] == "fifo"
+    frames = info["maneuver_frames"]
+    # measured with two busy loops (scripts/results_fc.py lag --busy 2): with the ground real-time, 0-2 of a triple
+    # flip's frames at 250 Hz late per trial; without, 19-79. Here 100 Hz: late = more than 5 ms after the deadline
+    assert frames["late_frames"] <= 0.02 * frames["frames"], frames
+    assert frames["lateness_median_ms"] < 1.0, frames
+    assert info["world"]["late_chunks"] <= 0.02 * info["world"]["chunks"], info["world"]
+    _ended_disarmed(trial)
+    _no_process_left(connection)
+
+
 def test_the_operators_kill_disarms_in_flight(firmware: tuple[Path, Path]) -> None:
     plant, connection = _plant(firmware)
     _when_airborne(plant, plant.kill)

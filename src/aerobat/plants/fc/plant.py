@@ -28,6 +28,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
+import threading
 import time
 import warnings
 from collections.abc import Iterator, Sequence
@@ -51,6 +52,7 @@ from aerobat.quadrotor.program import CompiledProgram, Program
 from aerobat.quadrotor.vehicle import VehicleConfig
 
 from .pose_source import MotionCaptureSource, PoseSource
+from .priority import GROUND_FIFO_PRIORITY, real_time_threads
 from .pty_bridge import PtyBridge
 from .safety import (
     SafetyLimits,
@@ -161,6 +163,13 @@ class RehearsalConnection:
                     self.reports.append(report)
 
 
+def _ground_threads(link: Link) -> tuple[int | None, ...]:
+    """The ground station's threads that keep the wall clock: this one (frames, supervisor), the pose
+    receiver's and the serial bridge's, where they have their own."""
+    return (threading.get_native_id(), getattr(link.poses, "thread_id", None),
+            link.bridge.thread_id if link.bridge is not None else None)
+
+
 class FlightControllerPlant(BetaflightPlant):
     """``--plant fc``: the Fig. 8 supervisor on the wall clock, with a Betaflight flight controller.
 
@@ -234,6 +243,10 @@ class FlightControllerPlant(BetaflightPlant):
                 # cannot be reached is a person's to look at
                 return self._failed(TrialStatus.LOST if rehearsal else TrialStatus.ABORTED,
                                     f"could not reach the flight controller: {error}", info)
+            # the ground keeps its deadlines on a busy machine: its frames, poses and serial bytes ahead of
+            # other work while the trial flies, where allowed (docs/real-vehicle.md, "Under load")
+            info["ground_scheduling"] = stack.enter_context(
+                real_time_threads(_ground_threads(link), GROUND_FIFO_PRIORITY))
             trial, flight = self._supervise(link, compiled, info, wall)
         report = link.world.report if link.world is not None else None
         if report is not None:

@@ -154,6 +154,11 @@ class MotionCaptureSource:
             self._unread.clear()
             return poses
 
+    @property
+    def thread_id(self) -> int | None:
+        """The native id of the thread that receives the poses (the ground gives it real-time priority in flight)."""
+        return self._thread.native_id
+
     def close(self, timeout_s: float = 1.0) -> None:
         """Stop handing out poses, and wait up to ``timeout_s`` for the listening thread to end (with the next frame).
 

@@ -108,6 +108,11 @@ class PtyBridge:
                     pass
             self._sock.close()
 
+    @property
+    def thread_id(self) -> int | None:
+        """The native id of the thread that carries the bytes (the ground gives it real-time priority in flight)."""
+        return self._thread.native_id
+
     def close(self) -> None:
         """Cut the link: the terminal and the TCP connection close, the thread ends (within 2 s)."""
         if not self._closed.is_set():

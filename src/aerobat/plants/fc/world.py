@@ -40,6 +40,8 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from typing import TYPE_CHECKING, Any
 
+from .priority import fifo
+
 if TYPE_CHECKING:
     from aerobat.plants.betaflight.params import BetaflightParams
 
@@ -124,15 +126,11 @@ def _die_with(parent_pid: int) -> None:
 
 def _real_time_scheduling(firmware_pid: int | None) -> str:
     """Put this process and every thread of the firmware under ``SCHED_FIFO`` where allowed; returns how it went."""
-    fifo = os.sched_param(WORLD_FIFO_PRIORITY)
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, fifo)
-    except (PermissionError, OSError, AttributeError):
+    if not fifo(0, WORLD_FIFO_PRIORITY):
         return "nice" if os.getpriority(os.PRIO_PROCESS, 0) < 0 else "normal"
     with contextlib.suppress(OSError, TypeError):  # no firmware process (None): only the world is real-time
         for task in os.listdir(f"/proc/{firmware_pid}/task"):
-            with contextlib.suppress(OSError):
-                os.sched_setscheduler(int(task), os.SCHED_FIFO, fifo)
+            fifo(int(task), WORLD_FIFO_PRIORITY)
     return "fifo"
 
 

@@ -4,8 +4,10 @@
         # the figures of a session learned with --plant fc (e.g. the command in docs/real-vehicle.md)
     .venv/bin/python scripts/results_fc.py lockstep --seed 1
         # the same maneuver and seed through the Betaflight plant in lockstep, open loop (~2 min)
-    .venv/bin/python scripts/results_fc.py lag --trials 2
-        # how the rehearsal's world kept to the wall clock (run it with the machine loaded)
+    .venv/bin/python scripts/results_fc.py lag --trials 2 --busy 2 [--ground-priority off]
+        # how the rehearsal's world and ground kept to the wall clock beside two busy loops
+    .venv/bin/python scripts/results_fc.py first --seeds 1 2 3 4 5 --repeats 2
+        # the first attempt in real time against lockstep, seed by seed (~4 min; --design-model paper|firmware)
 
 Everything comes from what was stored: each trial's ``info`` carries the world's timekeeping (late
 chunks, largest lag), the frame timing during the maneuver (lateness after the deadline, spread of
@@ -16,8 +18,11 @@ printed as the markdown table the document shows, and written as JSON beside the
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
+import subprocess
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -122,6 +127,30 @@ def lockstep(seed: int, trials: int) -> dict[str, Any]:
             "last10_m": float(position[-10:].mean())}
 
 
+@contextlib.contextmanager
+def busy_loops(count: int) -> Iterator[None]:
+    """``count`` processes that spin on a core each until the block ends (a loaded machine)."""
+    loops = [subprocess.Popen(["sh", "-c", "while :; do :; done"], start_new_session=True) for _ in range(count)]
+    try:
+        yield
+    finally:
+        for loop in loops:
+            loop.kill()
+            loop.wait(timeout=10)
+
+
+def _ground_priority_off() -> None:
+    """Measure without the ground's real-time priority (the A of an A/B): its threads stay as they are."""
+    import aerobat.plants.fc.plant as fc_plant
+
+    @contextlib.contextmanager
+    def unchanged(thread_ids: Any, priority: int = 0) -> Any:
+        del thread_ids, priority
+        yield "off (scripts/results_fc.py --ground-priority off)"
+
+    fc_plant.real_time_threads = unchanged  # type: ignore[assignment]
+
+
 def lag(seed: int, trials: int) -> list[dict[str, Any]]:
     """How the rehearsal's world kept to the wall clock, trial by trial (the nominal 3D triple flip at 8 kHz).
 
@@ -142,11 +171,52 @@ def lag(seed: int, trials: int) -> list[dict[str, Any]]:
     for _ in range(trials):
         trial = plant.fly(program)
         world = trial.info["world"]
-        rows.append({"status": trial.status.value, "scheduling": world.get("scheduling"),
+        frames = trial.info.get("maneuver_frames", {})
+        rows.append({"status": trial.status.value, "message": trial.message, "scheduling": world.get("scheduling"),
+                     "ground_scheduling": trial.info.get("ground_scheduling"),
+                     "lateness_median_ms": frames.get("lateness_median_ms"),
+                     "lateness_max_ms": frames.get("lateness_max_ms"),
                      "late_chunk_fraction": world["late_chunks"] / max(1, world["chunks"]),
                      "max_lag_ms": 1e3 * world["max_lag_s"],
                      "late_maneuver_frames": trial.info.get("maneuver_frames", {}).get("late_frames")})
     return rows
+
+
+def first_attempts(seeds: list[int], repeats: int, design_model: str) -> dict[str, Any]:
+    """The nominal 3D triple flip's first trial, seed by seed: once in lockstep (deterministic), ``repeats``
+    times in real time (the wall clock makes each rehearsal differ)."""
+    from aerobat.experiments.designing import nominal_design
+    from aerobat.plants import PlantChoice
+    from aerobat.plants.betaflight.plant import BetaflightPlant
+    from aerobat.plants.fc.plant import FlightControllerPlant, RehearsalConnection
+    from aerobat.quadrotor.maneuvers import MultiFlip
+    from aerobat.quadrotor.vehicle import fpv5
+
+    config = fpv5()
+    maneuver = MultiFlip(vehicle=config.vehicle, flips=3, max_rate_rad_s=math.radians(1800), dims=3)
+    nominal = nominal_design(maneuver, config, plant=PlantChoice("betaflight", feedback="none"),
+                             design_model=design_model)
+    program = maneuver.program(nominal.design.p_nominal)
+    mask = [e.kind is ErrorKind.POSITION for e in maneuver.errors]
+
+    def miss(trial: Any) -> float | None:
+        return float(_position_rows(maneuver.error(trial.final_state)[None, :], mask)[0]) if trial.ok else None
+
+    rows = []
+    for seed in seeds:
+        locked = miss(BetaflightPlant(config, seed=seed, feedback="none").fly(program))
+        rehearsed = [miss(FlightControllerPlant(config, RehearsalConnection({}), seed=seed).fly(program))
+                     for _ in range(repeats)]
+        rows.append({"seed": seed, "lockstep_m": locked, "rehearsal_m": rehearsed})
+        print(f"seed {seed}: lockstep {locked}, rehearsal {rehearsed}", flush=True)
+    lock = np.array([r["lockstep_m"] for r in rows], dtype=float)
+    real = np.array([v for r in rows for v in r["rehearsal_m"]], dtype=float)
+    return {"design_model": nominal.model.value, "rows": rows,
+            "lockstep_median_m": float(np.nanmedian(lock)), "lockstep_range_m": [float(np.nanmin(lock)),
+                                                                                  float(np.nanmax(lock))],
+            "rehearsal_median_m": float(np.nanmedian(real)), "rehearsal_range_m": [float(np.nanmin(real)),
+                                                                                    float(np.nanmax(real))],
+            "rehearsal_not_measured": int(np.isnan(real).sum())}
 
 
 def main() -> None:
@@ -161,15 +231,27 @@ def main() -> None:
     lg = sub.add_parser("lag", help="how the rehearsal's world kept to the wall clock, trial by trial")
     lg.add_argument("--seed", type=int, default=1)
     lg.add_argument("--trials", type=int, default=2)
+    lg.add_argument("--busy", type=int, default=0, help="busy loops to start beside the rehearsal (ended after)")
+    lg.add_argument("--ground-priority", choices=("on", "off"), default="on",
+                    help="off: the ground station's threads keep their scheduling (for an A/B under load)")
+    fa = sub.add_parser("first", help="the first attempt in real time against lockstep, seed by seed")
+    fa.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5])
+    fa.add_argument("--repeats", type=int, default=2, help="rehearsals per seed")
+    fa.add_argument("--design-model", choices=("paper", "firmware"), default="firmware")
     args = parser.parse_args()
-    if args.what == "summary":
+    if args.what == "first":
+        print(json.dumps(first_attempts(args.seeds, args.repeats, args.design_model), indent=1))
+    elif args.what == "summary":
         result = summarize(args.db, args.session)
         out = args.db.with_suffix(f".session{args.session}.json")
         out.write_text(json.dumps(result, indent=1))
         print(table(result))
         print(f"\n(written to {out})")
     elif args.what == "lag":
-        print(json.dumps(lag(args.seed, args.trials), indent=1))
+        if args.ground_priority == "off":
+            _ground_priority_off()
+        with busy_loops(args.busy):
+            print(json.dumps(lag(args.seed, args.trials), indent=1))
     else:
         print(json.dumps(lockstep(args.seed, args.trials), indent=1))
 

@@ -7,6 +7,7 @@ Run (needs the Betaflight SITL, built by ``make setup``; ../shared/data for the 
     .venv/bin/python scripts/results_firmware_model.py maneuvers   # pitch double flip, translation: first attempts
     .venv/bin/python scripts/results_firmware_model.py decompose   # the first attempt, world effect by effect
     .venv/bin/python scripts/results_firmware_model.py figure      # the paper model, the firmware model, a trial
+    .venv/bin/python scripts/results_firmware_model.py smoothness  # where the firmware is not smooth (~1 min)
     .venv/bin/python scripts/results_firmware_model.py all
 
 Each writes ``docs/figures/firmware_model/<name>.json`` (and the figure its PNG) and prints a table.
@@ -64,6 +65,105 @@ def roma_setup(work: Path) -> tuple[Any, Any]:
     return vehicle_from_name_or_file(str(vehicle)), params
 
 
+# -------------------------------------------------------------------- smoothness
+
+
+def _largest_step(values: np.ndarray) -> float:
+    """The largest step between neighbouring samples beyond its neighbours' mean (smooth: ~0; a jump: its size)."""
+    steps = np.diff(values)
+    return float(np.max(np.abs(steps[1:-1] - 0.5 * (steps[:-2] + steps[2:]))))
+
+
+def sweep(model: Any, maneuver: Any, p: np.ndarray, index: int, half_width: float, points: int) -> dict[str, Any]:
+    """Parameter ``index`` swept by ±``half_width`` around ``p``: the final position's largest step [m]."""
+    params = np.tile(p, (points, 1))
+    params[:, index] += np.linspace(-half_width, half_width, points)
+    finals = model.final_states([maneuver.program(q) for q in params])
+    return {"largest_step_m": max(_largest_step(finals[:, axis]) for axis in range(3)),
+            "spacing": 2 * half_width / (points - 1), "points": points}
+
+
+def jacobian_consistency(model: Any, maneuver: Any, p: np.ndarray) -> float:
+    """‖J(h) − J(4h)‖/‖J(h)‖ in scaled coordinates, h = 1e-3 scale (central differences; smooth: ≪ 1)."""
+    scales = np.array([spec.scale for spec in maneuver.parameters])
+    errors = np.array([spec.scale for spec in maneuver.errors])
+
+    def jac(step: float) -> np.ndarray:
+        rows = []
+        for k in range(p.size):
+            plus, minus = p.copy(), p.copy()
+            plus[k] += step * scales[k]
+            minus[k] -= step * scales[k]
+            finals = model.final_states([maneuver.program(plus), maneuver.program(minus)])
+            rows.append((maneuver.error(finals[0]) - maneuver.error(finals[1])) / errors / (2 * step))
+        return np.array(rows).T
+
+    small, large = jac(1e-3), jac(4e-3)
+    return float(np.linalg.norm(small - large) / np.linalg.norm(small))
+
+
+def saturation(config: Any, maneuver: Any, p: np.ndarray) -> dict[str, Any]:
+    """How much of the triple flip's p⁰ the motors spend at idle or full output, in the design model."""
+    from aerobat.plants.betaflight.design_model import firmware_design_model
+    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.quadrotor.firmware.layout import K_MIN_COMMAND, K_MOTOR_HIGH, K_MOTOR_LOW
+
+    model = firmware_design_model(config, BetaflightParams())
+    flown = model.trajectory(maneuver.program(p))
+    k = model.k  # the packet is (output − min_command − ½ µs of truncation's mean) / 1000 at design fidelity
+    low = (k[K_MOTOR_LOW] - k[K_MIN_COMMAND] - 0.5) / 1000.0
+    high = (k[K_MOTOR_HIGH] - k[K_MIN_COMMAND] - 0.5) / 1000.0
+    at_idle = np.any(flown.motors <= low + 1e-9, axis=1)
+    at_full = np.any(flown.motors >= high - 1e-9, axis=1)
+    return {"packet_idle": low, "packet_full": high, "steps": int(flown.motors.shape[0]),
+            "fraction_at_idle": float(np.mean(at_idle)), "fraction_at_full": float(np.mean(at_full)),
+            "fraction_at_a_limit": float(np.mean(at_idle | at_full))}
+
+
+def cmd_smoothness() -> dict[str, Any]:
+    """Sweeps and Jacobians of both fidelities (and the paper's model) around the triple flip's firmware p⁰,
+    and a design on each fidelity."""
+    from aerobat.core.design import design
+    from aerobat.plants.betaflight.design_model import firmware_design_model
+    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.quadrotor.simulate import NominalModel
+    from aerobat.quadrotor.vehicle import fpv5
+
+    config = fpv5()
+    maneuver = _triple(config)
+    paper = design(maneuver, NominalModel(config))
+    models = {fidelity: firmware_design_model(config, BetaflightParams(), fidelity=fidelity)
+              for fidelity in ("design", "exact")}
+    data: dict[str, Any] = {"maneuver": maneuver.name}
+    designs = {}
+    for fidelity, model in models.items():
+        started = time.perf_counter()
+        designs[fidelity] = result = design(maneuver, model, p_guess=paper.p_nominal)
+        data[f"design_on_{fidelity}"] = {"status": result.status.value, "residual": float(result.residual_norm),
+                                         "simulations": int(result.evaluations),
+                                         "wall_s": round(time.perf_counter() - started, 2)}
+    p = designs["design"].p_nominal
+    for name, model in (*models.items(), ("paper", NominalModel(config))):
+        data[name] = {
+            # p1, the accelerate stage's length: ±2 radio frames at 0.1 ms, ±1 ms at 10 µs (< a gyro period)
+            "switch_time": sweep(model, maneuver, p, 1, 0.008, 161),
+            "switch_time_fine": sweep(model, maneuver, p, 1, 0.001, 201),
+            "collective": sweep(model, maneuver, p, 3, 0.05, 101),  # p3 ± 0.05 m/s²
+            "jacobian_h_vs_4h": jacobian_consistency(model, maneuver, p)}
+    data["saturation"] = saturation(config, maneuver, p)
+    _write("smoothness", data)
+    print(f"{maneuver.name}, around the design model's p0; largest step of the final position between neighbours")
+    print("model     p1 ±8 ms /0.1 ms   p1 ±1 ms /10 us   p3 ±0.05 m/s2   |J(h)-J(4h)|/|J(h)|")
+    for name in ("design", "exact", "paper"):
+        row = data[name]
+        steps = [row[key]["largest_step_m"] * 1000 for key in ("switch_time", "switch_time_fine", "collective")]
+        print(f"{name:8s} {steps[0]:10.2f} mm {steps[1]:13.3f} mm {steps[2]:12.3f} mm {row['jacobian_h_vs_4h']:14.4f}")
+    for fidelity in ("design", "exact"):
+        print(f"designed on the {fidelity} fidelity: {data[f'design_on_{fidelity}']}")
+    print(f"motors at idle or full {data['saturation']['fraction_at_a_limit']:.1%} of the flip's gyro periods")
+    return data
+
+
 # -------------------------------------------------------------------- agreement
 
 
@@ -78,8 +178,17 @@ def agreement_case(name: str, config: Any, params: Any, maneuver: Any) -> dict[s
     nominal = nominal_design(maneuver, config, plant=PlantChoice("betaflight", params), design_model="firmware")
     program = maneuver.program(nominal.design.p_nominal)
     model = firmware_design_model(config, params)
+    started = time.perf_counter()
     sitl = sitl_flight(BetaflightPlant(config, noiseless(params, model), seed=0, feedback="none"), program)
-    row: dict[str, Any] = {"case": name, "maneuver": maneuver.name, "steps": int(len(sitl.times_s))}
+    sitl_s = time.perf_counter() - started
+    model.final_states([program])  # compiled already; timed below
+    started = time.perf_counter()
+    for _ in range(20):
+        model.final_states([program])
+    row: dict[str, Any] = {"case": name, "maneuver": maneuver.name, "steps": int(len(sitl.times_s)),
+                           "sitl_flight_s": round(sitl_s, 3),
+                           "model_flight_s": round((time.perf_counter() - started) / 20, 5),
+                           "design_simulations": int(nominal.design.evaluations)}
     for fidelity in ("exact", "design"):
         flown = firmware_design_model(config, params, fidelity=fidelity).trajectory(program)
         n = min(len(sitl.times_s), len(flown.times_s))
@@ -111,6 +220,9 @@ def cmd_agreement(work: Path) -> dict[str, Any]:
             print(f"{row['case']:44s} {fidelity:8s}  {100 * r['final_position_m']:12.2f}  "
                   f"{r['final_rotation_deg']:14.3f}  {r['largest_motor_difference']:6.3f}  "
                   f"{r['largest_setpoint_difference_deg_s']:9.2f}")
+        print(f"  one program: the SITL (power on, arm, take off, settle, hover, fly) {row['sitl_flight_s']:.2f} s, "
+              f"the model {row['model_flight_s'] * 1000:.1f} ms; the design took {row['design_simulations']} "
+              "simulations")
     return data
 
 
@@ -190,7 +302,11 @@ def first_attempts(config: Any, maneuver: Any, plant: Any, seeds: list[int]) -> 
         for seed in seeds:
             trial = dataclasses.replace(plant, seed=seed).build(config).fly(program)
             misses.append(float(np.linalg.norm(maneuver.error(trial.final_state)[idx])) if trial.ok else math.nan)
+        predicted = nominal.design.residual
         out[model] = {"design": nominal.design.status.value, "design_s": round(nominal.compute_s, 2),
+                      "design_residual": float(nominal.design.residual_norm), "design_message": nominal.design.message,
+                      "design_residual_errors": dict(zip([e.name for e in maneuver.errors], map(float, predicted),
+                                                         strict=True)),
                       "first_m": misses, "median_m": float(np.nanmedian(misses))}
     out["ratio"] = out["paper"]["median_m"] / out["firmware"]["median_m"]
     return out
@@ -314,7 +430,7 @@ def cmd_figure() -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("what", choices=("agreement", "learn", "maneuvers", "decompose", "figure", "all"))
+    parser.add_argument("what", choices=("agreement", "learn", "maneuvers", "decompose", "figure", "smoothness", "all"))
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5], help="plant seeds")
     parser.add_argument("--trials", type=int, default=30, help="trials per learning session")
     args = parser.parse_args(argv)
@@ -328,6 +444,8 @@ def main(argv: list[str] | None = None) -> int:
             cmd_maneuvers(args.seeds[:3])
         if args.what in ("figure", "all"):
             cmd_figure()
+        if args.what in ("smoothness", "all"):
+            cmd_smoothness()
         if args.what in ("learn", "all"):
             cmd_learn(work, args.seeds, args.trials)
     return 0

@@ -48,10 +48,11 @@ _HOME = {
     "solve_translation": "aerobat.quadrotor.timeoptimal",
     # plants
     "Arena": "aerobat.plants", "ArenaParams": "aerobat.plants", "NominalPlant": "aerobat.plants",
-    "PlantChoice": "aerobat.plants",
+    "PlantChoice": "aerobat.plants", "DesignModel": "aerobat.plants",
     # the store and the application
     "Store": "aerobat.store", "start_session": "aerobat.experiments", "resume_session": "aerobat.experiments",
-    "run_study": "aerobat.experiments", "identify": "aerobat.experiments.identify",
+    "run_study": "aerobat.experiments", "nominal_design": "aerobat.experiments.designing",
+    "identify": "aerobat.experiments.identify",
     "write_identified_vehicle": "aerobat.experiments.identify",
 }
 

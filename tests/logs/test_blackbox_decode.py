@@ -127,7 +127,7 @@ def test_an_encoding_the_decoder_does_not_read_is_one_line_and_exit_2(tmp_path, 
     data = (DATA / "zeezf7-short.bbl").read_bytes()
     path = tmp_path / "elias.bbl"
     path.write_bytes(data.replace(b"H Field P encoding:9,0,", b"H Field P encoding:9,4,", 1))
-    _one_error_line(capsys, path, "'time'", "encoding 4")
+    _one_error_line(capsys, path, "header field 'H Field P encoding'", "field 'time': '4'", "allowed")
 
 
 def test_an_empty_file_is_one_line_and_exit_2(tmp_path, capsys):

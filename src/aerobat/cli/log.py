@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import csv
 import io
-import json
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +16,7 @@ from aerobat.cli.common import (
     output_dir,
     refuse_overwrite,
 )
+from aerobat.cli.json_output import json_text
 from aerobat.errors import ConfigError
 
 __all__ = ["log_summary", "register"]
@@ -61,7 +61,7 @@ def log_summary(log: Any) -> dict[str, Any]:
 def _cmd_info(args: argparse.Namespace) -> int:
     summaries = [log_summary(log) for log in _logs(args)]
     if args.json:
-        print(json.dumps({"file": str(args.file), "logs": summaries}))
+        print(json_text({"file": str(args.file), "logs": summaries}))
         return 0
     say = console().print
     say(f"{args.file}: {len(summaries)} log{'s' if len(summaries) != 1 else ''}")
@@ -100,7 +100,7 @@ def _cmd_plot(args: argparse.Namespace) -> int:
             written.append(str(path))
             say(f"wrote {path}")
     if args.json:
-        print(json.dumps({"figures": written}))
+        print(json_text({"figures": written}))
     return 0
 
 
@@ -153,7 +153,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
         written.append(path)
         console(args.json).print(f"wrote {path}", highlight=False)
     if args.json:
-        print(json.dumps({"files": [str(p) for p in written]}))
+        print(json_text({"files": [str(p) for p in written]}))
     return 0
 
 
@@ -188,7 +188,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     if result.tune_report is not None:
         summary["tune"] = result.tune_report.text()
     if args.json:
-        print(json.dumps(summary, default=float))
+        print(json_text(summary))
         return 0
     lo, hi = result.window_s
     say(f"{result.log} {lo:g}–{hi:g} s replayed through Betaflight 4.6 SITL with the log's own tune, in ACRO, in "

@@ -30,6 +30,7 @@ is assumed and said in the log's notes.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import logging
 import re
@@ -131,14 +132,23 @@ def _layout(headers: dict[str, str], motors: np.ndarray, table: np.ndarray, colu
 
 def read_blackbox(path: Path) -> list[FlightLog]:
     """Every log in a blackbox file, in order (decoded by :mod:`aerobat.logs.blackbox_decode`)."""
-    from aerobat.logs.blackbox_decode import log_starts
+    from aerobat.logs.blackbox_decode import header_end, log_starts
 
     data = path.read_bytes()
     starts = log_starts(data)
     if not starts:
         raise ConfigError(f"{path}: no blackbox log in the file (no 'H Product:Blackbox flight data recorder' line)")
     ends = [*starts[1:], len(data)]
-    return [_read_one(path, data, i + 1, len(starts), starts[i], ends[i]) for i in range(len(starts))]
+    # a file that ends in the last log's header (or right after it): the recording stopped there. The logs before
+    # it are whole, and read; only a file of that one log is refused ("holds no frames")
+    cut = len(starts) > 1 and header_end(data, starts[-1]) >= len(data)
+    count = len(starts) - cut
+    logs = [_read_one(path, data, i + 1, count, starts[i], ends[i]) for i in range(count)]
+    if cut:
+        logs[-1] = dataclasses.replace(logs[-1], notes=(*logs[-1].notes, f"the file ends in the header of a log "
+                                                        f"after this one (log {len(starts)}, at byte {starts[-1]}): "
+                                                        "the recording stopped there; not read"))
+    return logs
 
 
 def _read_one(path: Path, data: bytes, index: int, count: int, start: int, end: int) -> FlightLog:

@@ -17,6 +17,7 @@ model.sdf ``turningDirection``; the firmware's mixer gives M1 a −z reaction to
 
 from __future__ import annotations
 
+import bisect
 import re
 import struct
 from pathlib import Path
@@ -43,9 +44,9 @@ _TYPES = {"f": "<f4", "d": "<f8", "I": "<u4", "i": "<i4", "H": "<u2", "h": "<i2"
 _VARIABLE = re.compile(r"^(?P<name>[^()]+)\((?P<type>[A-Za-z])\)$")
 # a record's own columns, named with parentheses, which no variable's name has: a variable may be called "t"
 _ID, _TIME = "(event id)", "(timestamp)"
-#: A record whose timestamp runs backwards or jumps ahead by this much or more [µs] is left out, as the
-#: Betaflight reader leaves out such frames: the logger writes continuously (a 1 kHz event every millisecond);
-#: one flipped bit in a timestamp made a 46.7 s log last 1,099,558 s.
+#: Records whose timestamps run backwards or jump ahead by this much or more [µs] are left out, as the Betaflight
+#: reader leaves out such frames: the logger writes continuously (a 1 kHz event every millisecond); one flipped
+#: bit in a timestamp made a 46.7 s log last 1,099,558 s.
 MAX_TIME_JUMP_US = 10_000_000
 
 
@@ -97,30 +98,72 @@ def _parse_header(path: Path, data: bytes) -> tuple[int, dict[int, tuple[str, li
     return at, types
 
 
+def _longest_in_order(stamps: list[int]) -> np.ndarray:
+    """The indices of a longest non-decreasing run of ``stamps`` (not necessarily adjacent), by patience sorting:
+    the fewest records left out to put the rest in time order."""
+    tails: list[int] = []  # tails[k]: the smallest last timestamp of an ordered run of k + 1 records so far
+    ends: list[int] = []  # the index of that last record
+    before = np.full(len(stamps), -1, dtype=np.int64)
+    for i, stamp in enumerate(stamps):
+        k = bisect.bisect_right(tails, stamp)
+        if k == len(tails):
+            tails.append(stamp)
+            ends.append(i)
+        else:
+            tails[k], ends[k] = stamp, i
+        before[i] = ends[k - 1] if k else -1
+    chain = []
+    i = ends[-1]
+    while i >= 0:
+        chain.append(i)
+        i = int(before[i])
+    return np.array(chain[::-1], dtype=np.int64)
+
+
+def _lone_outliers(t: np.ndarray) -> np.ndarray:
+    """Records out of step with a neighbour whose neighbours are in step with each other (one damaged timestamp
+    between good ones), and a first or last record out of step with both records next to it."""
+    tf = t.astype(np.float64)  # uint64 timestamps, a flipped top bit included
+
+    def in_step(gap: int) -> np.ndarray:
+        d = tf[gap:] - tf[:-gap]
+        return (d >= 0) & (d < MAX_TIME_JUMP_US)
+
+    out = np.zeros(t.shape, dtype=bool)
+    if len(t) < 3:
+        return out
+    step, skip = in_step(1), in_step(2)
+    out[1:-1] = (~step[:-1] | ~step[1:]) & skip
+    out[0] = not step[0] and not skip[0]
+    out[-1] = not step[-1] and not skip[-1]
+    # two such records side by side: either may be the damaged one, so neither is taken for it here
+    pair = out[:-1] & out[1:]  # records j and j + 1 both
+    either = np.zeros(t.shape, dtype=bool)
+    either[:-1] |= pair
+    either[1:] |= pair
+    return out & ~either
+
+
 def _in_time_order(t: np.ndarray, notes: list[str]) -> np.ndarray:
-    """Which records to keep: each within [last kept, last kept + :data:`MAX_TIME_JUMP_US`) of the last one kept,
-    from the first record whose next one follows it so (a note names the records left out)."""
-    steps = np.diff(t.astype(np.float64))  # uint64 timestamps, a flipped top bit included
-    bad = (steps < 0) | (steps >= MAX_TIME_JUMP_US)
-    if not bad.any():
+    """Which records to keep: all but lone records out of step (:func:`_lone_outliers`); then the fewest left out
+    so that the rest run forwards in time, and, if they still jump ahead by :data:`MAX_TIME_JUMP_US` or more
+    somewhere, the longest stretch between such jumps. A note names the records left out."""
+    steps = np.diff(t.astype(np.float64))
+    if not ((steps < 0) | (steps >= MAX_TIME_JUMP_US)).any():
         return np.ones(t.shape, dtype=bool)
+    stamps = t.tolist()  # Python integers: exact whatever a damaged timestamp holds
+    candidates = np.flatnonzero(~_lone_outliers(t))
+    kept = candidates[_longest_in_order([stamps[i] for i in candidates])] if candidates.size else candidates
+    jumps = np.flatnonzero(np.diff(t[kept].astype(np.float64)) >= MAX_TIME_JUMP_US) + 1
+    stretches = np.split(kept, jumps)
     keep = np.zeros(t.shape, dtype=bool)
-    good = np.flatnonzero(~bad)
-    if good.size:
-        stamps = t.tolist()  # Python integers: exact whatever a damaged timestamp holds
-        first = int(good[0])
-        last = stamps[first]
-        keep[first] = True
-        for i in range(first + 1, len(stamps)):
-            if last <= stamps[i] < last + MAX_TIME_JUMP_US:
-                keep[i] = True
-                last = stamps[i]
+    keep[max(stretches, key=len)] = True
     dropped = np.flatnonzero(~keep)
     plural = "s" if dropped.size != 1 else ""
-    named = ", ".join(f"{int(i)} at {int(t[i]) * 1e-6:.6g} s" for i in dropped[:3])
+    named = ", ".join(f"{int(i)} at {stamps[i] * 1e-6:.6g} s" for i in dropped[:3])
     notes.append(f"{dropped.size} record{plural} left out: the timestamp runs backwards or jumps by "
-                 f"{MAX_TIME_JUMP_US * 1e-6:g} s or more from the record before (record{plural} {named}"
-                 f"{', …' if dropped.size > 3 else ''}; numbered from 0)")
+                 f"{MAX_TIME_JUMP_US * 1e-6:g} s or more (record{plural} {named}{', …' if dropped.size > 3 else ''}; "
+                 "numbered from 0)")
     return keep
 
 

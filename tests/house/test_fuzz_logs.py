@@ -8,9 +8,11 @@ a clean one. The whole phase (``python scripts/fuzz_logs.py``, 1,356 cases) is t
 
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import json
 import sys
+from collections import Counter
 from pathlib import Path
 
 import pytest
@@ -70,12 +72,12 @@ def _judged(phase, tmp_path: Path, *, argv: list[str], code: int, out: bytes, er
     path = work / "log.bbl"
     path.write_bytes(b"H Product:Blackbox flight data recorder\n")
     case = logs.LogCase("bb-number", "test", lambda: b"")
-    run = logs._Running(case, 0, path, work, argv, None, 0.0, "" if changed else logs.hashlib.sha256(
+    run = logs.Running(case, 0, path, work, argv, None, 0.0, "" if changed else hashlib.sha256(
         path.read_bytes()).hexdigest())
-    report = {"counts": logs.Counter(), "by_kind": {}, "internal": [], "hangs": [], "data_loss": [], "non_json": [],
+    report = {"counts": Counter(), "by_kind": {}, "internal": [], "hangs": [], "data_loss": [], "non_json": [],
               "peak_memory": {"worst_mb": 0.0, "bound_mb": 0.0, "worst_fraction_of_bound": 0.0, "case": None,
                               "over_bound": [], "highest": []}}
-    logs._judge(fz, run, code, peak_mb, 1.0, report, {}, campaign, keep=True)
+    logs.judge_case(fz, run, code, peak_mb, 1.0, report, {}, campaign, keep=True)
     return report
 
 

@@ -134,14 +134,18 @@ def test_a_megabyte_of_frames_takes_memory_bounded_by_the_file(tmp_path):
     assert code == 0 and peak <= 300 + 20 * path.stat().st_size / 2**20, peak
 
 
-def test_a_header_whose_frames_take_no_bytes_is_refused(tmp_path, capsys):
-    # the same, with the fields the reader keeps (gyro, motors, ...): a million frames of them would be 300 MB
+def test_a_log_whose_frames_take_no_bytes_is_refused_when_they_outgrow_the_file(tmp_path, capsys):
+    # the same, with the fields the reader keeps (gyro, motors, ...) and P frames one byte each (every field
+    # incremented): a million of them would be 100 MB from 1 MB; refused once they pass 16 times the log's bytes
     from aerobat.logs.betaflight import FIELDS
 
     names = ["loopIteration", *FIELDS]
     path = tmp_path / "empty-frames.bbl"
-    path.write_bytes(_header(names, "6", "1") + b"I" * 1000)
-    _one_line(capsys, ["log", "info", str(path)], "log 1", "main frame of", "take 1 byte", "allowed at least")
+    path.write_bytes(_header(names, "6", "1") + b"I" + b"P" * 200_000)
+    _one_line(capsys, ["log", "info", str(path)], "log 1", "main frames of 36 fields", "one every 1.0 bytes",
+              "would decode to more than 16 times the log's 200,001 bytes", "allowed frames of 18 bytes or more")
+    code, peak = _peak_rss_mb(["log", "info", str(path)])
+    assert code == 2 and peak <= 300 + 20 * path.stat().st_size / 2**20, peak
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="POSIX signals")

@@ -9,8 +9,8 @@ disarm, flight mode, log end). The header says, per field, its encoding and pred
 The kernel decodes a chunk of :data:`CHUNK_BYTES` at a time and returns to Python between
 chunks, so a Ctrl-C stops the longest decode within milliseconds. Memory is bounded by the file:
 the main table's rows are at most the log's bytes over the smallest frame its header allows, and
-a header whose frames could decode to more than 16 times their size is refused
-(:func:`.blackbox_header.check_decoded_size`); the table's untouched rows take no memory.
+a log whose frames decode to more than 16 times its bytes (and 1 MB) is refused when it does
+(:data:`.blackbox_header.MAX_DECODED_BYTES_PER_BYTE`); the table's untouched rows take no memory.
 
 orangebox 0.4.0 (pure Python) read these files at about 70 µs a frame, ~90 % of
 ``aerobat log info`` on the 151 s Gecko log; it stays the tests' reference, and this decoder
@@ -24,15 +24,19 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from aerobat.logs.blackbox_header import check_decoded_size, decoder_config, frame_defs
+from aerobat.errors import ConfigError
+from aerobat.logs.blackbox_header import KINDS, MAX_DECODED_BYTES_PER_BYTE, decoder_config, frame_defs, min_frame_bytes
 
-__all__ = ["CHUNK_BYTES", "BlackboxFrames", "decode_blackbox", "header_end", "log_starts", "warm_up"]
+__all__ = ["CHUNK_BYTES", "DECODED_FLOOR_BYTES", "BlackboxFrames", "decode_blackbox", "header_end", "log_starts",
+           "warm_up"]
 
 LOG_START = b"H Product:Blackbox flight data recorder"
 #: Bytes the kernel decodes between returns to Python: ~13 ms of the slowest input known (every other byte a
 #: frame marker whose frame runs 256 bytes and is dropped, 0.4 µs a byte; a real log takes 0.03 µs a byte),
 #: so a Ctrl-C is raised within a tenth of a second even on a loaded machine.
 CHUNK_BYTES = 1 << 15
+#: Decoded bytes a log may take whatever its size (a short log's few frames), besides 16 times its bytes.
+DECODED_FLOOR_BYTES = 1 << 20
 
 
 @dataclasses.dataclass(frozen=True)
@@ -144,11 +148,14 @@ def decode_blackbox(data: bytes, start: int, end: int, headers: dict[str, str], 
     main_names = names["I"]
     kept = list(main_names) if fields is None else [f for f in fields if f in main_names]
     columns = np.array([main_names.index(f) for f in kept], dtype=np.int64)
-    smallest = check_decoded_size(defs, counts, len(kept), where)
     first = header_end(data, start)
+    size = max(end - first, 0)
     buffer = np.frombuffer(data, dtype=np.uint8)
-    # every main frame kept takes at least ``smallest`` bytes: rows enough for all (untouched ones cost nothing)
-    main = np.empty((max(end - first, 0) // smallest + 1, len(kept)), dtype=np.float64)
+    # every main frame takes at least ``smallest`` bytes: rows enough for all (rows never written cost nothing),
+    # but no more than the log may decode to; a log that fills those is refused when it does
+    smallest = min(min_frame_bytes(defs, counts, KINDS.index("I")), min_frame_bytes(defs, counts, KINDS.index("P")))
+    allowed = (MAX_DECODED_BYTES_PER_BYTE * size + DECODED_FLOOR_BYTES) // (8 * len(kept)) + 1
+    main = np.empty((min(size // smallest + 1, allowed), len(kept)), dtype=np.float64)
     rows = 16 if other_frames else 0
     slow = np.zeros((rows, counts[k.S_FRAME] + 1), dtype=np.int64)
     gps = np.zeros((rows, counts[k.G_FRAME] + 1), dtype=np.int64)
@@ -165,6 +172,13 @@ def decode_blackbox(data: bytes, start: int, end: int, headers: dict[str, str], 
         if outcome is k.ChunkEnd.FINISHED:
             break
         if outcome is k.ChunkEnd.MAIN_FULL:
+            if main.shape[0] >= allowed:
+                read = int(state[k.S_POS]) - first
+                raise ConfigError(f"{where}: {main.shape[0]:,} main frames of {len(kept)} fields in its first {read:,} "
+                                  f"bytes (one every {read / main.shape[0]:.1f} bytes) would decode to more than "
+                                  f"{MAX_DECODED_BYTES_PER_BYTE} times the log's {size:,} bytes; allowed frames of "
+                                  f"{8 * len(kept) / MAX_DECODED_BYTES_PER_BYTE:.0f} bytes or more on average "
+                                  "(Betaflight's: 20-30)")
             main = _grown(main)
         elif outcome is k.ChunkEnd.SLOW_FULL:
             slow = _grown(slow)

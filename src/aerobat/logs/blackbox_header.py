@@ -10,14 +10,12 @@ them) and from its own decoder, blackbox-tools (``parser.h``: ``FLIGHT_LOG_MAX_F
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from aerobat.errors import ConfigError
 
 __all__ = ["DEFAULTS", "ENCODINGS", "HOME_COORD", "HOME_COORD_1", "INCREMENT", "KINDS", "MAX_DECODED_BYTES_PER_BYTE",
-           "MAX_FIELDS", "MAX_INTERVAL", "MOTOR_0", "PREDICTORS", "check_decoded_size", "decoder_config", "frame_defs",
+           "MAX_FIELDS", "MAX_INTERVAL", "MOTOR_0", "PREDICTORS", "decoder_config", "frame_defs",
            "header_error", "header_int", "min_frame_bytes", "one_g"]
 
 KINDS = "IPSGH"
@@ -36,10 +34,10 @@ MAX_FIELDS = 128
 #: 32000 / the PID loop time in µs: 128 at 4 kHz, 256 at 8 kHz, 1032 at the 32 kHz of Betaflight 3) and the
 #: P interval is at most the I interval (1 << sample_rate, 0 when that would exceed it).
 MAX_INTERVAL = 32767
-#: A decoded main frame takes 8 bytes (float64) for each field kept; a header whose encodings let a frame of
-#: ``k`` kept fields take fewer than ``8 k / 16`` bytes could make a file decode to more than 16 times its size,
-#: and is refused. Betaflight's frames take at least a byte for every 1.4 fields (the shared logs' P frames:
-#: 25 bytes for 35 fields at the least, 28 on average).
+#: A decoded main frame takes 8 bytes (float64) for each field kept: a log whose frames decode to more than 16
+#: times its bytes (and 1 MB) is refused (:func:`.blackbox_decode.decode_blackbox`). The shared logs decode to
+#: 9-10 times theirs (34-35 fields in 28 bytes a frame on average); 16 times is a frame of 31 fields in 16 bytes
+#: all through a log, while a file of frames without bytes (the increment predictor) decoded to 800 times its size.
 MAX_DECODED_BYTES_PER_BYTE = 16
 _UINT16 = (0, 65535)
 
@@ -218,18 +216,3 @@ def decoder_config(headers: dict[str, str], names: dict[str, list[str]], defs: n
     cfg[k.CFG_HOME0] = home.index("GPS_home[0]") if "GPS_home[0]" in home else -1
     cfg[k.CFG_HOME1] = home.index("GPS_home[1]") if "GPS_home[1]" in home else -1
     return cfg
-
-
-def check_decoded_size(defs: np.ndarray, counts: np.ndarray, kept: int, where: str) -> int:
-    """The fewest bytes a main frame takes; refuses a header whose frames could decode to more than
-    :data:`MAX_DECODED_BYTES_PER_BYTE` times their size with ``kept`` fields kept."""
-    from aerobat.logs import blackbox_kernel as k
-
-    smallest = min(min_frame_bytes(defs, counts, k.I_FRAME), min_frame_bytes(defs, counts, k.P_FRAME))
-    if 8 * kept > MAX_DECODED_BYTES_PER_BYTE * smallest:
-        least = math.ceil(8 * kept / MAX_DECODED_BYTES_PER_BYTE)
-        raise ConfigError(f"{where}: the header's encodings and predictors let a main frame of {kept} fields take "
-                          f"{smallest} byte{'s' if smallest != 1 else ''}: allowed at least {least} (a byte for "
-                          "every two fields; Betaflight's frames take a byte for every 1.4 fields at the least); "
-                          "a frame without bytes is not recorded data")
-    return smallest

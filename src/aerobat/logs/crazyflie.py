@@ -41,6 +41,7 @@ CRAZYFLIE_LAYOUT = MotorLayout(
 
 _TYPES = {"f": "<f4", "d": "<f8", "I": "<u4", "i": "<i4", "H": "<u2", "h": "<i2", "B": "u1", "b": "i1",
           "Q": "<u8", "q": "<i8"}
+_FLOAT_TYPES = frozenset("fd")
 _VARIABLE = re.compile(r"^(?P<name>[^()]+)\((?P<type>[A-Za-z])\)$")
 # a record's own columns, named with parentheses, which no variable's name has: a variable may be called "t"
 _ID, _TIME = "(event id)", "(timestamp)"
@@ -169,8 +170,8 @@ def _in_time_order(t: np.ndarray, notes: list[str]) -> np.ndarray:
 
 def _count_non_finite(rec: np.ndarray, variables: list[tuple[str, str]], notes: list[str]) -> None:
     """A note per float variable holding NaN or infinite values (kept as read)."""
-    for name, kind in variables:
-        if kind in ("f", "d"):
+    for name, letter in variables:
+        if letter in _FLOAT_TYPES:
             bad = int(np.count_nonzero(~np.isfinite(rec[name])))
             if bad:
                 notes.append(f"{name} holds {bad} of {len(rec)} values NaN or infinite (kept as read)")

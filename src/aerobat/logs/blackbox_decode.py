@@ -152,7 +152,7 @@ def decode_blackbox(data: bytes, start: int, end: int, headers: dict[str, str], 
     size = max(end - first, 0)
     buffer = np.frombuffer(data, dtype=np.uint8)
     # every main frame takes at least ``smallest`` bytes: rows enough for all (rows never written cost nothing),
-    # but no more than the log may decode to; a log that fills those is refused when it does
+    # but no more than the log may decode to: only a log that would decode to more fills them, and is refused
     smallest = min(min_frame_bytes(defs, counts, KINDS.index("I")), min_frame_bytes(defs, counts, KINDS.index("P")))
     allowed = (MAX_DECODED_BYTES_PER_BYTE * size + DECODED_FLOOR_BYTES) // (8 * len(kept)) + 1
     main = np.empty((min(size // smallest + 1, allowed), len(kept)), dtype=np.float64)
@@ -162,8 +162,8 @@ def decode_blackbox(data: bytes, start: int, end: int, headers: dict[str, str], 
     events = np.zeros((rows, 4), dtype=np.int64)
     state, stats = k.new_state(first), np.zeros(k.ST_SIZE, dtype=np.int64)
     history = np.zeros((5, max(int(counts.max()), 1)), dtype=np.int64)
-    home, values, event_row = np.zeros(history.shape[1], dtype=np.int64), np.zeros(8, dtype=np.int64), np.zeros(
-        4, dtype=np.int64)
+    home = np.zeros(history.shape[1], dtype=np.int64)
+    values, event_row = np.zeros(8, dtype=np.int64), np.zeros(4, dtype=np.int64)
     stop = first
     while True:  # a chunk at a time: Python runs between chunks, so a Ctrl-C is raised here
         stop = min(max(stop, int(state[k.S_POS])) + CHUNK_BYTES, end)
@@ -171,16 +171,14 @@ def decode_blackbox(data: bytes, start: int, end: int, headers: dict[str, str], 
                                             home, values, event_row, main, slow, gps, events))
         if outcome is k.ChunkEnd.FINISHED:
             break
-        if outcome is k.ChunkEnd.MAIN_FULL:
-            if main.shape[0] >= allowed:
-                read = int(state[k.S_POS]) - first
-                raise ConfigError(f"{where}: {main.shape[0]:,} main frames of {len(kept)} fields in its first {read:,} "
-                                  f"bytes (one every {read / main.shape[0]:.1f} bytes) would decode to more than "
-                                  f"{MAX_DECODED_BYTES_PER_BYTE} times the log's {size:,} bytes; allowed frames of "
-                                  f"{8 * len(kept) / MAX_DECODED_BYTES_PER_BYTE:.0f} bytes or more on average "
-                                  "(Betaflight's: 20-30)")
-            main = _grown(main)
-        elif outcome is k.ChunkEnd.SLOW_FULL:
+        if outcome is k.ChunkEnd.MAIN_FULL:  # the log's frames outgrow what it may decode to
+            read = int(state[k.S_POS]) - first
+            raise ConfigError(f"{where}: {main.shape[0]:,} main frames of {len(kept)} fields in its first {read:,} "
+                              f"bytes (one every {read / main.shape[0]:.1f} bytes) would decode to more than "
+                              f"{MAX_DECODED_BYTES_PER_BYTE} times the log's {size:,} bytes; allowed frames of "
+                              f"{8 * len(kept) / MAX_DECODED_BYTES_PER_BYTE:.0f} bytes or more on average "
+                              "(Betaflight's: 20-30)")
+        if outcome is k.ChunkEnd.SLOW_FULL:
             slow = _grown(slow)
         elif outcome is k.ChunkEnd.GPS_FULL:
             gps = _grown(gps)

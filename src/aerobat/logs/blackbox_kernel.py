@@ -5,7 +5,8 @@ position, into tables the caller allocated: main frames (I and P) into a table o
 (the fields the caller keeps, exact: Betaflight's fields are 32-bit integers), slow (S), GPS (G)
 frames and events into tables of int64 rows (or only counted, when a table has no rows). It
 allocates nothing, and returns to Python after every chunk of bytes, so a Ctrl-C is raised
-between chunks, and whenever a table is full, so the caller grows it.
+between chunks, and whenever a table is full: the caller grows the slow, GPS and event tables,
+and refuses a log whose main frames fill theirs (more than the log may decode to).
 
 The format and the resynchronisation follow Betaflight's own decoders (blackbox-tools and the
 blackbox log viewer): a frame counts only if the byte after it starts another frame (or the log

@@ -217,3 +217,17 @@ def test_log_replay_json_of_a_real_second_is_strict_json(tmp_path, capsys):
     assert main(["log", "replay", f"{roma}:1", "--window-s", "22", "23", "--out", str(tmp_path), "--json"]) == 0
     summary = strict_json(capsys.readouterr().out)
     assert summary["window_s"] == [22.0, 23.0]
+
+
+def test_identify_log_json_that_fails_says_one_line_on_stderr(tmp_path, capsys):
+    # the fuzz campaign's logs phase: `identify --log ... --json` printed its progress line on stderr (stdout
+    # carries the JSON), so a fit that failed said two lines there
+    zeez = DATA / "betaflight" / "zeezf7-short.bbl"
+    path = tmp_path / "idle0.bbl"
+    path.write_bytes(zeez.read_bytes().replace(b"H motorOutput:158,2047\n", b"H motorOutput:0,0\n"))
+    code = main(["identify", "--log", f"{path}:2", "--output", str(tmp_path / "v.toml"), "--json"])
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
+    assert code == 1 and len(err) == 1 and err[0].startswith("aerobat: failed: idle0.bbl#2: the motors do not "
+                                                              "explain"), captured.err
+    assert captured.out == ""

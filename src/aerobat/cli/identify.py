@@ -145,9 +145,12 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
     geometry = _geometry(args, prior)
     say = console(args.json).print
 
-    def starting() -> None:  # only once the logs are read and fit to identify: a refusal is the only line
-        say(f"identifying from {', '.join(str(r) for r in refs)}: mass {geometry.mass_kg:g} kg, motors at "
-            f"(±{geometry.motor_x_m:g}, ±{geometry.motor_y_m:g}) m, prior {prior.name}")
+    def starting() -> None:
+        # only once the logs are read and fit to identify, so that a refusal is the only line; and not with --json,
+        # whose object says it all: stderr then carries nothing but a failure's one line
+        if not args.json:
+            say(f"identifying from {', '.join(str(r) for r in refs)}: mass {geometry.mass_kg:g} kg, motors at "
+                f"(±{geometry.motor_x_m:g}, ±{geometry.motor_y_m:g}) m, prior {prior.name}")
 
     result = identify_from_logs(refs, geometry, before_fit=starting)
     fit = result.fit

@@ -165,17 +165,20 @@ def test_the_warm_up_log_decodes_to_its_two_frames():
     assert frames.log_end and frames.notes() == []
 
 
-def test_a_file_cut_in_its_last_logs_header_keeps_the_logs_before_it(tmp_path, capsys):
-    # the recording stopped in log 2's header: log 1 is whole and read (the whole file was refused), and a note says so
+def test_a_file_cut_in_its_last_logs_header_or_first_frame_keeps_the_logs_before_it(tmp_path, capsys):
+    # the recording stopped in log 2's header or first frame: log 1 is whole and read (the whole file was refused,
+    # found by the fuzz campaign's cuts), and a note says so
     data = (DATA / "zeezf7-short.bbl").read_bytes()
     second = log_starts(data)[1]
-    for cut in (second + 60, second + 2000, header_end(data, second)):
+    frames = header_end(data, second)
+    for cut, where in ((second + 60, "header"), (second + 2000, "header"), (frames, "header"),
+                       (frames + 1, "first frame"), (frames + 20, "first frame")):
         path = tmp_path / f"cut{cut}.bbl"
         path.write_bytes(data[:cut])
         (log,) = read_logs(path)
         assert log.index == 1 and log.logs_in_file == 1 and log.signal(Channel.GYRO).samples > 90
-        assert log.notes[-1].startswith(f"the file ends in the header of a log after this one (log 2, at byte "
-                                        f"{second})")
+        assert log.notes[-1].startswith(f"the file ends in the {where} of a log after this one (log 2, at byte "
+                                        f"{second})"), (cut, log.notes[-1])
     path = tmp_path / "only-header.bbl"
     path.write_bytes(data[second: second + 2000])  # a file of one log cut in its header is still refused
     _one_error_line(capsys, path, "log 1")

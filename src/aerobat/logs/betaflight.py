@@ -139,19 +139,30 @@ def read_blackbox(path: Path) -> list[FlightLog]:
     if not starts:
         raise ConfigError(f"{path}: no blackbox log in the file (no 'H Product:Blackbox flight data recorder' line)")
     ends = [*starts[1:], len(data)]
-    # a file that ends in the last log's header (or right after it): the recording stopped there. The logs before
-    # it are whole, and read; only a file of that one log is refused ("holds no frames")
-    cut = len(starts) > 1 and header_end(data, starts[-1]) >= len(data)
-    count = len(starts) - cut
-    logs = [_read_one(path, data, i + 1, count, starts[i], ends[i]) for i in range(count)]
-    if cut:
-        logs[-1] = dataclasses.replace(logs[-1], notes=(*logs[-1].notes, f"the file ends in the header of a log "
-                                                        f"after this one (log {len(starts)}, at byte {starts[-1]}): "
-                                                        "the recording stopped there; not read"))
-    return logs
+    # A file that ends in the last log's header or before its first whole frame: the recording stopped there. The
+    # logs before it are whole, and read, with a note; only a file of that one log is refused ("holds no frames").
+    logs: list[FlightLog | None] = []
+    for i, (start, end) in enumerate(zip(starts, ends, strict=True)):
+        cut_short = 0 < i == len(starts) - 1
+        if cut_short and header_end(data, start) >= len(data):
+            logs.append(None)
+        else:
+            logs.append(_read_one(path, data, i + 1, len(starts), start, end, cut_short=cut_short))
+    last = logs[-1]
+    if last is not None:
+        return [log for log in logs if log is not None]
+    whole = [dataclasses.replace(log, logs_in_file=len(starts) - 1) for log in logs[:-1] if log is not None]
+    where = "header" if header_end(data, starts[-1]) >= len(data) else "first frame"
+    whole[-1] = dataclasses.replace(whole[-1], notes=(*whole[-1].notes, f"the file ends in the {where} of a log after "
+                                                      f"this one (log {len(starts)}, at byte {starts[-1]}): the "
+                                                      "recording stopped there; not read"))
+    return whole
 
 
-def _read_one(path: Path, data: bytes, index: int, count: int, start: int, end: int) -> FlightLog:
+def _read_one(path: Path, data: bytes, index: int, count: int, start: int, end: int, *,
+              cut_short: bool = False) -> FlightLog | None:
+    """Log ``index`` of the file; one without frames is refused, or, if it may be ``cut_short`` (the file's last
+    log of several: the file ends in its first frame), None."""
     from aerobat.logs.blackbox_decode import decode_blackbox
 
     headers = raw_headers(data, start)
@@ -160,6 +171,8 @@ def _read_one(path: Path, data: bytes, index: int, count: int, start: int, end: 
     frames = decode_blackbox(data, start, end, headers, where, fields=FIELDS, other_frames=False, drop_same_time=True)
     notes = frames.notes()
     if not len(frames.main):
+        if cut_short:
+            return None
         raise ConfigError(f"{where}: the log holds no frames" + (f" ({'; '.join(notes)})" if notes else ""))
     table = frames.main  # float64; every series below is a view of it, scaled in place (no copy of the log)
     columns = {name: i for i, name in enumerate(frames.names)}

@@ -127,7 +127,7 @@ def test_an_encoding_the_decoder_does_not_read_is_one_line_and_exit_2(tmp_path, 
     data = (DATA / "zeezf7-short.bbl").read_bytes()
     path = tmp_path / "elias.bbl"
     path.write_bytes(data.replace(b"H Field P encoding:9,0,", b"H Field P encoding:9,4,", 1))
-    _one_error_line(capsys, path, "'time'", "encoding 4")
+    _one_error_line(capsys, path, "header field 'H Field P encoding'", "field 'time': '4'", "allowed")
 
 
 def test_an_empty_file_is_one_line_and_exit_2(tmp_path, capsys):
@@ -163,3 +163,22 @@ def test_the_warm_up_log_decodes_to_its_two_frames():
     # through the I frame twice, plus a delta of 0)
     assert frames.main.tolist() == [[7, 10000], [8, 10000]]
     assert frames.log_end and frames.notes() == []
+
+
+def test_a_file_cut_in_its_last_logs_header_or_first_frame_keeps_the_logs_before_it(tmp_path, capsys):
+    # the recording stopped in log 2's header or first frame: log 1 is whole and read (the whole file was refused,
+    # found by the fuzz campaign's cuts), and a note says so
+    data = (DATA / "zeezf7-short.bbl").read_bytes()
+    second = log_starts(data)[1]
+    frames = header_end(data, second)
+    for cut, where in ((second + 60, "header"), (second + 2000, "header"), (frames, "header"),
+                       (frames + 1, "first frame"), (frames + 20, "first frame")):
+        path = tmp_path / f"cut{cut}.bbl"
+        path.write_bytes(data[:cut])
+        (log,) = read_logs(path)
+        assert log.index == 1 and log.logs_in_file == 1 and log.signal(Channel.GYRO).samples > 90
+        assert log.notes[-1].startswith(f"the file ends in the {where} of a log after this one (log 2, at byte "
+                                        f"{second})"), (cut, log.notes[-1])
+    path = tmp_path / "only-header.bbl"
+    path.write_bytes(data[second: second + 2000])  # a file of one log cut in its header is still refused
+    _one_error_line(capsys, path, "log 1")

@@ -7,7 +7,6 @@ The run is :func:`aerobat.experiments.identify.identify` (or ``refit_session`` w
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from pathlib import Path
 from typing import Any
@@ -26,6 +25,7 @@ from aerobat.cli.common import (
     session_ref,
     text_path,
 )
+from aerobat.cli.json_output import json_text
 from aerobat.errors import ConfigError, IdentificationFailed
 
 __all__ = ["register"]
@@ -97,7 +97,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     assert fit is not None
     save_figure(plot_identification(fit), figure)
     if args.json:
-        print(json.dumps({
+        print(json_text({
             "session_id": run.session_id, "plant": run.plant.to_table(), "flights": len(run.flights),
             "notes": list(run.notes) + list(fit.notes), "parameters": fit.parameter_rows(),
             "derived": {k: {"value": v, "sigma": s} for k, (v, s) in fit.derived().items()},
@@ -145,9 +145,15 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
     prior = vehicle_from_name_or_file(args.vehicle)
     geometry = _geometry(args, prior)
     say = console(args.json).print
-    say(f"identifying from {', '.join(str(r) for r in refs)}: mass {geometry.mass_kg:g} kg, motors at "
-        f"(±{geometry.motor_x_m:g}, ±{geometry.motor_y_m:g}) m, prior {prior.name}")
-    result = identify_from_logs(refs, geometry)
+
+    def starting() -> None:
+        # only once the logs are read and fit to identify, so that a refusal is the only line; and not with --json,
+        # whose object says it all: stderr then carries nothing but a failure's one line
+        if not args.json:
+            say(f"identifying from {', '.join(str(r) for r in refs)}: mass {geometry.mass_kg:g} kg, motors at "
+                f"(±{geometry.motor_x_m:g}, ±{geometry.motor_y_m:g}) m, prior {prior.name}")
+
+    result = identify_from_logs(refs, geometry, before_fit=starting)
     fit = result.fit
     config = vehicle_from_log_fit(fit, prior, name=args.name or out.stem, idle_command=result.idle_command)
     save_vehicle(config, out, header=f"identified by aerobat identify --log from {fit.name}")
@@ -161,7 +167,7 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
                                   + "".join(f"# {line}\n" for line in airframe_notes(fit))
                                   + tomli_w.dumps({"airframe": airframe, "pilot": pilot}))
     if args.json:
-        print(json.dumps({
+        print(json_text({
             "logs": list(result.fitted), "values": {k: {"value": v, "sigma": s, "unit": u}
                                                     for k, (v, s, u) in fit.values.items()},
             "holdout": [m.__dict__ for m in fit.holdout_metrics], "fit": [m.__dict__ for m in fit.fit_metrics],
@@ -169,7 +175,7 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
                            for name, v in result.validations},
             "fit_segments_s": fit.fit_segments_s, "holdout_segments_s": fit.holdout_segments_s,
             "notes": list(fit.notes), "wall_s": fit.wall_s, "out": str(out), "figure": str(figure),
-            "airframe": args.airframe}, default=float))
+            "airframe": args.airframe}))
         return 0
     _print_log_fit(result)
     say(f"vehicle written to {out} (figure {figure}" + (f", airframe {args.airframe}" if args.airframe else "") +

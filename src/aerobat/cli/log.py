@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import csv
 import io
-import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +17,7 @@ from aerobat.cli.common import (
     output_dir,
     refuse_overwrite,
 )
+from aerobat.cli.json_output import json_text
 from aerobat.errors import ConfigError
 
 __all__ = ["log_summary", "register"]
@@ -61,7 +62,7 @@ def log_summary(log: Any) -> dict[str, Any]:
 def _cmd_info(args: argparse.Namespace) -> int:
     summaries = [log_summary(log) for log in _logs(args)]
     if args.json:
-        print(json.dumps({"file": str(args.file), "logs": summaries}))
+        print(json_text({"file": str(args.file), "logs": summaries}))
         return 0
     say = console().print
     say(f"{args.file}: {len(summaries)} log{'s' if len(summaries) != 1 else ''}")
@@ -93,30 +94,37 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     written = []
     for log in logs:
         stem = f"log{log.index}"
-        for suffix, fig in (("traces", plot_log_traces(log, window_s=window)), ("spectra", plot_log_spectra(log))):
+        for suffix, draw in (("traces", lambda log=log: plot_log_traces(log, window_s=window)),
+                             ("spectra", lambda log=log: plot_log_spectra(log))):
             path = out / f"{stem}_{suffix}.png"
             refuse_overwrite(path, store_path=None, force=args.force, option="--out")
-            save_figure(fig, path)
+            save_figure(draw(), path)  # one figure at a time: each is let go once written
             written.append(str(path))
             say(f"wrote {path}")
     if args.json:
-        print(json.dumps({"figures": written}))
+        print(json_text({"figures": written}))
     return 0
 
 
-def _csv_text(log: Any) -> str:
+#: Rows of CSV made at a time: the export streams, never holding the log's text (or a copy of its table) whole.
+CSV_BLOCK_ROWS = 20_000
+
+
+def _long_csv(log: Any, write: Callable[[str], Any]) -> None:
     """Every series of ``log`` on its own time base: one row per sample, long format."""
-    buffer = io.StringIO()
-    writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(["signal", "unit", "time_s", *[f"v{i}" for i in range(4)], "columns"])
+    write("signal,unit,time_s,v0,v1,v2,v3,columns\n")
     for ch, s in log.signals.items():
         cols = "|".join(s.columns)
-        for t, row in zip(s.time_s, s.values, strict=True):
-            writer.writerow([ch.value, s.unit, f"{t:.6f}", *[f"{v:.7g}" for v in row], cols])
-    return buffer.getvalue()
+        for start in range(0, s.samples, CSV_BLOCK_ROWS):
+            buffer = io.StringIO()
+            writer = csv.writer(buffer, lineterminator="\n")
+            for t, row in zip(s.time_s[start: start + CSV_BLOCK_ROWS], s.values[start: start + CSV_BLOCK_ROWS],
+                              strict=True):
+                writer.writerow([ch.value, s.unit, f"{t:.6f}", *[f"{v:.7g}" for v in row], cols])
+            write(buffer.getvalue())
 
 
-def _wide_csv(log: Any) -> str:
+def _wide_csv(log: Any, write: Callable[[str], Any]) -> None:
     """The series that share the log's main time base side by side, one row per sample."""
     import numpy as np
 
@@ -124,36 +132,44 @@ def _wide_csv(log: Any) -> str:
     for s in log.signals.values():
         groups.setdefault(s.time_s.tobytes(), []).append(s)
     main = max(groups.values(), key=lambda g: (g[0].samples, len(g)))
-    header = ["time_s"] + [f"{s.channel.value}.{c}[{s.unit}]" for s in main for c in s.columns]
-    data = np.column_stack([main[0].time_s] + [s.values for s in main])
-    buffer = io.StringIO()
-    buffer.write(",".join(header) + "\n")
-    np.savetxt(buffer, data, delimiter=",", fmt="%.7g")
-    return buffer.getvalue()
+    write(",".join(["time_s"] + [f"{s.channel.value}.{c}[{s.unit}]" for s in main for c in s.columns]) + "\n")
+    for start in range(0, main[0].samples, CSV_BLOCK_ROWS):
+        rows = slice(start, start + CSV_BLOCK_ROWS)
+        buffer = io.StringIO()
+        np.savetxt(buffer, np.column_stack([main[0].time_s[rows]] + [s.values[rows] for s in main]), delimiter=",",
+                   fmt="%.7g")
+        write(buffer.getvalue())
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from aerobat.plotting import write_text
+    import sys
+
+    from aerobat.fileio import atomic_output
 
     logs = _logs(args)
     if args.output is not None and len(logs) > 1:
         raise ConfigError(f"--output {args.output}: the file holds {len(logs)} logs; name one with --index, or give "
                           "--out DIR for one CSV file per log")
-    render = _csv_text if args.long else _wide_csv
+    render = _long_csv if args.long else _wide_csv
     written: list[Path] = []
     if args.output is None and args.out is None:
         for log in logs:
-            print(render(log), end="")
+            render(log, sys.stdout.write)
         return 0
     for log in logs:
         name = f"{Path(args.file).stem}-log{log.index}.csv"
         path = Path(args.output) if args.output else output_dir(Path(args.out)) / name
-        refuse_overwrite(path, store_path=None, force=args.force, option="--output" if args.output else "--out")
-        write_text(path, render(log))
+        option = "--output" if args.output else "--out"
+        refuse_overwrite(path, store_path=None, force=args.force, option=option)
+        with atomic_output(path, option=option) as handle:  # replaces the file once the whole CSV is written
+            def write(text: str, handle: Any = handle) -> None:
+                handle.write(text.encode("utf-8"))
+
+            render(log, write)
         written.append(path)
         console(args.json).print(f"wrote {path}", highlight=False)
     if args.json:
-        print(json.dumps({"files": [str(p) for p in written]}))
+        print(json_text({"files": [str(p) for p in written]}))
     return 0
 
 
@@ -188,7 +204,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     if result.tune_report is not None:
         summary["tune"] = result.tune_report.text()
     if args.json:
-        print(json.dumps(summary, default=float))
+        print(json_text(summary))
         return 0
     lo, hi = result.window_s
     say(f"{result.log} {lo:g}–{hi:g} s replayed through Betaflight 4.6 SITL with the log's own tune, in ACRO, in "

@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -106,8 +106,14 @@ def _load(refs: Sequence[LogRef]) -> tuple[list[FlightLog], list[FlightLog]]:
 
 
 def identify_from_logs(refs: Sequence[LogRef | str | os.PathLike[str]], geometry: Geometry, *,
-                       options: LogFitOptions | None = None) -> LogIdentification:
-    """Fit ``geometry``'s vehicle on the logs ``refs`` and validate on the other logs of the same files."""
+                       options: LogFitOptions | None = None,
+                       before_fit: Callable[[], None] | None = None) -> LogIdentification:
+    """Fit ``geometry``'s vehicle on the logs ``refs`` and validate on the other logs of the same files.
+
+    ``before_fit`` is called once the logs are read and found fit to identify (each a multirotor's, with
+    enough flight, one motor layout), before the fit: where a caller says that it starts, so that a log
+    refused is the only thing said about it.
+    """
     parsed = [r if isinstance(r, LogRef) else parse_log_ref(r) for r in refs]
     if not parsed:
         raise ConfigError("identify: no log given")
@@ -120,6 +126,8 @@ def identify_from_logs(refs: Sequence[LogRef | str | os.PathLike[str]], geometry
                                     for log in chosen) + "); fit one vehicle at a time")
     (layout,) = layouts
     assert layout is not None
+    if before_fit is not None:
+        before_fit()
     fit = fit_log(prepared, layout, geometry, options=options)
     validations: list[tuple[str, tuple[ChannelMetrics, ...] | str]] = []
     for log in others:

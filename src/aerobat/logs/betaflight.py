@@ -30,6 +30,7 @@ is assumed and said in the log's notes.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import logging
 import re
@@ -39,9 +40,10 @@ from pathlib import Path
 import numpy as np
 
 from aerobat.errors import ConfigError
+from aerobat.logs import blackbox_header
 from aerobat.quadrotor.flightlog import Channel, FlightLog, LogMetadata, LogSource, MotorLayout, Signal
 
-__all__ = ["QUADX_LAYOUT", "quiet_orangebox", "raw_headers", "read_blackbox"]
+__all__ = ["FIELDS", "QUADX_LAYOUT", "quiet_orangebox", "raw_headers", "read_blackbox"]
 
 G_M_S2 = 9.80665
 DSHOT_MIN, DSHOT_MAX = 48.0, 2047.0
@@ -98,6 +100,13 @@ def raw_headers(data: bytes, start: int) -> dict[str, str]:
     return headers
 
 
+#: The main-frame fields the reader makes series of, in the order their table keeps them: each series's
+#: fields side by side, so that every series is a view of the one table, scaled in place.
+FIELDS = ("time", *(f"gyroADC[{i}]" for i in range(3)), *(f"accSmooth[{i}]" for i in range(3)),
+          *(f"setpoint[{i}]" for i in range(4)), *(f"rcCommand[{i}]" for i in range(4)),
+          *(f"motor[{i}]" for i in range(8)), *(f"axis{x}[{i}]" for x in "PIDF" for i in range(3)), "vbatLatest")
+
+
 def _layout(headers: dict[str, str], motors: np.ndarray, table: np.ndarray, columns: dict[str, int]
             ) -> tuple[MotorLayout, str]:
     """The QUADX layout with props in or out: from the header if it says, else from the yaw mixing."""
@@ -111,7 +120,8 @@ def _layout(headers: dict[str, str], motors: np.ndarray, table: np.ndarray, colu
         return QUADX_LAYOUT, "the header does not record the mixer: QUADX with props in (Betaflight's default) assumed"
     yaw_sum = sum(table[flying, columns[t]] for t in terms)
     diff = motors[flying, 0] + motors[flying, 3] - motors[flying, 1] - motors[flying, 2]
-    corr = float(np.corrcoef(yaw_sum, diff)[0, 1])
+    with np.errstate(invalid="ignore", divide="ignore"):  # a constant series has no correlation: said below
+        corr = float(np.corrcoef(yaw_sum, diff)[0, 1])
     if not np.isfinite(corr) or abs(corr) < 0.3:
         return QUADX_LAYOUT, (f"the header does not record the mixer and the yaw mixing does not show it "
                               f"(correlation {corr:.2f}): QUADX with props in (Betaflight's default) assumed")
@@ -122,88 +132,115 @@ def _layout(headers: dict[str, str], motors: np.ndarray, table: np.ndarray, colu
 
 def read_blackbox(path: Path) -> list[FlightLog]:
     """Every log in a blackbox file, in order (decoded by :mod:`aerobat.logs.blackbox_decode`)."""
-    from aerobat.logs.blackbox_decode import log_starts
+    from aerobat.logs.blackbox_decode import header_end, log_starts
 
     data = path.read_bytes()
     starts = log_starts(data)
     if not starts:
         raise ConfigError(f"{path}: no blackbox log in the file (no 'H Product:Blackbox flight data recorder' line)")
     ends = [*starts[1:], len(data)]
-    return [_read_one(path, data, i + 1, len(starts), starts[i], ends[i]) for i in range(len(starts))]
+    # A file that ends in the last log's header or before its first whole frame: the recording stopped there. The
+    # logs before it are whole, and read, with a note; only a file of that one log is refused ("holds no frames").
+    logs: list[FlightLog | None] = []
+    for i, (start, end) in enumerate(zip(starts, ends, strict=True)):
+        cut_short = 0 < i == len(starts) - 1
+        if cut_short and header_end(data, start) >= len(data):
+            logs.append(None)
+        else:
+            logs.append(_read_one(path, data, i + 1, len(starts), start, end, cut_short=cut_short))
+    last = logs[-1]
+    if last is not None:
+        return [log for log in logs if log is not None]
+    whole = [dataclasses.replace(log, logs_in_file=len(starts) - 1) for log in logs[:-1] if log is not None]
+    where = "header" if header_end(data, starts[-1]) >= len(data) else "first frame"
+    whole[-1] = dataclasses.replace(whole[-1], notes=(*whole[-1].notes, f"the file ends in the {where} of a log after "
+                                                      f"this one (log {len(starts)}, at byte {starts[-1]}): the "
+                                                      "recording stopped there; not read"))
+    return whole
 
 
-def _read_one(path: Path, data: bytes, index: int, count: int, start: int, end: int) -> FlightLog:
+def _read_one(path: Path, data: bytes, index: int, count: int, start: int, end: int, *,
+              cut_short: bool = False) -> FlightLog | None:
+    """Log ``index`` of the file; one without frames is refused, or, if it may be ``cut_short`` (the file's last
+    log of several: the file ends in its first frame), None."""
     from aerobat.logs.blackbox_decode import decode_blackbox
 
     headers = raw_headers(data, start)
     where = f"{path}: log {index}"
-    frames = decode_blackbox(data, start, end, headers, where)
+    one_g = blackbox_header.one_g(headers, where)
+    frames = decode_blackbox(data, start, end, headers, where, fields=FIELDS, other_frames=False, drop_same_time=True)
     notes = frames.notes()
     if not len(frames.main):
+        if cut_short:
+            return None
         raise ConfigError(f"{where}: the log holds no frames" + (f" ({'; '.join(notes)})" if notes else ""))
-    names = list(frames.names)
-    table = frames.main.astype(np.float64)
-    columns = {name: i for i, name in enumerate(names)}
-
-    def field(name: str) -> np.ndarray:
-        return table[:, columns[name]]
-
-    t_us = field("time")
-    order_ok = np.concatenate([[True], np.diff(t_us) > 0])
-    if not order_ok.all():
-        notes.append(f"{int((~order_ok).sum())} frames out of time order left out")
-        table = table[order_ok]
-        t_us = t_us[order_ok]
-    t = (t_us - t_us[0]) * 1e-6
-    signals: dict[Channel, Signal] = {}
+    table = frames.main  # float64; every series below is a view of it, scaled in place (no copy of the log)
+    columns = {name: i for i, name in enumerate(frames.names)}
 
     def have(*fields: str) -> bool:
         return all(f in columns for f in fields)
 
+    def block(fields: list[str] | tuple[str, ...]) -> np.ndarray:
+        """The columns of ``fields`` (next to each other in the table, see FIELDS) as one view."""
+        first = columns[fields[0]]
+        return table[:, first: first + len(fields)]
+
+    t = table[:, columns["time"]]
+    t -= t[0]
+    t *= 1e-6
+    signals: dict[Channel, Signal] = {}
+
     def vector(prefix: str, n: int) -> tuple[np.ndarray, tuple[str, ...]]:
         fields = tuple(f"{prefix}[{i}]" for i in range(n))
-        return np.column_stack([field(f) for f in fields]), fields
+        return block(fields), fields
 
     xyz = ("x", "y", "z")
+    motor_fields = [f"motor[{i}]" for i in range(8) if f"motor[{i}]" in columns]
+    layout = None
+    if len(motor_fields) == 4:  # before the motors are scaled: the layout reads DShot units
+        layout, note = _layout(headers, block(motor_fields), table, columns)
+        notes.append(note)
     if have("gyroADC[0]", "gyroADC[1]", "gyroADC[2]"):
         v, f = vector("gyroADC", 3)
-        signals[Channel.GYRO] = Signal(Channel.GYRO, t, np.radians(v), xyz, "rad/s", f)
+        signals[Channel.GYRO] = Signal(Channel.GYRO, t, np.radians(v, out=v), xyz, "rad/s", f)
     if have("accSmooth[0]", "accSmooth[1]", "accSmooth[2]"):
-        one_g = float(headers.get("acc_1G", "2048"))
         v, f = vector("accSmooth", 3)
-        signals[Channel.SPECIFIC_FORCE] = Signal(Channel.SPECIFIC_FORCE, t, v / one_g * G_M_S2, xyz, "m/s²", f)
+        v *= G_M_S2 / one_g
+        signals[Channel.SPECIFIC_FORCE] = Signal(Channel.SPECIFIC_FORCE, t, v, xyz, "m/s²", f)
     if have("setpoint[0]", "setpoint[1]", "setpoint[2]"):
         v, f = vector("setpoint", 3)
-        signals[Channel.RATE_SETPOINT] = Signal(Channel.RATE_SETPOINT, t, np.radians(v), xyz, "rad/s", f)
+        signals[Channel.RATE_SETPOINT] = Signal(Channel.RATE_SETPOINT, t, np.radians(v, out=v), xyz, "rad/s", f)
     if have("setpoint[3]"):
-        signals[Channel.THROTTLE] = Signal(Channel.THROTTLE, t, field("setpoint[3]") / 1000.0, ("throttle",),
-                                           "fraction", ("setpoint[3]",))
+        v = block(["setpoint[3]"])
+        v /= 1000.0
+        signals[Channel.THROTTLE] = Signal(Channel.THROTTLE, t, v, ("throttle",), "fraction", ("setpoint[3]",))
     if have("rcCommand[0]", "rcCommand[1]", "rcCommand[2]"):
         v, f = vector("rcCommand", 3)
-        signals[Channel.STICKS] = Signal(Channel.STICKS, t, v / 500.0, ("roll", "pitch", "yaw"), "fraction", f)
+        v /= 500.0
+        signals[Channel.STICKS] = Signal(Channel.STICKS, t, v, ("roll", "pitch", "yaw"), "fraction", f)
     if have("rcCommand[3]"):
-        signals[Channel.THROTTLE_STICK] = Signal(Channel.THROTTLE_STICK, t, (field("rcCommand[3]") - 1000.0) / 1000.0,
-                                                 ("throttle",), "fraction", ("rcCommand[3]",))
-    motor_fields = [n for n in columns if n.startswith("motor[")]
-    layout = None
+        v = block(["rcCommand[3]"])
+        v -= 1000.0
+        v /= 1000.0
+        signals[Channel.THROTTLE_STICK] = Signal(Channel.THROTTLE_STICK, t, v, ("throttle",), "fraction",
+                                                 ("rcCommand[3]",))
     if motor_fields:
-        v = np.column_stack([field(n) for n in motor_fields])
-        signals[Channel.MOTOR_COMMAND] = Signal(Channel.MOTOR_COMMAND, t, (v - DSHOT_MIN) / (DSHOT_MAX - DSHOT_MIN),
+        v = block(motor_fields)
+        v -= DSHOT_MIN
+        v /= DSHOT_MAX - DSHOT_MIN
+        signals[Channel.MOTOR_COMMAND] = Signal(Channel.MOTOR_COMMAND, t, v,
                                                 tuple(f"M{i + 1}" for i in range(len(motor_fields))), "fraction",
                                                 tuple(motor_fields))
-        if len(motor_fields) == 4:
-            layout, note = _layout(headers, v, table, columns)
-            notes.append(note)
     for channel, prefix, n in ((Channel.PID_P, "axisP", 3), (Channel.PID_I, "axisI", 3), (Channel.PID_D, "axisD", 2),
                                (Channel.PID_F, "axisF", 3)):
         fields = [f"{prefix}[{i}]" for i in range(n) if f"{prefix}[{i}]" in columns]
         if fields:
-            v = np.column_stack([field(x) for x in fields])
-            signals[channel] = Signal(channel, t, v, ("roll", "pitch", "yaw")[: len(fields)], "firmware units",
-                                      tuple(fields))
+            signals[channel] = Signal(channel, t, block(fields), ("roll", "pitch", "yaw")[: len(fields)],
+                                      "firmware units", tuple(fields))
     if have("vbatLatest"):
-        signals[Channel.BATTERY_VOLTAGE] = Signal(Channel.BATTERY_VOLTAGE, t, field("vbatLatest") * 0.01, ("v",),
-                                                  "V", ("vbatLatest",))
+        v = block(["vbatLatest"])
+        v *= 0.01
+        signals[Channel.BATTERY_VOLTAGE] = Signal(Channel.BATTERY_VOLTAGE, t, v, ("v",), "V", ("vbatLatest",))
     revision = headers.get("Firmware revision", "")
     version = _VERSION.search(revision)
     motors = len(motor_fields)

@@ -1,9 +1,16 @@
-"""aerobat's Betaflight blackbox decoder: the header in Python, the frames compiled (:mod:`.blackbox_kernel`).
+"""aerobat's Betaflight blackbox decoder: the header in Python (:mod:`.blackbox_header`), the frames compiled
+(:mod:`.blackbox_kernel`).
 
 A blackbox file holds one log per arming, each a header of ``H name:value`` lines and then
 binary frames: I frames (every field written whole), P frames (deltas on the frames before,
 with predictors), S (slow: flight modes, failsafe), G and H (GPS and its home) and E (events:
 disarm, flight mode, log end). The header says, per field, its encoding and predictor.
+
+The kernel decodes a chunk of :data:`CHUNK_BYTES` at a time and returns to Python between
+chunks, so a Ctrl-C stops the longest decode within milliseconds. Memory is bounded by the file:
+the main table's rows are at most the log's bytes over the smallest frame its header allows, and
+a log whose frames decode to more than 16 times its bytes (and 1 MB) is refused when it does
+(:data:`.blackbox_header.MAX_DECODED_BYTES_PER_BYTE`); the table's untouched rows take no memory.
 
 orangebox 0.4.0 (pure Python) read these files at about 70 µs a frame, ~90 % of
 ``aerobat log info`` on the 151 s Gecko log; it stays the tests' reference, and this decoder
@@ -13,29 +20,35 @@ must give its main-frame tables bit for bit on every shared log.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 import numpy as np
 
 from aerobat.errors import ConfigError
+from aerobat.logs.blackbox_header import KINDS, MAX_DECODED_BYTES_PER_BYTE, decoder_config, frame_defs, min_frame_bytes
 
-__all__ = ["BlackboxFrames", "decode_blackbox", "log_starts", "warm_up"]
+__all__ = ["CHUNK_BYTES", "DECODED_FLOOR_BYTES", "BlackboxFrames", "decode_blackbox", "header_end", "log_starts",
+           "warm_up"]
 
 LOG_START = b"H Product:Blackbox flight data recorder"
-_KINDS = "IPSGH"
-_ENCODINGS = {0: "signed VB", 1: "unsigned VB", 3: "negative 14-bit", 6: "tag8_8svb", 7: "tag2_3s32",
-              8: "tag8_4s16", 9: "null", 10: "tag2_3svariable"}
-_GROUP = {6: 1, 7: 3, 8: 4, 10: 3}  # encodings that write several fields together: fields per group (6: up to 8)
-_PREDICTORS = range(12)
-_MOTOR_0, _HOME_COORD, _HOME_COORD_1, _INCREMENT = 5, 7, 256, 6
-# Betaflight's decoders' defaults for headers a log leaves out
-_DEFAULTS = {"I interval": 32, "minthrottle": 1150, "vbatref": 4095, "Data version": 1}
+#: Bytes the kernel decodes between returns to Python: ~13 ms of the slowest input known (every other byte a
+#: frame marker whose frame runs 256 bytes and is dropped, 0.4 µs a byte; a real log takes 0.03 µs a byte),
+#: so a Ctrl-C is raised within a tenth of a second even on a loaded machine.
+CHUNK_BYTES = 1 << 15
+#: Decoded bytes a log may take whatever its size (a short log's few frames), besides 16 times its bytes.
+DECODED_FLOOR_BYTES = 1 << 20
 
 
 @dataclasses.dataclass(frozen=True)
 class BlackboxFrames:
-    """One log's decoded frames: main-frame fields as written (int64), and what was dropped."""
+    """One log's decoded frames: the main-frame fields kept, as written, and what was dropped.
 
-    names: tuple[str, ...]
+    ``main`` is float64, which holds every value exactly (Betaflight's fields are 32-bit integers, the
+    microsecond clock unwrapped past 32 bits stays below 2**53 for 285 years); ``slow``, ``gps`` and
+    ``events`` are empty when :func:`decode_blackbox` only counted them.
+    """
+
+    names: tuple[str, ...]  # the main-frame fields kept, the columns of ``main``
     main: np.ndarray  # (frames, fields): the I and P frames in order
     slow_names: tuple[str, ...]
     slow: np.ndarray  # (frames, 1 + fields): the main row each S frame precedes, then its fields
@@ -51,6 +64,7 @@ class BlackboxFrames:
     garbage_bytes: int  # bytes between frames that start none
     unknown_events: int
     log_end: bool  # Betaflight's "End of log" event was found
+    same_time_frames: int = 0  # main frames left out (drop_same_time): their time did not pass the last one kept
 
     def notes(self) -> list[str]:
         """What was skipped or corrupt, one line each (nothing when the log decoded cleanly)."""
@@ -62,6 +76,9 @@ class BlackboxFrames:
         if self.rejected_frames:
             notes.append(f"{self.rejected_frames} main frames left out: their iteration or time ran backwards or "
                          "jumped by 5,000 iterations / 10 s or more")
+        if self.same_time_frames:
+            notes.append(f"{self.same_time_frames} main frames left out: their time did not advance past the frame "
+                         "before")
         if self.withheld_frames:
             notes.append(f"{self.withheld_frames} P frames left out after a corrupt or rejected frame (a P frame "
                          "is a delta on the frames before; decoding resumed at the next I frame)")
@@ -95,146 +112,89 @@ def header_end(data: bytes, start: int) -> int:
     return at
 
 
-def _ints(headers: dict[str, str], key: str, where: str) -> list[int]:
-    try:
-        return [int(x) for x in headers[key].split(",")]
-    except ValueError:
-        raise ConfigError(f"{where}: header 'H {key}' is not a list of integers: {headers[key][:60]!r}") from None
+def _grown(table: np.ndarray) -> np.ndarray:
+    """``table`` with twice the rows (the rows after its own zero)."""
+    bigger = np.zeros((2 * table.shape[0], table.shape[1]), dtype=table.dtype)
+    bigger[: table.shape[0]] = table
+    return bigger
 
 
-def _header_int(headers: dict[str, str], key: str, where: str) -> int:
-    raw = headers.get(key)
-    if raw is None:
-        return _DEFAULTS[key]
-    try:
-        return int(raw.split(",")[0])
-    except ValueError:
-        raise ConfigError(f"{where}: header 'H {key}' is not an integer: {raw[:40]!r}") from None
-
-
-def _frame_defs(headers: dict[str, str], where: str) -> tuple[dict[str, list[str]], np.ndarray, np.ndarray]:
-    """The field names per frame kind and the (kind, encoding/predictor/signed, field) table."""
-    names: dict[str, list[str]] = {}
-    for kind in "ISGH":
-        if f"Field {kind} name" in headers:
-            names[kind] = [n.strip() for n in headers[f"Field {kind} name"].split(",")]
-    if "I" not in names:
-        raise ConfigError(f"{where}: the header has no field definitions (a damaged or truncated header)")
-    names["P"] = names["I"]
-    if names["I"][:2] != ["loopIteration", "time"]:
-        raise ConfigError(f"{where}: the main frame's first fields are {names['I'][:2]}, expected "
-                          "['loopIteration', 'time'] (not a Betaflight log)")
-    width = max(len(v) for v in names.values())
-    defs = np.zeros((len(_KINDS), 3, width), dtype=np.int64)
-    counts = np.zeros(len(_KINDS), dtype=np.int64)
-    for k, kind in enumerate(_KINDS):
-        if kind not in names:
-            continue
-        n = len(names[kind])
-        counts[k] = n
-        for row, prop in enumerate(("encoding", "predictor", "signed")):
-            key = f"Field {kind} {prop}"
-            source = "I" if prop == "signed" and kind == "P" else kind
-            if f"Field {source} {prop}" not in headers:
-                if prop == "signed":
-                    continue
-                raise ConfigError(f"{where}: the header has no 'H {key}' line (a damaged or truncated header)")
-            values = _ints(headers, f"Field {source} {prop}", where)
-            if len(values) != n:
-                raise ConfigError(f"{where}: 'H {key}' has {len(values)} entries for the {n} fields of the "
-                                  f"{kind} frame")
-            defs[k, row, :n] = values
-        for i in range(n):
-            enc, pred = int(defs[k, 0, i]), int(defs[k, 1, i])
-            if enc not in _ENCODINGS and pred != _INCREMENT:
-                raise ConfigError(f"{where}: field {names[kind][i]!r} of the {kind} frame has encoding {enc}; "
-                                  f"this decoder reads {', '.join(f'{c} ({s})' for c, s in _ENCODINGS.items())}")
-            if pred not in _PREDICTORS:
-                raise ConfigError(f"{where}: field {names[kind][i]!r} of the {kind} frame has predictor {pred}; "
-                                  "Betaflight's are 0–11")
-        # GPS coordinates come in pairs with one predictor id: the second is the home's second coordinate
-        for i in range(1, n):
-            if defs[k, 1, i - 1] == _HOME_COORD and defs[k, 1, i] == _HOME_COORD:
-                defs[k, 1, i] = _HOME_COORD_1
-    return names, defs, counts
-
-
-def _min_frame_bytes(defs: np.ndarray, counts: np.ndarray, k: int) -> int:
-    """The fewest bytes a frame of kind ``k`` can take, its marker included."""
-    size, i, n = 1, 0, int(counts[k])
-    while i < n:
-        enc, pred = int(defs[k, 0, i]), int(defs[k, 1, i])
-        if pred == _INCREMENT or enc == 9:
-            i += 1
-            continue
-        size += 1
-        if enc == 6:
-            j = i + 1
-            while j < min(i + 8, n) and defs[k, 0, j] == 6:
-                j += 1
-            i = j
-        else:
-            i += _GROUP.get(enc, 1)
-    return size
-
-
-def _config(headers: dict[str, str], names: dict[str, list[str]], defs: np.ndarray, where: str) -> np.ndarray:
-    from aerobat.logs import blackbox_kernel as k
-
-    cfg = np.zeros(k.CFG_SIZE, dtype=np.int64)
-    cfg[k.CFG_I_INTERVAL] = max(_header_int(headers, "I interval", where), 1)
-    p_interval = headers.get("P interval", "1/1").strip()
-    try:
-        num, _, denom = p_interval.partition("/")
-        # "1/2" in older firmware; Betaflight 4 writes one P frame every N iterations as "N"
-        p_num, p_denom = (int(num), int(denom)) if denom else (1, int(num))
-    except ValueError:
-        raise ConfigError(f"{where}: header 'H P interval' is {p_interval!r}, expected N or N/M") from None
-    cfg[k.CFG_P_NUM], cfg[k.CFG_P_DENOM] = max(p_num, 1), max(p_denom, 1)
-    cfg[k.CFG_MINTHROTTLE] = _header_int(headers, "minthrottle", where)
-    cfg[k.CFG_VBATREF] = _header_int(headers, "vbatref", where)
-    cfg[k.CFG_MOTOR_LOW] = (_ints(headers, "motorOutput", where)[0] if "motorOutput" in headers
-                            else cfg[k.CFG_MINTHROTTLE])
-    cfg[k.CFG_DATA_VERSION] = _header_int(headers, "Data version", where)
-    main = names["I"]
-    cfg[k.CFG_MOTOR0] = main.index("motor[0]") if "motor[0]" in main else -1
-    if cfg[k.CFG_MOTOR0] < 0 and (defs[:2, 1] == _MOTOR_0).any():
-        raise ConfigError(f"{where}: a field is predicted from motor[0], but the log has no motor[0] field")
-    home = names.get("H", [])
-    cfg[k.CFG_HOME0] = home.index("GPS_home[0]") if "GPS_home[0]" in home else -1
-    cfg[k.CFG_HOME1] = home.index("GPS_home[1]") if "GPS_home[1]" in home else -1
-    gps = names.get("G", [])
-    cfg[k.CFG_GPS_TIME] = gps.index("time") if "time" in gps else -1
-    return cfg
-
-
-def decode_blackbox(data: bytes, start: int, end: int, headers: dict[str, str],
-                    where: str) -> BlackboxFrames:
+def decode_blackbox(data: bytes, start: int, end: int, headers: dict[str, str], where: str, *,
+                    fields: Sequence[str] | None = None, other_frames: bool = True,
+                    drop_same_time: bool = False) -> BlackboxFrames:
     """Decode the log whose header starts at ``data[start]`` and whose bytes end before ``end``.
 
-    ``headers`` are its ``H`` lines (:func:`aerobat.logs.betaflight.raw_headers`); ``where`` names
-    the log in errors (a :class:`ConfigError`: a header this decoder cannot follow).
+    Parameters
+    ----------
+    data, start, end : the file's bytes and the log's span in them.
+    headers : its ``H`` lines (:func:`aerobat.logs.betaflight.raw_headers`).
+    where : names the log in errors (a :class:`~aerobat.errors.ConfigError`: a header this decoder cannot
+        follow, or a value out of the range Betaflight writes).
+    fields : the main-frame fields to keep, in this order (those the log lacks are left out); default all,
+        in the header's order.
+    other_frames : keep the slow and GPS frames and the events (default); else only count them.
+    drop_same_time : leave out of the table a main frame whose time does not pass the last one kept
+        (it stays the history of the P frames after it), counted in ``same_time_frames``.
+
+    Returns
+    -------
+    BlackboxFrames
     """
     from aerobat.logs import blackbox_kernel as k
 
-    names, defs, counts = _frame_defs(headers, where)
-    cfg = _config(headers, names, defs, where)
+    names, defs, counts = frame_defs(headers, where)
+    cfg = decoder_config(headers, names, defs, where)
+    cfg[k.CFG_DROP_SAME_TIME] = int(drop_same_time)
+    main_names = names["I"]
+    kept = list(main_names) if fields is None else [f for f in fields if f in main_names]
+    columns = np.array([main_names.index(f) for f in kept], dtype=np.int64)
     first = header_end(data, start)
+    size = max(end - first, 0)
     buffer = np.frombuffer(data, dtype=np.uint8)
-    smallest = min(_min_frame_bytes(defs, counts, k.I_FRAME), _min_frame_bytes(defs, counts, k.P_FRAME))
-    capacity = max(end - first, 0) // max(smallest, 1) + 1
-    main = np.empty((capacity, int(counts[k.I_FRAME])), dtype=np.int64)
-    stats, slow, gps, events = k.decode_frames(buffer, first, end, defs, counts, cfg, main)
+    # every main frame takes at least ``smallest`` bytes: rows enough for all (rows never written cost nothing),
+    # but no more than the log may decode to: only a log that would decode to more fills them, and is refused
+    smallest = min(min_frame_bytes(defs, counts, KINDS.index("I")), min_frame_bytes(defs, counts, KINDS.index("P")))
+    allowed = (MAX_DECODED_BYTES_PER_BYTE * size + DECODED_FLOOR_BYTES) // (8 * len(kept)) + 1
+    main = np.empty((min(size // smallest + 1, allowed), len(kept)), dtype=np.float64)
+    rows = 16 if other_frames else 0
+    slow = np.zeros((rows, counts[k.S_FRAME] + 1), dtype=np.int64)
+    gps = np.zeros((rows, counts[k.G_FRAME] + 1), dtype=np.int64)
+    events = np.zeros((rows, 4), dtype=np.int64)
+    state, stats = k.new_state(first), np.zeros(k.ST_SIZE, dtype=np.int64)
+    history = np.zeros((5, max(int(counts.max()), 1)), dtype=np.int64)
+    home = np.zeros(history.shape[1], dtype=np.int64)
+    values, event_row = np.zeros(8, dtype=np.int64), np.zeros(4, dtype=np.int64)
+    stop = first
+    while True:  # a chunk at a time: Python runs between chunks, so a Ctrl-C is raised here
+        stop = min(max(stop, int(state[k.S_POS])) + CHUNK_BYTES, end)
+        outcome = k.ChunkEnd(k.decode_chunk(buffer, stop, end, defs, counts, cfg, columns, state, stats, history,
+                                            home, values, event_row, main, slow, gps, events))
+        if outcome is k.ChunkEnd.FINISHED:
+            break
+        if outcome is k.ChunkEnd.MAIN_FULL:  # the log's frames outgrow what it may decode to
+            read = int(state[k.S_POS]) - first
+            raise ConfigError(f"{where}: {main.shape[0]:,} main frames of {len(kept)} fields in its first {read:,} "
+                              f"bytes (one every {read / main.shape[0]:.1f} bytes) would decode to more than "
+                              f"{MAX_DECODED_BYTES_PER_BYTE} times the log's {size:,} bytes; allowed frames of "
+                              f"{8 * len(kept) / MAX_DECODED_BYTES_PER_BYTE:.0f} bytes or more on average "
+                              "(Betaflight's: 20-30)")
+        if outcome is k.ChunkEnd.SLOW_FULL:
+            slow = _grown(slow)
+        elif outcome is k.ChunkEnd.GPS_FULL:
+            gps = _grown(gps)
+        elif outcome is k.ChunkEnd.EVENTS_FULL:
+            events = _grown(events)
     n = int(stats[k.ST_MAIN])
     return BlackboxFrames(
-        names=tuple(names["I"]), main=main[:n].copy(),
-        slow_names=tuple(names.get("S", [])), slow=slow[: int(stats[k.ST_SLOW])].copy(),
-        gps_names=tuple(names.get("G", [])), gps=gps[: int(stats[k.ST_GPS])].copy(),
-        events=events[: int(stats[k.ST_EVENTS])].copy(),
+        names=tuple(kept), main=main[:n],
+        slow_names=tuple(names.get("S", [])), slow=slow[: int(stats[k.ST_SLOW])],
+        gps_names=tuple(names.get("G", [])), gps=gps[: int(stats[k.ST_GPS])],
+        events=events[: int(stats[k.ST_EVENTS])],
         i_frames=int(stats[k.ST_I]), p_frames=int(stats[k.ST_P]), corrupt_frames=int(stats[k.ST_CORRUPT]),
         truncated=bool(stats[k.ST_TRUNCATED]), rejected_frames=int(stats[k.ST_REJECTED]),
         withheld_frames=int(stats[k.ST_WITHHELD]), garbage_bytes=int(stats[k.ST_GARBAGE]),
         unknown_events=int(stats[k.ST_UNKNOWN_EVENTS]), log_end=bool(stats[k.ST_LOG_END]),
+        same_time_frames=int(stats[k.ST_SAME_TIME]),
     )
 
 

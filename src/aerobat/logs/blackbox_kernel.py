@@ -1,10 +1,12 @@
 """The compiled frame decoder for Betaflight blackbox logs (numba; see :mod:`.blackbox_decode`).
 
-One pass over a log's frame bytes decodes every frame into preallocated int64 tables: main
-frames (I and P) into a table whose capacity is an upper bound on their number (the file's
-length over the smallest main frame the field definitions allow), slow (S), GPS (G) frames
-and events into tables that double when full (rare: a few hundred rows). Nothing is allocated
-per frame.
+:func:`decode_chunk` decodes a log's frames from where the last call stopped to a byte
+position, into tables the caller allocated: main frames (I and P) into a table of float64 rows
+(the fields the caller keeps, exact: Betaflight's fields are 32-bit integers), slow (S), GPS (G)
+frames and events into tables of int64 rows (or only counted, when a table has no rows). It
+allocates nothing, and returns to Python after every chunk of bytes, so a Ctrl-C is raised
+between chunks, and whenever a table is full: the caller grows the slow, GPS and event tables,
+and refuses a log whose main frames fill theirs (more than the log may decode to).
 
 The format and the resynchronisation follow Betaflight's own decoders (blackbox-tools and the
 blackbox log viewer): a frame counts only if the byte after it starts another frame (or the log
@@ -15,6 +17,8 @@ or time runs backwards, or jumps by 5,000 iterations or 10 s or more, is rejecte
 """
 
 from __future__ import annotations
+
+import enum
 
 import numpy as np
 from numba import njit
@@ -30,10 +34,27 @@ HOME_COORD, P1500, VBATREF, LAST_MAIN_FRAME_TIME, MINMOTOR, HOME_COORD_1 = 7, 8,
 EV_SYNC_BEEP, EV_INFLIGHT_ADJUSTMENT, EV_LOGGING_RESUME, EV_DISARM, EV_FLIGHT_MODE, EV_LOG_END = 0, 13, 14, 15, 30, 255
 # the configuration vector
 CFG_I_INTERVAL, CFG_P_NUM, CFG_P_DENOM, CFG_MINTHROTTLE, CFG_VBATREF, CFG_MOTOR_LOW = 0, 1, 2, 3, 4, 5
-CFG_DATA_VERSION, CFG_MOTOR0, CFG_HOME0, CFG_HOME1, CFG_GPS_TIME, CFG_SIZE = 6, 7, 8, 9, 10, 11
+CFG_DATA_VERSION, CFG_MOTOR0, CFG_HOME0, CFG_HOME1, CFG_DROP_SAME_TIME, CFG_SIZE = 6, 7, 8, 9, 10, 11
 # the statistics vector
 (ST_MAIN, ST_I, ST_P, ST_SLOW, ST_GPS, ST_HOME, ST_EVENTS, ST_CORRUPT, ST_REJECTED, ST_WITHHELD, ST_GARBAGE,
- ST_LOG_END, ST_END, ST_TRUNCATED, ST_UNKNOWN_EVENTS, ST_SIZE) = range(16)
+ ST_LOG_END, ST_END, ST_TRUNCATED, ST_UNKNOWN_EVENTS, ST_SAME_TIME, ST_SIZE) = range(17)
+# the decoder's state between calls: where it is, the main-frame history (rows of ``rows``), the stream's step
+(S_POS, S_CUR, S_PREV, S_PREV2, S_HAS_PREV, S_VALID, S_LAST_ITER, S_LAST_TIME, S_ROLLOVER, S_LAST_KEPT_TIME,
+ S_SIZE) = range(11)
+
+
+class ChunkEnd(enum.IntEnum):
+    """Why :func:`decode_chunk` returned."""
+
+    STOP = 0         # it reached the stop position: call again
+    FINISHED = 1     # the log's end or its end-of-log event
+    MAIN_FULL = 2    # the table named has no room for the next frame: grow it and call again
+    SLOW_FULL = 3
+    GPS_FULL = 4
+    EVENTS_FULL = 5
+
+
+_STOP, _FINISHED, _MAIN_FULL, _SLOW_FULL, _GPS_FULL, _EVENTS_FULL = (int(e) for e in ChunkEnd)
 
 MAX_FRAME_BYTES = 256
 MAX_ITERATION_JUMP = 5000
@@ -246,8 +267,11 @@ def _parse_frame(data, pos, end, kind, defs, counts, rows, out, prev, prev2, has
     motor_index = cfg[CFG_MOTOR0]
     minthrottle, vbatref, motor_low = cfg[CFG_MINTHROTTLE], cfg[CFG_VBATREF], cfg[CFG_MOTOR_LOW]
     version = cfg[CFG_DATA_VERSION]
+    limit = pos + MAX_FRAME_BYTES  # past it the frame is corrupt whatever follows: stop reading
     i = 0
     while i < n:
+        if pos > limit:
+            return pos
         predictor = defs[kind, 1, i]
         if predictor == INCREMENT:
             rows[out, i] = skipped + 1 + (rows[prev, i] if has_prev else 0)
@@ -284,8 +308,9 @@ def _parse_frame(data, pos, end, kind, defs, counts, rows, out, prev, prev2, has
         if group:
             for k in range(min(group, n - i)):
                 motor0 = rows[out, motor_index] if motor_index >= 0 else 0
-                rows[out, i] = _predict(defs[kind, 1, i], values[k], rows[prev, i], rows[prev2, i], has_prev, motor0,
-                                        last_time, home0, home1, minthrottle, vbatref, motor_low)
+                rows[out, i] = _field(_predict(defs[kind, 1, i], values[k], rows[prev, i], rows[prev2, i], has_prev,
+                                               motor0, last_time, home0, home1, minthrottle, vbatref, motor_low),
+                                      defs[kind, 2, i])
                 i += 1
             continue
         if e == SIGNED_VB:
@@ -299,30 +324,37 @@ def _parse_frame(data, pos, end, kind, defs, counts, rows, out, prev, prev2, has
         else:  # NULL (the header check refuses encodings Betaflight does not write)
             v = np.int64(0)
         motor0 = rows[out, motor_index] if motor_index >= 0 else 0
-        v = _predict(predictor, v, rows[prev, i], rows[prev2, i], has_prev, motor0, last_time, home0, home1,
-                     minthrottle, vbatref, motor_low)
-        # a field is a 32-bit integer: signed or unsigned as its header says
-        v &= 0xFFFFFFFF
-        if defs[kind, 2, i] and v >= 0x80000000:
-            v -= 0x100000000
-        rows[out, i] = v
+        rows[out, i] = _field(_predict(predictor, v, rows[prev, i], rows[prev2, i], has_prev, motor0, last_time,
+                                       home0, home1, minthrottle, vbatref, motor_low), defs[kind, 2, i])
         i += 1
     return pos
 
 
-@njit(cache=True)
-def _should_have_frame(index, cfg):
-    return (index % cfg[CFG_I_INTERVAL] + cfg[CFG_P_NUM] - 1) % cfg[CFG_P_DENOM] < cfg[CFG_P_NUM]
+@njit(cache=True, inline="always")
+def _field(v, signed):
+    """A field is a 32-bit integer: signed or unsigned as its header says."""
+    v &= 0xFFFFFFFF
+    if signed and v >= 0x80000000:
+        v -= 0x100000000
+    return v
 
 
 @njit(cache=True)
-def _grow(table, n):
-    """``table`` with room for row ``n``: twice the rows when full (slow, GPS and event tables only)."""
-    if n < table.shape[0]:
-        return table
-    bigger = np.zeros((2 * table.shape[0], table.shape[1]), dtype=np.int64)
-    bigger[: table.shape[0]] = table
-    return bigger
+def skipped_iterations(last_iter, interval, num, denom):
+    """Loop iterations without a logged frame between ``last_iter`` and the next P frame, in closed form.
+
+    Betaflight's decoders step ``index`` from ``last_iter + 1`` until ``shouldHaveFrame(index)``:
+    ``(index % interval + num - 1) % denom < num``; that loop ran once per iteration (up to ``denom``
+    times a frame). With ``r`` the next index within the I interval and ``j = (r + num - 1) % denom``:
+    no skip if ``j < num``; else the next logged index is ``denom - j`` on, unless that passes the next
+    I frame's index (always logged), ``interval - r`` on.
+    """
+    r = (last_iter + 1) % interval
+    j = (r + num - 1) % denom
+    if j < num:
+        return np.int64(0)
+    ahead = denom - j
+    return ahead if r + ahead < interval else interval - r
 
 
 @njit(cache=True)
@@ -363,32 +395,42 @@ def _event(data, pos, end, row):
     return pos, True, False
 
 
-@njit(cache=True)
-def decode_frames(data, start, end, defs, counts, cfg, main):
-    """Decode the frames in ``data[start:end]``; main frames go to ``main`` (rows enough for all).
+def new_state(start):
+    """The decoder's state at byte ``start`` of a log: no history, the stream not yet in step."""
+    state = np.zeros(S_SIZE, dtype=np.int64)
+    state[S_POS] = start
+    state[S_CUR], state[S_PREV], state[S_PREV2] = 0, 1, 2
+    state[S_LAST_ITER] = state[S_LAST_TIME] = state[S_LAST_KEPT_TIME] = -1
+    return state
 
-    Returns (statistics, slow, gps, events): ``slow`` rows are (main row they precede, fields…),
-    ``gps`` rows the same with the G fields, ``events`` rows (main row, type, value, value); only
-    their first ``statistics[ST_SLOW]``, ``[ST_GPS]`` and ``[ST_EVENTS]`` rows are filled.
+
+@njit(cache=True)
+def decode_chunk(data, stop, end, defs, counts, cfg, columns, state, stats, rows, home, values, event_row, main, slow,
+                 gps, events):
+    """Decode frames from ``state[S_POS]`` until ``stop`` (a frame begun before it is finished) or ``end``.
+
+    Main frames go to ``main`` (float64; column ``j`` is field ``columns[j]``), slow and GPS frames to
+    ``slow`` and ``gps`` (the main row they precede, then their fields) and events to ``events`` (main
+    row, type, value, value); a table without rows only counts. ``rows`` (5 rows: the main-frame
+    history, an S or G frame, an H frame), ``home``, ``values`` and ``event_row`` are scratch the caller
+    keeps between calls with ``state`` and ``stats``. Returns a :class:`ChunkEnd` value; on a full
+    table ``state[S_POS]`` is the frame that did not fit, decoded again by the next call.
     """
-    stats = np.zeros(ST_SIZE, dtype=np.int64)
-    # rows 0-2: the main-frame history (current, previous, the one before), 3: S or G frame, 4: H frame
-    rows = np.zeros((5, max(counts.max(), 1)), dtype=np.int64)
-    home = np.zeros(rows.shape[1], dtype=np.int64)
-    values = np.zeros(8, dtype=np.int64)
-    slow = np.zeros((16, counts[S_FRAME] + 1), dtype=np.int64)
-    gps = np.zeros((16, counts[G_FRAME] + 1), dtype=np.int64)
-    events = np.zeros((16, 4), dtype=np.int64)
-    event_row = np.zeros(4, dtype=np.int64)
-    cur, prev, prev2 = 0, 1, 2
-    has_prev = False
-    valid = False  # the main stream is in step: a P frame may be delivered
-    last_iter = np.int64(-1)
-    last_time = np.int64(-1)
-    rollover = np.int64(0)
-    n_main = 0
-    pos = start
-    while pos < end:
+    cur, prev, prev2 = state[S_CUR], state[S_PREV], state[S_PREV2]
+    has_prev = state[S_HAS_PREV] != 0
+    valid = state[S_VALID] != 0  # the main stream is in step: a P frame may be delivered
+    last_iter, last_time, rollover = state[S_LAST_ITER], state[S_LAST_TIME], state[S_ROLLOVER]
+    last_kept = state[S_LAST_KEPT_TIME]
+    drop_same_time = cfg[CFG_DROP_SAME_TIME] != 0
+    n_main = stats[ST_MAIN]
+    pos = state[S_POS]
+    outcome = _STOP
+    while True:
+        if pos >= end:
+            outcome = _FINISHED
+            break
+        if pos >= stop:
+            break
         mark = _MARKERS[data[pos]]
         if mark < 0:
             valid = False
@@ -407,10 +449,7 @@ def decode_frames(data, start, end, defs, counts, cfg, main):
             if mark == P_FRAME:
                 predict = has_prev
                 if last_iter >= 0:
-                    index = last_iter + 1
-                    while not _should_have_frame(index, cfg):
-                        index += 1
-                    skipped = index - last_iter - 1
+                    skipped = skipped_iterations(last_iter, cfg[CFG_I_INTERVAL], cfg[CFG_P_NUM], cfg[CFG_P_DENOM])
             elif mark != I_FRAME:
                 out = 4 if mark == H_FRAME else 3
                 p1, p2 = out, out
@@ -429,6 +468,20 @@ def decode_frames(data, start, end, defs, counts, cfg, main):
             has_prev = False
             pos = frame_start + 1
             continue
+        # no room for what the frame adds: return before anything changes, so the next call decodes it again
+        full = _STOP
+        if (mark == I_FRAME or mark == P_FRAME) and n_main >= main.shape[0]:
+            full = _MAIN_FULL
+        elif mark == S_FRAME and 0 < slow.shape[0] <= stats[ST_SLOW]:
+            full = _SLOW_FULL
+        elif mark == G_FRAME and 0 < gps.shape[0] <= stats[ST_GPS]:
+            full = _GPS_FULL
+        elif mark == EVENT_MARK and known and 0 < events.shape[0] <= stats[ST_EVENTS]:
+            full = _EVENTS_FULL
+        if full != _STOP:
+            pos = frame_start
+            outcome = full
+            break
         if mark == I_FRAME or mark == P_FRAME:
             t32 = rows[cur, 1] & 0xFFFFFFFF
             wrapped = last_time >= 0 and t32 < (last_time & 0xFFFFFFFF)
@@ -450,8 +503,13 @@ def decode_frames(data, start, end, defs, counts, cfg, main):
             valid = True
             last_iter = iteration
             last_time = t
-            main[n_main, :] = rows[cur, : counts[I_FRAME]]
-            n_main += 1
+            if drop_same_time and t <= last_kept:
+                stats[ST_SAME_TIME] += 1  # kept as history for the P frames after it, left out of the table
+            else:
+                for j in range(columns.shape[0]):
+                    main[n_main, j] = rows[cur, columns[j]]
+                n_main += 1
+                last_kept = t
             if mark == I_FRAME:
                 stats[ST_I] += 1
                 prev = cur
@@ -464,14 +522,14 @@ def decode_frames(data, start, end, defs, counts, cfg, main):
                 cur = 3 - prev - prev2 if prev != prev2 else (prev + 1) % 3
             has_prev = True
         elif mark == S_FRAME:
-            slow = _grow(slow, stats[ST_SLOW])
-            slow[stats[ST_SLOW], 0] = n_main
-            slow[stats[ST_SLOW], 1:] = rows[3, : counts[S_FRAME]]
+            if slow.shape[0]:
+                slow[stats[ST_SLOW], 0] = n_main
+                slow[stats[ST_SLOW], 1:] = rows[3, : counts[S_FRAME]]
             stats[ST_SLOW] += 1
         elif mark == G_FRAME:
-            gps = _grow(gps, stats[ST_GPS])
-            gps[stats[ST_GPS], 0] = n_main
-            gps[stats[ST_GPS], 1:] = rows[3, : counts[G_FRAME]]
+            if gps.shape[0]:
+                gps[stats[ST_GPS], 0] = n_main
+                gps[stats[ST_GPS], 1:] = rows[3, : counts[G_FRAME]]
             stats[ST_GPS] += 1
         elif mark == H_FRAME:
             home[:] = rows[4]
@@ -480,16 +538,22 @@ def decode_frames(data, start, end, defs, counts, cfg, main):
             if not known:
                 stats[ST_UNKNOWN_EVENTS] += 1
                 continue
-            events = _grow(events, stats[ST_EVENTS])
             event_row[0] = n_main
-            events[stats[ST_EVENTS], :] = event_row
+            if events.shape[0]:
+                events[stats[ST_EVENTS], :] = event_row
             stats[ST_EVENTS] += 1
             if event_row[1] == EV_LOGGING_RESUME:
                 last_iter = event_row[2]  # the jump to the resumed iteration and time is expected
                 last_time = event_row[3] + rollover
             if log_end:
                 stats[ST_LOG_END] = 1
+                outcome = _FINISHED
                 break
     stats[ST_MAIN] = n_main
     stats[ST_END] = pos
-    return stats, slow, gps, events
+    state[S_POS] = pos
+    state[S_CUR], state[S_PREV], state[S_PREV2] = cur, prev, prev2
+    state[S_HAS_PREV], state[S_VALID] = 1 if has_prev else 0, 1 if valid else 0
+    state[S_LAST_ITER], state[S_LAST_TIME], state[S_ROLLOVER], state[S_LAST_KEPT_TIME] = (last_iter, last_time,
+                                                                                            rollover, last_kept)
+    return outcome

@@ -14,6 +14,9 @@ counter-clockwise, 3 front left and 4 rear right clockwise).
 
 from __future__ import annotations
 
+import contextlib
+import io
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -80,11 +83,24 @@ def _matrix_to_quat(r: np.ndarray) -> np.ndarray:
     return out
 
 
+def _printed_notes(text: str) -> list[str]:
+    """What pyulog printed, as notes: each distinct line once, with how often it came, at most five."""
+    counts = Counter(line.strip() for line in text.splitlines() if line.strip())
+    notes = [f"pyulog: {line}" + (f" ({n} times)" if n > 1 else "") for line, n in list(counts.items())[:5]]
+    if len(counts) > 5:
+        notes.append(f"pyulog printed {len(counts) - 5} more distinct lines")
+    return notes
+
+
 def read_ulog(path: Path) -> list[FlightLog]:
     """The log of a ULog file (a ULog holds one)."""
     ULog = _pyulog()
+    printed = io.StringIO()
     try:
-        ulog = ULog(str(path))
+        # pyulog prints its warnings ("no subscription found", "File corruption detected"): they become notes,
+        # never lines on standard output, where they would break `--json` and CSV sent there
+        with contextlib.redirect_stdout(printed):
+            ulog = ULog(str(path))
     except Exception as exc:  # noqa: BLE001 - pyulog raises bare exceptions on damaged files
         raise ConfigError(f"{path}: not a readable ULog ({type(exc).__name__}: {exc})") from None
     topics = {}
@@ -96,7 +112,7 @@ def read_ulog(path: Path) -> list[FlightLog]:
     t0 = ulog.start_timestamp
     params = ulog.initial_parameters
     signals: dict[Channel, Signal] = {}
-    notes: list[str] = []
+    notes: list[str] = _printed_notes(printed.getvalue())
     if getattr(ulog, "file_corruption", False):
         notes.append("pyulog reports file corruption; the readable part was kept")
 

@@ -160,6 +160,24 @@ def acc_filter_hz(log: FlightLog) -> float:
         return 0.0
 
 
+def _no_flight(log: FlightLog, purpose: str, mean: np.ndarray, commanded: np.ndarray, motors_up: np.ndarray,
+               finite: np.ndarray, dt: float) -> None:
+    """Raise the ConfigError that says why no sample of ``log`` is in flight: motors that never spin, or
+    spinning motors whose samples are all unusable (not finite, or an impact)."""
+    where = f"{log.path}: log {log.index}"
+    if not motors_up.any():
+        top = f"{float(np.max(mean[commanded])):.3f}" if commanded.any() else "NaN"
+        raise ConfigError(f"{where}: the motors never spin (the mean motor command stays at or below {top} of full "
+                          f"range for all {log.duration_s:.1f} s): the vehicle did not fly in this log, so {purpose} "
+                          "has nothing to fit")
+    spun = f"the motors spin for {float(motors_up.sum()) * dt:.1f} s"
+    if not (motors_up & finite).any():
+        raise ConfigError(f"{where}: {spun}, but the gyro or specific force is NaN or infinite in every one of those "
+                          f"samples, so {purpose} has nothing to fit")
+    raise ConfigError(f"{where}: {spun}, but the specific force is above {IMPACT_M_S2 / 9.81:.0f} g (an impact or "
+                      f"a saturated accelerometer) in every one of those samples, so {purpose} has nothing to fit")
+
+
 def prepare_log(log: FlightLog, *, purpose: str = "identification") -> PreparedLog:
     """The log on the gyro's time base with its flight found; ConfigError naming what is missing."""
     if not log.metadata.is_multirotor:
@@ -186,14 +204,17 @@ def prepare_log(log: FlightLog, *, purpose: str = "identification") -> PreparedL
         t, w, f, u = (_block_mean(x, factor) for x in (t, w, f, u))
         sp = _block_mean(sp, factor) if sp is not None else None
         dt *= factor
-    finite = np.all(np.isfinite(w), axis=1) & np.all(np.isfinite(f), axis=1) & np.all(np.isfinite(u), axis=1)
+    commanded = np.all(np.isfinite(u), axis=1)
+    finite = np.all(np.isfinite(w), axis=1) & np.all(np.isfinite(f), axis=1) & commanded
     mean = u.mean(axis=1)
-    idle = float(np.nanpercentile(mean[finite], 1.0)) if finite.any() else 0.0
-    spinning = finite & (mean > max(idle, 0.0) + FLYING_ABOVE_IDLE)
+    idle = float(np.percentile(mean[finite if finite.any() else commanded], 1.0)) if commanded.any() else 0.0
+    motors_up = commanded & (mean > max(idle, 0.0) + FLYING_ABOVE_IDLE)
+    spinning = finite & motors_up
     for start, end in _runs(~spinning):  # a dive or a hard yaw brings the motors down for a moment: still flying
         if 0 < start and end < len(spinning) and (end - start) * dt < GAP_S:
             spinning[start:end] = finite[start:end]
-    spinning &= np.linalg.norm(f, axis=1) < IMPACT_M_S2
+    with np.errstate(invalid="ignore"):  # a NaN sample is not finite: left out above
+        spinning &= np.linalg.norm(f, axis=1) < IMPACT_M_S2
     trim = int(round(TRIM_S / dt))
     in_flight = np.zeros_like(spinning)
     segments = []
@@ -204,9 +225,7 @@ def prepare_log(log: FlightLog, *, purpose: str = "identification") -> PreparedL
             segments.append((float(t[a]), float(t[b - 1])))
     flight = float(in_flight.sum()) * dt
     if not spinning.any() and log.duration_s >= MIN_FLIGHT_S:
-        raise ConfigError(f"{log.path}: log {log.index}: the motors never spin (the mean motor command stays at or "
-                          f"below {float(np.nanmax(mean)):.3f} of full range for all {log.duration_s:.1f} s): the "
-                          f"vehicle did not fly in this log, so {purpose} has nothing to fit")
+        _no_flight(log, purpose, mean, commanded, motors_up, finite, dt)
     if flight < MIN_FLIGHT_S:
         raise ConfigError(f"{log.path}: log {log.index} holds {flight:.1f} s of flight (motors above idle) in "
                           f"{log.duration_s:.2f} s; {purpose} needs at least {MIN_FLIGHT_S:.0f} s")

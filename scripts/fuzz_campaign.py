@@ -1089,25 +1089,56 @@ def api_targets(ctx: ApiContext) -> list[ApiTarget]:
 # ====================================================================== main
 
 
-def files_module() -> Any:
-    """``scripts/fuzz_files.py`` (the files phase), loaded from next to this file however this one was loaded."""
+def phase_module(name: str) -> Any:
+    """``scripts/fuzz_<name>.py`` (a phase), loaded from next to this file however this one was loaded, once."""
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location("fuzz_files", Path(__file__).with_name("fuzz_files.py"))
+    module_name = f"fuzz_{name}"
+    if module_name in sys.modules:
+        return sys.modules[module_name]
+    spec = importlib.util.spec_from_file_location(module_name, Path(__file__).with_name(f"{module_name}.py"))
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
-    sys.modules["fuzz_files"] = module
+    sys.modules[module_name] = module
     spec.loader.exec_module(module)
     return module
 
 
+def files_module() -> Any:
+    """``scripts/fuzz_files.py`` (the files phase)."""
+    return phase_module("files")
+
+
+PHASES = ("files", "tunes", "logs", "exports", "server")
+"""The phases beside the command line's and the library's, each ``scripts/fuzz_<phase>.py``'s ``run_<phase>_phase``."""
+
+
+def _tally(report: dict[str, Any]) -> None:
+    """The campaign's totals over every phase: internal errors, hangs, data loss, non-JSON, over the memory bound."""
+    parts = [report[phase] for phase in PHASES if isinstance(report.get(phase), dict)]
+    report["internal"] = (report["cli"]["counts"]["INTERNAL"] + report["api"]["counts"]["INTERNAL"]
+                          + sum(len(part.get("internal", [])) for part in parts))
+    report["hangs"] = sum(len(part.get("hangs", [])) for part in parts)
+    report["data_loss"] = sum(len(part.get("data_loss", [])) for part in parts)
+    logs = report.get("logs", {})
+    report["non_json"] = len(logs.get("non_json", []))
+    report["over_memory_bound"] = len(logs.get("peak_memory", {}).get("over_bound", []))
+    report["cases"] = (sum(report["cli"]["counts"].values()) + sum(report["api"]["counts"].values())
+                       + sum(int(part.get("cases", 0)) for part in parts))
+    report["peak_memory_mb"] = {
+        "campaign": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "log_commands_worst": logs.get("peak_memory", {}).get("worst_mb"),
+        "log_commands_bound_at_worst": logs.get("peak_memory", {}).get("bound_mb")}
+
+
 def run_campaign(*, cli: int, api: int, seed: int, budget_s: float, report: Path | None,
                  progress: Callable[[str], None], keep: bool = False, files: int = 0,
-                 files_kinds: tuple[str, ...] | None = None) -> dict[str, Any]:
+                 files_kinds: tuple[str, ...] | None = None, tunes: int = 0, logs: int = 0, exports: int = 0,
+                 server: int = 0) -> dict[str, Any]:
     """Run the campaign in a scratch folder; returns the report (also written to ``report``).
 
-    ``files``: the files phase (``scripts/fuzz_files.py``): -1 every case, N a seeded sample, 0 none;
-    ``files_kinds`` limits it to some kinds of case.
+    ``files``, ``tunes``, ``logs``, ``exports``, ``server``: the phases of ``scripts/fuzz_<phase>.py``:
+    -1 every case, N a seeded sample, 0 none; ``files_kinds`` limits the files phase to some kinds of case.
     """
     root = Path(tempfile.mkdtemp(prefix="aerobat-fuzz-"))
     saved_cwd, saved_env = os.getcwd(), dict(os.environ)
@@ -1127,10 +1158,18 @@ def run_campaign(*, cli: int, api: int, seed: int, budget_s: float, report: Path
             campaign.run_cli_phase(cli, fx)
         if api:
             campaign.run_api_phase(api, fx)
+        me = sys.modules[__name__]
         if files:
-            files_module().run_files_phase(sys.modules[__name__], campaign, fx, files, kinds=files_kinds)
-        # Bit flips inside store records (issue 31 S1) are another change's: its phase is called here, as
-        # `bitflip_campaign(campaign, fx, n)`, with the same report conventions (findings with `reproduce`).
+            files_module().run_files_phase(me, campaign, fx, files, kinds=files_kinds)
+        for phase, n in (("tunes", tunes), ("logs", logs), ("exports", exports), ("server", server)):
+            if n:
+                fx.restore_store()  # each phase starts from the seeded store (the cli phase may delete by design)
+                getattr(phase_module(phase), f"run_{phase}_phase")(me, campaign, fx, n)
+                problem = fx.store_ok()  # what a phase did to the store and did not see itself is data loss too
+                if problem:
+                    campaign.report[phase].setdefault("data_loss", []).append(
+                        {"case": f"the store after the {phase} phase", "reason": problem})
+                    fx.restore_store()
     finally:
         os.chdir(saved_cwd)
         os.environ.clear()
@@ -1143,12 +1182,7 @@ def run_campaign(*, cli: int, api: int, seed: int, budget_s: float, report: Path
                         path.chmod(0o755)
             shutil.rmtree(root, ignore_errors=True)
     campaign.report["wall_s"] = round(time.perf_counter() - campaign.started, 1)
-    found = campaign.report.get("files", {})
-    campaign.report["internal"] = (campaign.report["cli"]["counts"]["INTERNAL"]
-                                   + campaign.report["api"]["counts"]["INTERNAL"]
-                                   + len(found.get("internal", [])))
-    campaign.report["hangs"] = len(found.get("hangs", []))
-    campaign.report["data_loss"] = len(found.get("data_loss", []))
+    _tally(campaign.report)
     campaign.write_report()
     return campaign.report
 
@@ -1168,6 +1202,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--files-kinds", default=None,
                         help="only these kinds of file case, comma-separated (empty, dashdash, special-input, "
                              "special-output, store-link); default all")
+    for phase in PHASES[1:]:
+        parser.add_argument(f"--{phase}", type=int, default=-1,
+                            help=f"cases of the {phase} phase (scripts/fuzz_{phase}.py): -1 all, N a sample, 0 none")
     parser.add_argument("--keep", action="store_true", help="keep the scratch folder (the reproductions use it)")
     parser.add_argument("--list", action="store_true", help="list the commands and options found, and stop")
     args = parser.parse_args(argv)
@@ -1195,17 +1232,22 @@ def main(argv: list[str] | None = None) -> int:
         os.dup2(devnull.fileno(), 0)
     kinds = tuple(k.strip() for k in args.files_kinds.split(",") if k.strip()) if args.files_kinds else None
     report = run_campaign(cli=args.cli, api=args.api, seed=args.seed, budget_s=args.budget_s, report=args.report,
-                          progress=say, keep=args.keep, files=args.files, files_kinds=kinds)
+                          progress=say, keep=args.keep, files=args.files, files_kinds=kinds, tunes=args.tunes,
+                          logs=args.logs, exports=args.exports, server=args.server)
     cli, api = report["cli"], report["api"]
     say(f"fuzz: done in {report['wall_s']:.0f} s: cli {sum(cli['counts'].values())} invocations "
         + " ".join(f"{c}={cli['counts'].get(c, 0)}" for c in CLASSES)
         + f"; api {sum(api['counts'].values())} calls "
         + " ".join(f"{c}={api['counts'].get(c, 0)}" for c in API_CLASSES)
-        + (f"; files {sum(report['files']['counts'].values())} cases " + " ".join(
-            f"{c}={v}" for c, v in sorted(report["files"]["counts"].items())) if "files" in report else "")
-        + f"; internal errors {report['internal']}, hangs {report['hangs']}, data loss {report['data_loss']}"
+        + "".join(f"; {phase} {sum(report[phase]['counts'].values())} cases " + " ".join(
+            f"{c}={v}" for c, v in sorted(report[phase]["counts"].items())) for phase in PHASES if phase in report)
+        + f"; {report['cases']} cases in all: internal errors {report['internal']}, hangs {report['hangs']}, "
+          f"data loss {report['data_loss']}, non-JSON {report['non_json']}, over the memory bound "
+          f"{report['over_memory_bound']}; peak memory: campaign {report['peak_memory_mb']['campaign']:.0f} MB, "
+          f"a log command {report['peak_memory_mb']['log_commands_worst'] or 0:.0f} MB"
         + (f"; report {args.report}" if args.report else ""))
-    return 1 if report["internal"] or report["hangs"] or report["data_loss"] else 0
+    bad = ("internal", "hangs", "data_loss", "non_json", "over_memory_bound")
+    return 1 if any(report[key] for key in bad) else 0
 
 
 if __name__ == "__main__":

@@ -29,18 +29,23 @@ def _module():
 
 
 def _campaign(tmp_path: Path, *, cli: int, api: int, seed: int, budget_s: float, timeout: float, files: int = 0,
-              files_kinds: str | None = None) -> dict:
+              files_kinds: str | None = None, tunes: int = 0, logs: int = 0, exports: int = 0,
+              server: int = 0) -> dict:
     report = tmp_path / "fuzz.json"
+    phases = {"tunes": tunes, "logs": logs, "exports": exports, "server": server}
     result = subprocess.run([sys.executable, str(SCRIPT), "--cli", str(cli), "--api", str(api), "--seed", str(seed),
                              "--budget-s", str(budget_s), "--report", str(report), "--files", str(files),
-                             *(["--files-kinds", files_kinds] if files_kinds else [])],
+                             *(["--files-kinds", files_kinds] if files_kinds else []),
+                             *(arg for phase, n in phases.items() for arg in (f"--{phase}", str(n)))],
                             capture_output=True, text=True, timeout=timeout, cwd=tmp_path)
     data = json.loads(report.read_text())
-    found = data.get("files", {})
+    parts = [data[phase] for phase in ("files", *phases) if phase in data]
+    keys = ("internal", "hangs", "data_loss", "non_json")
     internal = data["cli"]["internal"] + data["api"]["internal"] + [
-        entry for key in ("internal", "hangs", "data_loss") for entry in found.get(key, [])]
-    assert result.returncode == 0 and data["internal"] == 0 and data["hangs"] == 0 and data["data_loss"] == 0, \
-        json.dumps(internal, indent=1)[:8000]
+        entry for part in parts for key in keys for entry in part.get(key, ())]
+    zeros = ("internal", "hangs", "data_loss", "non_json", "over_memory_bound")
+    assert result.returncode == 0 and not any(data[key] for key in zeros), \
+        (result.stderr[-2000:], json.dumps(internal, indent=1)[:8000])
     assert sum(data["cli"]["counts"].values()) == cli
     assert sum(data["api"]["counts"].values()) == api
     return data
@@ -80,11 +85,18 @@ def test_the_judge_calls_what_must_not_happen_internal():
 
 
 def test_a_small_campaign_finds_no_internal_error(tmp_path):
-    """Also 30 cases of the files phase (issue 31): special files as inputs and outputs, links to the store."""
-    data = _campaign(tmp_path, cli=40, api=25, seed=1, budget_s=4.0, timeout=420, files=30,
-                     files_kinds="special-input,special-output,store-link")
+    """Also 30 cases of the files phase (issue 31): special files as inputs and outputs, links to the store; and a
+    few of each of issue 45's phases (tunes, logs, exports, server), counted into the campaign's totals."""
+    data = _campaign(tmp_path, cli=40, api=25, seed=1, budget_s=4.0, timeout=600, files=30,
+                     files_kinds="special-input,special-output,store-link", tunes=6, logs=4, exports=4, server=4)
     assert data["cli"]["counts"].get("ok", 0) > 0 and data["cli"]["counts"].get("bad-input", 0) > 0
     assert sum(data["files"]["counts"].values()) == 30 and data["files"]["counts"].get("bad-input", 0) >= 20
+    for phase, n in (("tunes", 6), ("exports", 4), ("server", 4)):
+        assert sum(data[phase]["counts"].values()) == n, (phase, data[phase]["counts"])
+    logs = data["logs"]
+    assert logs.get("skipped") or sum(logs["counts"].values()) == 4, logs.get("counts")
+    assert data["cases"] == 40 + 25 + 30 + sum(int(data[p].get("cases", 0)) for p in ("tunes", "logs", "exports",
+                                                                                      "server"))
 
 
 def _files_module():
@@ -159,6 +171,9 @@ def test_the_files_phase_sees_data_loss_and_dropped_values(tmp_path):
 
 @pytest.mark.slow
 def test_the_full_campaign_finds_no_internal_error(tmp_path):
-    """Issue 19: 2,000 command lines and 500 library calls, 0 internal errors, 0 tracebacks."""
-    data = _campaign(tmp_path, cli=2000, api=500, seed=0, budget_s=6.0, timeout=4 * 3600, files=-1)
+    """Issues 19 and 45: 2,000 command lines, 500 library calls and every case of the files, tunes, logs, exports and
+    server phases; 0 internal errors, hangs, data loss, non-JSON outputs, and log commands within their memory bound."""
+    data = _campaign(tmp_path, cli=2000, api=500, seed=0, budget_s=6.0, timeout=4 * 3600, files=-1, tunes=-1, logs=-1,
+                     exports=-1, server=-1)
     assert len(data["cli"]["by_command"]) >= 16
+    assert data["cases"] >= 2000 + 500 + 1000

@@ -110,6 +110,13 @@ def crowding_note(workers: int | None, cores: int, cpu_count: int) -> str:
             f"slower than with --workers {max(1, cpu_count // cores)} (docs/performance.md, issue 27)")
 
 
+def _check_out(args: argparse.Namespace, written: tuple[str, ...]) -> None:
+    """An unusable --out (the store itself, a file, no text) is refused before anything runs (the design included)."""
+    if args.out is not None:
+        folder = output_dir(text_path(args.out, "--out"))
+        check_outputs({folder / name: "--out" for name in written}, stores=(getattr(args, "db", None),))
+
+
 def run_cli_study(args: argparse.Namespace, kind: str, run: Callable[..., Any],
                   written: tuple[str, ...] = (), *, cores: int = 1) -> tuple[Any, Path]:
     """Run a study with progress lines; returns (what ``run`` returned, output folder).
@@ -122,9 +129,7 @@ def run_cli_study(args: argparse.Namespace, kind: str, run: Callable[..., Any],
     (:meth:`~aerobat.plants.PlantChoice.cores`): without ``--workers``, the machine's cores ÷ ``cores``
     jobs run at once, as :func:`~aerobat.experiments.studies.runner.run_study` decides from the jobs.
     """
-    if args.out is not None:  # an unusable --out (the store itself, a file, no text) is refused before anything runs
-        folder = output_dir(text_path(args.out, "--out"))
-        check_outputs({folder / name: "--out" for name in written}, stores=(getattr(args, "db", None),))
+    _check_out(args, written)
     out_console = console(getattr(args, "json", False))
     started = time.perf_counter()
     state: dict[str, Any] = {"first": 0, "walls": []}
@@ -209,9 +214,13 @@ def report_failures(outcome: Any) -> None:
                             f"{lines}{more}; run them again with --resume {outcome.study_id}")
 
 
-def _design(args: argparse.Namespace, plant: Any) -> tuple[Any, Any, Any]:
-    """The study's nominal design for ``plant`` (a :class:`~aerobat.experiments.designing.NominalDesign`)."""
+def _design(args: argparse.Namespace, plant: Any, written: tuple[str, ...]) -> tuple[Any, Any, Any]:
+    """The study's nominal design for ``plant`` (a :class:`~aerobat.experiments.designing.NominalDesign`), after
+    checking ``--out`` for the files ``written`` there."""
     from aerobat.experiments.designing import nominal_design
+    from aerobat.plants import DesignModel
+
+    _check_out(args, written)
     from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
 
     config = vehicle_from_name_or_file(args.vehicle)
@@ -221,8 +230,9 @@ def _design(args: argparse.Namespace, plant: Any) -> tuple[Any, Any, Any]:
     if not nominal.design.converged:
         raise DesignFailed(f"design failed on the {nominal.model.value} model: {nominal.design.message}",
                            nominal.design)
-    print(f"designed on the {nominal.model.value} model ({nominal.description}) in {nominal.compute_s:.1f} s",
-          file=sys.stderr, flush=True)
+    model = (nominal.description if nominal.model is DesignModel.PAPER
+             else f"the {nominal.model.value} model ({nominal.description})")
+    print(f"designed on {model} in {nominal.compute_s:.1f} s", file=sys.stderr, flush=True)
     return config, maneuver, nominal
 
 
@@ -244,13 +254,14 @@ def _cmd_robustness(args: argparse.Namespace) -> int:
             if args.plant == "betaflight" else None)
     if args.plant != "betaflight" and getattr(args, "tune", None) is not None:
         raise ConfigError(f"--tune applies only with --plant betaflight (got --plant {args.plant})")
-    config, maneuver, nominal = _design(args, PlantChoice(args.plant, base))
+    written = ("trials_to_tolerance.png", "success_vs_property.png", "robustness.json")
+    config, maneuver, nominal = _design(args, PlantChoice(args.plant, base), written)
     run = functools.partial(robustness_study, maneuver=maneuver, design=nominal, model=config,
                             vehicles=args.vehicles, iterations=args.iterations, seed=args.seed, ranges=ranges,
                             rule=rule, tolerance_m=args.tolerance_m, plant=args.plant, base=base,
                             feedback=args.feedback)
     study, out = run_cli_study(args, "robustness", run,
-                               written=("trials_to_tolerance.png", "success_vs_property.png", "robustness.json"),
+                               written=written,
                                cores=PlantChoice(args.plant, base).cores())
     outcome = study.outcome
     study.write(out)
@@ -329,7 +340,7 @@ def _cmd_rules(args: argparse.Namespace) -> int:
     plant = plant_choice_from_args(args)
     check_methods(methods)  # every method's package is there before a single job runs
     plant.spec.check_available()
-    config, maneuver, nominal = _design(args, plant)
+    config, maneuver, nominal = _design(args, plant, ("rules.csv", "rules.png"))
     run = functools.partial(rules_study, maneuver=maneuver, design=nominal, model=config, methods=methods,
                             seeds=args.seeds, trials=args.trials, plant=plant, tolerance_m=args.tolerance_m)
     study, out = run_cli_study(args, "rules", run, written=("rules.csv", "rules.png"), cores=plant.cores())
@@ -373,7 +384,7 @@ def _cmd_feedback(args: argparse.Namespace) -> int:
     plant.spec.check_available()
     for scheme in schemes:
         plant.spec.check_feedback(Feedback(scheme))
-    config, maneuver, nominal = _design(args, plant)
+    config, maneuver, nominal = _design(args, plant, ("feedback.csv", "feedback.png"))
     run = functools.partial(feedback_study, maneuver=maneuver, design=nominal, model=config, schemes=schemes,
                             scenarios=scenarios, seeds=args.seeds, trials=args.trials, plant=plant, rule=args.rule,
                             tolerance_m=args.tolerance_m)

@@ -17,7 +17,6 @@ import math
 import os
 import shlex
 import signal
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -118,7 +117,7 @@ def _check_out(args: argparse.Namespace, written: tuple[str, ...]) -> None:
 
 
 def run_cli_study(args: argparse.Namespace, kind: str, run: Callable[..., Any],
-                  written: tuple[str, ...] = (), *, cores: int = 1) -> tuple[Any, Path]:
+                  written: tuple[str, ...] = (), *, cores: int = 1, design: Any = None) -> tuple[Any, Path]:
     """Run a study with progress lines; returns (what ``run`` returned, output folder).
 
     ``run(store, **options)`` runs the study (one of :mod:`aerobat.experiments.studies.run_and_report`'s
@@ -128,6 +127,7 @@ def run_cli_study(args: argparse.Namespace, kind: str, run: Callable[..., Any],
     (checked before any job runs). ``cores``: the cores one job's plant keeps busy
     (:meth:`~aerobat.plants.PlantChoice.cores`): without ``--workers``, the machine's cores ÷ ``cores``
     jobs run at once, as :func:`~aerobat.experiments.studies.runner.run_study` decides from the jobs.
+    ``design``: the study's :class:`~aerobat.experiments.designing.NominalDesign`, said once the study starts.
     """
     _check_out(args, written)
     out_console = console(getattr(args, "json", False))
@@ -146,6 +146,8 @@ def run_cli_study(args: argparse.Namespace, kind: str, run: Callable[..., Any],
         state["total"] = todo + done
         state["out"] = _study_folder(args, store, study_id, written)
         at_once = "" if workers is None else f", {workers} at a time"
+        if design is not None:
+            out_console.print(_designed_on(design), soft_wrap=True)
         out_console.print(f"study {study_id} ({kind}): {todo} jobs to run, {done} already done "
                           f"(resume with --resume {study_id}){at_once}", soft_wrap=True)
         out_console.file.flush()
@@ -218,7 +220,6 @@ def _design(args: argparse.Namespace, plant: Any, written: tuple[str, ...]) -> t
     """The study's nominal design for ``plant`` (a :class:`~aerobat.experiments.designing.NominalDesign`), after
     checking ``--out`` for the files ``written`` there."""
     from aerobat.experiments.designing import nominal_design
-    from aerobat.plants import DesignModel
 
     _check_out(args, written)
     from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
@@ -230,10 +231,16 @@ def _design(args: argparse.Namespace, plant: Any, written: tuple[str, ...]) -> t
     if not nominal.design.converged:
         raise DesignFailed(f"design failed on the {nominal.model.value} model: {nominal.design.message}",
                            nominal.design)
+    return config, maneuver, nominal
+
+
+def _designed_on(nominal: Any) -> str:
+    """One line: the model a study's design ran on, and how long it took."""
+    from aerobat.plants import DesignModel
+
     model = (nominal.description if nominal.model is DesignModel.PAPER
              else f"the {nominal.model.value} model ({nominal.description})")
-    print(f"designed on {model} in {nominal.compute_s:.1f} s", file=sys.stderr, flush=True)
-    return config, maneuver, nominal
+    return f"designed on {model} in {nominal.compute_s:.1f} s"
 
 
 # ----------------------------------------------------------------- robustness
@@ -260,9 +267,8 @@ def _cmd_robustness(args: argparse.Namespace) -> int:
                             vehicles=args.vehicles, iterations=args.iterations, seed=args.seed, ranges=ranges,
                             rule=rule, tolerance_m=args.tolerance_m, plant=args.plant, base=base,
                             feedback=args.feedback)
-    study, out = run_cli_study(args, "robustness", run,
-                               written=written,
-                               cores=PlantChoice(args.plant, base).cores())
+    study, out = run_cli_study(args, "robustness", run, written=written, cores=PlantChoice(args.plant, base).cores(),
+                               design=nominal)
     outcome = study.outcome
     study.write(out)
     summary = study.summary
@@ -343,7 +349,8 @@ def _cmd_rules(args: argparse.Namespace) -> int:
     config, maneuver, nominal = _design(args, plant, ("rules.csv", "rules.png"))
     run = functools.partial(rules_study, maneuver=maneuver, design=nominal, model=config, methods=methods,
                             seeds=args.seeds, trials=args.trials, plant=plant, tolerance_m=args.tolerance_m)
-    study, out = run_cli_study(args, "rules", run, written=("rules.csv", "rules.png"), cores=plant.cores())
+    study, out = run_cli_study(args, "rules", run, written=("rules.csv", "rules.png"), cores=plant.cores(),
+                               design=nominal)
     outcome = study.outcome
     study.write(out)
     rows = study.rows
@@ -389,7 +396,7 @@ def _cmd_feedback(args: argparse.Namespace) -> int:
                             scenarios=scenarios, seeds=args.seeds, trials=args.trials, plant=plant, rule=args.rule,
                             tolerance_m=args.tolerance_m)
     study, out = run_cli_study(args, "feedback", run, written=("feedback.csv", "feedback.png"),
-                               cores=plant.cores())
+                               cores=plant.cores(), design=nominal)
     outcome = study.outcome
     study.write(out)
     rows = study.rows

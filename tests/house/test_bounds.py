@@ -92,6 +92,13 @@ def _error_spec():
     return ErrorSpec(name="z", unit="m", scale=0.1)
 
 
+def _firmware_config():
+    from aerobat.plants.betaflight.design_model import firmware_config, plant_settings
+    from aerobat.plants.betaflight.params import BetaflightParams
+
+    return firmware_config(plant_settings(BetaflightParams()), gyro_rate_hz=8000)
+
+
 EXAMPLES = {
     # classes with required fields (or a default of None): one valid instance each (the others are
     # built with their defaults)
@@ -103,6 +110,7 @@ EXAMPLES = {
     "aerobat.quadrotor.identification.logfit.LogFitOptions": _log_fit_options,
     "aerobat.core.maneuver.ParameterSpec": _parameter_spec,
     "aerobat.core.maneuver.ErrorSpec": _error_spec,
+    "aerobat.quadrotor.firmware.config.FirmwareConfig": _firmware_config,
 }
 
 

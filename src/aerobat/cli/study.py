@@ -146,10 +146,10 @@ def run_cli_study(args: argparse.Namespace, kind: str, run: Callable[..., Any],
         state["total"] = todo + done
         state["out"] = _study_folder(args, store, study_id, written)
         at_once = "" if workers is None else f", {workers} at a time"
-        if design is not None:
-            out_console.print(_designed_on(design), soft_wrap=True)
         out_console.print(f"study {study_id} ({kind}): {todo} jobs to run, {done} already done "
                           f"(resume with --resume {study_id}){at_once}", soft_wrap=True)
+        if design is not None:
+            out_console.print(f"  {_designed_on(design)}", soft_wrap=True)
         out_console.file.flush()
 
     def progress(done: int, total: int, job: Any, outcome: Any) -> None:

@@ -37,6 +37,7 @@ import argparse
 import contextlib
 import copy
 import dataclasses
+import faulthandler
 import inspect
 import io
 import json
@@ -721,6 +722,8 @@ class Campaign:
         self.report["wall_s"] = round(time.perf_counter() - self.started, 1)
         self.write_report()
         os.write(self.say_fd, f"fuzz: a call did not stop within its budget: {self.current}\n".encode())
+        os.write(self.say_fd, b"fuzz: where every thread was:\n")
+        faulthandler.dump_traceback(self.say_fd, all_threads=True)
         os._exit(3)
 
     say_fd = 2

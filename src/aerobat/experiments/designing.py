@@ -89,7 +89,8 @@ def nominal_design(maneuver: Maneuver, config: VehicleConfig, *, plant: PlantCho
     maneuver : what to design.
     config : the vehicle the user believes (the paper's model's vehicle; the firmware model's rigid body).
     plant : the plant the design is for (None: a paper design with no plant in mind).
-    design_model : ``"paper"`` or ``"firmware"`` (None: the plant's default, :attr:`~aerobat.plants.PlantSpec.default_design_model`).
+    design_model : ``"paper"`` or ``"firmware"`` (None: the plant's default,
+        :attr:`~aerobat.plants.PlantSpec.default_design_model`).
     correction : the right inverse used for C.
     """
     check_type("config", config, VehicleConfig, "a VehicleConfig (e.g. aerobat.hummingbird())")

@@ -245,6 +245,11 @@ class Alarm:
         self.armed = False
         self.fired = 0
         self.previous = signal.signal(signal.SIGALRM, self._handle)
+        # started in the background by a shell without job control, the process inherits SIGINT ignored (and
+        # Python then installs no KeyboardInterrupt): the budget's Ctrl-C would do nothing and every command
+        # that waits for one (browse, a long learn) would look hung
+        if threading.current_thread() is threading.main_thread():
+            self.previous_int = signal.signal(signal.SIGINT, signal.default_int_handler)
 
     def _handle(self, signum: int, frame: Any) -> None:
         if not self.armed:
@@ -270,6 +275,8 @@ class Alarm:
 
     def close(self) -> None:
         signal.signal(signal.SIGALRM, self.previous)
+        if hasattr(self, "previous_int"):
+            signal.signal(signal.SIGINT, self.previous_int)
 
 
 @contextlib.contextmanager

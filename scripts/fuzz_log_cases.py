@@ -330,3 +330,27 @@ def build_cases() -> list[LogCase]:
             "roma": (DATA / "betaflight" / "diatone-roma-f5.bbl").read_bytes()}
     return (blackbox_cases(data) + crazyflie_cases((DATA / "crazyflie" / "log16").read_bytes())
             + ulog_cases((DATA / "px4" / "auav-x21-quad.ulg").read_bytes()))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """List the cases, kind by kind: ``python scripts/fuzz_log_cases.py [--labels]`` (needs ../shared/data)."""
+    import argparse
+    from collections import Counter
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--labels", action="store_true", help="every case's label and command, not only the counts")
+    args = parser.parse_args(argv)
+    if not DATA.is_dir():
+        print(f"the real flight logs are not here ({DATA} is absent)")
+        return 2
+    cases = build_cases()
+    if args.labels:
+        for case in cases:
+            print(f"{case.kind:10s} {case.command:14s} {case.label}")
+    counts = Counter(case.kind for case in cases)
+    print(", ".join(f"{kind} {counts.get(kind, 0)}" for kind in KINDS) + f"; {len(cases)} cases")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -336,7 +336,10 @@ def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | No
     from aerobat.plants import PLANTS
 
     choices = kinds or PLANTS.names()
-    p.add_argument("--plant", choices=choices, default=default, help="what flies the program")
+    p.add_argument("--plant", choices=choices, default=default,
+                   help="what flies the program" if default is not None else
+                   "the plant the design is for: its firmware model with --design-model firmware (default: none, "
+                   "a design on the paper's model)")
     for name, spec in PLANTS.items():
         if spec.option is not None and name in choices:
             p.add_argument(spec.option, metavar="FILE.toml",

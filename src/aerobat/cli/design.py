@@ -45,11 +45,11 @@ def _cmd_design(args: argparse.Namespace) -> int:
                           "design_model_description": nominal.description,
                           "design_model_compute_s": nominal.compute_s}))
     else:
-        console().print(f"design model: {nominal.model.value} — {nominal.description}")
+        model = [f"  design model: {nominal.model.value} — {nominal.description}"]
         if nominal.paper is not None:
-            console().print(f"  started from the paper model's p⁰ ({nominal.paper.evaluations} simulations); both "
-                            f"stages {nominal.compute_s:.2f} s")
-        _print_design(result)
+            model.append(f"  started from the paper model's p⁰ ({nominal.paper.evaluations} simulations); both "
+                         f"stages {nominal.compute_s:.2f} s")
+        _print_design(result, model)
     if not result.converged:
         raise DesignFailed(result.message, result)
     if args.program is not None:
@@ -80,9 +80,11 @@ def _write_program(maneuver: Any, result: Any, args: argparse.Namespace) -> None
           file=sys.stderr if args.json else sys.stdout)
 
 
-def _print_design(result: Any) -> None:
+def _print_design(result: Any, model: list[str]) -> None:
+    """The design's summary with the ``model`` lines under its first (status) line, then singular values, J and C."""
     out = console()
-    for line in result.summary().splitlines():
+    first, *rest = result.summary().splitlines()
+    for line in (first, *model, *rest):
         out.print(line)
     m = result.maneuver
     out.print("singular values: " + np.array2string(result.singular_values, precision=4))

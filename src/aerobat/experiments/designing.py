@@ -57,12 +57,12 @@ class NominalDesign:
     compute_s: float = 0.0
 
     def summary(self) -> str:
-        """The design's summary with the model it ran on."""
-        head = f"design model: {self.model.value} — {self.description}"
+        """The design's summary, then the model it ran on."""
+        lines = [self.design.summary(), f"  design model: {self.model.value} — {self.description}"]
         if self.paper is not None:
-            head += (f"\n  started from the paper model's p⁰ ({self.paper.status.value}, {self.paper.evaluations} "
-                     f"simulations); both stages {self.compute_s:.2f} s")
-        return head + "\n" + self.design.summary()
+            lines.append(f"  started from the paper model's p⁰ ({self.paper.status.value}, {self.paper.evaluations} "
+                         f"simulations); both stages {self.compute_s:.2f} s")
+        return "\n".join(lines)
 
 
 def resolve_design_model(plant: PlantChoice | None, choice: DesignModel | str | None) -> DesignModel:

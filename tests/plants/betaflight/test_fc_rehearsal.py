@@ -129,7 +129,7 @@ def test_a_trial_keeps_its_deadlines_with_two_busy_loops_beside_it(firmware: tup
         for loop in loops:
             loop.kill()
             loop.wait(timeout=10)
-    assert trial.status is TrialStatus.OK, trial.message
+    assert trial.status is TrialStatus.OK, (trial.message, trial.info.get("world"), trial.info.get("frames"))
     info = trial.info
     assert info["ground_scheduling"] == "fifo" and info["world"]["scheduling"] == "fifo"
     frames = info["maneuver_frames"]
@@ -166,7 +166,7 @@ def test_leaving_the_geofence_disarms(firmware: tuple[Path, Path]) -> None:
     plant.safety = dataclasses.replace(plant.safety, fence_z_m=(floor - 0.1, floor + 1.0))  # the take-off crosses it
     trial = plant.fly(FLIP.program(P0))
     assert trial.status is TrialStatus.CRASHED and trial.info.get("safety_stop") == "geofence", \
-        (trial.status, trial.info.get("safety_stop"), trial.message)
+        (trial.status, trial.info.get("safety_stop"), trial.message, trial.info.get("world"))
     _ended_disarmed(trial)
 
 

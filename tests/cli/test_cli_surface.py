@@ -170,3 +170,10 @@ def test_a_study_estimate_comes_from_its_measured_jobs_not_from_the_pool_start()
     # no job times (design jobs) or an unknown pool (Dask): the rate since the start
     assert study_eta(60.0, 3, 6, [], workers=2) == pytest.approx(120.0)
     assert study_eta(60.0, 3, 6, [5.0], workers=None) == pytest.approx(120.0)
+
+
+def test_design_refuses_a_plant_settings_file_without_its_plant():
+    """The fuzz campaign (issue 41's plant options on design): --arena /dev/zero without --plant ran and exited 0."""
+    code, out, err = call(["design", "flip", "--flips", "1", "--dims", "2", "--max-rate-deg-s", "800",
+                           "--arena", "/dev/zero"])
+    assert code == 2 and err.strip() == "aerobat: error: --arena applies only with --plant arena (no --plant given)"

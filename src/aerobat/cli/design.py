@@ -30,6 +30,12 @@ def _cmd_design(args: argparse.Namespace) -> int:
     if args.plant is None and (args.tune is not None or args.design_model == "firmware"):
         raise ConfigError(f"{'--tune' if args.tune is not None else '--design-model firmware'}: name the plant "
                           f"whose firmware flies the program (--plant betaflight or fc)")
+    if args.plant is None:
+        from aerobat.plants import PLANTS
+
+        for name, spec in PLANTS.items():  # a settings file without its plant is refused, never ignored
+            if spec.option is not None and getattr(args, spec.option.lstrip("-").replace("-", "_"), None) is not None:
+                raise ConfigError(f"{spec.option} applies only with --plant {name} (no --plant given)")
     plant = plant_choice_from_args(args) if args.plant is not None else None
     if args.program is not None:  # refused before the design: the store (D1), an existing file without --force
         from pathlib import Path

@@ -150,8 +150,11 @@ class RehearsalConnection:
         with SimulatedSource() as source:
             world = RealTimeWorld({**self.plant_args, "seed": seed}, source.port, chunk_s=self.chunk_s)
             try:
-                with PtyBridge("127.0.0.1", world.uart1_port) as bridge, \
-                        SerialTransport(bridge.device) as transport:
+                try:
+                    bridge = PtyBridge("127.0.0.1", world.uart1_port)
+                except (TimeoutError, OSError, RuntimeError) as error:  # say what became of the world and firmware
+                    raise RuntimeError(f"{error} ({world.describe()})") from error
+                with bridge, SerialTransport(bridge.device) as transport:
                     t0 = world.start()
                     source.set_time_zero(t0)
                     self.current = Link(MspClient(transport, timeout_s=1.0), source, t0, world, bridge)

@@ -38,6 +38,7 @@ import sys
 import time
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .priority import fifo
@@ -283,6 +284,17 @@ class RealTimeWorld:
     def pid(self) -> int:
         """The world process's id."""
         return self._process.pid
+
+    def describe(self) -> str:
+        """Whether the world and its firmware still run, in words (for a failure that needs explaining)."""
+        code = self._process.poll()
+        world = "the world runs" if code is None else f"the world exited with {code}"
+        try:
+            state = Path(f"/proc/{self.firmware_pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except (OSError, IndexError, TypeError):
+            state = ""
+        firmware = "runs" if state and state not in "ZX" else "is gone"
+        return f"{world}; its firmware (pid {self.firmware_pid}) {firmware}"
 
     def stop(self, timeout_s: float = 10.0) -> WorldReport | None:
         """Stop flying and return how the world kept time (None if it was never started or is gone)."""

@@ -290,10 +290,11 @@ class RealTimeWorld:
         code = self._process.poll()
         world = "the world runs" if code is None else f"the world exited with {code}"
         try:
-            state = Path(f"/proc/{self.firmware_pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+            proc_letter = Path(f"/proc/{self.firmware_pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
         except (OSError, IndexError, TypeError):
-            state = ""
-        firmware = "runs" if state and state not in "ZX" else "is gone"
+            proc_letter = ""
+        gone = proc_letter in {"", "Z", "X"}  # zombie or dead: /proc's one-letter process states
+        firmware = "is gone" if gone else "runs"
         return f"{world}; its firmware (pid {self.firmware_pid}) {firmware}"
 
     def stop(self, timeout_s: float = 10.0) -> WorldReport | None:

@@ -6,7 +6,9 @@ import pytest
 
 from aerobat.plants.betaflight.errors import LinkTimeout, MspError
 from aerobat.plants.betaflight.msp import (
+    MAX_ANSWER_BYTES,
     MSP_API_VERSION,
+    MSP_SET_RAW_RC,
     MSP_STATUS_EX,
     MspClient,
     MspVersion,
@@ -71,6 +73,31 @@ def test_request_skips_noise_and_chunks(version: MspVersion) -> None:
     client = MspClient(transport, version=version)
     api = client.api_version()
     assert (api.protocol, api.major, api.minor) == (0, 1, 47)
+
+
+@pytest.mark.parametrize("lost", [1, 2, 3, 5, 7, 8])
+def test_answers_after_a_torn_frame_are_read_at_once(lost: int) -> None:
+    """Bytes lost from an answer's header (the SITL's UART thread races its main loop; a real UART overruns)
+    must not hold the later answers back: a header whose size comes from the next frame's bytes declares
+    kilobytes, and waiting for them silenced the link for longer than its timeout."""
+    ack = v2_response(MSP_SET_RAW_RC, b"")
+    torn = ack[: len(ack) - 1 - lost] if lost < len(ack) - 1 else ack[:2]
+    transport = FakeTransport({}, chunk=4096)
+    transport.pending = torn + ack + ack
+    client = MspClient(transport)
+    answers = client.collect(0.0)
+    assert [command for command, _ in answers] == [MSP_SET_RAW_RC, MSP_SET_RAW_RC]
+
+
+def test_a_header_too_large_for_any_answer_is_skipped_and_a_partial_answer_is_waited_for() -> None:
+    body = struct.pack("<BHH", 0, MSP_STATUS_EX, MAX_ANSWER_BYTES + 1)
+    transport = FakeTransport({}, chunk=4096)
+    ack = v2_response(MSP_SET_RAW_RC, b"")
+    transport.pending = b"$X>" + body + ack[:5]  # the torn header, then an answer still arriving
+    client = MspClient(transport)
+    assert client.collect(0.0) == []
+    transport.pending = ack[5:]
+    assert client.collect(0.0) == [(MSP_SET_RAW_RC, b"")]
 
 
 def test_error_frame_raises() -> None:

@@ -123,50 +123,80 @@ class _Frame:
     is_error: bool
 
 
+MAX_ANSWER_BYTES = 4112
+"""The longest MSP answer Betaflight sends (msp_serial.h: ``MSP_PORT_OUTBUF_SIZE`` with dataflash reads): a
+header that declares more is not a frame start but torn bytes."""
+
+
+def _frame_at(buffer: bytearray, start: int) -> tuple[_Frame | None, int]:
+    """The answer frame that starts at ``buffer[start]`` (a ``$``).
+
+    Returns ``(frame, end)`` for a complete frame with a good checksum, ``(None, 0)`` when the bytes
+    there cannot start one (another direction, a size no answer has, a bad checksum) and
+    ``(None, -1)`` when they may, but it has not all arrived yet.
+    """
+    if len(buffer) - start < 3:
+        return None, -1
+    kind, direction = buffer[start + 1], buffer[start + 2]
+    if kind not in b"MX" or direction not in b">!":
+        return None, 0
+    if kind == ord("M"):
+        if len(buffer) - start < 5:
+            return None, -1
+        size, command = buffer[start + 3], buffer[start + 4]
+        end = start + 5 + size + 1
+        if len(buffer) < end:
+            return None, -1
+        payload = bytes(buffer[start + 5 : end - 1])
+        checksum = size ^ command
+        for byte in payload:
+            checksum ^= byte
+        if checksum != buffer[end - 1]:
+            return None, 0
+    else:
+        if len(buffer) - start < 8:
+            return None, -1
+        _flag, command, size = struct.unpack_from("<BHH", buffer, start + 3)
+        if size > MAX_ANSWER_BYTES:
+            return None, 0
+        end = start + 8 + size + 1
+        if len(buffer) < end:
+            return None, -1
+        if crc8_dvb_s2(bytes(buffer[start + 3 : end - 1])) != buffer[end - 1]:
+            return None, 0
+        payload = bytes(buffer[start + 8 : end - 1])
+    return _Frame(command, payload, direction == ord("!")), end
+
+
 def _parse_frame(buffer: bytearray) -> tuple[_Frame | None, int]:
     """Find the first complete response frame in ``buffer``.
 
     Returns the frame (or None if none is complete yet) and how many bytes of
     ``buffer`` can be dropped. Bytes before a frame start and frames with a
-    bad checksum are skipped.
+    bad checksum are skipped. A frame start whose rest has not arrived is
+    waited for, unless a complete frame follows it: then its bytes were torn
+    (lost on the line, or a header whose size came from the next frame's bytes,
+    which would otherwise hold every later answer back until kilobytes arrive)
+    and the parser goes on from the complete frame.
     """
     start = 0
     while True:
         start = buffer.find(b"$", start)
         if start < 0:
             return None, len(buffer)
-        if len(buffer) - start < 3:
-            return None, start
-        kind, direction = buffer[start + 1], buffer[start + 2]
-        if kind not in b"MX" or direction not in b">!":
+        frame, end = _frame_at(buffer, start)
+        if frame is not None:
+            return frame, end
+        if end == 0:
             start += 1
             continue
-        if kind == ord("M"):
-            if len(buffer) - start < 5:
-                return None, start
-            size, command = buffer[start + 3], buffer[start + 4]
-            end = start + 5 + size + 1
-            if len(buffer) < end:
-                return None, start
-            payload = bytes(buffer[start + 5 : end - 1])
-            checksum = size ^ command
-            for byte in payload:
-                checksum ^= byte
-            if checksum != buffer[end - 1]:
-                start += 1
-                continue
-        else:
-            if len(buffer) - start < 8:
-                return None, start
-            _flag, command, size = struct.unpack_from("<BHH", buffer, start + 3)
-            end = start + 8 + size + 1
-            if len(buffer) < end:
-                return None, start
-            if crc8_dvb_s2(bytes(buffer[start + 3 : end - 1])) != buffer[end - 1]:
-                start += 1
-                continue
-            payload = bytes(buffer[start + 8 : end - 1])
-        return _Frame(command, payload, direction == ord("!")), end
+        later = buffer.find(b"$", start + 1)
+        while later >= 0:
+            frame, end = _frame_at(buffer, later)
+            if frame is not None:
+                return frame, end
+            later = buffer.find(b"$", later + 1)
+        return None, start
 
 
 @dataclass(frozen=True)

@@ -47,6 +47,7 @@ __all__ = [
     "StoreFormatError",
     "StoreVersionError",
     "StoreWriteError",
+    "WorkersUnavailable",
     "require",
 ]
 
@@ -122,6 +123,10 @@ class SolveFailed(AerobatError):
 
 class PlantError(AerobatError):
     """A plant cannot fly at all (as opposed to one trial failing, which is a :class:`~aerobat.core.plant.Trial`)."""
+
+
+class WorkersUnavailable(AerobatError):
+    """A process pool's workers could not start: no job ran (an infrastructure failure, not failed jobs)."""
 
 
 class OutputError(AerobatError):

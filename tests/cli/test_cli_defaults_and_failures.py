@@ -172,3 +172,23 @@ def test_a_full_disk_while_writing_output_is_a_failure_not_bad_input(tmp_path):
     assert result.returncode == 1, result.stderr
     assert "Traceback" not in result.stderr
     assert result.stderr.startswith("aerobat: failed:") and ("disk" in result.stderr or "too large" in result.stderr)
+
+
+def test_a_ctrl_c_that_lands_in_a_finalizer_still_stops_the_command(capfd) -> None:
+    """The full fuzz campaign (issue 45): a Ctrl-C delivered while the garbage collector ran a weak reference's
+    callback was dropped by Python ("Exception ignored in …", a traceback) and the command went on."""
+    import gc
+    import time
+
+    from aerobat.cli.app import _interrupts_redelivered
+
+    class Finalized:
+        def __del__(self) -> None:
+            raise KeyboardInterrupt  # what Python's SIGINT handler raises wherever the main thread is
+
+    with _interrupts_redelivered(), pytest.raises(KeyboardInterrupt):
+        Finalized()  # dropped at once: its finalizer's exception cannot propagate
+        gc.collect()
+        for _ in range(100):
+            time.sleep(0.01)
+    assert "Exception ignored" not in capfd.readouterr().err

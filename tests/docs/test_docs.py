@@ -187,7 +187,7 @@ def run_document(path: Path, tmp: Path, *, small: bool) -> list[str]:
                 result = subprocess.run(argv, capture_output=True, text=True, timeout=3600, cwd=tmp, env=env)
                 assert result.returncode == 0, f"{path.name}: `{command}`:\n{result.stderr[-2000:]}"
             ran.append(command)
-        namespace: dict = {}
+        namespace: dict = {"__name__": "__main__"}  # a block runs as the script a reader would save
         cwd = os.getcwd()
         os.chdir(tmp)
         try:
@@ -233,3 +233,28 @@ def test_documented_commands_run(tmp_path, path):
 @pytest.mark.parametrize("path", DOCUMENTS, ids=_ids)
 def test_documented_commands_run_as_written(tmp_path, path):
     run_document(path, tmp_path, small=False)
+
+
+def test_the_study_snippet_runs_as_a_saved_script_and_refuses_to_run_without_its_guard(tmp_path):
+    """Issue 44: docs/feedback.md's study, saved to a file in an empty folder and run as a reader would. Without its
+    ``if __name__ == "__main__":`` every spawned worker died at start and the study printed "2 of 2 runs failed"
+    with exit status 0; now nothing that did not run is reported, and the script fails."""
+    body = next(code for language, code in blocks(ROOT / "docs" / "feedback.md")
+                if language == "python" and "feedback_study" in code)
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
+    guarded, bare = tmp_path / "guarded", tmp_path / "bare"
+    guarded.mkdir()
+    bare.mkdir()
+    (guarded / "study.py").write_text(body)
+    result = subprocess.run([sys.executable, "study.py"], cwd=guarded, capture_output=True, text=True, timeout=600,
+                            env=env)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert [line.split()[0] for line in result.stdout.splitlines()] == ["none", "tracking"]
+    assert "0 of 2 runs failed" in result.stdout
+    top_level = body.split("\n\nif __name__")[0].replace("def main() -> None:\n", "if True:\n") + "\n"
+    (bare / "study.py").write_text(top_level)
+    result = subprocess.run([sys.executable, "study.py"], cwd=bare, capture_output=True, text=True, timeout=600,
+                            env=env)
+    assert result.returncode != 0
+    assert "WorkersUnavailable" in result.stderr and "nothing ran" in result.stderr
+    assert "runs failed" not in result.stdout

@@ -270,8 +270,11 @@ def test_foreign_corrupted_and_newer_files_are_refused_untouched(tmp_path, capsy
 def test_unwritable_and_missing_locations_are_clear_errors(tmp_path, capsys):
     with pytest.raises(StoreAccessError, match="cannot open or create"):
         Store("/proc/aerobat-test.sqlite")  # read-only even for root
-    with pytest.raises(StoreAccessError, match="does not exist"):
-        Store(tmp_path / "missing" / "a.sqlite")
+    with Store(tmp_path / "missing" / "deeper" / "a.sqlite"):  # issue 44: a new store's folders are made
+        pass
+    (tmp_path / "a-file").write_text("")
+    with pytest.raises(StoreAccessError, match="cannot make the directory"):
+        Store(tmp_path / "a-file" / "a.sqlite")
     with pytest.raises(StoreAccessError, match="is a directory"):
         Store(tmp_path)
     with pytest.raises(StoreAccessError, match="no such database"):

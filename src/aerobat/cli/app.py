@@ -25,6 +25,7 @@ import argparse
 import contextlib
 import sys
 from collections.abc import Iterator, Sequence
+from typing import Any
 
 from aerobat.cli.common import CommandFailed, HelpFormatter, Parser
 from aerobat.errors import (
@@ -42,6 +43,7 @@ from aerobat.errors import (
     StoreError,
     StoreFormatError,
     StoreVersionError,
+    WorkersUnavailable,
 )
 
 __all__ = ["EXIT_FAILED", "EXIT_INTERNAL", "EXIT_OK", "EXIT_USAGE", "build_parser", "exit_status", "main"]
@@ -54,7 +56,7 @@ EXIT_STOPPED_BY_PIPE = 128 + 13  # SIGPIPE: what `yes | head -1` reports for `ye
 
 _USAGE = (ConfigError, StoreAccessError, StoreFormatError, StoreVersionError, SessionNotFound, SessionInUse)
 _FAILED = (DesignFailed, IdentificationFailed, SolveFailed, PlantError, MissingDependency, DiskFull, StoreError,
-           CommandFailed)
+           CommandFailed, WorkersUnavailable)
 
 
 def exit_status(exc: BaseException) -> int:
@@ -182,8 +184,42 @@ def _undecodable_names_printable() -> Iterator[None]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status (see the module's table)."""
-    with _undecodable_names_printable():
+    with _undecodable_names_printable(), _interrupts_redelivered():
         return _main(argv)
+
+
+@contextlib.contextmanager
+def _interrupts_redelivered() -> Iterator[None]:
+    """A Ctrl-C (or a SIGTERM a command turns into :class:`~aerobat.cli.stopping.Stopped`) that lands in a
+    finalizer is delivered again, to the main thread at its next instruction.
+
+    Python runs signal handlers between instructions of the main thread, which may be inside a ``__del__``
+    or a weak reference's callback that the garbage collector runs; an exception raised there cannot
+    propagate, so Python prints "Exception ignored in …" with a traceback and the command carries on as if
+    the key had not been pressed (the full fuzz campaign: ``browse --export`` went on until a second Ctrl-C).
+    """
+    import _thread
+    import signal
+    import threading
+
+    previous = sys.unraisablehook
+
+    def hook(unraisable: Any) -> None:
+        if unraisable.exc_type is not None and issubclass(unraisable.exc_type, KeyboardInterrupt):
+            # from another thread, a moment later: raised now, it would be raised inside this hook, and dropped
+            # again; should it land in another finalizer, this hook sends it once more
+            signum = getattr(unraisable.exc_value, "signum", signal.SIGINT)
+            timer = threading.Timer(0.01, _thread.interrupt_main, args=(signum,))
+            timer.daemon = True
+            timer.start()
+            return
+        previous(unraisable)
+
+    sys.unraisablehook = hook
+    try:
+        yield
+    finally:
+        sys.unraisablehook = previous
 
 
 def _main(argv: Sequence[str] | None) -> int:

@@ -20,9 +20,10 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Protocol
 
-from aerobat.errors import ConfigError
+from aerobat.errors import ConfigError, WorkersUnavailable
 from aerobat.experiments.job import Job, JobResult, JobStatus, run_job
 from aerobat.experiments.lifetime import process_pool
 
@@ -94,6 +95,33 @@ class Executor(Protocol):
     def close(self) -> None: ...
 
 
+_WORKER_START_TIMEOUT_S = 300.0  # a spawned worker imports aerobat and numba: seconds, minutes on a loaded machine
+
+
+def _started() -> int:
+    """A worker's answer that it started: its process id."""
+    return os.getpid()
+
+
+def _workers_started(pool: ProcessPoolExecutor) -> None:
+    """Wait until a worker of ``pool`` has started; raise :class:`WorkersUnavailable` if none can.
+
+    A spawned worker re-imports the script that made the pool; a script that starts a study at its top
+    level, without ``if __name__ == "__main__":``, makes every worker die as it starts. Each job would then
+    count as failed and the study would report its runs failed with exit status 0, although none ran.
+    """
+    try:
+        pool.submit(_started).result(timeout=_WORKER_START_TIMEOUT_S)
+    except BrokenProcessPool as exc:
+        raise WorkersUnavailable(
+            f"the study's worker processes could not start ({exc}); nothing ran. A script that runs a study with "
+            f"workers > 1 must start it under `if __name__ == \"__main__\":` (each worker re-imports the "
+            f"script), or use workers=1") from None
+    except TimeoutError:
+        raise WorkersUnavailable(f"no worker process started within {_WORKER_START_TIMEOUT_S:g} s; nothing "
+                                 f"ran") from None
+
+
 def _worker_init() -> None:
     # one simulation thread per worker process: the pool already uses every core
     from aerobat.quadrotor.simulate import set_batch_threads
@@ -127,7 +155,13 @@ class LocalExecutor:
         if self._pool is not None and self._owner is not threading.current_thread():
             self.close()  # its workers die with the thread that started them (PR_SET_PDEATHSIG)
         if self._pool is None:
-            self._pool = process_pool(self.workers, _worker_init)
+            pool = process_pool(self.workers, _worker_init)
+            try:
+                _workers_started(pool)
+            except WorkersUnavailable:
+                pool.shutdown(wait=True, cancel_futures=True)
+                raise
+            self._pool = pool
             self._owner = threading.current_thread()
         futures = {self._pool.submit(run_job, job): job for job in jobs}
         finished = False

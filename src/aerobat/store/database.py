@@ -161,8 +161,12 @@ class Database:
             if not create:
                 raise StoreAccessError(f"{path}: no such database (--db); `aerobat learn` creates one")
             parent = path.parent if str(path.parent) else Path(".")
-            if not parent.is_dir():
-                raise StoreAccessError(f"{path}: cannot create the database: directory {parent} does not exist")
+            if not parent.is_dir():  # a new store's folders are made, as an output's are
+                try:
+                    parent.mkdir(parents=True, exist_ok=True)
+                except OSError as exc:
+                    raise StoreAccessError(f"{path}: cannot create the database: cannot make the directory "
+                                           f"{parent} ({exc.strerror or exc})") from None
             if not os.access(parent, os.W_OK):
                 raise StoreAccessError(f"{path}: cannot create the database: directory {parent} is read-only")
             return True

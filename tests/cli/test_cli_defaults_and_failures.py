@@ -113,6 +113,10 @@ def test_rules_study_reports_every_method_with_the_baselines_installed(tmp_path,
     report = json.loads(out)
     assert sorted(row["method"] for row in report["methods"]) == ["bayesopt", "cma", "paper", "tsvd"]
     assert all(row["runs"] == 1 for row in report["methods"])
+    code, out, err = call(["study", "rules", *SMALL_FLIP, "--methods", "paper", "--seeds", "1", "--trials", "2",
+                           "--workers", "1", "--db", "plain.sqlite"])
+    assert code == 0, err
+    assert "[1/1] " in err and "[1/1] " not in out  # issue 44: progress on standard error, as docs/cli.md says
 
 
 # ------------------------------------------------------------------ defect 4

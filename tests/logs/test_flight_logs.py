@@ -97,6 +97,26 @@ def test_log_info_json_gives_the_numbers(capsys):
     assert info["logs"][0]["tune"]["rollPID"] == "47,85,38"
 
 
+def test_one_log_of_a_file_is_named_file_colon_n_by_every_log_command(tmp_path, capsys):
+    """Issue 44: `log info FILE.bbl:2` said "file not found" while identify and replay took FILE:N."""
+    assert main(["log", "info", f"{ROMA}:2", "--json"]) == 0
+    named = json.loads(capsys.readouterr().out)
+    assert main(["log", "info", str(ROMA), "--index", "2", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out) == named
+    assert [log["index"] for log in named["logs"]] == [2] and named["file"] == str(ROMA)
+    out = tmp_path / "two.csv"
+    assert main(["log", "export", f"{ROMA}:2", "--output", str(out)]) == 0  # one log: one file
+    assert out.stat().st_size > 0
+    assert main(["log", "info", f"{ROMA}:2", "--index", "3"]) == 2
+    assert f"{ROMA}:2: names log 2, --index 3 another" in capsys.readouterr().err
+    assert main(["log", "info", f"{ROMA}:4"]) == 2
+    assert "log 4 does not exist; the file holds 3 logs" in capsys.readouterr().err
+    odd = tmp_path / "flight:2"  # a file whose own name ends in :N is that file
+    shutil.copyfile(ROMA, odd)
+    assert main(["log", "info", str(odd), "--json"]) == 0
+    assert len(json.loads(capsys.readouterr().out)["logs"]) == 3
+
+
 def test_log_export_csv_and_plot(tmp_path, capsys):
     out = tmp_path / "cf.csv"
     assert main(["log", "export", str(CF[0]), "--format", "csv", "--output", str(out)]) == 0

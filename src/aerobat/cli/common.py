@@ -107,6 +107,17 @@ def _metavar(option: str, kind: Any) -> str | None:
     return None
 
 
+def _with_metavar(args: tuple[Any, ...], kwargs: dict[str, Any]) -> dict[str, Any]:
+    """``kwargs`` with the metavar an option's name and type imply (N, DIR, the unit), unless one is given."""
+    options = [a for a in args if isinstance(a, str) and a.startswith("-")]
+    takes_value = kwargs.get("action") in (None, "store", "append") and "choices" not in kwargs
+    if options and takes_value and "metavar" not in kwargs:
+        metavar = _metavar(options[0], kwargs.get("type"))
+        if metavar is not None:
+            kwargs = {**kwargs, "metavar": metavar}
+    return kwargs
+
+
 class Parser(argparse.ArgumentParser):
     """argparse with one-line errors and the documented exit status for bad usage.
 
@@ -121,13 +132,18 @@ class Parser(argparse.ArgumentParser):
 
     def add_argument(self, *args: Any, **kwargs: Any) -> argparse.Action:
         """An option's metavar says what it takes: N for a count, DIR for ``--out``, the unit for a quantity."""
-        options = [a for a in args if isinstance(a, str) and a.startswith("-")]
-        takes_value = kwargs.get("action") in (None, "store", "append") and "choices" not in kwargs
-        if options and takes_value and "metavar" not in kwargs:
-            metavar = _metavar(options[0], kwargs.get("type"))
-            if metavar is not None:
-                kwargs["metavar"] = metavar
-        return super().add_argument(*args, **kwargs)
+        return super().add_argument(*args, **_with_metavar(args, kwargs))
+
+    def add_argument_group(self, *args: Any, **kwargs: Any) -> Any:
+        """A titled group of options in the help, whose options get their metavars as the parser's do."""
+        group = super().add_argument_group(*args, **kwargs)
+        plain = group.add_argument
+
+        def add_argument(*names: Any, **options: Any) -> argparse.Action:
+            return plain(*names, **_with_metavar(names, options))
+
+        group.add_argument = add_argument  # type: ignore[method-assign]
+        return group
 
     def error(self, message: str) -> NoReturn:
         unknown = self._unknown_options() if "arguments are required" in message else []
@@ -343,14 +359,14 @@ def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | No
     for name, spec in PLANTS.items():
         if spec.option is not None and name in choices:
             p.add_argument(spec.option, metavar="FILE.toml",
-                          help=f"{name} settings, only with --plant {name} (default: the {name}'s defaults)")
+                          help=f"{name} settings, only with --plant {name} (default: the {name} plant's own)")
     if "betaflight" in choices:
-        p.add_argument("--tune", metavar="FILE",
+        p.add_argument("--tune", metavar="FILE[:N]",
                        help="a real quad's Betaflight configuration flown by the SITL, only with --plant betaflight: "
-                            "a CLI diff or dump, or a blackbox log .bbl, .bfl or .txt whose header is used "
-                            "(default: aerobat's own settings)")
+                            "a CLI diff or dump, or a blackbox log .bbl, .bfl or .txt whose header is used, FILE:N "
+                            "its log N (default: aerobat's own settings)")
         p.add_argument("--tune-log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
-                       help="which log of a blackbox file holding several gives the tune (default: 1)")
+                       help=argparse.SUPPRESS)  # before FILE:N; kept so that older command lines still run
     p.add_argument("--seed", type=bounded_int(*SEEDS.bounds()), default=0, help="seed of the plant's random generator")
     add_design_model_option(p)
     if not feedback:
@@ -426,19 +442,23 @@ def plant_choice_from_args(args: argparse.Namespace) -> Any:
     return with_tune_from_args(args, choice)
 
 
-def read_tune(path: str | Path, log_index: int | None = None) -> tuple[Any, dict[str, float], str]:
-    """What the tune in ``path`` becomes on the SITL, checked as the firmware would be configured; nothing runs.
+def read_tune(path: str | Path, log_index: int | None = None,
+              option: str = "--tune-log-index") -> tuple[Any, dict[str, float], str]:
+    """What the tune in ``path`` (``FILE:N``: log N of a blackbox file) becomes on the SITL, checked as the
+    firmware would be configured; nothing runs. ``log_index`` is the log given by ``option`` instead.
 
     Returns the :class:`~aerobat.plants.betaflight.translate.TuneReport`, the tune's full-stick rates
     [deg/s] per axis and its ``rates_type``. A tune that cannot be read, names an unknown setting or
     holds a value that is no value of its setting is bad input (:class:`~aerobat.errors.ConfigError`).
     """
+    from aerobat.logs.refs import parse_log_ref
     from aerobat.plants.betaflight.configure import check_commands
     from aerobat.plants.betaflight.firmware_settings import load_settings
     from aerobat.plants.betaflight.translate import translate
     from aerobat.plants.betaflight.tune import load_tune
 
-    report = translate(load_tune(path, log_index=log_index))  # unknown settings raise here, naming the file and line
+    ref = parse_log_ref(path).with_index(log_index, option)
+    report = translate(load_tune(ref.path, log_index=ref.index))  # unknown settings raise here, naming file and line
     tuned = load_settings().with_tune(report)
     check_commands(tuned)  # the last check before the firmware's CLI, as configuring it runs it
     rates = {axis: tuned.rate_deg_s(axis, 1.0) for axis in ("roll", "pitch", "yaw")}

@@ -244,7 +244,6 @@ def _print_fit(run: Any, fit: Any) -> None:
 def register(sub: Any) -> None:
     p = sub.add_parser("identify", help="identify the nominal model of the vehicle a plant flies, write a vehicle "
                                         "file", formatter_class=HelpFormatter)
-    add_plant_options(p, feedback=False)  # identification always flies the open loop
     p.add_argument("--output", dest="out", default=None, metavar="FILE.toml",
                    help="the identified vehicle file to write (required)")
     old_spelling(p, "--out", "out")
@@ -254,31 +253,35 @@ def register(sub: Any) -> None:
     p.add_argument("--figure", default=None, metavar="FILE.png",
                    help="measured against fitted responses (default: --output with .png)")
     p.add_argument("--name", default=None, help="the identified vehicle's name (default: --output's stem)")
-    p.add_argument("--no-flips", action="store_true", help="leave out the two slow flips (720°/s)")
-    p.add_argument("--max-angle-deg", type=finite_float(3.0, 68.0, "deg"), default=28.6,
-                   help="largest attitude a rate doublet may reach")
-    p.add_argument("--max-attempts", type=bounded_int(1, 10), default=2,
-                   help="flights per trial when its trigger is lost, the plant stops answering or it is aborted")
-    p.add_argument("--max-flights", type=bounded_int(1, 100), default=12, help="flights in all")
-    p.add_argument("--max-position-rms-mm", type=finite_float(0.01, 10000.0, "mm"), default=20.0,
-                   help="refuse a fit whose position residual is larger (RMS)")
-    p.add_argument("--max-angle-rms-deg", type=finite_float(0.001, 170.0, "deg"), default=3.0,
-                   help="refuse a fit whose attitude residual is larger (RMS)")
-    p.add_argument("--log", metavar="FILE[:N]", action="append", default=None,
-                   help="identify from real flight logs instead of flying: a blackbox, ULog or Crazyflie file, or "
-                        "log N of it; repeat to fit several together, the file's other logs validate "
-                        "(default: fly the sequence)")
-    p.add_argument("--mass-kg", type=finite_float(0.005, 50.0, "kg"), default=None, metavar="KG",
-                   help="with --log: take-off mass (default: the prior's)")
-    p.add_argument("--motor-x-m", type=finite_float(0.005, 2.0, "m"), default=None, metavar="M",
-                   help="with --log: motor distance from the centre along x (default: the prior's arm / √2)")
-    p.add_argument("--motor-y-m", type=finite_float(0.005, 2.0, "m"), default=None, metavar="M",
-                   help="with --log: motor distance from the centre along y (default: the prior's arm / √2)")
-    p.add_argument("--airframe", metavar="FILE.toml", default=None,
-                   help="with --log: also write the Betaflight plant's [airframe] section (default: not written)")
-    p.add_argument("--from-session", metavar="SESSION", type=session_ref,
-                   help="fit a stored identification session again instead of flying: an id or 'last' (default: fly)")
     p.add_argument("--force", action="store_true", help="replace --output if it exists")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    fly = p.add_argument_group("flying the identification sequence (the default)")
+    add_plant_options(fly, feedback=False)  # identification always flies the open loop
+    fly.add_argument("--no-flips", action="store_true", help="leave out the two slow flips (720°/s)")
+    fly.add_argument("--max-angle-deg", type=finite_float(3.0, 68.0, "deg"), default=math.degrees(0.5),
+                     help="largest attitude a rate doublet may reach (default: 28.6, that is 0.5 rad)")
+    fly.add_argument("--max-attempts", type=bounded_int(1, 10), default=2,
+                     help="flights per trial when its trigger is lost, the plant stops answering or it is aborted")
+    fly.add_argument("--max-flights", type=bounded_int(1, 100), default=12, help="flights in all")
+    logs = p.add_argument_group("from real flight logs instead (--log)")
+    logs.add_argument("--log", metavar="FILE[:N]", action="append", default=None,
+                      help="identify from real flight logs instead of flying: a blackbox, ULog or Crazyflie file, or "
+                           "log N of it; repeat to fit several together, the file's other logs validate "
+                           "(default: fly the sequence)")
+    logs.add_argument("--mass-kg", type=finite_float(0.005, 50.0, "kg"), default=None, metavar="KG",
+                      help="with --log: take-off mass (default: the prior's)")
+    logs.add_argument("--motor-x-m", type=finite_float(0.005, 2.0, "m"), default=None, metavar="M",
+                      help="with --log: motor distance from the centre along x (default: the prior's arm / √2)")
+    logs.add_argument("--motor-y-m", type=finite_float(0.005, 2.0, "m"), default=None, metavar="M",
+                      help="with --log: motor distance from the centre along y (default: the prior's arm / √2)")
+    logs.add_argument("--airframe", metavar="FILE.toml", default=None,
+                      help="with --log: also write the Betaflight plant's [airframe] section (default: not written)")
+    fit = p.add_argument_group("the fit")
+    fit.add_argument("--max-position-rms-mm", type=finite_float(0.01, 10000.0, "mm"), default=20.0,
+                     help="refuse a fit whose position residual is larger (RMS)")
+    fit.add_argument("--max-angle-rms-deg", type=finite_float(0.001, 170.0, "deg"), default=3.0,
+                     help="refuse a fit whose attitude residual is larger (RMS)")
+    fit.add_argument("--from-session", metavar="SESSION", type=session_ref,
+                     help="fit a stored identification session again instead of flying: an id or 'last' (default: fly)")
     add_db_option(p)
     p.set_defaults(func=_cmd_identify)

@@ -23,9 +23,18 @@ from aerobat.errors import ConfigError
 __all__ = ["log_summary", "register"]
 
 
+def _named(args: argparse.Namespace) -> None:
+    """``FILE:N`` as ``FILE`` and ``--index N`` (the one way every command names a log in a file)."""
+    from aerobat.logs import parse_log_ref
+
+    ref = parse_log_ref(args.file).with_index(args.index)
+    args.file, args.index = str(ref.path), ref.index
+
+
 def _logs(args: argparse.Namespace) -> list[Any]:
     from aerobat.logs import read_logs
 
+    _named(args)
     logs = read_logs(args.file)
     if getattr(args, "index", None) is not None:
         if args.index > len(logs):
@@ -148,7 +157,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
     logs = _logs(args)
     if args.output is not None and len(logs) > 1:
-        raise ConfigError(f"--output {args.output}: the file holds {len(logs)} logs; name one with --index, or give "
+        raise ConfigError(f"--output {args.output}: the file holds {len(logs)} logs; name one as FILE:N, or give "
                           "--out DIR for one CSV file per log")
     render = _long_csv if args.long else _wide_csv
     written: list[Path] = []
@@ -174,6 +183,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
+    import math
     import sys
 
     from aerobat.experiments.log_replay import AXES, replay_log
@@ -189,12 +199,20 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     window = tuple(args.window_s) if args.window_s else None
     say = console(args.json).print
 
+    terminal = sys.stderr.isatty()
+    reported = [-math.inf]
+
     def progress(done: float, total: float) -> None:
-        print(f"\r  replayed {done:6.1f} / {total:.1f} s", end="", file=sys.stderr, flush=True)
+        if terminal:  # one line that counts up
+            print(f"\r  replayed {done:6.1f} / {total:.1f} s", end="", file=sys.stderr, flush=True)
+        elif done >= total or done - reported[0] >= 0.25 * total:  # a log, CI: a few plain lines
+            reported[0] = done
+            print(f"  replayed {done:6.1f} / {total:.1f} s", file=sys.stderr, flush=True)
 
     result = replay_log(args.file, window_s=window, params=params, airframe_source=source,
                         step_min_deg_s=args.step_min_deg_s, seed=args.seed, progress=progress)
-    print(file=sys.stderr)
+    if terminal:
+        print(file=sys.stderr)
     stem = result.log.replace("#", "-log")
     figure = out / f"{stem}_{result.window_s[0]:g}-{result.window_s[1]:g}s.png"
     refuse_overwrite(figure, store_path=None, force=args.force, option="--out")
@@ -244,10 +262,11 @@ def register(sub: Any) -> None:
     cmds = p.add_subparsers(dest="log_command", metavar="COMMAND")
 
     def common(q: argparse.ArgumentParser) -> None:
-        q.add_argument("file", metavar="FILE",
-                       help="a .bbl/.bfl/.txt blackbox log, a .ulg ULog or a Crazyflie log (required)")
+        q.add_argument("file", metavar="FILE[:N]",
+                       help="a .bbl/.bfl/.txt blackbox log, a .ulg ULog or a Crazyflie log; FILE:N only its log N, "
+                            "from 1 (required)")
         q.add_argument("--index", type=bounded_int(1, 10_000), default=None, metavar="N",
-                       help="only log N of the file, from 1 (default: every log)")
+                       help="only log N of the file, from 1, as FILE:N (default: every log)")
 
     q = cmds.add_parser("info", help="what a log file holds: logs, durations, rates, fields, firmware, tune",
                         formatter_class=HelpFormatter)
@@ -278,7 +297,8 @@ def register(sub: Any) -> None:
     q = cmds.add_parser("replay", help="fly a Betaflight log's sticks through the SITL with the log's tune and "
                                        "compare per axis", formatter_class=HelpFormatter)
     q.add_argument("file", metavar="FILE[:N]", help="a Betaflight blackbox log, :N its log N (default 1) (required)")
-    q.add_argument("--plant", choices=("betaflight",), default="betaflight", help="the plant that flies the sticks")
+    q.add_argument("--plant", choices=("betaflight",), default="betaflight",
+                   help=argparse.SUPPRESS)  # the one plant today; old command lines say it
     q.add_argument("--airframe", metavar="FILE.toml", default=None,
                    help="a Betaflight plant file, e.g. the [airframe] that identify --log --airframe writes "
                         "(default: the packaged 5-inch)")

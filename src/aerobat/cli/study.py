@@ -131,6 +131,7 @@ def run_cli_study(args: argparse.Namespace, kind: str, run: Callable[..., Any],
     """
     _check_out(args, written)
     out_console = console(getattr(args, "json", False))
+    progress_console = console(True)  # standard error
     started = time.perf_counter()
     state: dict[str, Any] = {"first": 0, "walls": []}
     from aerobat.experiments.execution import default_workers
@@ -160,9 +161,10 @@ def run_cli_study(args: argparse.Namespace, kind: str, run: Callable[..., Any],
             state["walls"].append(float(wall))
         eta = study_eta(elapsed, ran, total - done, state["walls"], workers)
         note = "" if outcome.done else f" FAILED: {outcome.error}"
-        out_console.print(f"  [{done}/{total}] {job.key} {outcome.status.value}{note} "
-                          f"(elapsed {elapsed:.0f} s, about {eta:.0f} s left)", soft_wrap=True)
-        out_console.file.flush()
+        # progress on standard error (docs/cli.md): standard output keeps what the study found
+        progress_console.print(f"  [{done}/{total}] {job.key} {outcome.status.value}{note} "
+                               f"(elapsed {elapsed:.0f} s, about {eta:.0f} s left)", soft_wrap=True)
+        progress_console.file.flush()
 
     with open_store(args) as store, sigterm_stops(standalone=getattr(args, "standalone", False)):
         try:
@@ -467,11 +469,11 @@ def register(sub: Any) -> None:
                           "(default: the plant's best measured)")
     rob.add_argument("--betaflight", metavar="FILE.toml",
                      help="Betaflight plant settings to sample around (default: the shipped ones)")
-    rob.add_argument("--tune", metavar="FILE", help="a real quad's Betaflight diff/dump or blackbox log, flown by "
-                                                   "every sampled vehicle, only with --plant betaflight "
-                                                   "(default: aerobat's own settings)")
+    rob.add_argument("--tune", metavar="FILE[:N]", help="a real quad's Betaflight diff/dump or blackbox log (FILE:N "
+                                                       "its log N), flown by every sampled vehicle, only with --plant "
+                                                       "betaflight (default: aerobat's own settings)")
     rob.add_argument("--tune-log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
-                     help="which log of a blackbox file gives the tune (default: 1)")
+                     help=argparse.SUPPRESS)  # before FILE:N; kept so that older command lines still run
     add_design_model_option(rob)
     add_execution_options(rob)
     rob.set_defaults(func=_stoppable(_cmd_robustness))

@@ -17,7 +17,7 @@ __all__ = ["register"]
 
 
 def _cmd_tune(args: argparse.Namespace) -> int:
-    report, rates, rates_type = read_tune(args.file, args.log_index)
+    report, rates, rates_type = read_tune(args.file, args.log_index, "--log-index")
     if args.json:
         print(json.dumps({**report.to_table(), "rates_type": rates_type,
                           "full_stick_rates_deg_s": {axis: round(rate, 2) for axis, rate in rates.items()}}))
@@ -32,9 +32,9 @@ def register(sub: Any) -> None:
     p = sub.add_parser("tune", help="what a real quad's Betaflight tune (a CLI diff or dump, or a blackbox log's "
                                     "header) becomes on the SITL: applied, translated, refused, pinned; nothing flies",
                        formatter_class=HelpFormatter)
-    p.add_argument("file", metavar="FILE", help="a Betaflight CLI diff or dump, or a blackbox log .bbl, .bfl or .txt "
-                                                "(required)")
+    p.add_argument("file", metavar="FILE[:N]", help="a Betaflight CLI diff or dump, or a blackbox log .bbl, .bfl or "
+                                                    ".txt, FILE:N its log N (default 1) (required)")
     p.add_argument("--log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
-                   help="which log of a blackbox file holding several gives the tune (default: 1)")
+                   help=argparse.SUPPRESS)  # before FILE:N; kept so that older command lines still run
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_cmd_tune)

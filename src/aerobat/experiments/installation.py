@@ -224,7 +224,7 @@ def set_up(*, betaflight: bool = True, kernels: bool = True, progress: Progress 
         say("compiling the kernels (one to two minutes the first time, seconds when cached)")
         start = time.perf_counter()
         try:
-            warm_up()
+            warm_up(progress=say)
         except Exception as exc:  # noqa: BLE001 - a failed compile is reported as the step's outcome
             steps.append(("kernels", SetupStep.FAILED, f"{type(exc).__name__}: {exc}"))
         else:

@@ -15,13 +15,13 @@ import math
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from aerobat.errors import ConfigError, IdentificationFailed
 from aerobat.logs import read_logs
+from aerobat.logs.refs import LogRef, parse_log_ref
 from aerobat.quadrotor.flightlog import FlightLog
 from aerobat.quadrotor.identification import envelope_margins
 from aerobat.quadrotor.identification.logdata import PreparedLog, prepare_log
@@ -38,29 +38,6 @@ from aerobat.quadrotor.vehicle import ModelEffects, VehicleConfig, VehicleParams
 
 __all__ = ["LogIdentification", "LogRef", "airframe_from_log_fit", "airframe_notes", "identify_from_logs",
            "parse_log_ref", "vehicle_from_log_fit"]
-
-
-@dataclass(frozen=True)
-class LogRef:
-    """A log in a file: ``path`` and ``index`` (from 1; None: every log in the file)."""
-
-    path: Path
-    index: int | None = None
-
-    def __str__(self) -> str:
-        return f"{self.path}" + (f":{self.index}" if self.index is not None else "")
-
-
-def parse_log_ref(text: str | os.PathLike[str]) -> LogRef:
-    """``FILE`` or ``FILE:N`` (log N of FILE, from 1)."""
-    raw = os.fspath(text)
-    head, sep, tail = raw.rpartition(":")
-    if sep and tail.isdigit() and head:
-        index = int(tail)
-        if index < 1:
-            raise ConfigError(f"{raw}: log numbers start at 1")
-        return LogRef(Path(head), index)
-    return LogRef(Path(raw))
 
 
 @dataclass(frozen=True)

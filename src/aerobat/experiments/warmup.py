@@ -21,28 +21,45 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 
 import numpy as np
 
 __all__ = ["warm_up"]
 
 
-def warm_up(workers: int = 2) -> float:
+_HEARTBEAT_S = 15.0
+
+
+def warm_up(workers: int = 2, progress: Callable[[str], None] | None = None) -> float:
     """Compile (or load from numba's cache) every kernel a command uses; returns the seconds it took.
 
     The kernels fall into three groups (the playback kernels with the ones RotorPy and Betaflight
     call, the arena's trial, and the firmware design model), compiled in ``workers`` processes side
-    by side (numba writes each cache file atomically, so a kernel two need is safe).
+    by side (numba writes each cache file atomically, so a kernel two need is safe). ``progress`` gets
+    a line as each group is ready and, while any is still compiling, one every 15 s naming them.
     """
+    say = progress or (lambda line: None)
     start = time.perf_counter()
     if workers > 1:
+        from concurrent.futures import FIRST_COMPLETED, wait
+
         from aerobat.experiments.lifetime import process_pool
 
         with process_pool(min(workers, len(PARTS))) as pool:  # its workers die with this process
-            list(pool.map(_warm_part, PARTS))
+            pending = {pool.submit(_warm_part, part): part for part in PARTS}
+            while pending:
+                done, _ = wait(pending, timeout=_HEARTBEAT_S, return_when=FIRST_COMPLETED)
+                for future in done:
+                    future.result()  # a failed compile raises here
+                    say(f"  {pending.pop(future)} kernels ready ({time.perf_counter() - start:.0f} s)")
+                if not done:
+                    say(f"  still compiling: {', '.join(sorted(pending.values()))} "
+                        f"({time.perf_counter() - start:.0f} s)")
     else:
         for part in PARTS:
             _warm_part(part)
+            say(f"  {part} kernels ready ({time.perf_counter() - start:.0f} s)")
     return time.perf_counter() - start
 
 
@@ -199,7 +216,8 @@ def _betaflight_kernels(x: np.ndarray, cmd: np.ndarray) -> None:
 
 
 def main() -> None:
-    print(f"aerobat: compiled kernels ready ({warm_up():.1f} s)", flush=True)
+    seconds = warm_up(progress=lambda line: print(line, flush=True))
+    print(f"aerobat: compiled kernels ready ({seconds:.1f} s)", flush=True)
 
 
 if __name__ == "__main__":

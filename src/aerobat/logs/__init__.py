@@ -22,6 +22,7 @@ from pathlib import Path
 from aerobat.config import check_int
 from aerobat.errors import ConfigError
 from aerobat.logs.files import MAX_LOG_BYTES, LogFormat, check_log_file, detect_format
+from aerobat.logs.refs import LogRef, parse_log_ref
 from aerobat.quadrotor.flightlog import Channel, FlightLog, LogMetadata, LogSource, MotorLayout, Signal
 
 __all__ = [
@@ -30,10 +31,12 @@ __all__ = [
     "FlightLog",
     "LogFormat",
     "LogMetadata",
+    "LogRef",
     "LogSource",
     "MotorLayout",
     "Signal",
     "detect_format",
+    "parse_log_ref",
     "read_log",
     "read_logs",
 ]

@@ -83,7 +83,10 @@ def test_a_bad_tune_is_refused_before_anything_flies(tmp_path: Path, capsys: pyt
     assert main([*learn, "--plant", "arena"]) == 2
     assert "--tune applies only with --plant betaflight" in capsys.readouterr().err
     assert main([*learn, "--plant", "betaflight", "--tune-log-index", "2"]) == 2  # a diff holds no logs
-    assert "--tune-log-index" in capsys.readouterr().err
+    assert f"{bad}:2: the file is a CLI diff/dump, not a blackbox log" in capsys.readouterr().err
+    learn[-1] = f"{bad}:2"  # the same log named as every command names one (issue 44)
+    assert main([*learn, "--plant", "betaflight"]) == 2
+    assert f"{bad}:2: the file is a CLI diff/dump, not a blackbox log" in capsys.readouterr().err
     assert not db.exists()  # nothing flown, nothing stored
 
 

@@ -471,8 +471,8 @@ def load_tune(path: str | Path, *, log_index: int | None = None) -> Tune:
             raise TuneError(f"{path}: {error}") from None
         log_index = 1 if log_index is None else log_index
         if isinstance(log_index, bool) or not isinstance(log_index, int) or not 1 <= log_index <= len(starts):
-            raise TuneError(f"{path}: --tune-log-index {log_index!r}: the file holds {len(starts)} log(s), "
-                            f"allowed 1..{len(starts)}")
+            raise TuneError(f"{path}:{log_index!r}: no such log; the file holds {len(starts)} log(s), "
+                            f"allowed {path}:1 … {path}:{len(starts)}")
         source = f"{path}#log{log_index}"
         return tune_from_blackbox_header(_header_at(data, starts[log_index - 1]), source=source)
     if len(data) > MAX_CLI_BYTES:
@@ -485,5 +485,6 @@ def load_tune(path: str | Path, *, log_index: int | None = None) -> Tune:
         raise TuneError(f"{path}: line {line}: byte 0x{data[error.start]:02x} is not UTF-8 text: neither a Betaflight "
                         "CLI diff/dump nor a blackbox log (no 'H Product:' header)") from None
     if log_index is not None:
-        raise TuneError(f"{path}: --tune-log-index {log_index}: the file is a CLI diff/dump, not a blackbox log")
+        raise TuneError(f"{path}:{log_index}: the file is a CLI diff/dump, not a blackbox log: it holds no log "
+                        f"{log_index}")
     return parse_cli(text, source=str(path))

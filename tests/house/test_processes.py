@@ -98,8 +98,9 @@ class Command:
                 self.changed.notify_all()
 
     def progress(self) -> int:
+        """The last job a progress line reported done (progress is on standard error, docs/cli.md)."""
         with self.changed:
-            return max((int(m.group(1)) for m in map(PROGRESS.match, self.out) if m), default=0)
+            return max((int(m.group(1)) for m in map(PROGRESS.match, self.err) if m), default=0)
 
     def wait_for(self, predicate: Callable[[], object], timeout: float) -> bool:
         deadline = time.monotonic() + timeout
@@ -189,7 +190,7 @@ def test_sigterm_of_a_study_ends_it_cleanly_and_it_resumes(tmp_path, commands, a
     lines = [line for line in err.splitlines() if line.startswith("aerobat:")]
     with Store(db) as store:
         done = len(store.finished_study_jobs(1))
-    total = int(PROGRESS.match(next(line for line in run.out if PROGRESS.match(line))).group(2))
+    total = int(PROGRESS.match(next(line for line in run.err if PROGRESS.match(line))).group(2))
     assert 1 <= run.progress() <= done < total, "the study was not interrupted, or lost a reported job"
     assert lines == [f"aerobat: interrupted by SIGTERM: study 1 stopped with {done} of {total} jobs stored; "
                      f"resume with: aerobat {' '.join(argv)} --db {db} --out {out} --resume 1"], err

@@ -55,4 +55,5 @@ def test_rules_study_runs_betaflight_in_worker_processes(firmware: tuple[Path, P
          "--workers", "1", "--db", str(tmp_path / "s.sqlite"), "--out", str(tmp_path / "out")],
         capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
-    assert "1 jobs to run" in result.stdout and "paper-seed-0000 done" in result.stdout  # study seeds start at 0
+    assert "1 jobs to run" in result.stdout and "paper-seed-0000 done" in result.stderr  # study seeds start at 0;
+    # progress lines go to standard error (docs/cli.md)

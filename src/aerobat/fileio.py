@@ -241,11 +241,16 @@ def _check_output(path: Path, name: str, *, force: bool, stores: Iterable[Any], 
 
 
 def _check_can_create(path: Path, name: str) -> None:
-    """A missing output: its folder must exist and take a new file (probed with a create, then removed)."""
+    """A missing output: its folder is made if missing (as ``--out DIR`` is) and must take a new file (probed with a
+    create, then removed)."""
     folder = path.parent
     if not folder.is_dir():
-        raise ConfigError(f"{name}: the folder {folder} does not exist" if not os.path.lexists(folder)
-                          else f"{name}: {folder} is not a folder")
+        if os.path.lexists(folder):
+            raise ConfigError(f"{name}: {folder} is not a folder")
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ConfigError(f"{name}: cannot make the folder {folder}: {exc.strerror or exc}") from None
     try:
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o600)
     except FileExistsError:  # created meanwhile: the write checks it again

@@ -250,3 +250,24 @@ def test_log_files_are_never_modified(tmp_path):
     read_logs(ZEEZ)
     shutil.copy(ZEEZ, tmp_path)
     assert {p: p.stat().st_mtime_ns for p in DATA.rglob("*") if p.is_file()} == before
+
+
+def test_a_log_identified_without_a_vehicle_says_its_prior_and_what_it_did_not_identify(tmp_path, capsys):
+    """Issue 44: a Betaflight log was fitted around the 0.468 kg Hummingbird unsaid; the airframe file wrote the
+    plant's invented com_offset_m and thrust_gains under "identified from"; κ at 4× the 5-inch's passed unsaid;
+    --output into a missing folder was refused."""
+    out, airframe = tmp_path / "new" / "folder" / "roma.toml", tmp_path / "new" / "folder" / "roma-airframe.toml"
+    code = main(["identify", "--log", f"{ROMA}:1", "--output", str(out), "--airframe", str(airframe), "--json"])
+    report = json.loads(capsys.readouterr().out)
+    assert code == 0 and report["prior"] == "fpv5"  # the preset of a Betaflight log, not the paper's Hummingbird
+    assert report["values"]["kappa_m"]["value"] > 2 * 0.022
+    assert any(w.startswith("kappa_m = ") and "× the prior's (fpv5: 0.022 m)" in w for w in report["warnings"])
+    text = airframe.read_text()
+    header = text.split("\n[airframe]")[0]
+    assert "NOT identified, the Betaflight plant's defaults: com_offset_m, thrust_gains" in header
+    assert "given, not identified: mass_kg, motor_x_m, motor_y_m" in header
+    assert "# CHECK: kappa_m = " in header
+    assert "around the prior fpv5" in out.read_text().splitlines()[0]
+    code = main(["identify", "--log", f"{ROMA}:1", "--vehicle", "hummingbird", "--output", str(tmp_path / "h.toml"),
+                 "--json"])
+    assert code == 0 and json.loads(capsys.readouterr().out)["prior"] == "hummingbird"  # a named prior is the prior

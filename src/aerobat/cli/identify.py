@@ -72,7 +72,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
             run = refit_session(store, args.from_session, options=options, name=args.name or out.stem)
             say(f"fitting session {run.session_id} of {store.path} again ({len(run.flights)} stored flights)")
         else:
-            prior = vehicle_from_name_or_file(args.vehicle)
+            prior = vehicle_from_name_or_file(args.vehicle or "hummingbird")
             plant = plant_choice_from_args(args)
             plant.spec.check_available()
 
@@ -130,8 +130,10 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
     from aerobat.experiments.log_identify import (
         airframe_from_log_fit,
         airframe_notes,
+        identification_warnings,
         identify_from_logs,
         parse_log_ref,
+        prior_for_log,
         vehicle_from_log_fit,
     )
     from aerobat.plotting import save_figure, write_text
@@ -142,7 +144,12 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
     if args.airframe is not None:
         refuse_overwrite(Path(text_path(args.airframe, "--airframe")), store_path=None, force=args.force,
                          option="--airframe")
-    prior = vehicle_from_name_or_file(args.vehicle)
+    if args.vehicle is None:  # the prior from the log's firmware, said (issue 44: a 5-inch fitted as a Hummingbird)
+        name, why = prior_for_log(refs[0].path)
+        chosen = f"{name}, chosen for {why}; --vehicle names yours"
+    else:
+        name, chosen = args.vehicle, "--vehicle"
+    prior = vehicle_from_name_or_file(name)
     geometry = _geometry(args, prior)
     say = console(args.json).print
 
@@ -151,20 +158,23 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
         # whose object says it all: stderr then carries nothing but a failure's one line
         if not args.json:
             say(f"identifying from {', '.join(str(r) for r in refs)}: mass {geometry.mass_kg:g} kg, motors at "
-                f"(±{geometry.motor_x_m:g}, ±{geometry.motor_y_m:g}) m, prior {prior.name}")
+                f"(±{geometry.motor_x_m:g}, ±{geometry.motor_y_m:g}) m, prior {prior.name} ({chosen})")
 
     result = identify_from_logs(refs, geometry, before_fit=starting)
     fit = result.fit
     config = vehicle_from_log_fit(fit, prior, name=args.name or out.stem, idle_command=result.idle_command)
-    save_vehicle(config, out, header=f"identified by aerobat identify --log from {fit.name}")
+    save_vehicle(config, out, header=f"identified by aerobat identify --log from {fit.name} around the prior "
+                                     f"{prior.name} (mass and motor positions given or the prior's, not identified)")
     save_figure(plot_log_fit(fit, result.prepared[0]), figure)
+    warnings = identification_warnings(fit, prior)
     airframe = None
     if args.airframe:
         airframe = airframe_from_log_fit(fit)
         # the pilot flies with the mass the user gave, as a pilot who weighed the quad would
         pilot = {"vehicle_mass_kg": airframe["mass_kg"]}
-        write_text(args.airframe, f"# [airframe] of the Betaflight plant, identified from {fit.name}\n"
+        write_text(args.airframe, f"# [airframe] of the Betaflight plant from {fit.name} (prior {prior.name})\n"
                                   + "".join(f"# {line}\n" for line in airframe_notes(fit))
+                                  + "".join(f"# CHECK: {line}\n" for line in warnings)
                                   + tomli_w.dumps({"airframe": airframe, "pilot": pilot}))
     if args.json:
         print(json_text({
@@ -174,10 +184,12 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
             "validation": {name: (v if isinstance(v, str) else [m.__dict__ for m in v])
                            for name, v in result.validations},
             "fit_segments_s": fit.fit_segments_s, "holdout_segments_s": fit.holdout_segments_s,
-            "notes": list(fit.notes), "wall_s": fit.wall_s, "out": str(out), "figure": str(figure),
-            "airframe": args.airframe}))
+            "notes": list(fit.notes), "warnings": warnings, "prior": prior.name, "wall_s": fit.wall_s,
+            "out": str(out), "figure": str(figure), "airframe": args.airframe}))
         return 0
     _print_log_fit(result)
+    for line in warnings:
+        say(f"check: {line}")
     say(f"vehicle written to {out} (figure {figure}" + (f", airframe {args.airframe}" if args.airframe else "") +
         f"); use it with --vehicle {out}")
     return 0
@@ -196,7 +208,7 @@ def _print_log_fit(result: Any) -> None:
         table.add_row(name, f"{value:.5g}", "fixed" if sigma != sigma else f"{sigma:.2g}", unit)
     out.print(table)
     check = Table(title="prediction (R² / correlation)")
-    check.add_column("flight")
+    check.add_column("flight", overflow="fold", min_width=24)  # whole names: log 2 and log 3 differ at the end
     for m in fit.holdout_metrics:
         check.add_column(m.channel, justify="right")
     check.add_row("held-out blocks", *[f"{m.r2:.2f} / {m.correlation:.2f}" for m in fit.holdout_metrics])
@@ -247,9 +259,10 @@ def register(sub: Any) -> None:
     p.add_argument("--output", dest="out", default=None, metavar="FILE.toml",
                    help="the identified vehicle file to write (required)")
     old_spelling(p, "--out", "out")
-    p.add_argument("--vehicle", default="hummingbird",
+    p.add_argument("--vehicle", default=None,
                    help="prior: the vehicle you believe you have (preset name or vehicle TOML file); the trials are "
-                        "built on it and the plant is built around it")
+                        "built on it and the plant is built around it (default: hummingbird when flying; with --log "
+                        "the preset of the log's firmware, said: fpv5 for Betaflight, crazyflie21 for a Crazyflie)")
     p.add_argument("--figure", default=None, metavar="FILE.png",
                    help="measured against fitted responses (default: --output with .png)")
     p.add_argument("--name", default=None, help="the identified vehicle's name (default: --output's stem)")

@@ -21,6 +21,7 @@ import numpy as np
 
 from aerobat.errors import ConfigError, IdentificationFailed
 from aerobat.logs import read_logs
+from aerobat.logs.files import LogFormat, check_log_file, detect_format
 from aerobat.logs.refs import LogRef, parse_log_ref
 from aerobat.quadrotor.flightlog import FlightLog
 from aerobat.quadrotor.identification import envelope_margins
@@ -36,8 +37,8 @@ from aerobat.quadrotor.identification.logfit import (
 )
 from aerobat.quadrotor.vehicle import ModelEffects, VehicleConfig, VehicleParams
 
-__all__ = ["LogIdentification", "LogRef", "airframe_from_log_fit", "airframe_notes", "identify_from_logs",
-           "parse_log_ref", "vehicle_from_log_fit"]
+__all__ = ["KAPPA_RATIO_WARNING", "LogIdentification", "LogRef", "airframe_from_log_fit", "airframe_notes",
+           "identification_warnings", "identify_from_logs", "parse_log_ref", "prior_for_log", "vehicle_from_log_fit"]
 
 
 @dataclass(frozen=True)
@@ -201,9 +202,58 @@ def airframe_from_log_fit(fit: LogFit, *, base: Any | None = None) -> dict[str, 
     return table
 
 
-def airframe_notes(fit: LogFit) -> list[str]:
-    """Comment lines for the written ``[airframe]``: what the fit gave that the table does not use."""
-    return [f"the fit's delay from motor command to the logged (filtered) gyro: {fit.model.delay_s * 1e3:.1f} ms;",
+_FITTED_AIRFRAME = ("inertia_kg_m2", "thrust_max_n", "curve_min_speed_ratio", "curve_shape", "motor_tau_up_s",
+                    "motor_tau_down_s", "kappa_m")
+_GIVEN_AIRFRAME = ("mass_kg", "motor_x_m", "motor_y_m")
+
+
+def airframe_notes(fit: LogFit, base: Any | None = None) -> list[str]:
+    """Comment lines for the written ``[airframe]``: which fields the log gave, which were given or assumed, which
+    are the plant's defaults (a log does not tell them), and what the fit gave that the table does not use."""
+    from aerobat.plants.betaflight.params import Airframe
+
+    defaults = [name for name in dataclasses.asdict(base or Airframe())
+                if name not in _FITTED_AIRFRAME + _GIVEN_AIRFRAME]
+    return [f"fitted to the log: {', '.join(_FITTED_AIRFRAME)} (I_zz and kappa_m with the assumed I_zz ratio "
+            f"{fit.geometry.inertia_zz_ratio:.3g} of I_xx + I_yy);",
+            f"given, not identified: {', '.join(_GIVEN_AIRFRAME)} (--mass-kg, --motor-x-m, --motor-y-m, else the "
+            f"prior's);",
+            f"NOT identified, the Betaflight plant's defaults: {', '.join(defaults)};",
+            f"the fit's delay from motor command to the logged (filtered) gyro: {fit.model.delay_s * 1e3:.1f} ms;",
             "not used as output_delay_s: it includes gyro filtering the SITL's firmware runs itself, a 250 Hz",
             "log cannot tell a delay from a lag, and a pure delay of that size made the tune's roll loop",
             "limit-cycle on the SITL (docs/plants.md)"]
+
+
+KAPPA_RATIO_WARNING = 2.0
+"""An identified κ more than this factor from the prior's is named in the notes: a log's yaw moments give κ only with
+an assumed I_zz, and a factor of 2 is more than props and motors of one class differ by."""
+
+
+def identification_warnings(fit: LogFit, prior: VehicleConfig) -> list[str]:
+    """What in the fit a user should check before flying it: values far from the prior the log cannot pin down."""
+    warnings = []
+    kappa, prior_kappa = fit.value("kappa_m"), prior.vehicle.drag_constant_m
+    if math.isfinite(kappa) and prior_kappa > 0 and not (
+            1.0 / KAPPA_RATIO_WARNING <= kappa / prior_kappa <= KAPPA_RATIO_WARNING):
+        warnings.append(f"kappa_m = {kappa:.3g} m is {kappa / prior_kappa:.1f}× the prior's ({prior.name}: "
+                        f"{prior_kappa:.3g} m): it comes from the yaw response with an assumed I_zz (ratio "
+                        f"{fit.geometry.inertia_zz_ratio:.3g} of I_xx + I_yy), which an I_zz off by that factor "
+                        f"explains as well; check it (a measured I_zz, the props' data) before flying on it")
+    return warnings
+
+_PRIOR_FOR_FORMAT = {
+    LogFormat.BLACKBOX: ("fpv5", "a Betaflight blackbox log: the 5-inch FPV quad Betaflight mostly flies"),
+    LogFormat.CRAZYFLIE: ("crazyflie21", "a Crazyflie log"),
+    LogFormat.ULOG: ("hummingbird", "a PX4 ULog: no preset is typical of PX4's airframes, the paper's Hummingbird"),
+}
+
+
+def prior_for_log(path: str | os.PathLike[str]) -> tuple[str, str]:
+    """The vehicle preset a log's quad is fitted around when the user names none, and why (from the file's format).
+
+    The prior sets what a log cannot: the mass and motor positions (unless given), the assumed I_zz ratio and the
+    envelope's margins; a Betaflight log fitted around the paper's 0.468 kg Hummingbird was a 5-inch quad with a
+    Hummingbird's arms.
+    """
+    return _PRIOR_FOR_FORMAT[detect_format(check_log_file(path))]

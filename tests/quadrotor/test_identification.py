@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -245,6 +246,16 @@ def test_cli_identify_writes_a_vehicle_that_design_accepts_and_refuses_a_bad_fit
     assert status == 1 and not refused.exists()
     assert "no vehicle file written" in capsys.readouterr().err
     assert main(["identify", "--plant", "nominal", "--out", str(out), "--db", db]) == 2  # exists, no --force
+    # issue 44: `last` is the newest identification, not the newest session (a learn, a study's running one)
+    assert main(["learn", "flip", "--flips", "1", "--dims", "2", "--max-rate-deg-s", "800", "--plant", "nominal",
+                 "--trials", "1", "--db", db]) == 0
+    capsys.readouterr()
+    again = tmp_path / "again.toml"
+    assert main(["identify", "--from-session", "last", "--out", str(again), "--db", db]) == 0
+    assert "fitting session 1 of" in capsys.readouterr().out
+    assert main(["sessions", "--db", db, "--json"]) == 0  # an identification has no target to miss
+    errors = {row["id"]: row["last_position_error_m"] for row in json.loads(capsys.readouterr().out)}
+    assert errors[1] is None and errors[2] is not None
 
 
 # ------------------------------------------------------------------ long runs (make test-slow)

@@ -47,7 +47,7 @@ def _cmd_sessions(args: argparse.Namespace) -> int:
                 "id": r.id, "maneuver": r.maneuver_name, "plant": r.plant_kind, "vehicle": r.vehicle,
                 "plant_vehicle": r.plant_vehicle, "feedback": r.feedback, "seed": r.seed,
                 "iterations": r.n_measured, "trials": r.n_records, "target": r.target_iterations,
-                "last_position_error_m": r.last_position_error_m, "state": r.display_state, "study": r.study_id,
+                "last_position_error_m": _last_error(r), "state": r.display_state, "study": r.study_id,
                 "tags": list(r.tags), "started_at": r.started_at, "updated_at": r.updated_at} for r in rows]))
             return 0
         more = f" ({hidden} study sessions hidden: --all shows them)" if hidden else ""
@@ -61,13 +61,18 @@ def _cmd_sessions(args: argparse.Namespace) -> int:
             str(r.id), r.maneuver_name, r.plant_kind,
             r.vehicle if r.plant_vehicle in ("", r.vehicle) else f"{r.vehicle} (flown: {r.plant_vehicle})",
             r.feedback, "—" if r.seed is None else str(r.seed), f"{r.n_measured}/{r.target_iterations}",
-            "—" if r.last_position_error_m is None else f"{r.last_position_error_m:.4f}",
+            "—" if _last_error(r) is None else f"{_last_error(r):.4f}",
             r.display_state if r.study_id is None else f"{r.display_state} (study {r.study_id})",
             r.started_at[:16].replace("T", " "), ",".join(r.tags)) for r in rows]
         sys.stdout.write(table(rows_text, {0, 5, 6, 7}))
         if more:
             print(more.strip(" ()"))
     return 0
+
+
+def _last_error(row: Any) -> float | None:
+    """A session's last position error; None for an identification, whose flights have no target to miss."""
+    return None if row.maneuver_name.startswith("identification (") else row.last_position_error_m
 
 
 def _cmd_show(args: argparse.Namespace) -> int:

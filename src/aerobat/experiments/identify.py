@@ -29,7 +29,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -39,7 +39,7 @@ import numpy as np
 from aerobat.core.design import Design, DesignStatus
 from aerobat.core.learning import Iteration, IterationStatus, SessionStatus, step_to
 from aerobat.core.plant import Plant, StatefulPlant, Trial, TrialStatus
-from aerobat.errors import ConfigError, IdentificationFailed, OutputError
+from aerobat.errors import ConfigError, IdentificationFailed, OutputError, SessionNotFound
 from aerobat.experiments.designing import resolve_design_model
 from aerobat.experiments.setup import plant_choice_from_record, plant_record_config
 from aerobat.plants import DesignModel, PlantChoice
@@ -250,6 +250,18 @@ def _fit_message(fit: VehicleFit) -> str:
     return f"fit refused: {'; '.join(fit.problems)} ({used})"
 
 
+def _last_identification(store: Store) -> int:
+    """The newest identification session that is not running: ``--from-session last`` (issue 44: a study's learning
+    session, still running, was taken)."""
+    for summary in store.list_sessions(newest_first=True):
+        if summary.state is SessionStatus.RUNNING:
+            continue
+        spec = store.maneuver(store.session(summary.id).maneuver_id).spec
+        if isinstance(spec, Mapping) and spec.get("kind") == "identification":
+            return summary.id
+    raise SessionNotFound(f"{store.path}: holds no finished identification session (`aerobat identify` flies one)")
+
+
 def refit_session(store: Store, ref: int | str, *, options: FitOptions | None = None,
                   name: str = "identified") -> IdentificationRun:
     """Fit again from a stored identification session's flights (nothing is flown).
@@ -262,7 +274,8 @@ def refit_session(store: Store, ref: int | str, *, options: FitOptions | None = 
         Its flights hold too few usable trials.
     """
     started = time.perf_counter()
-    session_id = store.resolve_session(ref)
+    last = isinstance(ref, str) and ref.strip().lower() == "last"
+    session_id = _last_identification(store) if last else store.resolve_session(ref)
     rec = store.session(session_id)
     where = f"{store.path}: session {session_id}"
     sequence = sequence_from_spec(store.maneuver(rec.maneuver_id).spec, where)

@@ -163,8 +163,16 @@ def test_bad_vehicle_exits_2(capsys, tmp_path):
 
 
 def test_unwritable_plot_path_exits_2(capsys, tmp_path):
+    (tmp_path / "no").write_text("a file, where the path needs a folder")
     target = tmp_path / "no" / "such" / "dir" / "x.png"
     _assert_one_line_error(capsys, main(["simulate", SINGLE, "--plot", str(target)]), str(target))
+
+
+def test_a_plot_path_in_missing_folders_makes_them(capsys, tmp_path):
+    """Issue 44: outputs make their parent folders, as --out DIR does."""
+    target = tmp_path / "new" / "folders" / "x.png"
+    assert main(["simulate", SINGLE, "--plot", str(target)]) == 0
+    assert target.stat().st_size > 0
 
 
 def test_debug_flag_shows_the_exception(tmp_path, capsys):

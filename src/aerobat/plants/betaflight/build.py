@@ -83,7 +83,7 @@ def build_dir_for(patch: Path, cache_dir: Path | None = None) -> Path:
 @contextmanager
 def _exclusive_lock(path: Path) -> Iterator[None]:
     path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "a") as handle:
+    with open(path, "a") as handle:  # internal
         fcntl.flock(handle, fcntl.LOCK_EX)
         try:
             yield
@@ -138,7 +138,7 @@ def _stop_with(owner_pid: int) -> Callable[[], None]:
 
 
 def _run_logged(command: list[str], cwd: Path, log: Path, what: str) -> None:
-    with open(log, "ab") as handle:
+    with open(log, "ab") as handle:  # internal
         handle.write(f"\n$ {' '.join(command)}  (in {cwd})\n".encode())
         handle.flush()
         result = subprocess.run(command, cwd=cwd, stdout=handle, stderr=subprocess.STDOUT, check=False,
@@ -225,7 +225,7 @@ def ensure_sitl(
         tools = _check_tools()
         target_dir.mkdir(parents=True, exist_ok=True)
         log = target_dir / "build.log"
-        log.write_text("")
+        log.write_text("")  # internal
         started_s = time.monotonic()
         stage_s: dict[str, float] = {}
         with tempfile.TemporaryDirectory(prefix="build-", dir=target_dir) as scratch:
@@ -264,7 +264,7 @@ def ensure_sitl(
             "make_jobs": make_jobs,
             "built_at_unix_s": int(time.time()),
         }
-        (target_dir / _INFO_NAME).write_text(json.dumps(info, indent=2) + "\n")
+        (target_dir / _INFO_NAME).write_text(json.dumps(info, indent=2) + "\n")  # internal
         say(f"built {binary} in {elapsed_s:.1f} s")
         return binary
 

@@ -262,7 +262,7 @@ def ensure_eeprom(
     if eeprom.is_file():
         return eeprom
     lock_path = eeprom.with_suffix(".lock")
-    with open(lock_path, "a") as lock:
+    with open(lock_path, "a") as lock:  # internal
         fcntl.flock(lock, fcntl.LOCK_EX)
         if eeprom.is_file():
             return eeprom
@@ -276,7 +276,7 @@ def ensure_eeprom(
                 raise ConfigureFailed(f"no eeprom.bin was saved in {workdir}")
             staged = eeprom.with_suffix(".tmp")
             shutil.copyfile(saved, staged)
-        (binary.parent / f"{eeprom.stem}.cli.txt").write_text(transcript)
+        (binary.parent / f"{eeprom.stem}.cli.txt").write_text(transcript)  # internal
         if verify:
             say("verifying the saved eeprom in a fresh process")
             try:

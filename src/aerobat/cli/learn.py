@@ -42,7 +42,11 @@ from aerobat.cli.show import print_stored_session
 from aerobat.core.bounds import ITERATIONS
 from aerobat.errors import ConfigError
 
-__all__ = ["register"]
+__all__ = ["KILL_LINE", "register"]
+
+KILL_LINE = "aerobat: kill: the flight in progress disarms now; then learning stops"
+"""What ``learn`` on a flight controller prints at once on Ctrl-C, the operator's kill (the session's own line
+follows when it has stopped: ``aerobat: failed: stopped: trial N aborted: kill …``, exit 1)."""
 
 
 class Interrupts:
@@ -77,7 +81,7 @@ class Interrupts:
             self.signum = signum
             if self.kill is not None:
                 self.kill()
-                os.write(2, b"aerobat: kill: the flight in progress disarms now; then learning stops\n")
+                os.write(2, f"{KILL_LINE}\n".encode())
                 return
             os.write(2, b"aerobat: stopping after the trial in flight (interrupt again to abort it)\n")
             return

@@ -691,8 +691,11 @@ def judge(inv: Invocation, how: str, code: int | None, out: str, err: str, escap
         return "ok", ""
     if code in (1, 2):
         lines = err.splitlines()
-        if fired and code == 1 and len(lines) == 2 and lines[0] == KILL_LINE and \
-                lines[1].startswith("aerobat: failed: stopped: "):  # the budget's Ctrl-C was the fc plant's kill
+        # the budget's Ctrl-C was the flight controller's kill: its line at once (written to the descriptor, so the
+        # capture may put it second), then the session's
+        others = [line for line in lines if line != KILL_LINE]
+        if fired and code == 1 and len(lines) == 2 and len(others) == 1 and \
+                others[0].startswith("aerobat: failed: stopped: "):
             return "stopped", "time budget (the flight controller's kill)"
         prefix = "aerobat: error: " if code == 2 else "aerobat: failed: "
         if len(lines) != 1:

@@ -86,6 +86,8 @@ def test_the_judge_calls_what_must_not_happen_internal():
     kill = f"{fuzz.KILL_LINE}\naerobat: failed: stopped: trial 1 aborted: kill: motors stopped at once\n"
     assert judge(fine, "returned", 1, "", kill, "", 1)[0] == "stopped"
     assert judge(fine, "returned", 1, "", kill, "", 0)[0] == "INTERNAL"  # no Ctrl-C was sent
+    swapped = "".join(reversed(kill.splitlines(keepends=True)))  # the kill line is written to the descriptor
+    assert judge(fine, "returned", 1, "", swapped, "", 1)[0] == "stopped"
 
 
 def test_a_small_campaign_finds_no_internal_error(tmp_path):

@@ -455,10 +455,17 @@ def read_tune(path: str | Path, log_index: int | None = None,
     from aerobat.plants.betaflight.configure import check_commands
     from aerobat.plants.betaflight.firmware_settings import load_settings
     from aerobat.plants.betaflight.translate import translate
-    from aerobat.plants.betaflight.tune import load_tune
+    from aerobat.plants.betaflight.tune import TuneError, load_tune
 
-    ref = parse_log_ref(path).with_index(log_index, option)
-    report = translate(load_tune(ref.path, log_index=ref.index))  # unknown settings raise here, naming file and line
+    named = parse_log_ref(path)
+    ref = named.with_index(log_index, option)
+    try:
+        tune = load_tune(ref.path, log_index=ref.index)
+    except TuneError as exc:
+        if log_index is not None and named.index is None:  # the log was named by the option: say so
+            raise TuneError(f"{exc} ({option} {log_index})") from None
+        raise
+    report = translate(tune)  # unknown settings raise here, naming the file and line
     tuned = load_settings().with_tune(report)
     check_commands(tuned)  # the last check before the firmware's CLI, as configuring it runs it
     rates = {axis: tuned.rate_deg_s(axis, 1.0) for axis in ("roll", "pitch", "yaw")}

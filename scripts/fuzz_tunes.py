@@ -251,7 +251,7 @@ def enumerated(rng: random.Random) -> list[TuneCase]:
         TuneCase("structure", b"\xef\xbb\xbf" + header + FRAMES, ".bbl", Expect.GOOD, why="a BOM before a header"),
         TuneCase("structure", header + FRAMES + header + FRAMES, ".bbl", Expect.GOOD, why="two logs, the second",
                  log_index=2),
-        TuneCase("structure", header + FRAMES, ".bbl", Expect.BAD, ("--tune-log-index",), "log 3 of 1", log_index=3),
+        TuneCase("structure", header + FRAMES, ".bbl", Expect.BAD, ("--log-index",), "log 3 of 1", log_index=3),
         TuneCase("structure", with_value(header, b"Firmware revision", b"") + FRAMES, ".bbl", Expect.BAD,
                  ("Firmware revision",), "no firmware"),
         TuneCase("structure", header.replace(b"H rollPID:", b"H rollPID") + FRAMES, ".bbl", Expect.ANY, why="no colon"),

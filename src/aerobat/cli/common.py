@@ -111,11 +111,8 @@ def _with_metavar(args: tuple[Any, ...], kwargs: dict[str, Any]) -> dict[str, An
     """``kwargs`` with the metavar an option's name and type imply (N, DIR, the unit), unless one is given."""
     options = [a for a in args if isinstance(a, str) and a.startswith("-")]
     takes_value = kwargs.get("action") in (None, "store", "append") and "choices" not in kwargs
-    if options and takes_value and "metavar" not in kwargs:
-        metavar = _metavar(options[0], kwargs.get("type"))
-        if metavar is not None:
-            kwargs = {**kwargs, "metavar": metavar}
-    return kwargs
+    metavar = _metavar(options[0], kwargs.get("type")) if options and takes_value and "metavar" not in kwargs else None
+    return kwargs if metavar is None else {**kwargs, "metavar": metavar}
 
 
 class Parser(argparse.ArgumentParser):
@@ -138,11 +135,7 @@ class Parser(argparse.ArgumentParser):
         """A titled group of options in the help, whose options get their metavars as the parser's do."""
         group = super().add_argument_group(*args, **kwargs)
         plain = group.add_argument
-
-        def add_argument(*names: Any, **options: Any) -> argparse.Action:
-            return plain(*names, **_with_metavar(names, options))
-
-        group.add_argument = add_argument  # type: ignore[method-assign]
+        group.add_argument = lambda *names, **options: plain(*names, **_with_metavar(names, options))  # type: ignore
         return group
 
     def error(self, message: str) -> NoReturn:
@@ -461,10 +454,9 @@ def read_tune(path: str | Path, log_index: int | None = None,
     ref = named.with_index(log_index, option)
     try:
         tune = load_tune(ref.path, log_index=ref.index)
-    except TuneError as exc:
-        if log_index is not None and named.index is None:  # the log was named by the option: say so
-            raise TuneError(f"{exc} ({option} {log_index})") from None
-        raise
+    except TuneError as exc:  # a log named by the option: the refusal says so
+        raise (TuneError(f"{exc} ({option} {log_index})") if log_index is not None and named.index is None
+               else exc) from None
     report = translate(tune)  # unknown settings raise here, naming the file and line
     tuned = load_settings().with_tune(report)
     check_commands(tuned)  # the last check before the firmware's CLI, as configuring it runs it

@@ -372,6 +372,14 @@ def bench_logs_section() -> list[str]:
             *[f"| {a} | {b} | {c} |" for a, b, c in rows], ""]
 
 
+def bench_store_section() -> list[str]:
+    """The store and the browser at 100,000 sessions (``benchmarks/browse_load.py``), as markdown lines."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import browse_load
+
+    return browse_load.section(browse_load.run())
+
+
 def machine() -> str:
     cpu = "unknown CPU"
     try:
@@ -507,7 +515,7 @@ def main() -> None:
         print(json.dumps(results, default=float))
         return
     # the firmware and log benches: the report only, not --json
-    text = report(results, bench_betaflight_section() + bench_logs_section())
+    text = report(results, bench_betaflight_section() + bench_logs_section() + bench_store_section())
     print(text)
     if args.write:
         # keep the hand-measured sections that follow the marker (other benchmark scripts)

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import json
 import math
+import sqlite3
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -120,3 +122,91 @@ def check_session_mcap(path: Path, store: Store, session_id: int) -> dict[str, i
         starts = [next(reader.iter_messages(topics=[f"/trial/{i.index}/pose"]))[2].log_time for i in flown]
         assert starts == sorted(starts) and summary.statistics.message_start_time == starts[0]
     return counts
+
+
+def _insert(conn: sqlite3.Connection, table: str, rows: list[dict[str, Any]]) -> None:
+    """Rows into ``table``, each with its checksum (as the store writes them)."""
+    from aerobat.store import checksums
+
+    columns = checksums.COVERED[table]
+    values = [[row[c] for c in columns] for row in rows]
+    marks = ", ".join("?" * (len(columns) + 1))
+    conn.executemany(f"INSERT INTO {table} ({', '.join(columns)}, checksum) VALUES ({marks})",
+                     [[*v, checksums.record_checksum(table, v)] for v in values])
+
+
+def _rows(conn: sqlite3.Connection, table: str, order: str = "") -> list[dict[str, Any]]:
+    from aerobat.store import checksums
+
+    columns = checksums.COVERED[table]
+    return [dict(zip(columns, r, strict=True)) for r in conn.execute(
+        f"SELECT {', '.join(columns)} FROM {table}{' ORDER BY ' + order if order else ''}")]
+
+
+def build_large_store(path: Path, *, sessions: int = 100_000, study_size: int = 1000,
+                      plain_fraction: float = 0.2) -> dict[str, int]:
+    """A store of ``sessions`` sessions in seconds: a fifth plain, the rest in studies of ``study_size``.
+
+    A few sessions are written through the store's API (every plant, rule and feedback of
+    :func:`build_store`); the rest are copies of their rows made in SQL, each with its own id, start
+    time (spread over 2026), seed, tags, notes and checksum, so that every row reads back verified.
+    A study session flies its own sampled vehicle, with its own vehicle and plant rows, as a
+    robustness study stores them. Copies keep their template's iterations (1 to 5, without
+    trajectories) and study sessions have their study's job row.
+    """
+    from datetime import UTC, datetime, timedelta
+
+    build_store(path, sessions=8, study_vehicles=2, failed_jobs=0, flown=False)
+    n_plain = int(round(sessions * plain_fraction))
+    n_studies = -(-(sessions - n_plain) // study_size)
+    conn = sqlite3.connect(path)
+    try:
+        templates = _rows(conn, "sessions", "id")
+        plain_t = [t for t in templates if t["study_id"] is None]
+        study_t = [t for t in templates if t["study_id"] is not None]
+        iterations: dict[int, list[dict[str, Any]]] = {}
+        for it in _rows(conn, "iterations", "session_id, idx"):
+            iterations.setdefault(it["session_id"], []).append(it)
+        plants = {p["id"]: p for p in _rows(conn, "plants")}
+        vehicles = {v["id"]: v for v in _rows(conn, "vehicles")}
+        study0, job0 = _rows(conn, "studies")[0], _rows(conn, "study_jobs")[0]
+        conn.execute("BEGIN")
+        for table in ("study_jobs", "iterations", "sessions", "studies"):
+            conn.execute(f"DELETE FROM {table}")
+        start = datetime(2026, 1, 1, tzinfo=UTC)
+        _insert(conn, "studies", [{**study0, "id": k + 1, "created_at": (start + timedelta(days=365 * k / n_studies))
+                                   .isoformat()} for k in range(n_studies)])
+        new: dict[str, list[dict[str, Any]]] = {t: [] for t in ("vehicles", "plants", "sessions", "iterations",
+                                                                 "study_jobs")}
+        next_vehicle, next_plant = max(vehicles) + 1, max(plants) + 1
+        every = sessions / max(n_plain, 1)  # plain sessions spread among the studies' ones
+        plain_done = 0
+        for sid in range(1, sessions + 1):
+            if plain_done < n_plain and sid - 1 >= plain_done * every:
+                template, study_id, plant_id = plain_t[plain_done % len(plain_t)], None, None
+                plain_done += 1
+            else:
+                template, study_id = study_t[sid % len(study_t)], (sid - plain_done - 1) // study_size + 1
+                plant = plants[template["plant_id"]]
+                config = {**json.loads(vehicles[plant["vehicle_id"]]["config"]), "sample": sid}
+                new["vehicles"].append({**vehicles[plant["vehicle_id"]], "id": next_vehicle, "digest": f"v{sid}",
+                                        "config": json.dumps(config, sort_keys=True)})
+                new["plants"].append({**plant, "id": next_plant, "vehicle_id": next_vehicle, "digest": f"p{sid}"})
+                plant_id = next_plant
+                next_vehicle, next_plant = next_vehicle + 1, next_plant + 1
+            when = (start + timedelta(seconds=365 * 86400 * (sid - 1) / sessions)).isoformat()
+            new["sessions"].append({
+                **template, "id": sid, "seed": sid, "plant_id": plant_id or template["plant_id"], "study_id": study_id,
+                "started_at": when, "updated_at": when, "ended_at": when, "owner": None, "pid": None,
+                "tags": (json.dumps(["good"] if sid % 97 == 0 else ["night", "windy"]) if sid % 31 == 0 else None),
+                "notes": json.dumps([{"at": when, "text": f"battery {sid % 7} swapped"}]) if sid % 53 == 0 else None,
+                "last_position_error_m": (template["last_position_error_m"] or 0.1) * (1 + (sid % 101) / 50)})
+            new["iterations"] += [{**it, "session_id": sid} for it in iterations.get(template["id"], [])]
+            if study_id is not None:
+                new["study_jobs"].append({**job0, "study_id": study_id, "key": f"vehicle-{sid:06d}", "session_id": sid})
+        for table, rows in new.items():
+            _insert(conn, table, rows)
+        conn.execute("COMMIT")
+    finally:
+        conn.close()
+    return {"plain": n_plain, "study": sessions - n_plain, "studies": n_studies}

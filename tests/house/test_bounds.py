@@ -111,6 +111,8 @@ EXAMPLES = {
     "aerobat.core.maneuver.ParameterSpec": _parameter_spec,
     "aerobat.core.maneuver.ErrorSpec": _error_spec,
     "aerobat.quadrotor.firmware.config.FirmwareConfig": _firmware_config,
+    "aerobat.store.query.SessionQuery": lambda: __import__("aerobat.store.query", fromlist=["SessionQuery"])
+    .SessionQuery(study=3, limit=50, offset=100),  # values, so that their bounds are tested too (None: all)
 }
 
 

@@ -11,8 +11,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from aerobat.store import Store
+from aerobat.store.records import SessionSummary
 
-__all__ = ["SessionRow", "StudyRow", "session_rows", "study_rows"]
+__all__ = ["SessionRow", "StudyRow", "session_row", "session_rows", "study_rows"]
 
 
 @dataclass(frozen=True)
@@ -56,32 +57,27 @@ class StudyRow:
     out_dir: str | None
 
 
-def _row(store: Store, session_id: int, kinds: dict[int, str]) -> SessionRow:
-    rec = store.session(session_id)
-    if rec.maneuver_id not in kinds:
-        kinds[rec.maneuver_id] = store.maneuver(rec.maneuver_id).kind
-    rule = rec.rule.get("name", "") if isinstance(rec.rule, dict) else ""
+def session_row(summary: SessionSummary) -> SessionRow:
+    """The table's row of a session (from its summary: nothing more is read)."""
+    s = summary
     return SessionRow(
-        id=rec.id, maneuver=rec.maneuver_name, maneuver_kind=kinds[rec.maneuver_id] or "", plant=rec.plant_kind,
-        vehicle=rec.plant_vehicle or rec.vehicle, feedback=rec.feedback or "none", rule=str(rule),
-        status=rec.display_state, study_id=rec.study_id, started_at=rec.started_at, updated_at=rec.updated_at,
-        n_records=rec.n_records, n_measured=rec.n_measured, target_iterations=rec.target_iterations,
-        last_position_error_m=rec.last_position_error_m, seed=rec.seed, tags=tuple(rec.tags))
+        id=s.id, maneuver=s.maneuver_name, maneuver_kind=s.maneuver_kind, plant=s.plant_kind,
+        vehicle=s.plant_vehicle or s.vehicle, feedback=s.feedback or "none", rule=s.rule, status=s.display_state,
+        study_id=s.study_id, started_at=s.started_at, updated_at=s.updated_at, n_records=s.n_records,
+        n_measured=s.n_measured, target_iterations=s.target_iterations,
+        last_position_error_m=s.last_position_error_m, seed=s.seed, tags=tuple(s.tags))
 
 
 def session_rows(store: Store, *, session_id: int | None = None) -> list[SessionRow]:
     """Every session (or one), oldest first, with the names the table filters by."""
-    kinds: dict[int, str] = {}
-    ids = [session_id] if session_id is not None else [s.id for s in store.list_sessions()]
-    return [_row(store, sid, kinds) for sid in ids]
+    if session_id is None:
+        return [session_row(s) for s in store.list_sessions()]
+    return [session_row(s) for s in store.session_summaries([session_id])]
 
 
 def study_rows(store: Store) -> list[StudyRow]:
-    """Every study with its job counts and how many sessions learned for it."""
-    counts: dict[int, int] = {}
-    for summary in store.list_sessions():
-        if summary.study_id is not None:
-            counts[summary.study_id] = counts.get(summary.study_id, 0) + 1
+    """Every study with its job counts and how many sessions learned for it (counted by the database)."""
+    counts = store.sessions_per_study()
     return [StudyRow(id=s.id, kind=s.kind, created_at=s.created_at, jobs_done=s.jobs_done, jobs_failed=s.jobs_failed,
                      n_sessions=counts.get(s.id, 0), out_dir=s.out_dir) for s in store.list_studies()]
 

@@ -18,20 +18,22 @@ import re
 import shutil
 import tempfile
 import threading
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
+from urllib.parse import urlencode
 
 import numpy as np
 
-from aerobat.browse.catalog import json_text, session_rows, study_rows
+from aerobat.browse.catalog import json_text, session_row, session_rows, study_rows
 from aerobat.core.learning import IterationStatus, SessionStatus
 from aerobat.errors import ConfigError, SessionNotFound
 from aerobat.fileio import check_output, check_output_folder, make_output_folder, write_output
 from aerobat.store import Store
+from aerobat.store.query import SessionQuery, SortKey
 from aerobat.store.records import JobStatus
 
-__all__ = ["MAX_COMPARED", "MAX_ID", "NotFound", "Site"]
+__all__ = ["MAX_COMPARED", "MAX_ID", "PAGE_ROWS", "NotFound", "Site", "session_query"]
 
 
 class NotFound(SessionNotFound):
@@ -42,10 +44,16 @@ MAX_ID = 2**63 - 1
 """The largest id a store can hold (SQLite's largest integer): a page for a larger one does not exist."""
 MAX_COMPARED = 50
 """The most sessions one comparison shows."""
+PAGE_ROWS = 100
+"""Sessions on one page of the sessions table."""
+_FILTERS = {"maneuver": "maneuver", "plant": "plant", "vehicle": "vehicle", "feedback": "feedback", "rule": "rule",
+            "status": "status", "tag": "tag", "q": "text", "from": "since", "to": "until"}
+"""The table's query parameters and the :class:`~aerobat.store.query.SessionQuery` fields they set."""
+_ON = ("1", "on", "true", "yes")
 
 _N = "([0-9]+)"  # an id: ASCII digits only (a regular expression's \d also matches "١")
 _PAGE = re.compile(
-    rf"^(?:(index)\.html|session-{_N}\.html|study-{_N}\.html|compare\.html|api/session-{_N}\.json"
+    rf"^(?:(index)(?:-{_N})?\.html|session-{_N}\.html|study-{_N}\.html|compare\.html|api/session-{_N}\.json"
     rf"|session-{_N}/(learning|side_views)\.png|session-{_N}/replay-([0-9]+|default)\.html"
     rf"|study-{_N}/([\w.-]+\.png)|compare/([0-9]+(?:-[0-9]+)+)\.png)$")
 
@@ -56,6 +64,42 @@ def _id(text: str, what: str) -> int:
     if len(text) > len(str(MAX_ID)) or int(text) > MAX_ID:
         raise NotFound(f"no {what} {text[:20]}{'…' if len(text) > 20 else ''} (ids go up to {MAX_ID})")
     return int(text)
+
+
+def _bad(name: str, value: str, expected: str) -> Any:
+    shown = repr(value if len(value) <= 40 else value[:40] + "…")
+    raise ConfigError(f"{name}={shown}: expected {expected}")
+
+
+def session_query(params: Mapping[str, str], *, limit: int | None = None, offset: int = 0) -> SessionQuery:
+    """The :class:`~aerobat.store.query.SessionQuery` of the sessions table's query parameters (``plant=arena``,
+    ``q=text``, ``from=2026-01-01``, ``studies=1``, ``sort=error``, ``dir=desc``…); empty ones are no filter."""
+    given = {k: v for k, v in params.items() if isinstance(v, str) and v.strip()}
+    fields: dict[str, Any] = {_FILTERS[k]: v for k, v in given.items() if k in _FILTERS}
+    if "study" in given:
+        study = given["study"].strip()
+        fields["study"] = _id(study, "study") if study.isascii() and study.isdigit() else \
+            _bad("study", study, "a study id")
+    fields["include_studies"] = given.get("studies", "").strip().lower() in _ON
+    if "sort" in given:
+        if given["sort"] not in tuple(SortKey):
+            _bad("sort", given["sort"], "one of " + ", ".join(SortKey))
+        fields["sort"] = SortKey(given["sort"])
+    if given.get("dir", "asc") not in ("asc", "desc"):
+        _bad("dir", given["dir"], "asc or desc")
+    fields["descending"] = given.get("dir") == "desc"
+    return SessionQuery(**fields, limit=limit, offset=offset)
+
+
+def _index_link(params: Mapping[str, str], static: bool, **change: Any) -> str:
+    """The link to another page or order of the sessions table (the server keeps the filters in the query)."""
+    if static:
+        page = int(change.get("page", 1))
+        return "index.html" if page <= 1 else f"index-{page}.html"
+    merged = {k: v for k, v in {**params, **{k: str(v) for k, v in change.items()}}.items() if v not in ("", None)}
+    if merged.get("page") == "1":
+        del merged["page"]
+    return "index.html" + ("?" + urlencode(merged) if merged else "")
 
 
 def _environment() -> Any:
@@ -114,22 +158,23 @@ class Site:
         g = match.groups()
         with self._lock:
             if g[0]:
-                return "text/html", self.index().encode()
-            if g[1]:
-                return "text/html", self.session_page(self._session(g[1])).encode()
+                page_number = 1 if g[1] is None else _id(g[1], "page")
+                return "text/html", self.index(query or {}, page=page_number).encode()
             if g[2]:
-                return "text/html", self.study_page(self._study(g[2])).encode()
+                return "text/html", self.session_page(self._session(g[2])).encode()
             if g[3]:
-                return "application/json", json.dumps(self.progress(self._session(g[3]))).encode()
+                return "text/html", self.study_page(self._study(g[3])).encode()
             if g[4]:
-                return "image/png", self.session_figure(self._session(g[4]), g[5]).read_bytes()
-            if g[6]:
-                trial = None if g[7] == "default" else _id(g[7], "trial")
-                return "text/html", self.replay(self._session(g[6]), trial).read_bytes()
-            if g[8]:
-                return "image/png", self.study_figure(self._study(g[8]), g[9]).read_bytes()
-            if g[10]:
-                return "image/png", self.compare_figure(self._ids(g[10], "compare figure ")).read_bytes()
+                return "application/json", json.dumps(self.progress(self._session(g[4]))).encode()
+            if g[5]:
+                return "image/png", self.session_figure(self._session(g[5]), g[6]).read_bytes()
+            if g[7]:
+                trial = None if g[8] == "default" else _id(g[8], "trial")
+                return "text/html", self.replay(self._session(g[7]), trial).read_bytes()
+            if g[9]:
+                return "image/png", self.study_figure(self._study(g[9]), g[10]).read_bytes()
+            if g[11]:
+                return "image/png", self.compare_figure(self._ids(g[11], "compare figure ")).read_bytes()
             ids = (query or {}).get("ids", "")
             return "text/html", self.compare_page(self._ids(ids, "compare: ids=")).encode()
 
@@ -160,14 +205,32 @@ class Site:
         return str(self._env.get_template(template).render(static=self.static, db=str(self.store.path), **values))
 
     # ---------------------------------------------------------- pages
-    def index(self) -> str:
-        """The sessions and studies tables (study sessions hidden until asked for)."""
-        rows = session_rows(self.store)
-        studies = study_rows(self.store)
-        choices = {name: sorted({str(getattr(r, name)) for r in rows if getattr(r, name) is not None})
-                   for name in ("maneuver", "plant", "vehicle", "feedback", "rule", "status", "study_id")}
-        choices["tags"] = sorted({t for r in rows for t in r.tags})
-        return self._render("index.html", rows=rows, studies=studies, choices=choices)
+    def index(self, params: Mapping[str, str] | None = None, *, page: int = 1) -> str:
+        """A page of the sessions table: the server's filtered, sorted and paged in the database; a static
+        export's ``index.html``, ``index-2.html``… each :data:`PAGE_ROWS` sessions (study sessions are on
+        their study's page), filtered and sorted in the page by the browser."""
+        params = dict(params or {})
+        if self.static:
+            query = SessionQuery(limit=PAGE_ROWS, offset=(page - 1) * PAGE_ROWS)
+        else:
+            if "page" in params:
+                page = _id(params["page"], "page") if params["page"].isascii() and params["page"].isdigit() \
+                    else _bad("page", params["page"], "a page number")
+            if page < 1:
+                _bad("page", str(page), "a page number from 1")
+            query = session_query(params, limit=PAGE_ROWS, offset=(page - 1) * PAGE_ROWS)
+        found = self.store.query_sessions(query, counts=True)
+        if page > found.pages:
+            raise NotFound(f"no page {page} of the sessions table (it has {found.pages})")
+        chosen = {name: "" if getattr(query, name) is None else str(getattr(query, name))
+                  for name in ("maneuver", "plant", "vehicle", "feedback", "rule", "status", "study", "tag")}
+        choices = {name: [(v, n) for v, n in values] for name, values in found.counts.items()}
+        for name, value in chosen.items():
+            if value and value not in {v for v, _ in choices[name]}:
+                choices[name].append((value, 0))  # the chosen value is offered even if nothing has it now
+        return self._render("index.html", found=found, query=query, rows=[session_row(r) for r in found.rows],
+                            studies=study_rows(self.store), choices=choices, chosen=chosen,
+                            link=lambda **change: _index_link(params, self.static, **change))
 
     def session_page(self, session_id: int) -> str:
         """One session: figures, tables, maneuver, design, plant, replay, tags and notes."""
@@ -207,7 +270,7 @@ class Site:
         """One study: its jobs, failed ones first, its sessions and the figures in its output folder."""
         study = self.store.study(study_id)
         jobs = self.store.study_jobs(study_id)
-        sessions = [r for r in session_rows(self.store) if r.study_id == study_id]
+        sessions = [session_row(s) for s in self.store.study_sessions(study_id)]
         failed = [j for j in jobs if j.status is JobStatus.FAILED]
         return self._render("study.html", study=study, jobs=jobs, failed=failed,
                             sessions=sessions, figures=self._study_figures(study.out_dir))
@@ -305,7 +368,8 @@ class Site:
         ``compare.html`` and its figure are exported only for the sessions in ``compare``; a session's
         figures are listed only if it has a measured trial (and, in a static site, is not a study's).
         """
-        pages = []
+        pages = [f"index-{n}.html" for n in range(2, self.store.query_sessions(
+            SessionQuery(limit=PAGE_ROWS)).pages + 1)]
         for row in session_rows(self.store):
             pages.append(f"session-{row.id}.html")
             if row.n_measured and self._draws(row.study_id):

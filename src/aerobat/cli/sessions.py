@@ -27,7 +27,7 @@ from aerobat.cli.curate import table
 from aerobat.cli.show import print_stored_session
 from aerobat.errors import ConfigError, OutputError
 from aerobat.fileio import check_output, write_output
-from aerobat.store.browse import SHOWN_STATES
+from aerobat.store.query import SHOWN_STATES, SessionQuery
 from aerobat.store.records import JobStatus
 
 __all__ = ["register"]
@@ -36,17 +36,18 @@ __all__ = ["register"]
 def _cmd_sessions(args: argparse.Namespace) -> int:
     with open_store(args, create=False) as store:
         filters = {"plant": args.plant, "maneuver": args.maneuver, "vehicle": args.vehicle,
-                   "feedback": args.feedback, "status": args.status, "study": args.study, "tag": args.tag}
-        rows = store.find_sessions(**filters, include_studies=args.all, limit=args.limit)
-        hidden = 0
-        if not args.all and args.study is None:
-            hidden = len(store.find_sessions(**{**filters, "study": None}, include_studies=True)) - len(
-                store.find_sessions(**filters))
+                   "feedback": args.feedback, "status": args.status, "study": args.study, "tag": args.tag,
+                   "rule": args.rule, "text": args.search, "since": args.since, "until": args.until}
+        study = None if args.study is None else store.resolve_study(args.study)
+        found = store.query_sessions(SessionQuery(**{**filters, "study": study}, include_studies=args.all,
+                                                  descending=args.limit is not None, limit=args.limit))
+        rows = list(reversed(found.rows)) if args.limit is not None else list(found.rows)  # oldest first
+        hidden = found.hidden
         if args.json:
             print(json.dumps([{
                 "id": r.id, "maneuver": r.maneuver_name, "plant": r.plant_kind, "vehicle": r.vehicle,
                 "plant_vehicle": r.plant_vehicle, "feedback": r.feedback, "seed": r.seed,
-                "iterations": r.n_measured, "trials": r.n_records, "target": r.target_iterations,
+                "rule": r.rule, "iterations": r.n_measured, "trials": r.n_records, "target": r.target_iterations,
                 "last_position_error_m": _last_error(r), "state": r.display_state, "study": r.study_id,
                 "tags": list(r.tags), "started_at": r.started_at, "updated_at": r.updated_at} for r in rows]))
             return 0
@@ -55,16 +56,16 @@ def _cmd_sessions(args: argparse.Namespace) -> int:
             print(f"no sessions in {store.path}{' match' if any(v is not None for v in filters.values()) else ''}"
                   f"{more}")
             return 0
-        header = ("id", "maneuver", "plant", "vehicle", "feedback", "seed", "iter.", "last err [m]", "state",
+        header = ("id", "maneuver", "plant", "vehicle", "feedback", "rule", "seed", "iter.", "last err [m]", "state",
                   "started (UTC)", "tags")
         rows_text = [header] + [(
             str(r.id), r.maneuver_name, r.plant_kind,
             r.vehicle if r.plant_vehicle in ("", r.vehicle) else f"{r.vehicle} (flown: {r.plant_vehicle})",
-            r.feedback, "—" if r.seed is None else str(r.seed), f"{r.n_measured}/{r.target_iterations}",
+            r.feedback, r.rule or "—", "—" if r.seed is None else str(r.seed), f"{r.n_measured}/{r.target_iterations}",
             "—" if _last_error(r) is None else f"{_last_error(r):.4f}",
             r.display_state if r.study_id is None else f"{r.display_state} (study {r.study_id})",
             r.started_at[:16].replace("T", " "), ",".join(r.tags)) for r in rows]
-        sys.stdout.write(table(rows_text, {0, 5, 6, 7}))
+        sys.stdout.write(table(rows_text, {0, 6, 7, 8}))
         if more:
             print(more.strip(" ()"))
     return 0
@@ -318,6 +319,16 @@ def _cmd_examples(args: argparse.Namespace) -> int:
     return 0
 
 
+def _day(text: str) -> str:
+    """A day, ``YYYY-MM-DD`` (argparse names the option in its refusal)."""
+    import datetime
+
+    try:
+        return datetime.date.fromisoformat(text.strip()).isoformat()
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a day, YYYY-MM-DD") from None
+
+
 def register(sub: Any) -> None:
     fmt = HelpFormatter
     ses = sub.add_parser("sessions", help="list the stored learning sessions", formatter_class=fmt)
@@ -333,6 +344,14 @@ def register(sub: Any) -> None:
                      help="only this feedback scheme; none is the paper's open loop (default: any)")
     ses.add_argument("--status", choices=SHOWN_STATES, default=None, help="only sessions in this state (default: any)")
     ses.add_argument("--tag", default=None, help="only sessions with this tag (`aerobat tag`) (default: any)")
+    ses.add_argument("--rule", default=None, help="only this update rule: paper, broyden, … (default: any)")
+    ses.add_argument("--search", metavar="TEXT", default=None,
+                     help="only sessions whose maneuver, plant, vehicle, feedback, rule, tags or notes contain TEXT "
+                          "(default: no search)")
+    ses.add_argument("--since", metavar="YYYY-MM-DD", type=_day, default=None,
+                     help="only sessions started on this day (UTC) or later (default: any)")
+    ses.add_argument("--until", metavar="YYYY-MM-DD", type=_day, default=None,
+                     help="only sessions started on this day (UTC) or earlier (default: any)")
     ses.add_argument("--all", action="store_true",
                      help="also list the sessions studies learned in (default: hidden, a study stores hundreds)")
     ses.add_argument("--json", action="store_true", help="print one JSON array")

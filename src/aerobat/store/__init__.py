@@ -19,6 +19,7 @@ from aerobat.store.browse import SHOWN_STATES, SessionComparison
 from aerobat.store.codec import decode_trajectory, encode_trajectory
 from aerobat.store.database import DEFAULT_PATH, default_path
 from aerobat.store.owners import owner_alive
+from aerobat.store.query import SessionPage, SessionQuery, SortKey
 from aerobat.store.records import (
     DesignRecord,
     IterationRecord,
@@ -37,6 +38,9 @@ __all__ = [
     "DEFAULT_PATH",
     "SESSION_STATES",
     "SHOWN_STATES",
+    "SessionPage",
+    "SessionQuery",
+    "SortKey",
     "SessionComparison",
     "DesignRecord",
     "IterationRecord",

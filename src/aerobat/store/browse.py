@@ -14,8 +14,10 @@ from aerobat.config import check_type, short_repr
 from aerobat.core.outcomes import IterationStatus, SessionStatus
 from aerobat.errors import ConfigError, SessionInUse
 from aerobat.store import checksums
+from aerobat.store import query as sql
 from aerobat.store.codec import utc_now
 from aerobat.store.owners import owner_alive
+from aerobat.store.query import FACETS, SHOWN_STATES, SessionPage, SessionQuery, check_text
 from aerobat.store.reading import Reading
 from aerobat.store.records import SessionSummary
 
@@ -23,9 +25,6 @@ __all__ = ["Browsing", "SessionComparison", "SESSION_STATES", "SHOWN_STATES"]
 
 SESSION_STATES: tuple[SessionStatus, ...] = tuple(SessionStatus)
 """States a session can be stored in. ``running`` sessions whose process is gone are shown as ``killed``."""
-
-SHOWN_STATES = (*SESSION_STATES, "killed")
-"""States ``aerobat sessions --status`` filters on (``killed``: running, but its process is gone)."""
 
 _MAX_TAG = 64
 _MAX_NOTE = 4000
@@ -60,16 +59,15 @@ class SessionComparison:
 
 
 def _text(name: str, value: Any, limit: int) -> str:
-    if not isinstance(value, str):
-        raise ConfigError(f"{name}: expected text, got {short_repr(value)}")
-    text = value.strip()
-    if not text or len(text) > limit or not text.isprintable():
-        raise ConfigError(f"{name} {short_repr(value)}: expected 1 to {limit} printable characters")
-    return text
+    return check_text(name, value, limit)
 
 
-def _matches(wanted: str | None, *values: str) -> bool:
-    return wanted is None or any(wanted.strip().lower() == v.lower() for v in values)
+def _nocase(text: str) -> str:
+    """``text`` with ASCII letters in lower case (as SQLite's NOCASE compares)."""
+    return text.translate(_LOWER)
+
+
+_LOWER = str.maketrans("ABCDEFGHIJKLMNOPQRSTUVWXYZ", "abcdefghijklmnopqrstuvwxyz")
 
 
 class Browsing(Reading):
@@ -91,25 +89,108 @@ class Browsing(Reading):
         tag : only sessions with this tag.
         include_studies : also the sessions studies learned in (hidden by default: a study stores hundreds).
         limit : only the newest ``limit`` of those that match.
+
+        The filters run in the database (:meth:`query_sessions`): only the sessions returned are read.
         """
-        for name, value in (("plant", plant), ("maneuver", maneuver), ("vehicle", vehicle),
-                            ("feedback", feedback), ("tag", tag)):
-            if value is not None:
-                _text(name, value, 200)
-        if status is not None and status not in SHOWN_STATES:
-            raise ConfigError(f"status {short_repr(status)}: allowed {', '.join(SHOWN_STATES)}")
         check_type("include_studies", include_studies, (bool, np.bool_), "True or False")
-        study_id = None if study is None else self.resolve_study(study)
-        rows = [s for s in self.list_sessions()
-                if _matches(plant, s.plant_kind) and _matches(maneuver, s.maneuver_name)
-                and _matches(vehicle, s.vehicle, s.plant_vehicle) and _matches(feedback, s.feedback)
-                and (status is None or s.display_state == status) and (tag is None or tag.strip() in s.tags)
-                and (s.study_id == study_id if study_id is not None else include_studies or s.study_id is None)]
         if limit is not None:
             from aerobat.config import check_int
 
-            rows = rows[max(0, len(rows) - check_int("limit", limit, low=1)):]
-        return rows
+            check_int("limit", limit, low=1)
+        query = SessionQuery(plant=plant, maneuver=maneuver, vehicle=vehicle, feedback=feedback, status=status,
+                             tag=tag, study=None if study is None else self.resolve_study(study),
+                             include_studies=bool(include_studies), descending=limit is not None, limit=limit)
+        return list(reversed(self.query_sessions(query).rows)) if limit is not None else \
+            list(self.query_sessions(query).rows)
+
+    def query_sessions(self, query: SessionQuery, *, counts: bool = False) -> SessionPage:
+        """A page of the sessions ``query`` finds, how many match, and (``counts``) how many each filter value has.
+
+        Everything but the page's rows is answered by SQL on the sessions table; the page's rows
+        are read whole and verified against their checksums. With ``counts``, each of :data:`FACETS`
+        gets its values with the number of sessions each would show under the other filters (one
+        ``GROUP BY`` over the sessions that pass the text, tag and day filters, and one for the tags).
+        """
+        if not isinstance(query, SessionQuery):
+            raise ConfigError(f"query: expected a SessionQuery, got {short_repr(query)}")
+        check_type("counts", counts, (bool, np.bool_), "True or False")
+        with self._guard("finding sessions"):
+            dead = self._dead_owners()
+            where, args = sql.where(query, dead)
+            order, order_args = sql.order_by(query, dead)
+            page = f" LIMIT {query.limit if query.limit is not None else -1} OFFSET {query.offset}"
+            rows = self._db.execute(f"SELECT {checksums.select_list('sessions', 's')} FROM sessions s{where}{order}"
+                                    f"{page}", [*args, *order_args]).fetchall()
+            total = int(self._db.execute("SELECT count(*) FROM sessions").fetchone()[0])
+            if counts:
+                facets, matched, hidden = self._facet_counts(query, dead)
+            else:
+                facets = {}
+                matched = int(self._db.execute(f"SELECT count(*) FROM sessions s{where}", args).fetchone()[0])
+                hidden = 0
+                if query.study is None and not query.include_studies:
+                    studies_where, studies_args = sql.where(query, dead, studies=True)
+                    hidden = int(self._db.execute(f"SELECT count(*) FROM sessions s{studies_where}",
+                                                  studies_args).fetchone()[0])
+        return SessionPage(query, tuple(self._summaries(rows)), matched, total, hidden, facets)
+
+    def _dead_owners(self) -> tuple[str, ...]:
+        """Owners of sessions stored as running whose process is gone (their sessions are shown ``killed``)."""
+        owners = [r[0] for r in self._db.execute(
+            "SELECT DISTINCT owner FROM sessions WHERE state = 'running' AND owner IS NOT NULL")]
+        return tuple(o for o in owners if owner_alive(o) is False)
+
+    def _facet_counts(self, query: SessionQuery, dead: tuple[str, ...]
+                      ) -> tuple[dict[str, tuple[tuple[str, int], ...]], int, int]:
+        """Counts per value of every facet, the sessions matching every filter, and those hidden as a study's."""
+        state, state_args = sql.state_sql(dead)
+        where, args = sql.where(query, dead, facets=False)
+        grouped = sql.GROUPED_SQL.format(state=state)
+        groups = self._db.execute(f"SELECT {grouped}{where} GROUP BY 1, 2, 3, 4, 5, 6, 7, 8",
+                                  [*state_args, *args]).fetchall()
+        wanted = {name: None if getattr(query, name) is None else _nocase(str(getattr(query, name)))
+                  for name in ("maneuver", "plant", "vehicle", "feedback", "rule", "status")}
+
+        def passes(group: tuple[Any, ...], skip: str) -> bool:
+            maneuver, plant, flown, designed, feedback, rule, status, study_id, _ = group
+            values = {"maneuver": (maneuver,), "plant": (plant,), "vehicle": (flown, designed),
+                      "feedback": (feedback,), "rule": (rule,), "status": (status,)}
+            for name, want in wanted.items():
+                if want is not None and name != skip and not any(_nocase(str(v)) == want for v in values[name]):
+                    return False
+            if skip == "study":
+                return True
+            if query.study is not None:
+                return bool(study_id == query.study)
+            return query.include_studies or study_id is None
+
+        counts: dict[str, dict[str, int]] = {name: {} for name in FACETS}
+        matched = hidden = 0
+        for group in groups:
+            n = int(group[-1])
+            if passes(group, ""):
+                matched += n
+            elif query.study is None and not query.include_studies and group[7] is not None and passes(
+                    group[:7] + (None, n), ""):
+                hidden += n
+            for k, name in enumerate(FACETS[:-1]):
+                if not passes(group, name):
+                    continue
+                if name == "vehicle":
+                    values = {str(group[2] or group[3] or "")} | ({str(group[3])} if group[3] else set())
+                elif name == "study":
+                    values = set() if group[7] is None else {str(group[7])}
+                else:
+                    values = {str(group[k if k < 2 else k + 1] or "")}
+                for value in values:
+                    counts[name][value] = counts[name].get(value, 0) + n
+        tag_where, tag_args = sql.where(query.without("tag"), dead)
+        counts["tag"] = {str(value): int(n) for value, n in self._db.execute(
+            f"SELECT j.value, count(*) FROM sessions s, json_each({sql.TAGS_SQL}) j{tag_where} GROUP BY j.value",
+            tag_args).fetchall()}
+        ordered = {name: tuple(sorted(values.items(), key=lambda item: (-item[1], item[0])))
+                   for name, values in counts.items()}
+        return ordered, matched, hidden
 
     def tag_session(self, session_id: int, tag: str, *, remove: bool = False) -> tuple[str, ...]:
         """Add (or ``remove``) a tag; the session's tags afterwards."""

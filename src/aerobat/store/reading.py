@@ -132,7 +132,12 @@ class Reading(StudyTables):
             sql += " LIMIT ?"
             args = (check_int("limit", limit, low=0, high=2**63 - 1),)
         with self._guard("listing sessions"):
-            rows = [checksums.verify(self.path, "sessions", r) for r in self._db.execute(sql, args).fetchall()]
+            rows = self._db.execute(sql, args).fetchall()
+        return self._summaries(rows)
+
+    def _summaries(self, selected: Sequence[Sequence[Any]]) -> list[SessionSummary]:
+        """Session rows (as ``checksums.select_list('sessions')`` selects them) verified, as summaries."""
+        rows = [checksums.verify(self.path, "sessions", r) for r in selected]
         alive: dict[str | None, bool | None] = {}
         cache: dict[tuple[str, int], Any] = {}
         out = []
@@ -144,12 +149,18 @@ class Reading(StudyTables):
                     alive[r["owner"]] = owner_alive(r["owner"])
                 if alive[r["owner"]] is False:
                     display = "killed"
+            names = self._names(r, cache)  # fills the cache with the session's parts
             out.append(SessionSummary(
                 id=r["id"], seed=r["seed"], n_records=r["n_records"], n_measured=r["n_measured"],
                 target_iterations=r["target_iterations"], last_position_error_m=r["last_position_error_m"],
                 state=state, display_state=display, started_at=r["started_at"], updated_at=r["updated_at"],
-                study_id=r["study_id"], **self._names(r, cache)))
+                study_id=r["study_id"], **names, maneuver_kind=str(cache["maneuvers", r["maneuver_id"]]["kind"] or ""),
+                rule=self._rule_name(r)))
         return out
+
+    def _rule_name(self, row: Mapping[str, Any]) -> str:
+        rule = self._loads(row["rule"], f"session {row['id']} rule")
+        return str(rule.get("name", "")) if isinstance(rule, dict) else ""
 
     def session(self, session_id: int) -> SessionRecord:
         """The session and its summary."""
@@ -321,6 +332,27 @@ class Reading(StudyTables):
         self.vehicle(self.plant(rec.plant_id).vehicle_id)
         self.iterations(rec.id, trajectories=True, plant_state=True)
 
+    def session_summaries(self, session_ids: Sequence[int]) -> list[SessionSummary]:
+        """The summaries of these sessions, in the order given (:class:`SessionNotFound` for one not stored)."""
+        ids = [self._session_id(sid) for sid in session_ids]
+        found: dict[int, SessionSummary] = {}
+        with self._guard("listing sessions"):
+            for start in range(0, len(ids), 500):
+                chunk = ids[start:start + 500]
+                rows = self._db.execute(f"SELECT {checksums.select_list('sessions')} FROM sessions WHERE id IN "
+                                        f"({', '.join('?' * len(chunk))})", chunk).fetchall()
+                found.update((s.id, s) for s in self._summaries(rows))
+        return [found[sid] for sid in ids]
+
+    def sessions_per_study(self) -> dict[int, int]:
+        """``study → sessions it learned in``, counted by the database."""
+        with self._guard("counting sessions"):
+            return {int(sid): int(n) for sid, n in self._db.execute(
+                "SELECT study_id, count(*) FROM sessions WHERE study_id IS NOT NULL GROUP BY study_id")}
+
     def study_sessions(self, study_id: int) -> list[SessionSummary]:
-        """Summaries of the sessions that learned for this study."""
-        return [s for s in self.list_sessions() if s.study_id == study_id]
+        """Summaries of the sessions that learned for this study, oldest first."""
+        with self._guard("listing sessions"):
+            rows = self._db.execute(f"SELECT {checksums.select_list('sessions')} FROM sessions WHERE study_id = ? "
+                                    f"ORDER BY id", (study_id,)).fetchall()
+        return self._summaries(rows)

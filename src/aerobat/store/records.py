@@ -197,7 +197,8 @@ class SessionSummary:
 
     ``vehicle`` is the design model's name, ``plant_vehicle`` the name of the vehicle the plant
     flew, ``feedback`` the plant's onboard feedback scheme (``none``: the paper's open loop),
-    ``tags`` the user's tags (``aerobat tag``).
+    ``tags`` the user's tags (``aerobat tag``), ``maneuver_kind`` the maneuver's kind, ``rule`` the
+    update rule's name.
     """
 
     id: int
@@ -217,6 +218,8 @@ class SessionSummary:
     plant_vehicle: str = ""
     feedback: str = "none"
     tags: tuple[str, ...] = ()
+    maneuver_kind: str = ""
+    rule: str = ""
 
 
 @dataclass(frozen=True)

@@ -84,21 +84,29 @@ class StudyTables(Database):
                                        f"{short_repr(job['status'])} (written by another aerobat?)") from None
         return jobs
 
-    def _study(self, r: dict[str, Any], jobs: Sequence[dict[str, Any]]) -> StudyRecord:
+    def _job_counts(self, study_id: int | None) -> dict[tuple[int, str], int]:
+        """``(study, status) → jobs`` counted by the database (of one study, or all; no job row is read)."""
+        sql = "SELECT study_id, status, count(*) FROM study_jobs"
+        with self._guard("reading study jobs"):
+            rows = (self._db.execute(sql + " GROUP BY 1, 2").fetchall() if study_id is None else
+                    self._db.execute(sql + " WHERE study_id = ? GROUP BY 1, 2", (study_id,)).fetchall())
+        return {(int(sid), str(status)): int(n) for sid, status, n in rows}
+
+    def _study(self, r: dict[str, Any], counts: Mapping[tuple[int, str], int]) -> StudyRecord:
         what = f"study {r['id']}"
-        own = [j["status"] for j in jobs if j["study_id"] == r["id"]]
         return from_columns(  # type: ignore[no-any-return]
             StudyRecord, r, kind=StudyKind.stored(r["kind"]), spec=self._json(r["spec"], what),
             command=tuple(self._json(r["command"] or "[]", what)),
-            jobs_done=own.count(JobStatus.DONE), jobs_failed=own.count(JobStatus.FAILED))
+            jobs_done=counts.get((r["id"], JobStatus.DONE.value), 0),
+            jobs_failed=counts.get((r["id"], JobStatus.FAILED.value), 0))
 
     def list_studies(self) -> list[StudyRecord]:
-        """Every study, oldest first, with its job counts (every row verified against its checksum)."""
+        """Every study, oldest first, with its job counts (every study row verified against its checksum)."""
         with self._guard("reading studies"):
             rows = self._db.execute(f"SELECT {checksums.select_list('studies')} FROM studies ORDER BY id").fetchall()
         studies = [checksums.verify(self.path, "studies", r) for r in rows]
-        jobs = self._jobs(None)
-        return [self._study(r, jobs) for r in studies]
+        counts = self._job_counts(None)
+        return [self._study(r, counts) for r in studies]
 
     def study(self, study_id: int) -> StudyRecord:
         """One study with its job counts."""
@@ -107,7 +115,7 @@ class StudyTables(Database):
             r = checksums.fetch(self._db, self.path, "studies", {"id": study_id})
         if r is None:
             raise SessionNotFound(f"{self.path}: no study {study_id} (see `aerobat studies`)")
-        return self._study(r, self._jobs(study_id))
+        return self._study(r, self._job_counts(study_id))
 
     def finished_study_jobs(self, study_id: int) -> set[str]:
         """Keys of the jobs that are done (failed jobs are not: they run again on resume)."""

@@ -100,9 +100,17 @@ def test_served_pages_show_what_the_store_holds_and_never_write_it(store_path):
         page = body.decode()
         assert status == 200 and page.count('<tr class="job">') == len(jobs) == 200
         assert '<span id="jobs-failed">2</span>' in page and page.count("diverged at") == 2 * 2  # failed + jobs tables
-        # compare two sessions: parameters side by side and the overlaid curves
+        # compare two sessions: what differs, the overlaid curves, parameters with meaning and bounds
         status, _, body = fetch(browser.url + "compare.html?ids=1,2")
-        assert status == 200 and b"session 1</a>" in body and b"session 2</a>" in body
+        page = body.decode()
+        assert status == 200 and "session 1: plant arena, feedback none, seed 1</a>" in page
+        assert "They differ in: <strong>plant, feedback, seed, measured iterations" in page
+        assert "plant setting feedback.scheme" in page and "accelerate collective" in page
+        assert fetch(browser.url + "assets/plotly.min.js")[1].startswith("text/javascript")
+        # a session's parameters say what they mean; the table has a seed column, sortable
+        page = fetch(browser.url + "session-1.html")[2].decode()
+        assert "<td>p0</td><td>accelerate collective</td><td>m/s²</td><td>[" in page
+        assert 'href="index.html?sort=seed&amp;dir=asc"' in fetch(browser.url)[2].decode()
         assert fetch(browser.url + "compare/1-2.png")[2][:4] == b"\x89PNG"
         # pages that do not exist: one clear line
         status, _, body = fetch(browser.url + "session-9999.html")
@@ -127,6 +135,8 @@ def test_export_writes_the_same_pages_as_static_files(store_path, tmp_path):
     assert len([p for p in pages if re.fullmatch(r"session-\d+\.html", p)]) == 203
     assert len([p for p in pages if p.endswith(".png") and p.startswith("session-")]) == 10
     assert "study-1.html" in pages and "compare.html" in pages and "compare/1-2.png" in pages
+    assert "assets/plotly.min.js" in pages  # the interactive figures work from the folder, offline
+    assert 'href="compare.html">sessions 1, 2 side by side</a>' in (site / "index.html").read_text()
     with Site(store_path, static=True) as live:
         assert (site / "session-1.html").read_text() == live.get("session-1.html")[1].decode()
     assert files_digest(store_path) == before
@@ -228,8 +238,13 @@ def test_the_page_in_chromium_filters_and_draws_its_figures(store_path, tmp_path
         assert re.search(r'<span id="shown">203</span> of 203', dom)
         dom = chromium(browser.url + "session-1.html", tmp_path)
         assert re.search(r'id="aerobat-page-status"[^>]*>ok: 2 figures<', dom), dom[-500:]
+        assert re.search(r'id="errors-figure"[^>]*data-drawn="yes"', dom)  # plotly drew it
         dom = chromium(browser.url + "study-1.html", tmp_path)
         assert re.search(r'id="aerobat-page-status"[^>]*>ok: 0 figures<', dom)
+        dom = chromium(browser.url + "compare.html?ids=1,2,3", tmp_path)
+        assert re.search(r'id="errors-figure"[^>]*data-drawn="yes"', dom), dom[:2000]
+        assert dom.count('class="scatterlayer') == 1 and dom.count('class="trace scatter') == 3  # three curves
+        assert "They differ in: <strong>plant, feedback, seed, rule" in dom
 
 
 @pytest.mark.slow

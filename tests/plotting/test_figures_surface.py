@@ -139,3 +139,15 @@ def test_a_stored_sessions_side_views_say_the_loop_and_follow_the_motion(tmp_pat
     assert seen["title"].endswith("on nominal, open loop"), seen["title"]
     assert seen["planes"] == ("xz",) and "plane" not in seen  # a pitch flip, seen along its axis
     assert seen["target"] == (0.0, 0.0, 0.0)
+
+
+def test_the_learning_figure_has_no_tick_between_two_iterations():
+    """Iterations are whole numbers: three of them get ticks at 1, 2, 3, not at 1.5 and 2.5 (issue 44)."""
+    from aerobat.plotting.learning import plot_learning
+
+    its = [{"i": i, "status": "ok", "error": [0.1 / i, 0.2 / i], "params": [1.0 + i, 2.0]} for i in (1, 2, 3)]
+    fig = plot_learning(its, ["x", "z"], ["m", "m"], ["p0", "p1"], ["s", "s"])
+    for ax in fig.axes:
+        if ax.get_visible() and ax.get_xlabel() == "iteration":
+            ticks = [t for t in ax.get_xticks() if ax.get_xlim()[0] <= t <= ax.get_xlim()[1]]
+            assert ticks and all(float(t).is_integer() for t in ticks), ticks

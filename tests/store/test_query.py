@@ -106,7 +106,7 @@ def _key(s, key: SortKey):
     return {SortKey.ID: s.id, SortKey.MANEUVER: s.maneuver_name, SortKey.PLANT: s.plant_kind,
             SortKey.VEHICLE: s.plant_vehicle, SortKey.FEEDBACK: s.feedback, SortKey.RULE: s.rule,
             SortKey.STATUS: s.display_state, SortKey.TRIALS: s.n_measured, SortKey.ERROR: s.last_position_error_m,
-            SortKey.STUDY: s.study_id, SortKey.STARTED: s.started_at}[key]
+            SortKey.STUDY: s.study_id, SortKey.SEED: s.seed, SortKey.STARTED: s.started_at}[key]
 
 
 @pytest.mark.parametrize(("key", "descending"), list(itertools.product(SortKey, (False, True))))

@@ -13,7 +13,7 @@ from typing import Any
 from aerobat.store import Store
 from aerobat.store.records import SessionSummary
 
-__all__ = ["SessionRow", "StudyRow", "session_row", "session_rows", "study_rows"]
+__all__ = ["SessionRow", "StudyRow", "job_summary", "session_row", "session_rows", "study_rows"]
 
 
 @dataclass(frozen=True)
@@ -80,6 +80,26 @@ def study_rows(store: Store) -> list[StudyRow]:
     counts = store.sessions_per_study()
     return [StudyRow(id=s.id, kind=s.kind, created_at=s.created_at, jobs_done=s.jobs_done, jobs_failed=s.jobs_failed,
                      n_sessions=counts.get(s.id, 0), out_dir=s.out_dir) for s in store.list_studies()]
+
+
+def job_summary(result: Any, *, limit: int = 8) -> list[str]:
+    """A study job's result as lines a person reads: ``name value`` for numbers and words, ``name: N values``
+    for lists, ``name: {…}`` for tables; at most ``limit`` lines (the page shows the whole JSON on request)."""
+    if not isinstance(result, dict):
+        return [json_text(result)[:200]]
+    lines = []
+    for name, value in result.items():
+        if isinstance(value, bool) or value is None or isinstance(value, str):
+            lines.append(f"{name}: {value if value is not None else '—'}"[:120])
+        elif isinstance(value, int | float):
+            lines.append(f"{name}: {value:.4g}" if isinstance(value, float) else f"{name}: {value}")
+        elif isinstance(value, list):
+            lines.append(f"{name}: {len(value)} value{'' if len(value) == 1 else 's'}")
+        elif isinstance(value, dict):
+            lines.append(f"{name}: {{{', '.join(list(map(str, value))[:4])}{', …' if len(value) > 4 else ''}}}")
+        else:
+            lines.append(f"{name}: {str(value)[:80]}")
+    return lines[:limit] + ([f"… {len(lines) - limit} more"] if len(lines) > limit else [])
 
 
 def json_text(value: Any) -> str:

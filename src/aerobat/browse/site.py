@@ -25,7 +25,7 @@ from urllib.parse import urlencode
 
 import numpy as np
 
-from aerobat.browse.catalog import json_text, session_row, session_rows, study_rows
+from aerobat.browse.catalog import job_summary, json_text, session_row, session_rows, study_rows
 from aerobat.core.learning import IterationStatus, SessionStatus
 from aerobat.errors import ConfigError, SessionNotFound
 from aerobat.fileio import check_output, check_output_folder, make_output_folder, write_output
@@ -55,7 +55,7 @@ _N = "([0-9]+)"  # an id: ASCII digits only (a regular expression's \d also matc
 _PAGE = re.compile(
     rf"^(?:(index)(?:-{_N})?\.html|session-{_N}\.html|study-{_N}\.html|compare\.html|api/session-{_N}\.json"
     rf"|session-{_N}/(learning|side_views)\.png|session-{_N}/replay-([0-9]+|default)\.html"
-    rf"|study-{_N}/([\w.-]+\.png)|compare/([0-9]+(?:-[0-9]+)+)\.png)$")
+    rf"|study-{_N}/([\w.-]+\.png)|compare/([0-9]+(?:-[0-9]+)+)\.png|assets/(plotly\.min\.js))$")
 
 
 def _id(text: str, what: str) -> int:
@@ -102,6 +102,45 @@ def _index_link(params: Mapping[str, str], static: bool, **change: Any) -> str:
     return "index.html" + ("?" + urlencode(merged) if merged else "")
 
 
+def _dtick(curves: Sequence[Mapping[str, Any]]) -> int:
+    """A whole-number trial step giving at most about ten ticks (1, 2, 5, 10, 20, 50…)."""
+    last = max([max(c["x"]) for c in curves if c["x"]] or [1])
+    step = 1
+    while last / step > 10:
+        step = step * 5 // 2 if str(step)[0] == "2" else step * 2
+    return step
+
+
+def _pinned(spec: Any, value: float) -> str:
+    """``"at its lower bound 0"`` if ``value`` is within 1e-4 of the parameter's scale of a bound (as the design
+    says), else empty."""
+    tol = 1e-4 * spec.scale
+    if math.isfinite(spec.lower) and value <= spec.lower + tol:
+        return f"at its lower bound {spec.lower:g}"
+    if math.isfinite(spec.upper) and value >= spec.upper - tol:
+        return f"at its upper bound {spec.upper:g}"
+    return ""
+
+
+def _plotly_js() -> bytes:
+    """plotly.js as the ``plotly`` package ships it (the compare page's figure; no network)."""
+    from plotly.offline import get_plotlyjs
+
+    return str(get_plotlyjs()).encode()
+
+
+def _parameter_specs(spec: Mapping[str, Any]) -> tuple[Any, ...]:
+    """The maneuver's parameter specifications (meaning, scale, bounds), rebuilt from its stored spec; none
+    if it cannot be rebuilt here (a maneuver from a plug-in that is not installed)."""
+    from aerobat.core.registry import from_spec
+    from aerobat.errors import AerobatError
+
+    try:
+        return tuple(from_spec(spec, source="stored maneuver").parameters)
+    except (AerobatError, ImportError, KeyError, TypeError, ValueError):
+        return ()
+
+
 def _environment() -> Any:
     from jinja2 import Environment, PackageLoader, select_autoescape
 
@@ -110,6 +149,7 @@ def _environment() -> Any:
         else f"{v:.{d}g}"
     env.filters["when"] = lambda s: "—" if not s else str(s)[:19].replace("T", " ")
     env.filters["json"] = json_text
+    env.filters["summary"] = job_summary
     env.globals["zip"] = zip
     return env
 
@@ -134,6 +174,7 @@ class Site:
         self.cache = Path(tempfile.mkdtemp(prefix="aerobat-browse-")) if cache is None else cache
         self._lock = threading.RLock()
         self._env = _environment()
+        self.compared: tuple[int, ...] = ()  # a static export's comparison (its index links to it)
 
     def close(self) -> None:
         """Close the store (after the page being drawn, if any) and remove the temporary figure cache."""
@@ -175,6 +216,8 @@ class Site:
                 return "image/png", self.study_figure(self._study(g[9]), g[10]).read_bytes()
             if g[11]:
                 return "image/png", self.compare_figure(self._ids(g[11], "compare figure ")).read_bytes()
+            if g[12]:
+                return "text/javascript", _plotly_js()
             ids = (query or {}).get("ids", "")
             return "text/html", self.compare_page(self._ids(ids, "compare: ids=")).encode()
 
@@ -229,6 +272,7 @@ class Site:
             if value and value not in {v for v, _ in choices[name]}:
                 choices[name].append((value, 0))  # the chosen value is offered even if nothing has it now
         return self._render("index.html", found=found, query=query, rows=[session_row(r) for r in found.rows],
+                            compared=self.compared if self.static else (),
                             studies=study_rows(self.store), choices=choices, chosen=chosen,
                             link=lambda **change: _index_link(params, self.static, **change))
 
@@ -248,15 +292,22 @@ class Site:
                 else None
             table.append({"it": it, "position_m": position, "error": it.error.tolist()})
         measured = [it.index for it in iterations if it.status is IterationStatus.OK and it.trajectory_rows > 0]
+        specs = _parameter_specs(mrec.spec)
+        specs = specs if len(specs) == len(mrec.parameter_names) else ()
         parameters = [{"name": n, "unit": u, "guess": float(drec.p_guess[k]), "nominal": float(drec.p_nominal[k]),
-                       "start": float(rec.start_params[k]), "learned": float(rec.current_params[k])}
+                       "start": float(rec.start_params[k]), "learned": float(rec.current_params[k]),
+                       "description": specs[k].description if specs else "",
+                       "bounds": f"[{specs[k].lower:g}, {specs[k].upper:g}]" if specs else "",
+                       "pinned": _pinned(specs[k], float(rec.current_params[k])) if specs else ""}
                       for k, (n, u) in enumerate(zip(mrec.parameter_names, mrec.parameter_units, strict=True))]
+        curves = [self._error_curve(session_id, f"session {session_id}")]
         return self._render(
             "session.html", rec=rec, row=row, mrec=mrec, drec=drec, prec=prec, table=table, measured=measured,
             parameters=parameters, vehicle=store.vehicle(prec.vehicle_id).config,
             design_vehicle=store.vehicle(drec.vehicle_id).config, tags=rec.tags,
             notes=[f"{at}  {text}" for at, text in rec.notes],
             replays=(["default"] if self.static else ["default", *measured]), figures=self._draws(row.study_id),
+            curves=curves, dtick=_dtick(curves),
             live=not self.static and rec.display_state == SessionStatus.RUNNING)  # running, and not killed
 
     def progress(self, session_id: int) -> dict[str, Any]:
@@ -276,18 +327,48 @@ class Site:
                             sessions=sessions, figures=self._study_figures(study.out_dir))
 
     def compare_page(self, ids: Sequence[int]) -> str:
-        """Two or more sessions: error curves overlaid, parameters side by side."""
-        sessions = []
-        names: list[str] = []
-        for sid in ids:
-            rec = self.store.session(sid)
-            mrec = self.store.maneuver(rec.maneuver_id)
-            sessions.append({"row": session_rows(self.store, session_id=sid)[0],
-                             "params": dict(zip(mrec.parameter_names, rec.current_params.tolist(), strict=True)),
-                             "start": dict(zip(mrec.parameter_names, rec.start_params.tolist(), strict=True)),
-                             "units": dict(zip(mrec.parameter_names, mrec.parameter_units, strict=True))})
-            names += [n for n in mrec.parameter_names if n not in names]
-        return self._render("compare.html", sessions=sessions, names=names, key="-".join(map(str, ids)))
+        """Two or more sessions: what differs between them, their position errors over the trials in an
+        interactive figure (and a PNG), and their parameters side by side with meaning and bounds."""
+        comparison = self.store.compare_many(ids)
+        differences = comparison.differences
+        rows = {sid: session_rows(self.store, session_id=sid)[0] for sid in comparison.ids}
+        legend_fields = [f for f in ("maneuver", "plant", "vehicle flown", "feedback", "rule", "seed")
+                         if f in differences]
+        values = dict(comparison.rows)
+        labels = {}
+        for k, sid in enumerate(comparison.ids):
+            said = [f"{'vehicle' if f == 'vehicle flown' else f} {rows[sid].rule if f == 'rule' else values[f][k]}"
+                    for f in legend_fields]
+            labels[sid] = f"session {sid}" + (f": {', '.join(said)}" if said else "")
+        curves = [self._error_curve(sid, labels[sid]) for sid in comparison.ids]
+        return self._render("compare.html", ids=comparison.ids, rows=comparison.rows, differences=differences,
+                            labels=labels, parameters=self._compared_parameters(comparison), curves=curves,
+                            dtick=_dtick(curves), key="-".join(map(str, comparison.ids)))
+
+    def _error_curve(self, session_id: int, label: str) -> dict[str, Any]:
+        """A session's position error per measured trial, as a plotly trace."""
+        mask = np.array(self.store.maneuver(self.store.session(session_id).maneuver_id).position_mask, dtype=bool)
+        its = [it for it in self.store.iterations(session_id) if it.status is IterationStatus.OK]
+        points = [(it.index, float(np.linalg.norm(it.error[mask]))) for it in its
+                  if mask.any() and np.isfinite(it.error[mask]).all()]
+        return {"x": [t for t, _ in points], "y": [e for _, e in points], "name": label, "mode": "lines+markers",
+                "type": "scatter", "hovertemplate": "trial %{x}: %{y:.4g} m<extra>" + label + "</extra>"}
+
+    def _compared_parameters(self, comparison: Any) -> list[dict[str, Any]]:
+        """Each parameter's name, meaning, unit and bounds, and per session its value and whether it is pinned
+        at a bound (within 1e-4 of the parameter's scale, as the design says)."""
+        if not comparison.parameters:
+            return []
+        specs = _parameter_specs(self.store.maneuver(self.store.session(comparison.ids[0]).maneuver_id).spec)
+        out = []
+        for k, (name, unit, values) in enumerate(comparison.parameters):
+            spec = specs[k] if specs and len(specs) == len(comparison.parameters) else None
+            cells = [{"value": value, "pinned": _pinned(spec, value) if spec is not None else ""}
+                     for value in values]
+            out.append({"name": name, "unit": unit, "description": spec.description if spec else "",
+                        "bounds": f"[{spec.lower:g}, {spec.upper:g}]" if spec else "", "cells": cells,
+                        "same": len(set(values)) == 1})
+        return out
 
     # ---------------------------------------------------------- figures
     def _draws(self, study_id: int | None) -> bool:
@@ -353,6 +434,9 @@ class Site:
             if its and mask.any():
                 ax.semilogy([it.index for it in its], [float(np.linalg.norm(it.error[mask])) for it in its], ".-",
                             label=f"session {sid}")
+        from matplotlib.ticker import MaxNLocator
+
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))  # trials are whole numbers
         ax.set_xlabel("trial")
         ax.set_ylabel("position error [m]")
         ax.grid(True, which="both", alpha=0.3)
@@ -368,8 +452,8 @@ class Site:
         ``compare.html`` and its figure are exported only for the sessions in ``compare``; a session's
         figures are listed only if it has a measured trial (and, in a static site, is not a study's).
         """
-        pages = [f"index-{n}.html" for n in range(2, self.store.query_sessions(
-            SessionQuery(limit=PAGE_ROWS)).pages + 1)]
+        pages = [*(f"index-{n}.html" for n in range(2, self.store.query_sessions(
+            SessionQuery(limit=PAGE_ROWS)).pages + 1))]
         for row in session_rows(self.store):
             pages.append(f"session-{row.id}.html")
             if row.n_measured and self._draws(row.study_id):
@@ -380,7 +464,8 @@ class Site:
             pages += [f"study-{study.id}/{name}" for name in self._study_figures(study.out_dir)]
         if compare:
             pages += ["compare.html", f"compare/{'-'.join(map(str, compare))}.png"]
-        return [*pages, "index.html"]
+        return [*pages, "assets/plotly.min.js", "index.html"]  # plotly.js (4.8 MB) after the pages: a full disk
+        # stops the export with as many pages written as fit
 
     def export(self, folder: Path, *, compare: Sequence[int] = (), stores: Iterable[Any] = ()) -> list[Path]:
         """Write every page, figure and default replay as static files under ``folder``; the files written.
@@ -398,6 +483,7 @@ class Site:
         """
         protected = (self.store.path, *stores)
         compare = [self._session(str(sid)) for sid in compare]
+        self.compared = tuple(compare)
         pages = self.export_pages(compare)
         for sub in sorted({Path(page).parent for page in pages} - {Path(".")}):
             check_output_folder(folder / sub, option="--export")

@@ -57,9 +57,13 @@ def plot_learning(iterations: Sequence[dict], error_names: Sequence[str], error_
     axes[0, 0].set_title("final-state errors" + (" (green: ± the error's scale)" if error_scales is not None
                                                   else ""))
     axes[0, 1].set_title("parameters (red lines: lost/rejected trials)")
-    # each column's lowest panel in use carries the iteration ticks (the rows below it are switched off)
+    # each column's lowest panel in use carries the iteration ticks (the rows below it are switched off);
+    # iterations are whole numbers: no tick at 1.5
+    from matplotlib.ticker import MaxNLocator
+
     for col, used in ((0, n_e if errors.size else 0), (1, n_p)):
         if used:
+            axes[used - 1, col].xaxis.set_major_locator(MaxNLocator(integer=True))
             axes[used - 1, col].tick_params(labelbottom=True)
             axes[used - 1, col].set_xlabel("iteration")
     if title:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import sqlite3
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,7 +22,8 @@ from aerobat.store.query import FACETS, SHOWN_STATES, SessionPage, SessionQuery,
 from aerobat.store.reading import Reading
 from aerobat.store.records import SessionSummary
 
-__all__ = ["Browsing", "SessionComparison", "SESSION_STATES", "SHOWN_STATES"]
+__all__ = ["MAX_SETTING_ROWS", "Browsing", "SessionComparison", "SessionsComparison", "SESSION_STATES",
+           "SHOWN_STATES"]
 
 SESSION_STATES: tuple[SessionStatus, ...] = tuple(SessionStatus)
 """States a session can be stored in. ``running`` sessions whose process is gone are shown as ``killed``."""
@@ -56,6 +58,42 @@ class SessionComparison:
                                                      for n, x, y in self.rows],
                 "parameters": [{"name": n, "unit": u, "a": x, "b": y} for n, u, x, y in self.parameters],
                 "differences": list(self.differences)}
+
+
+@dataclass(frozen=True)
+class SessionsComparison:
+    """Two or more sessions side by side (the browser's compare page; ``aerobat compare`` shows two).
+
+    Attributes
+    ----------
+    ids : the session ids, in the order given.
+    rows : ``(field, one value per session)``, every value as text: what they flew, how they learned,
+        where they ended, then every plant setting (the tune, the simulator's settings) that differs.
+    parameters : ``(name, unit, current value per session)`` when all fly the same parameters.
+    """
+
+    ids: tuple[int, ...]
+    rows: tuple[tuple[str, tuple[str, ...]], ...]
+    parameters: tuple[tuple[str, str, tuple[float, ...]], ...]
+
+    @property
+    def differences(self) -> tuple[str, ...]:
+        """The fields whose values are not all the same."""
+        return tuple(name for name, values in self.rows if len(set(values)) > 1)
+
+
+MAX_SETTING_ROWS = 40
+"""The most differing plant settings a comparison lists (the rest are counted)."""
+
+
+def _flat(table: Any, prefix: str = "") -> dict[str, str]:
+    """``{"settings.gains.p": "0.5", …}``: a nested table's leaves as text, by dotted name."""
+    if isinstance(table, dict):
+        out: dict[str, str] = {}
+        for key, value in table.items():
+            out.update(_flat(value, f"{prefix}{key}."))
+        return out
+    return {prefix.rstrip("."): json.dumps(table, sort_keys=True) if isinstance(table, list) else str(table)}
 
 
 def _text(name: str, value: Any, limit: int) -> str:
@@ -263,8 +301,16 @@ class Browsing(Reading):
 
     def compare_sessions(self, a: int, b: int) -> SessionComparison:
         """Two sessions side by side: what they flew, how they learned, where they ended."""
-        recs = [self.session(self._session_id(a)), self.session(self._session_id(b))]
+        both = self.compare_many([a, b])
+        return SessionComparison(both.ids[0], both.ids[1], tuple((n, x, y) for n, (x, y) in both.rows),
+                                 tuple((n, u, x, y) for n, u, (x, y) in both.parameters))
+
+    def compare_many(self, session_ids: Sequence[int]) -> SessionsComparison:
+        """Sessions side by side: what they flew, how they learned, where they ended, the plant settings
+        that differ (at most :data:`MAX_SETTING_ROWS`), and the learned parameters if all fly the same ones."""
+        recs = [self.session(self._session_id(sid)) for sid in session_ids]
         mans = [self.maneuver(r.maneuver_id) for r in recs]
+        plants = [self.plant(r.plant_id) for r in recs]
         firsts, bests = [], []
         for rec in recs:
             found = [self._position_error(rec.id, it.error) for it in self.iterations(rec.id)
@@ -273,27 +319,33 @@ class Browsing(Reading):
             firsts.append(_metres(errors[0] if errors else None))
             bests.append(_metres(min(errors) if errors else None))
 
-        def both(fn: Any) -> tuple[str, str]:
-            return str(fn(recs[0], mans[0])), str(fn(recs[1], mans[1]))
+        def each(fn: Any) -> tuple[str, ...]:
+            return tuple(str(fn(r, m)) for r, m in zip(recs, mans, strict=True))
 
-        rows = [("maneuver", *both(lambda r, m: m.name)), ("plant", *both(lambda r, m: r.plant_kind)),
-                ("vehicle (design model)", *both(lambda r, m: r.vehicle)),
-                ("vehicle flown", *both(lambda r, m: r.plant_vehicle)),
-                ("feedback", *both(lambda r, m: r.feedback)), ("seed", *both(lambda r, m: r.seed)),
-                ("rule", *both(lambda r, m: json.dumps(r.rule, sort_keys=True))),
-                ("state", *both(lambda r, m: r.display_state)),
-                ("measured iterations", *both(lambda r, m: f"{r.n_measured}/{r.target_iterations}")),
-                ("first position error [m]", firsts[0], firsts[1]),
-                ("best position error [m]", bests[0], bests[1]),
-                ("last position error [m]", *both(lambda r, m: _metres(r.last_position_error_m))),
-                ("study", *both(lambda r, m: "—" if r.study_id is None else r.study_id)),
-                ("tags", *both(lambda r, m: ", ".join(r.tags) or "—"))]
-        parameters: list[tuple[str, str, float, float]] = []
-        if mans[0].parameter_names == mans[1].parameter_names:
-            parameters = [(n, u, float(x), float(y)) for n, u, x, y in zip(
-                mans[0].parameter_names, mans[0].parameter_units, recs[0].current_params, recs[1].current_params,
-                strict=True)]
-        return SessionComparison(recs[0].id, recs[1].id, tuple(rows), tuple(parameters))
+        rows = [("maneuver", each(lambda r, m: m.name)), ("plant", each(lambda r, m: r.plant_kind)),
+                ("vehicle (design model)", each(lambda r, m: r.vehicle)),
+                ("vehicle flown", each(lambda r, m: r.plant_vehicle)),
+                ("feedback", each(lambda r, m: r.feedback)), ("seed", each(lambda r, m: r.seed)),
+                ("rule", each(lambda r, m: json.dumps(r.rule, sort_keys=True))),
+                ("state", each(lambda r, m: r.display_state)),
+                ("measured iterations", each(lambda r, m: f"{r.n_measured}/{r.target_iterations}")),
+                ("first position error [m]", tuple(firsts)), ("best position error [m]", tuple(bests)),
+                ("last position error [m]", each(lambda r, m: _metres(r.last_position_error_m))),
+                ("study", each(lambda r, m: "—" if r.study_id is None else r.study_id)),
+                ("tags", each(lambda r, m: ", ".join(r.tags) or "—"))]
+        settings = [_flat(p.config) for p in plants]
+        names = sorted({k for table in settings for k in table})
+        differing = [n for n in names if len({table.get(n, "—") for table in settings}) > 1]
+        rows += [(f"plant setting {n}", tuple(table.get(n, "—") for table in settings))
+                 for n in differing[:MAX_SETTING_ROWS]]
+        if len(differing) > MAX_SETTING_ROWS:
+            rows.append(("plant settings not listed", (f"{len(differing) - MAX_SETTING_ROWS} more differ",)
+                         * len(recs)))
+        parameters: list[tuple[str, str, tuple[float, ...]]] = []
+        if all(m.parameter_names == mans[0].parameter_names for m in mans):
+            parameters = [(n, u, tuple(float(r.current_params[k]) for r in recs)) for k, (n, u) in enumerate(zip(
+                mans[0].parameter_names, mans[0].parameter_units, strict=True))]
+        return SessionsComparison(tuple(r.id for r in recs), tuple(rows), tuple(parameters))
 
     def _position_error(self, session_id: int, error: np.ndarray) -> float | None:
         mask = self._position_mask(session_id)

@@ -47,6 +47,7 @@ class SortKey(StrEnum):
     TRIALS = "trials"
     ERROR = "error"
     STUDY = "study"
+    SEED = "seed"
     STARTED = "started"
 
 
@@ -270,7 +271,7 @@ def order_by(query: SessionQuery, dead_owners: tuple[str, ...]) -> tuple[str, li
         return f" ORDER BY s.id {direction}", args
     expression = {SortKey.MANEUVER: MANEUVER_SQL, SortKey.PLANT: PLANT_SQL, SortKey.VEHICLE: FLOWN_SQL,
                   SortKey.FEEDBACK: FEEDBACK_SQL, SortKey.RULE: RULE_SQL, SortKey.TRIALS: "s.n_measured",
-                  SortKey.ERROR: "s.last_position_error_m", SortKey.STUDY: "s.study_id",
+                  SortKey.ERROR: "s.last_position_error_m", SortKey.STUDY: "s.study_id", SortKey.SEED: "s.seed",
                   SortKey.STARTED: "s.started_at"}.get(key)
     if expression is None:  # status
         expression, args = state_sql(dead_owners)

@@ -64,6 +64,10 @@ def test_learn_on_nominal_plant_table(capsys, tmp_path):
                        "--out", str(tmp_path), "--db", str(tmp_path / "s.sqlite"))
     assert code == 0
     assert "p⁰" in out and "learned" in out
+    # the parameters by meaning, unit and change (issue 44: not p0…p4 alone), and what γ and scale are
+    rows = {line.split()[0]: line for line in out.splitlines() if line.startswith(("p0 ", "p2 "))}
+    assert "accelerate collective" in rows["p0"] and "m/s²" in rows["p0"] and "coast duration" in rows["p2"]
+    assert "γ is the update's step" in out and "scale the part of it kept inside the parameters' bounds" in out
 
 
 @pytest.mark.parametrize("argv, fragment", [

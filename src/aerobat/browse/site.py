@@ -27,6 +27,7 @@ import numpy as np
 
 from aerobat.browse.catalog import job_summary, json_text, session_row, session_rows, study_rows
 from aerobat.core.learning import IterationStatus, SessionStatus
+from aerobat.core.registry import parameters_of
 from aerobat.errors import ConfigError, SessionNotFound
 from aerobat.fileio import check_output, check_output_folder, make_output_folder, write_output
 from aerobat.store import Store
@@ -127,18 +128,6 @@ def _plotly_js() -> bytes:
     from plotly.offline import get_plotlyjs
 
     return str(get_plotlyjs()).encode()
-
-
-def _parameter_specs(spec: Mapping[str, Any]) -> tuple[Any, ...]:
-    """The maneuver's parameter specifications (meaning, scale, bounds), rebuilt from its stored spec; none
-    if it cannot be rebuilt here (a maneuver from a plug-in that is not installed)."""
-    from aerobat.core.registry import from_spec
-    from aerobat.errors import AerobatError
-
-    try:
-        return tuple(from_spec(spec, source="stored maneuver").parameters)
-    except (AerobatError, ImportError, KeyError, TypeError, ValueError):
-        return ()
 
 
 def _environment() -> Any:
@@ -292,8 +281,7 @@ class Site:
                 else None
             table.append({"it": it, "position_m": position, "error": it.error.tolist()})
         measured = [it.index for it in iterations if it.status is IterationStatus.OK and it.trajectory_rows > 0]
-        specs = _parameter_specs(mrec.spec)
-        specs = specs if len(specs) == len(mrec.parameter_names) else ()
+        specs = parameters_of(mrec.spec, len(mrec.parameter_names))
         parameters = [{"name": n, "unit": u, "guess": float(drec.p_guess[k]), "nominal": float(drec.p_nominal[k]),
                        "start": float(rec.start_params[k]), "learned": float(rec.current_params[k]),
                        "description": specs[k].description if specs else "",
@@ -359,10 +347,11 @@ class Site:
         at a bound (within 1e-4 of the parameter's scale, as the design says)."""
         if not comparison.parameters:
             return []
-        specs = _parameter_specs(self.store.maneuver(self.store.session(comparison.ids[0]).maneuver_id).spec)
+        specs = parameters_of(self.store.maneuver(self.store.session(comparison.ids[0]).maneuver_id).spec,
+                              len(comparison.parameters))
         out = []
         for k, (name, unit, values) in enumerate(comparison.parameters):
-            spec = specs[k] if specs and len(specs) == len(comparison.parameters) else None
+            spec = specs[k] if specs else None
             cells = [{"value": value, "pinned": _pinned(spec, value) if spec is not None else ""}
                      for value in values]
             out.append({"name": name, "unit": unit, "description": spec.description if spec else "",

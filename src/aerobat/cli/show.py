@@ -9,7 +9,33 @@ import numpy as np
 from aerobat.cli.common import console
 from aerobat.core.maneuver import ErrorKind
 
-__all__ = ["print_stored_session"]
+__all__ = ["parameter_table", "print_stored_session"]
+
+
+def parameter_table(mrec: Any, nominal: np.ndarray, learned: np.ndarray) -> Any:
+    """The parameters with their meaning and unit, p⁰ and the learned values, and the change (a rich table);
+    a learned value pinned at a bound (within 1e-4 of the parameter's scale) says so."""
+    from rich.table import Table
+
+    from aerobat.core.registry import parameters_of
+
+    specs = parameters_of(mrec.spec, len(mrec.parameter_names))
+    rows = Table(box=None, pad_edge=False, title=None)
+    for name, justify in (("parameter", "left"), ("meaning", "left"), ("unit", "left"), ("p⁰", "right"),
+                          ("learned", "right"), ("change", "right")):
+        rows.add_column(name, justify=justify)  # type: ignore[arg-type]
+    for k, (name, unit) in enumerate(zip(mrec.parameter_names, mrec.parameter_units, strict=True)):
+        p0, p = float(nominal[k]), float(learned[k])
+        pinned = ""
+        if specs:
+            spec = specs[k]
+            if p <= spec.lower + 1e-4 * spec.scale:
+                pinned = f" (at its lower bound {spec.lower:g})"
+            elif p >= spec.upper - 1e-4 * spec.scale:
+                pinned = f" (at its upper bound {spec.upper:g})"
+        rows.add_row(name, specs[k].description if specs else "", unit, f"{p0:.4g}", f"{p:.4g}{pinned}",
+                     f"{p - p0:+.3g}")
+    return rows
 
 
 def print_stored_session(store: Any, session_id: int, *, iterations: bool, header: bool = False,
@@ -88,7 +114,5 @@ def print_stored_session(store: Any, session_id: int, *, iterations: bool, heade
             last = errors[-10:]
             out.print(f"position error: first {errors[0]:.3f} m, last {len(last)} mean {last.mean():.3f} m "
                       f"(std {last.std():.3f} m), best {errors.min():.3f} m")
-    names = mrec.parameter_names
-    out.print("p⁰:      " + "  ".join(f"{n}={v:.4g}" for n, v in zip(names, drec.p_nominal, strict=True)))
-    out.print("learned: " + "  ".join(f"{n}={v:.4g}" for n, v in zip(names, rec.current_params, strict=True)))
+    out.print(parameter_table(mrec, drec.p_nominal, rec.current_params))
     out.print(f"session {rec.id} {rec.display_state}: {rec.message}")

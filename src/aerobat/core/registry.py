@@ -31,6 +31,7 @@ __all__ = [
     "ManeuverBuilder",
     "Registry",
     "from_spec",
+    "parameters_of",
     "register_maneuver",
     "registered_kinds",
 ]
@@ -168,3 +169,13 @@ def from_spec(spec: Mapping[str, Any], *, source: str = "maneuver spec") -> Mane
             raise ConfigError(f"{source}.module: the plugin module {module!r} of maneuver kind {kind!r} cannot be "
                               f"imported: {exc}") from None
     return MANEUVERS.get(kind, source=f"{source}.kind")(spec, source)
+
+
+def parameters_of(spec: Mapping[str, Any], expected: int) -> tuple[Any, ...]:
+    """The parameter specifications (meaning, unit, scale, bounds) of the maneuver a stored ``spec`` describes;
+    none if it cannot be rebuilt here (a plug-in that is not installed) or has not ``expected`` parameters."""
+    try:
+        parameters = tuple(from_spec(spec, source="stored maneuver").parameters)
+    except (ConfigError, ImportError, KeyError, TypeError, ValueError):
+        return ()
+    return parameters if len(parameters) == expected else ()

@@ -91,6 +91,20 @@ class Switch:
     value: float
 
 
+def make_switch(time_s: float, channel: str, value: float) -> Switch:
+    """``Switch(time_s=…, channel=…, value=…)``, the same object, built at a third of the cost of the frozen
+    dataclass's ``__init__`` (maneuvers build thousands per design; :class:`Program` checks every switch)."""
+    switch = _new(Switch)
+    fields = switch.__dict__
+    fields["time_s"] = time_s
+    fields["channel"] = channel
+    fields["value"] = value
+    return switch
+
+
+_new = object.__new__
+
+
 @dataclass(frozen=True, kw_only=True)
 class RampDown:
     """Ramp-down envelopes to hover over the program's last seconds (Sect. 7.2).
@@ -245,7 +259,8 @@ def _compile(program: Program) -> CompiledProgram:
     breaks = sorted(times)
     K = len(breaks) - 1
     index = _CHANNEL_INDEX
-    ordered = sorted(switches, key=lambda s: (s.time_s, index[s.channel]))
+    # (time, channel, value), in time and then channel order (no two switches share both)
+    ordered = sorted([(sw.time_s, index[sw.channel], sw.value) for sw in switches])
     g = program.hover_collective_m_s2
     value = [g, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]  # latest value per channel, in CHANNELS order
     integral = [0.0, 0.0, 0.0]  # ∫ accel up to the current segment start
@@ -254,11 +269,11 @@ def _compile(program: Program) -> CompiledProgram:
     j = 0
     for k in range(K):
         t0, t1 = breaks[k], breaks[k + 1]
-        while j < count and ordered[j].time_s <= t0:
-            value[index[ordered[j].channel]] = float(ordered[j].value)
+        while j < count and ordered[j][0] <= t0:
+            value[ordered[j][1]] = float(ordered[j][2])
             j += 1
-        wc0, wc1 = _envelope(t0, T, ramp_c)
-        wr0, wr1 = _envelope(t0, T, ramp_r)
+        wc0, wc1 = _envelope(t0, T, ramp_c) if ramp_c > 0.0 else (1.0, 0.0)
+        wr0, wr1 = _envelope(t0, T, ramp_r) if ramp_r > 0.0 else (1.0, 0.0)
         raw_c = value[0]
         rows += (g + wc0 * (raw_c - g), wc1 * (raw_c - g), 0.0)
         for axis in range(3):

@@ -125,12 +125,28 @@ def _run_batch(x0: np.ndarray, bp: np.ndarray, coeffs: np.ndarray, nseg: np.ndar
     if threads == 1:  # nothing to hand over
         _play(np.arange(count), x0, bp, coeffs, nseg, plants, ctrl, delays, max_step_s, out)
         return
-    chunks = min(count, 4 * threads)  # a few per thread even out programs of different lengths
     pool = _Workers.get(threads)
+    if count >= 16 * threads:  # a large batch: a few chunks per thread even out a thread slowed by others
+        jobs = [pool.submit(_play, rows, x0, bp, coeffs, nseg, plants, ctrl, delays, max_step_s, out)
+                for rows in np.array_split(np.arange(count), 4 * threads)]
+        for job in jobs:
+            job.result()
+        return
+    # a short batch (the design's: a Jacobian, a line search): one share per thread, cut by steps so that
+    # programs of different lengths even out, the calling thread running the last share itself; each
+    # hand-over and each call into the kernel costs tens of µs
+    steps = np.maximum(1.0, np.ceil(np.diff(bp, axis=1) / max_step_s - 1e-9))
+    steps[np.arange(bp.shape[1] - 1)[None, :] >= nseg[:, None]] = 0.0
+    work = np.cumsum(steps.sum(axis=1))
+    cuts = np.searchsorted(work, work[-1] * np.arange(1, threads) / threads, side="right")
+    shares = [rows for rows in np.split(np.arange(count), cuts) if rows.size]
     jobs = [pool.submit(_play, rows, x0, bp, coeffs, nseg, plants, ctrl, delays, max_step_s, out)
-            for rows in np.array_split(np.arange(count), chunks)]
-    for job in jobs:
-        job.result()
+            for rows in shares[:-1]]
+    try:
+        _play(shares[-1], x0, bp, coeffs, nseg, plants, ctrl, delays, max_step_s, out)
+    finally:
+        for job in jobs:
+            job.result()
 
 
 # ------------------------------------------------------------------- results

@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Any, Literal
 
 import numpy as np
@@ -35,7 +36,7 @@ from aerobat.core.maneuver import ErrorKind, ErrorSpec, ParameterSpec, check_par
 from aerobat.errors import ConfigError
 from aerobat.quadrotor.dynamics import POS, VEL, euler_zyx, hover_state, rotation_angles
 from aerobat.quadrotor.envelope import ReducedEnvelope
-from aerobat.quadrotor.program import MANEUVER_RAMP_S, Program, RampDown, Switch
+from aerobat.quadrotor.program import MANEUVER_RAMP_S, Program, RampDown, make_switch
 from aerobat.quadrotor.vehicle import VehicleParams
 
 __all__ = ["DIMS", "FLIPS", "MAX_RATE", "MAX_RATE_DEG_S", "Axis", "Coast", "FlipStages", "MultiFlip", "flip_from_spec"]
@@ -55,6 +56,27 @@ MAX_RATE = Interval(_RATE_LOW_RAD_S, _RATE_HIGH_RAD_S, as_float=True,
 """c_pmax, the coast rates a flip may have [rad/s] (:attr:`MultiFlip.max_rate_rad_s`)."""
 MAX_RATE_DEG_S = Interval(math.degrees(_RATE_LOW_RAD_S), math.degrees(_RATE_HIGH_RAD_S), unit="deg/s")
 """The same range in degrees per second, for what is given in them (``--max-rate-deg-s``, the envelope's rates)."""
+
+
+def _event_time(event: tuple[tuple[str, float], float]) -> float:
+    return event[0][1]
+
+
+def _triangle(events: dict[tuple[str, float], float], channel: str, start: float, length: float, span: float,
+              amplitude: float) -> None:
+    """Eq 43's triangle on ``channel``: +A/span² from ``start``, −A/span² from half ``length`` on (0 if empty)."""
+    if length <= 1e-9 or span <= 1e-9:
+        events[(channel, round(start, 12))] = 0.0
+        return
+    level = amplitude / span**2
+    events[(channel, round(start, 12))] = level
+    events[(channel, round(start + 0.5 * length, 12))] = -level
+
+
+@lru_cache(maxsize=64)
+def _ramp_down(collective_s: float) -> RampDown:
+    """The flip's ramp-down (built and checked once per duration: programs are built in every design step)."""
+    return RampDown(collective_s=collective_s)
 
 
 @dataclass(frozen=True)
@@ -226,49 +248,41 @@ class MultiFlip:
             raise ConfigError(f"{self.name}: invalid parameters: {problem}")
         p = np.asarray(params, dtype=float)
         st = self.stages(p)
-        starts = st.starts_s
-        end = st.total_s
+        # plain floats from here (the same IEEE values as NumPy's scalars, a fraction of the cost: this
+        # runs for every simulation of every design)
+        starts = st.starts_s.tolist()
+        durations = st.durations_s.tolist()
+        end = float(st.durations_s.sum())
         flip_ch, lat_ch = ("accel_p", "accel_q") if self.axis == "roll" else ("accel_q", "accel_p")
+        # a later event at the same instant (zero-length stage) replaces the earlier one
         events: dict[tuple[str, float], float] = {}
-
-        def put(channel: str, time_s: float, value: float) -> None:
-            # a later event at the same instant (zero-length stage) replaces the earlier one
-            events[(channel, round(float(time_s), 12))] = float(value)
-
-        for k in range(5):
-            put("collective", starts[k], st.collectives_m_s2[k])
-            put(flip_ch, starts[k], st.accelerations_rad_s2[k])
+        for k, (collective, accel) in enumerate(zip(st.collectives_m_s2.tolist(), st.accelerations_rad_s2.tolist(),
+                                                    strict=True)):
+            events[("collective", round(starts[k], 12))] = collective
+            events[(flip_ch, round(starts[k], 12))] = accel
         if self.dims == 3:
+            q = p.tolist()
             # eq 43: F1(A, t_s, t_Δ) = A·sgn(t_s + t_Δ/2 − t)/t_Δ² on the stage [t_s, t_s + t_Δ]
-            for k, amplitude in ((0, p[5]), (1, p[6]), (3, p[7])):
-                self._triangle(put, lat_ch, starts[k], st.durations_s[k], st.durations_s[k], amplitude)
-            put(lat_ch, starts[2], 0.0)
-            put(lat_ch, starts[4], 0.0)
+            for k, amplitude in ((0, q[5]), (1, q[6]), (3, q[7])):
+                _triangle(events, lat_ch, starts[k], durations[k], durations[k], amplitude)
+            events[(lat_ch, round(starts[2], 12))] = 0.0
+            events[(lat_ch, round(starts[4], 12))] = 0.0
             # eqs 44, 46: F2 with t_Δ = p1 + p4 over accelerate and over recover
-            span = p[1] + p[4]
-            self._triangle(put, "accel_r", 0.0, p[1], span, p[8])
-            put("accel_r", starts[1], 0.0)
-            self._triangle(put, "accel_r", starts[4], p[4], span, p[8])
+            span = q[1] + q[4]
+            _triangle(events, "accel_r", 0.0, q[1], span, q[8])
+            events[("accel_r", round(starts[1], 12))] = 0.0
+            _triangle(events, "accel_r", starts[4], q[4], span, q[8])
         switches = tuple(
-            Switch(time_s=t, channel=ch, value=v) for (ch, t), v in sorted(events.items(), key=lambda e: e[0][1])
+            make_switch(t, ch, v) for (ch, t), v in sorted(events.items(), key=_event_time)
             if t < end
         )
         return Program(
             switches=switches,
             duration_s=end,
-            ramp_down=RampDown(collective_s=min(self.ramp_collective_s, end)),
+            ramp_down=_ramp_down(min(self.ramp_collective_s, end)),
             hover_collective_m_s2=self.vehicle.gravity_m_s2,
             name=self.name,
         )
-
-    @staticmethod
-    def _triangle(put, channel: str, start: float, length: float, span: float, amplitude: float) -> None:
-        if length <= 1e-9 or span <= 1e-9:
-            put(channel, start, 0.0)
-            return
-        level = amplitude / span**2
-        put(channel, start, level)
-        put(channel, start + 0.5 * length, -level)
 
     def initial_state(self) -> np.ndarray:
         """The hover state the flip starts from (13 entries: position, velocity, quaternion, rates)."""

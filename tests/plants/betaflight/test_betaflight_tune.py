@@ -60,6 +60,16 @@ def test_the_real_431_diff_is_translated_and_every_line_accounted_for() -> None:
     assert all(table.get(name).check(value) is None for name, value in values.items())
     text = report.text()
     assert "translated  simplified_dmax_gain = 0 -> simplified_d_max_gain = 0" in text and "refused" in text
+    # what `--tune` prints: the lines that matter, refused settings grouped by why (issue 44: not 87 lines)
+    summary = report.summary("aerobat tune FILE").splitlines()
+    assert summary[0] == text.splitlines()[0] and len(summary) <= 25 < len(text.splitlines())
+    assert [line for line in summary if line.startswith("  translated")] == [
+        line for line in text.splitlines() if line.startswith("  translated")]
+    assert "  refused     2 × a 4.6 setting not compiled into the SITL build (its hardware is absent): " \
+           "dyn_notch_count, dyn_notch_q" in summary
+    assert sum(int(line.split()[1]) for line in summary if line.startswith("  refused")) == len(report.refused)
+    assert summary[-1] == (f"  ({len(report.applied)} applied and {len(report.pinned)} pinned settings not listed: "
+                           "`aerobat tune FILE` prints every setting)")
 
 
 @needs_data

@@ -175,6 +175,25 @@ class TuneReport:
             "commands": list(self.commands),
         }
 
+    def summary(self, whole: str = "aerobat tune FILE") -> str:
+        """What a pilot must know before flying it, in a few lines: the counts, every translated setting, the
+        refused ones grouped by why (hardware the SITL lacks, another profile…) and the notes; ``whole``: the
+        command that prints every setting."""
+        t = self.tune
+        lines = [self.text().splitlines()[0]]
+        lines += [f"  translated  {o} = {ov} -> {n} = {nv}  ({t.where(line)}: {why})"
+                  for o, ov, n, nv, line, why in self.translated]
+        groups: dict[str, list[str]] = {}
+        for name, _, _, why in self.refused:
+            groups.setdefault(why, []).append(name)
+        for why, names in groups.items():
+            listed = ", ".join(dict.fromkeys(names))
+            lines.append(f"  refused     {len(names)} × {why}: {listed if len(listed) <= 100 else listed[:99] + '…'}")
+        lines += [f"  note        {note}" for note in self.notes]
+        lines.append(f"  ({len(self.applied)} applied and {len(self.pinned)} pinned settings not listed: `{whole}` "
+                     f"prints every setting)")
+        return "\n".join(lines)
+
     def text(self) -> str:
         """The report as people read it (one line per setting)."""
         t = self.tune

@@ -478,16 +478,14 @@ def with_tune_from_args(args: argparse.Namespace, choice: Any) -> Any:
     if choice.kind != "betaflight":
         raise ConfigError(f"--tune applies only with --plant betaflight (got --plant {choice.kind})")
     import dataclasses
+    import shlex
 
     from aerobat.plants import PlantChoice
 
     report, rates, rates_type = read_tune(tune_path, log_index)
     shown = ", ".join(f"{axis} {rate:.0f}" for axis, rate in rates.items())
-    import shlex
-
-    named = f"{tune_path}:{log_index}" if log_index is not None else str(tune_path)
-    summary = report.summary(f"aerobat tune {shlex.quote(named)}")
-    print(f"{summary}\n  the tune's full-stick rates [deg/s] ({rates_type}): {shown}; the pilot's "
+    whole = "aerobat tune " + shlex.quote(f"{tune_path}:{log_index}" if log_index is not None else str(tune_path))
+    print(f"{report.summary(whole)}\n  the tune's full-stick rates [deg/s] ({rates_type}): {shown}; the pilot's "
           "sticks invert its rate and throttle curves", file=sys.stderr)
     return PlantChoice(choice.kind, dataclasses.replace(choice.settings, tune=report.tune), choice.seed,
                        choice.feedback)

@@ -151,3 +151,21 @@ def test_the_learning_figure_has_no_tick_between_two_iterations():
         if ax.get_visible() and ax.get_xlabel() == "iteration":
             ticks = [t for t in ax.get_xticks() if ax.get_xlim()[0] <= t <= ax.get_xlim()[1]]
             assert ticks and all(float(t).is_integer() for t in ticks), ticks
+
+
+def test_the_robustness_panels_show_what_varies_when_every_vehicle_succeeds():
+    """Issue 44: 11 flat 100 % panels said nothing; the median trials to the tolerance per quintile does."""
+    import numpy as np
+
+    from aerobat.plotting.studies import plot_success_by_property
+
+    rng = np.random.default_rng(0)
+    mass = rng.uniform(0.4, 0.6, 50)
+    props = [{"mass_kg": float(m), "arm_m": 0.17} for m in mass]
+    trials = [int(2 + 10 * (m - 0.4)) for m in mass]  # heavier vehicles take longer
+    fig = plot_success_by_property(props, [True] * 50, ["mass_kg", "arm_m"], trials)
+    assert "every vehicle met the tolerance" in fig._suptitle.get_text()
+    twins = [ax for ax in fig.axes if ax.get_ylabel() == "median trials to tolerance"]
+    assert len(twins) == 1  # the constant property has no panel data
+    medians = twins[0].lines[0].get_ydata()
+    assert np.all(np.diff(medians) >= 0) and medians[-1] > medians[0]

@@ -33,12 +33,15 @@ def plot_trials_to_tolerance(trials_to_tolerance: Sequence[int | None], toleranc
 
 
 def plot_success_by_property(properties: Sequence[Mapping[str, float]], success: Sequence[bool],
-                             names: Sequence[str]) -> Any:
-    """Success rate per quintile of each sampled property (one panel per property)."""
+                             names: Sequence[str], trials: Sequence[float | None] | None = None) -> Any:
+    """Success rate per quintile of each sampled property (one panel per property); with ``trials`` (each
+    vehicle's trials to the tolerance, None if never), their median per quintile on a second axis: when
+    every vehicle succeeds the success rate is flat at 100 %, and how fast it learned is what varies."""
     ok = np.asarray(success, dtype=bool)
+    took = None if trials is None else np.array([np.nan if t is None else float(t) for t in trials])
     cols = 4
     rows = math.ceil(len(names) / cols)
-    fig = new_figure(figsize=(3.2 * cols, 2.6 * rows))
+    fig = new_figure(figsize=(3.2 * cols, 2.6 * rows + 0.4))
     axes = np.ravel(fig.subplots(rows, cols))
     for ax, name in zip(axes, names, strict=False):
         values = np.array([p[name] for p in properties], dtype=float)
@@ -52,9 +55,21 @@ def plot_success_by_property(properties: Sequence[Mapping[str, float]], success:
         ax.plot(centers, np.array(rate) * 100, "o-")
         ax.set_title(name, fontsize=8)
         ax.set_ylim(-5, 105)
-        ax.set_ylabel("success [%]", fontsize=8)
+        ax.set_ylabel("success [%]", fontsize=8, color="C0")
+        if took is not None and np.isfinite(took).any():
+            median = [np.nanmedian(took[(which == k) & np.isfinite(took)]) if np.any((which == k) & np.isfinite(took))
+                      else np.nan for k in range(len(edges) - 1)]
+            right = ax.twinx()
+            right.plot(centers, median, "s--", color="C1", ms=4)
+            right.set_ylabel("median trials to tolerance", fontsize=7, color="C1")
+            right.tick_params(labelsize=7, colors="C1")
     for ax in axes[len(names):]:
         ax.axis("off")
+    everyone = ok.size > 0 and bool(ok.all())
+    fig.suptitle("every vehicle met the tolerance: success is 100 % in every quintile; the squares (median trials "
+                 "to reach it) show what varies" if everyone and took is not None else
+                 "success per quintile of each sampled property" + (" (squares: median trials to the tolerance)"
+                                                                     if took is not None else ""), fontsize=9)
     return fig
 
 

@@ -365,7 +365,7 @@ class RobustnessReport:
         if not with_props:
             return None
         return _saved(plot_success_by_property([r.properties for r in with_props], [r.success for r in with_props],
-                                               self.properties), path)
+                                               self.properties, [r.trials_to_tolerance for r in with_props]), path)
 
     def write(self, folder: str | Path) -> list[Path]:
         """``trials_to_tolerance.png``, ``success_vs_property.png`` (if any vehicle learned) and ``robustness.json``."""

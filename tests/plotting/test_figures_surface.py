@@ -169,3 +169,29 @@ def test_the_robustness_panels_show_what_varies_when_every_vehicle_succeeds():
     assert len(twins) == 1  # the constant property has no panel data
     medians = twins[0].lines[0].get_ydata()
     assert np.all(np.diff(medians) >= 0) and medians[-1] > medians[0]
+
+
+def test_a_tall_side_view_has_no_tick_labels_running_together():
+    """Issue 44: a flip that goes up 3 m and sideways 0.2 m drew "-0.50.0 0.5" under a narrow panel."""
+    import numpy as np
+
+    from aerobat.plotting.vehicle import plot_side_views
+
+    t = np.linspace(0.0, 1.5, 300)
+    states = np.zeros((t.size, 13))
+    states[:, 6] = 1.0  # level attitude (w of the quaternion)
+    states[:, 1] = 0.1 * np.sin(4 * t)  # y: a little sideways
+    states[:, 2] = 3.0 * np.sin(np.pi * t / 1.5)  # z: up 3 m and back
+    fig = plot_side_views([("trial 1", t, states), ("trial 30", t, states)], plane="yz", target=(0.0, 0.0))
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    for ax in fig.axes:
+        low, high = ax.get_xlim()
+        labels = [lab for lab, at in zip(ax.get_xticklabels(), ax.get_xticks(), strict=True)
+                  if lab.get_visible() and lab.get_text() and low <= at <= high]  # the ones drawn
+        boxes = sorted((lab.get_window_extent(renderer) for lab in labels), key=lambda b: b.x0)
+        assert len(boxes) >= 2
+        assert all(a.x1 + 2 <= b.x0 for a, b in zip(boxes, boxes[1:], strict=False)), [lab.get_text() for lab in labels]

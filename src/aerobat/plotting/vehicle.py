@@ -159,8 +159,15 @@ def plot_side_views(panels: Sequence[tuple[str, np.ndarray, np.ndarray]], *,
         lows.append(low)
         highs.append(high)
     ratio = max(float((hi[0] - lo[0]) / max(hi[1] - lo[1], 1e-9)) for lo, hi in zip(lows, highs, strict=True))
-    fig = new_figure(figsize=(len(panels) * (max(1.6, min(6.0, 4.0 * ratio)) + 0.7) + 0.4, 0.4 + 4.5 * len(planes)))
+    panel_in = max(1.6, min(6.0, 4.0 * ratio))
+    fig = new_figure(figsize=(len(panels) * (panel_in + 0.7) + 0.4, 0.4 + 4.5 * len(planes)))
     axes = np.atleast_2d(fig.subplots(len(planes), len(panels), squeeze=False, sharex="row", sharey="row"))
+    from matplotlib.ticker import MaxNLocator
+
+    # a narrow box (a tall flight: the equal aspect makes it about 4 in × ratio wide) gets fewer horizontal
+    # ticks, their labels upright: labels such as "-0.25 0.00 0.25" ran together
+    x_bins = max(2, int(panel_in * 1.4))
+    narrow = 4.0 * ratio < 2.0
     for row, p in enumerate(planes):
         for k, (label, times, states) in enumerate(panels):
             ax = axes[row, k]
@@ -169,6 +176,9 @@ def plot_side_views(panels: Sequence[tuple[str, np.ndarray, np.ndarray]], *,
             ax.set_xlim(lows[row][0], highs[row][0])
             ax.set_ylim(lows[row][1], highs[row][1])
             ax.set_aspect("equal", adjustable="box")  # the limits are fixed: the box adjusts, not the data
+            ax.xaxis.set_major_locator(MaxNLocator(nbins=x_bins, steps=[1, 2, 2.5, 5, 10]))
+            if narrow:
+                ax.tick_params(axis="x", labelrotation=90)
             if k:
                 ax.set_ylabel("")
     axes[0, 0].legend(loc="best", fontsize=7)

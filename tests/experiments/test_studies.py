@@ -134,8 +134,29 @@ def test_envelope_study(tmp_path, capsys):
     assert len(rows) == 4
     triple = next(r for r in rows if r["flips"] == 3 and r["max_rate_deg_s"] == 1800)
     assert triple["converged"] and 1.3 < triple["duration_s"] < 1.7 and triple["apex_m"] > 0.5
+    # 3 flips at 800°/s: Newton stalls from the eq 37–39 guess; from its neighbours' mean p⁰ it converges
+    slow = next(r for r in rows if r["flips"] == 3 and r["max_rate_deg_s"] == 800)
+    assert slow["converged"] and slow["continued_from_deg_s"] == [600, 1000] and 2.4 < slow["duration_s"] < 2.7
+    assert triple["continued_from_deg_s"] == []  # converged from its own guess
     for name in ("feasible", "duration_s", "apex_m", "condition_number"):
         assert (tmp_path / "env" / f"envelope_{name}.png").exists()
+
+
+def test_a_design_job_without_continuation_reports_the_guess_failure():
+    """The continuation is the envelope's: a plain design job says what its guess gave."""
+    import math
+
+    from aerobat import hummingbird
+    from aerobat.experiments.jobs import design_job
+    from aerobat.quadrotor.maneuvers import MultiFlip
+    from aerobat.quadrotor.vehicle import vehicle_table
+
+    config = hummingbird()
+    spec = {"maneuver": MultiFlip(vehicle=config.vehicle, flips=3, dims=2, max_rate_rad_s=math.radians(800)).spec(),
+            "model": vehicle_table(config)}
+    plain = design_job(spec)
+    assert not plain["converged"] and plain["continued_from_deg_s"] == [] and "recover collective" in plain["message"]
+    assert design_job({**spec, "continuation": True})["converged"]
 
 
 def test_a_median_never_reached_reads_never_in_the_study_tables():

@@ -19,6 +19,7 @@ from aerobat.core.learning import Iteration, SessionStatus, learn
 from aerobat.core.maneuver import ErrorKind, Maneuver, position_indices
 from aerobat.core.registry import from_spec
 from aerobat.core.rules import RuleChoice
+from aerobat.errors import ConfigError
 from aerobat.experiments.baselines import BASELINES, run_baseline
 from aerobat.experiments.job import job_kind
 from aerobat.experiments.setup import build_rule
@@ -82,6 +83,9 @@ def design_job(spec: dict[str, Any]) -> dict[str, Any]:
     maneuver = from_spec(spec["maneuver"], source="job maneuver")
     model = vehicle_from_table(spec["model"], source="job model")
     result = design(maneuver, NominalModel(model))
+    continued_from: list[float] = []
+    if not result.converged and spec.get("continuation"):
+        result, continued_from = _continued(spec, model, result)
     apex = lowest = math.nan
     if result.converged:
         traj = simulate(maneuver.program(result.p_nominal), model)
@@ -97,7 +101,43 @@ def design_job(spec: dict[str, Any]) -> dict[str, Any]:
         "condition_number": result.condition_number if result.converged else math.nan,
         "residual_norm": result.residual_norm,
         "p_nominal": result.p_nominal.tolist(),
+        "continued_from_deg_s": continued_from,
     }
+
+
+CONTINUATION_STEPS = (0.25, 0.5)
+"""A flip whose design fails from its guess is tried again from its neighbours: the same flip at these
+fractions below and above its maximum rate, designed from their own guesses."""
+
+
+def _continued(spec: dict[str, Any], model: Any, failed: Any) -> tuple[Any, list[float]]:
+    """A design of ``spec``'s flip that failed from its guess (eqs 37–39), tried again from the mean p⁰ of
+    the same flip at a lower and a higher maximum rate (each of :data:`CONTINUATION_STEPS`) when both
+    converge: the guess, not the flip, may be what failed. ``(design, [lower, upper] rates [deg/s])``, or
+    the failed design and ``[]``."""
+    base = dict(spec["maneuver"])
+    if not isinstance(base.get("max_rate_rad_s"), int | float):
+        return failed, []  # not a flip: nothing to continue along
+    rate = float(base["max_rate_rad_s"])
+    for step in CONTINUATION_STEPS:
+        neighbours = []
+        for factor in (1.0 - step, 1.0 + step):
+            try:
+                neighbour = from_spec({**base, "max_rate_rad_s": rate * factor}, source="job maneuver")
+            except ConfigError:  # beyond the flip's own bounds on the rate
+                break
+            found = design(neighbour, NominalModel(model))
+            if not found.converged:
+                break
+            neighbours.append(found)
+        if len(neighbours) < 2:
+            continue
+        maneuver = from_spec(base, source="job maneuver")
+        guess = 0.5 * (neighbours[0].p_nominal + neighbours[1].p_nominal)
+        result = design(maneuver, NominalModel(model), p_guess=guess)
+        if result.converged:
+            return result, [round(math.degrees(rate * (1 - step)), 6), round(math.degrees(rate * (1 + step)), 6)]
+    return failed, []
 
 
 @job_kind("benchmark")

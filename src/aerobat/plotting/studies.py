@@ -80,11 +80,12 @@ _ENVELOPE_TITLES = {"feasible": "which flips the vehicle can fly (nominal design
 
 
 def plot_envelope(name: str, flips: Sequence[int], rates_deg_s: Sequence[float], values: np.ndarray, *,
-                  ax: Any = None) -> Any:
+                  ax: Any = None, continued: Sequence[tuple[int, float]] = ()) -> Any:
     """One quantity of a design envelope over (flip count, max rate); each cell centred on its sample.
 
     ``feasible`` is drawn with two colours and a legend (and grey for a job that failed); the
-    other quantities with a colour bar (the condition number on a log scale).
+    other quantities with a colour bar (the condition number on a log scale). ``continued``: the
+    (flips, rate) cells whose design converged only by continuation from their neighbours, marked "c".
     """
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
@@ -99,7 +100,10 @@ def plot_envelope(name: str, flips: Sequence[int], rates_deg_s: Sequence[float],
         cmap = ListedColormap(["#d62728", "#2ca02c", "#bbbbbb"])
         ax.imshow(shown, origin="lower", aspect="auto", cmap=cmap, vmin=-0.5, vmax=2.5, extent=extent,
                   interpolation="nearest")
-        handles = [Patch(color="#2ca02c", label="design converged"), Patch(color="#d62728", label="infeasible")]
+        handles = [Patch(color="#2ca02c", label="design converged"),
+                   Patch(color="#d62728", label="no design found (from the\nguess, nor by continuation)")]
+        if continued:
+            handles.append(Patch(color="white", label="c: converged by continuation\nfrom its neighbours in rate"))
         if np.isnan(data).any():
             handles.append(Patch(color="#bbbbbb", label="job failed (see aerobat studies)"))
         ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
@@ -108,6 +112,8 @@ def plot_envelope(name: str, flips: Sequence[int], rates_deg_s: Sequence[float],
         image = ax.imshow(shown, origin="lower", aspect="auto", cmap="viridis", extent=extent,
                           interpolation="nearest")
         fig.colorbar(image, ax=ax)
+    for n, rate in continued:
+        ax.text(rate, n, "c", ha="center", va="center", fontsize=9, color="white" if name == "feasible" else "k")
     ax.set_xticks(rates)
     ax.set_xticklabels([f"{r:g}" for r in rates], rotation=45, fontsize=7)
     ax.set_yticks(list(flips))

@@ -23,10 +23,11 @@ def envelope_key(flips: int, rate_deg_s: float) -> str:
 
 def envelope_jobs(base_spec: Mapping[str, Any], model: VehicleConfig, flips: Sequence[int],
                   rates_deg_s: Sequence[float]) -> list[Job]:
-    """One design job per (flip count, max rate) of a flip specification."""
+    """One design job per (flip count, max rate) of a flip specification; one that fails from its guess is
+    tried again by continuation from its neighbours in rate (:func:`aerobat.experiments.jobs.design_job`)."""
     return [Job(key=envelope_key(n, rate), kind="design", spec={
-        "maneuver": dict(base_spec, flips=int(n), max_rate_rad_s=math.radians(rate)), "model": vehicle_table(model)})
-        for n in flips for rate in rates_deg_s]
+        "maneuver": dict(base_spec, flips=int(n), max_rate_rad_s=math.radians(rate)), "model": vehicle_table(model),
+        "continuation": True}) for n in flips for rate in rates_deg_s]
 
 
 def envelope_grid(results: Mapping[str, Mapping[str, Any]], flips: Sequence[int],
@@ -46,5 +47,5 @@ def envelope_grid(results: Mapping[str, Mapping[str, Any]], flips: Sequence[int]
             job = JobStatus.DONE if r is not None else JobStatus.FAILED
             rows.append({"flips": n, "max_rate_deg_s": rate, "job": job,
                          **{k: (r or {}).get(k) for k in ("converged", "status", "duration_s", "apex_m", "lowest_m",
-                                                          "condition_number")}})
+                                                          "condition_number", "continued_from_deg_s")}})
     return feasible, grid, rows

@@ -415,6 +415,8 @@ class EnvelopeCell:
     apex_m: float | None
     lowest_m: float | None
     condition_number: float | None
+    continued_from_deg_s: list[float] | None = None
+    """The lower and upper rates whose designs' mean p⁰ it converged from when its own guess failed."""
 
 
 @dataclass(frozen=True)
@@ -447,7 +449,8 @@ class EnvelopeReport:
         if quantity != "feasible" and quantity not in self.grids:
             raise ConfigError(f"envelope quantity {quantity!r}: use feasible, {', '.join(self.grids)}")
         values = self.feasible if quantity == "feasible" else self.grids[quantity]
-        return _saved(plot_envelope(quantity, self.flips, self.rates_deg_s, values, ax=ax), path)
+        continued = [(r.flips, r.max_rate_deg_s) for r in self.rows if r.continued_from_deg_s]
+        return _saved(plot_envelope(quantity, self.flips, self.rates_deg_s, values, ax=ax, continued=continued), path)
 
     def write(self, folder: str | Path) -> list[Path]:
         """``envelope.json`` and ``envelope_feasible.png`` with one figure per quantity."""

@@ -468,7 +468,7 @@ def test_learn_stores_everything_and_sessions_show_plot_export_read_it(tmp_path,
     code, out, _ = run(capsys, "sessions", "--db", db, "--json")
     assert json.loads(out)[0]["iterations"] == 3
     code, out, _ = run(capsys, "show", "last", "--db", db)
-    assert code == 0 and "session 1:" in out and "position error [m]" in out and "learned:" in out
+    assert code == 0 and "session 1:" in out and "position error [m]" in out and "learned" in out and "p⁰" in out
     code, out, _ = run(capsys, "show", "last", "--full", "--db", db)
     assert code == 0 and "flip_angle" in out
     code, out, _ = run(capsys, "show", "1", "--db", db, "--json")

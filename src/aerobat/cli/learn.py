@@ -215,11 +215,13 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
         say(f"  note: resumed trials will not repeat an uninterrupted run exactly: {run.inexact_because}")
 
     progress = _Progress(run.measured, run.target)
-    say("  (each trial: γ is the update's step, Sect. 4; scale the part of it kept inside the parameters' "
-        "bounds, Sect. 4.2)")
+    legend = ["  (each trial: γ is the update's step, Sect. 4; scale the part of it kept inside the parameters' "
+              "bounds, Sect. 4.2)"]
 
     def on_iteration(it: Any) -> None:  # printed only once committed: every line is a stored iteration
         when = progress.tick(it.measured)
+        while legend:  # above the first trial's line
+            say(legend.pop())
         if it.measured:
             say(f"  {it.index:3d}  ok          position error {position_error_m(run.maneuver, it.error):7.3f} m  "
                 f"γ={it.gamma:.2f}  scale={it.scale:.2f}  {when}")

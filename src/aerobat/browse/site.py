@@ -125,8 +125,10 @@ def _pinned(spec: Any, value: float) -> str:
 
 def _plotly_js() -> bytes:
     """plotly.js as the ``plotly`` package ships it (the compare page's figure; no network)."""
-    from plotly.offline import get_plotlyjs
-
+    try:
+        from plotly.offline import get_plotlyjs
+    except ImportError:  # the page falls back to its PNG
+        raise NotFound("assets/plotly.min.js: plotly is not installed (pip install 'aerobat[viewers]')") from None
     return str(get_plotlyjs()).encode()
 
 

@@ -150,3 +150,12 @@ def test_the_declared_design_options_have_the_signatures_defaults():
     signature = inspect.signature(design).parameters
     for f in dataclasses.fields(_DesignArguments):
         assert signature[f.name].default == f.default, f.name
+
+
+def test_a_parameter_on_its_bound_is_pinned_within_a_ten_thousandth_of_its_scale():
+    from aerobat.core.maneuver import ParameterSpec
+
+    spec = ParameterSpec(name="p2", description="coast duration", unit="s", lower=0.0, upper=5.0, scale=0.02)
+    assert spec.pinned(0.0) == "lower" and spec.pinned(1.9e-6) == "lower" and spec.pinned(2.1e-6) == ""
+    assert spec.pinned(5.0 - 1e-6) == "upper" and spec.pinned(2.5) == ""
+    assert ParameterSpec(name="p5", description="free", unit="rad").pinned(-1e9) == ""  # no bound, never pinned

@@ -113,14 +113,9 @@ def _dtick(curves: Sequence[Mapping[str, Any]]) -> int:
 
 
 def _pinned(spec: Any, value: float) -> str:
-    """``"at its lower bound 0"`` if ``value`` is within 1e-4 of the parameter's scale of a bound (as the design
-    says), else empty."""
-    tol = 1e-4 * spec.scale
-    if math.isfinite(spec.lower) and value <= spec.lower + tol:
-        return f"at its lower bound {spec.lower:g}"
-    if math.isfinite(spec.upper) and value >= spec.upper - tol:
-        return f"at its upper bound {spec.upper:g}"
-    return ""
+    """``"at its lower bound 0"`` if ``value`` sits on a bound (:meth:`ParameterSpec.pinned`), else empty."""
+    side = spec.pinned(value)
+    return f"at its {side} bound {spec.lower if side == 'lower' else spec.upper:g}" if side else ""
 
 
 def _plotly_js() -> bytes:

@@ -26,13 +26,8 @@ def parameter_table(mrec: Any, nominal: np.ndarray, learned: np.ndarray) -> Any:
         rows.add_column(name, justify=justify)  # type: ignore[arg-type]
     for k, (name, unit) in enumerate(zip(mrec.parameter_names, mrec.parameter_units, strict=True)):
         p0, p = float(nominal[k]), float(learned[k])
-        pinned = ""
-        if specs:
-            spec = specs[k]
-            if p <= spec.lower + 1e-4 * spec.scale:
-                pinned = f" (at its lower bound {spec.lower:g})"
-            elif p >= spec.upper - 1e-4 * spec.scale:
-                pinned = f" (at its upper bound {spec.upper:g})"
+        side = specs[k].pinned(p) if specs else ""
+        pinned = f" (at its {side} bound {specs[k].lower if side == 'lower' else specs[k].upper:g})" if side else ""
         rows.add_row(name, specs[k].description if specs else "", unit, f"{p0:.4g}", f"{p:.4g}{pinned}",
                      f"{p - p0:+.3g}")
     return rows

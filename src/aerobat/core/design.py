@@ -458,13 +458,10 @@ def _pinned(maneuver: Maneuver, p: np.ndarray, lower: np.ndarray, upper: np.ndar
         # within 1e-4 of its scale: a bounded trust-region solve that stops on `ftol` leaves a pinned
         # parameter ~1e-5 scales inside its bound (the 1e-6 used before made the named reason depend
         # on the last bits of the model)
-        tol = 1e-4 * spec.scale
-        if math.isfinite(lo) and value <= lo + tol:
-            bound, side, limit = spec.bound_names[0], "lower", lo
-        elif math.isfinite(hi) and value >= hi - tol:
-            bound, side, limit = spec.bound_names[1], "upper", hi
-        else:
+        side = spec.pinned(value)
+        if not side:
             continue
+        bound, limit = (spec.bound_names[0], lo) if side == "lower" else (spec.bound_names[1], hi)
         name = f" = {bound}" if bound else ""
         out.append((bool(bound), f"{spec.name} ({spec.description}) = {value:.4g} {spec.unit} at its {side} "
                                  f"limit {limit:.4g}{name}"))

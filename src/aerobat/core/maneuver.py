@@ -76,6 +76,16 @@ class ParameterSpec:
             raise ConfigError(f"parameter {self.name}: lower = {self.lower} must be < upper = {self.upper}")
         validate(self)
 
+    def pinned(self, value: float) -> str:
+        """``"lower"`` or ``"upper"`` if ``value`` sits on that bound (within 1e-4 of the scale: a bounded
+        solve leaves a pinned parameter a hair inside it), else ``""``."""
+        tol = 1e-4 * self.scale
+        if math.isfinite(self.lower) and value <= self.lower + tol:
+            return "lower"
+        if math.isfinite(self.upper) and value >= self.upper - tol:
+            return "upper"
+        return ""
+
 
 @dataclass(frozen=True, kw_only=True)
 class ErrorSpec:

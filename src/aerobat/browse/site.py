@@ -113,7 +113,8 @@ def _dtick(curves: Sequence[Mapping[str, Any]]) -> int:
 
 
 def _pinned(spec: Any, value: float) -> str:
-    """``"at its lower bound 0"`` if ``value`` sits on a bound (:meth:`ParameterSpec.pinned`), else empty."""
+    """``"at its lower bound 0"`` if ``value`` sits on a bound (:meth:`aerobat.core.maneuver.ParameterSpec.pinned`),
+    else empty."""
     side = spec.pinned(value)
     return f"at its {side} bound {spec.lower if side == 'lower' else spec.upper:g}" if side else ""
 

@@ -109,6 +109,12 @@ def check_session_mcap(path: Path, store: Store, session_id: int) -> dict[str, i
         assert [s["f1_n"] for s in states] == as_json(it.states[:, 13])  # null where not measured (the arena)
         assert [s["p_rad_s"] for s in states] == as_json(it.states[:, 10])
         assert [s["vz_m_s"] for s in states] == as_json(it.states[:, 5]) and states[0]["vz_m_s"] is not None
+        # body rates estimated from the measured attitude: there whatever the plant measures (issue 44)
+        from aerobat.quadrotor.attitude_rates import body_rates_from_attitude
+
+        estimated = body_rates_from_attitude(it.times_s, it.states[:, 6:10])
+        for k, name in enumerate(("p_est_rad_s", "q_est_rad_s", "r_est_rad_s")):
+            assert [s[name] for s in states] == as_json(estimated[:, k]) and None not in [s[name] for s in states]
         for _, _, m in reader.iter_messages():
             if m.data[:1] == b"{":
                 json.loads(m.data, parse_constant=lambda c: pytest.fail(f"{c} is not JSON"))

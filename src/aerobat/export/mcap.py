@@ -42,11 +42,16 @@ _STATE_COLUMNS = ((3, "vx_m_s"), (4, "vy_m_s"), (5, "vz_m_s"), (10, "p_rad_s"), 
                   (13, "f1_n"), (14, "f2_n"), (15, "f3_n"), (16, "f4_n"))
 """State columns sent on ``/trial/N/state`` (a value the plant did not measure, e.g. the arena's thrusts, is null)."""
 _COMMAND_COLUMNS = ((0, "collective_m_s2"), (1, "p_hat_rad_s"), (2, "q_hat_rad_s"), (3, "r_hat_rad_s"))
+_ESTIMATED_RATES = ("p_est_rad_s", "q_est_rad_s", "r_est_rad_s")
+"""Body rates estimated from the measured attitude (:func:`~aerobat.quadrotor.attitude_rates.body_rates_from_attitude`),
+sent beside the measured ones: a plant that measures no rates (the arena's motion capture) still has them."""
 
 _STATE_SCHEMA = {
     "type": "object", "title": "aerobat.TrialState",
     "properties": {"trial": {"type": "integer"}, "t_s": {"type": "number"},
-                   **{k: {"type": ["number", "null"]} for _, k in _STATE_COLUMNS}}}
+                   **{k: {"type": ["number", "null"]} for _, k in _STATE_COLUMNS},
+                   **{k: {"type": ["number", "null"], "description": "estimated from the measured attitude"}
+                      for k in _ESTIMATED_RATES}}}
 _COMMAND_SCHEMA = {
     "type": "object", "title": "aerobat.Command",
     "properties": {"trial": {"type": "integer"}, "t_s": {"type": "number"},
@@ -111,6 +116,7 @@ def write_session_mcap(store: Store, session_id: int, path: str | Path) -> McapS
     except ImportError as exc:
         raise MissingDependency(str(exc.name or "mcap"), extra="viewers", purpose="export --format mcap") from None
     from aerobat.core.registry import from_spec
+    from aerobat.quadrotor.attitude_rates import body_rates_from_attitude
 
     rec = store.session(session_id)
     mrec = store.maneuver(rec.maneuver_id)
@@ -158,8 +164,10 @@ def write_session_mcap(store: Store, session_id: int, path: str | Path) -> McapS
                     times = np.asarray(it.times_s, dtype=np.float64)
                     states = np.asarray(it.states, dtype=np.float64)
                     commands = maneuver.program(it.params).commands_at(times)
+                    estimated = body_rates_from_attitude(times, states[:, 6:10])
                     stamps = t0 + np.round((times - times[0]) * 1e9).astype(np.int64)
-                    for row, t, x, u in zip(stamps.tolist(), times.tolist(), states, commands, strict=True):
+                    for row, t, x, u, w in zip(stamps.tolist(), times.tolist(), states, commands, estimated,
+                                               strict=True):
                         pose = PoseInFrame(frame_id="world")
                         pose.timestamp.FromNanoseconds(row)
                         pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = map(float, x[0:3])
@@ -172,7 +180,8 @@ def write_session_mcap(store: Store, session_id: int, path: str | Path) -> McapS
                         tf.rotation.w, tf.rotation.x, tf.rotation.y, tf.rotation.z = map(float, x[6:10])
                         emit("/tf", tf_schema, "protobuf", row, tf.SerializeToString())
                         emit_json(f"/trial/{it.index}/state", "state", row, {
-                            "trial": it.index, "t_s": t, **{name: _finite(x[k]) for k, name in _STATE_COLUMNS}})
+                            "trial": it.index, "t_s": t, **{name: _finite(x[k]) for k, name in _STATE_COLUMNS},
+                            **{name: _finite(w[k]) for k, name in enumerate(_ESTIMATED_RATES)}})
                         emit_json(f"/trial/{it.index}/command", "command", row, {
                             "trial": it.index, "t_s": t, **{name: _finite(u[k]) for k, name in _COMMAND_COLUMNS}})
                     end = int(stamps[-1])

@@ -416,11 +416,9 @@ class Site:
         fig = new_figure(figsize=(8, 4))
         ax = fig.subplots()
         for sid in ids:
-            mask = np.array(self.store.maneuver(self.store.session(sid).maneuver_id).position_mask, dtype=bool)
-            its = [it for it in self.store.iterations(sid) if it.status is IterationStatus.OK]
-            if its and mask.any():
-                ax.semilogy([it.index for it in its], [float(np.linalg.norm(it.error[mask])) for it in its], ".-",
-                            label=f"session {sid}")
+            curve = self._error_curve(sid, f"session {sid}")  # the interactive figure's points
+            if curve["x"]:
+                ax.semilogy(curve["x"], curve["y"], ".-", label=curve["name"])
         from matplotlib.ticker import MaxNLocator
 
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))  # trials are whole numbers

@@ -96,10 +96,6 @@ def _flat(table: Any, prefix: str = "") -> dict[str, str]:
     return {prefix.rstrip("."): json.dumps(table, sort_keys=True) if isinstance(table, list) else str(table)}
 
 
-def _text(name: str, value: Any, limit: int) -> str:
-    return check_text(name, value, limit)
-
-
 def _nocase(text: str) -> str:
     """``text`` with ASCII letters in lower case (as SQLite's NOCASE compares)."""
     return text.translate(_LOWER)
@@ -131,10 +127,6 @@ class Browsing(Reading):
         The filters run in the database (:meth:`query_sessions`): only the sessions returned are read.
         """
         check_type("include_studies", include_studies, (bool, np.bool_), "True or False")
-        if limit is not None:
-            from aerobat.config import check_int
-
-            check_int("limit", limit, low=1)
         query = SessionQuery(plant=plant, maneuver=maneuver, vehicle=vehicle, feedback=feedback, status=status,
                              tag=tag, study=None if study is None else self.resolve_study(study),
                              include_studies=bool(include_studies), descending=limit is not None, limit=limit)
@@ -233,7 +225,7 @@ class Browsing(Reading):
     def tag_session(self, session_id: int, tag: str, *, remove: bool = False) -> tuple[str, ...]:
         """Add (or ``remove``) a tag; the session's tags afterwards."""
         session_id = self._session_id(session_id)
-        tag = _text("tag", tag, _MAX_TAG)
+        tag = check_text("tag", tag, _MAX_TAG)
         if any(c.isspace() or c == "," for c in tag):
             raise ConfigError(f"tag {short_repr(tag)}: no spaces or commas (give several tags one at a time)")
 
@@ -253,7 +245,7 @@ class Browsing(Reading):
     def note_session(self, session_id: int, text: str) -> int:
         """Append a note to a session (kept with the time it was written); how many notes it has."""
         session_id = self._session_id(session_id)
-        text = _text("note", text, _MAX_NOTE)
+        text = check_text("note", text, _MAX_NOTE)
 
         def write(conn: sqlite3.Connection) -> int:
             row = checksums.fetch(conn, self.path, "sessions", {"id": session_id})

@@ -4,8 +4,9 @@ Each document's shell commands run in order, in a fresh folder (the repository's
 ``examples`` linked in, no ``$AEROBAT_DB``), so a document's later commands see what its
 earlier ones stored. The fast suite runs them with smaller sizes (fewer iterations, seeds,
 vehicles, grid points; the rule is :func:`smaller`); the slow suite runs them as written.
-Python blocks run too, in order, in one namespace per document. A command the suite cannot
-run is listed in ``NOT_RUN`` with the reason.
+Python blocks run too: a document's blocks, in order, are saved as one script in that folder and run
+by the venv's Python in a process of their own, as a reader would save and run them (issue 44).
+A command the suite cannot run is listed in ``NOT_RUN`` with the reason.
 """
 
 from __future__ import annotations
@@ -129,7 +130,6 @@ def run_document(path: Path, tmp: Path, *, small: bool) -> list[str]:
     (tmp / "examples").symlink_to(ROOT / "examples")
     (tmp / "benchmarks").symlink_to(ROOT / "benchmarks")
     (tmp / "scripts").symlink_to(ROOT / "scripts")
-    (tmp / "out").mkdir()
     env = dict(os.environ)  # as written: no test plugin on the path (docs/maneuvers.md names a file instead)
     env.pop("AEROBAT_DB", None)
     ran: list[str] = []
@@ -187,17 +187,16 @@ def run_document(path: Path, tmp: Path, *, small: bool) -> list[str]:
                 result = subprocess.run(argv, capture_output=True, text=True, timeout=3600, cwd=tmp, env=env)
                 assert result.returncode == 0, f"{path.name}: `{command}`:\n{result.stderr[-2000:]}"
             ran.append(command)
-        namespace: dict = {"__name__": "__main__"}  # a block runs as the script a reader would save
-        cwd = os.getcwd()
-        os.chdir(tmp)
-        try:
-            for language, body in blocks(path):
-                if language == "python":
-                    code = re.sub(r"iterations=30", "iterations=3", body) if small else body
-                    exec(compile(code, f"{path.name} python block", "exec"), namespace)  # noqa: S102
-                    ran.append("python block")
-        finally:
-            os.chdir(cwd)
+        snippets = [re.sub(r"iterations=30", "iterations=3", body) if small else body
+                    for language, body in blocks(path) if language == "python"]
+        if snippets:  # saved to a file in the folder and run as a reader would (issue 44), not exec'd in here
+            script = tmp / f"{path.stem.lower()}_snippets.py"
+            script.write_text("\n\n".join(snippets))
+            result = subprocess.run([sys.executable, script.name], capture_output=True, text=True, timeout=1800,
+                                    cwd=tmp, env=env)
+            assert result.returncode == 0, f"{path.name}: its python blocks, saved as {script.name}:\n" \
+                                           f"{result.stderr[-3000:]}"
+            ran += ["python block"] * len(snippets)
     return ran
 
 

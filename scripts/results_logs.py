@@ -11,6 +11,8 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+import numpy as np
+
 from aerobat.errors import ConfigError
 from aerobat.experiments.log_identify import identify_from_logs
 from aerobat.logs import Channel, read_logs
@@ -109,13 +111,42 @@ def gecko_and_px4() -> list[str]:
     return lines
 
 
+def pilot_table() -> list[str]:
+    """What `log plot` reads for a pilot: the crash, and the step response per axis, on each Betaflight flight."""
+    from aerobat.logs import read_logs
+    from aerobat.plotting.flightlog import log_crash
+    from aerobat.quadrotor.log_analysis import estimate_step_response
+
+    lines = ["| flight | crash | roll: 50 % / rise / overshoot | pitch | yaw |", "|---|---|---|---|---|"]
+    for path in (ROMA, GECKO):
+        for log in read_logs(path):
+            if log.duration_s < 10.0:
+                continue
+            crash = log_crash(log)
+            flight = log.window(-np.inf, crash.time_s) if crash else log
+            g = flight.signals[Channel.GYRO]
+            sp = np.degrees(flight.signals[Channel.RATE_SETPOINT].at(g.time_s))
+            cells = []
+            for k in range(3):
+                r = estimate_step_response(g.time_s, sp[:, k], np.degrees(g.values[:, k]))
+                cells.append("—" if r is None else f"{1e3 * r.delay_s:.0f} ms / {1e3 * r.rise_s:.0f} ms / "
+                             f"{100 * r.overshoot:.0f} % (0 ms: {r.mean[0]:.2f}, 500 ms: {r.mean[-1]:.2f})")
+            where = f"{crash.time_s:.2f} s: {crash.reason}" if crash else "none"
+            lines.append(f"| {log.name} | {where} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def figures(out: Path) -> None:
-    from aerobat.logs import read_log
+    from aerobat.logs import read_log, read_logs
     from aerobat.plotting import save_figure
-    from aerobat.plotting.flightlog import plot_log_fit, plot_log_traces
+    from aerobat.plotting.flightlog import plot_log_fit, plot_log_spectrogram, plot_log_step_response, plot_log_traces
 
     out.mkdir(parents=True, exist_ok=True)
     save_figure(plot_log_traces(read_log(GECKO), window_s=(50.0, 58.0)), out / "gecko_traces.png")
+    roma1 = read_logs(ROMA)[0]
+    save_figure(plot_log_traces(roma1), out / "roma1_traces.png")
+    save_figure(plot_log_spectrogram(roma1), out / "roma1_spectrogram.png")
+    save_figure(plot_log_step_response(roma1), out / "roma1_step_response.png")
     result = identify_from_logs([f"{ROMA}:1"], ROMA_GEOMETRY)
     save_figure(plot_log_fit(result.fit, result.prepared[0]), out / "roma_fit.png")
     print(f"figures written to {out}")
@@ -131,7 +162,8 @@ def main() -> None:
         raise SystemExit(f"{DATA} is absent: the real logs are needed")
     for title, lines in (("Every shared log", info_table()), ("Crazyflie 2.1 from log10, log15, log16",
                                                                crazyflie_table()),
-                         ("DIATONE ROMA F5 from its first log", roma_table()), ("Gecko and PX4", gecko_and_px4())):
+                         ("DIATONE ROMA F5 from its first log", roma_table()), ("Gecko and PX4", gecko_and_px4()),
+                         ("What log plot reads for a pilot", pilot_table())):
         print(f"### {title}\n")
         print("\n".join(lines))
         print()

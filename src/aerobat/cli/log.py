@@ -93,7 +93,13 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 def _cmd_plot(args: argparse.Namespace) -> int:
     from aerobat.plotting import save_figure
-    from aerobat.plotting.flightlog import plot_log_spectra, plot_log_traces
+    from aerobat.plotting.flightlog import (
+        plot_log_pid,
+        plot_log_spectra,
+        plot_log_spectrogram,
+        plot_log_step_response,
+        plot_log_traces,
+    )
 
     logs = _logs(args)
     out = Path(args.out) if args.out else Path("out") / f"log-{Path(args.file).name}"
@@ -103,11 +109,19 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     written = []
     for log in logs:
         stem = f"log{log.index}"
-        for suffix, draw in (("traces", lambda log=log: plot_log_traces(log, window_s=window)),
-                             ("spectra", lambda log=log: plot_log_spectra(log))):
+        figures = (("traces", plot_log_traces, "needs a gyro"), ("pid", plot_log_pid, "the log has no PID terms"),
+                   ("spectra", plot_log_spectra, ""),
+                   ("spectrogram", plot_log_spectrogram,
+                    "needs a gyro and a throttle over at least one 128-sample segment"),
+                   ("step_response", plot_log_step_response, "needs a rate set point and a gyro"))
+        for suffix, draw, missing in figures:
             path = out / f"{stem}_{suffix}.png"
             refuse_overwrite(path, store_path=None, force=args.force, option="--out")
-            save_figure(draw(), path)  # one figure at a time: each is let go once written
+            figure = draw(log, window_s=window)
+            if figure is None:
+                say(f"log {log.index}: no {suffix.replace('_', ' ')} figure: {missing}")
+                continue
+            save_figure(figure, path)  # one figure at a time: each is let go once written
             written.append(str(path))
             say(f"wrote {path}")
     if args.json:
@@ -188,7 +202,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
     from aerobat.experiments.log_replay import AXES, replay_log
     from aerobat.plotting import save_figure
-    from aerobat.plotting.log_replay import plot_replay
+    from aerobat.plotting.log_replay import plot_replay, plot_replay_steps
 
     params, source = None, "the default 5-inch (settings.toml's airframe)"
     if args.airframe is not None:
@@ -215,10 +229,14 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         print(file=sys.stderr)
     stem = result.log.replace("#", "-log")
     figure = out / f"{stem}_{result.window_s[0]:g}-{result.window_s[1]:g}s.png"
-    refuse_overwrite(figure, store_path=None, force=args.force, option="--out")
+    steps_figure = figure.with_name(f"{figure.stem}_steps.png")
+    for path in (figure, steps_figure):
+        refuse_overwrite(path, store_path=None, force=args.force, option="--out")
     save_figure(plot_replay(result), figure)
+    save_figure(plot_replay_steps(result), steps_figure)
     summary = result.summary()
     summary["figure"] = str(figure)
+    summary["steps_figure"] = str(steps_figure)
     if result.tune_report is not None:
         summary["tune"] = result.tune_report.text()
     if args.json:
@@ -252,7 +270,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         f"{term} " + ", ".join(f"{axis} {m.rms:.1f} r {m.correlation:.2f} of {m.logged_rms:.1f}"
                                for axis, m in zip(AXES, row, strict=True) if m is not None)
         for term, row in zip("PIDF", result.pid, strict=True)), highlight=False)
-    say(f"wrote {figure}", highlight=False)
+    say(f"wrote {figure} and {steps_figure}", highlight=False)
     return 0
 
 

@@ -8,7 +8,7 @@ import numpy as np
 
 from aerobat.plotting.files import new_figure
 
-__all__ = ["plot_replay"]
+__all__ = ["plot_replay", "plot_replay_steps"]
 
 _AXES = ("roll", "pitch", "yaw")
 
@@ -58,4 +58,41 @@ def plot_replay(result: Any) -> Any:
     lo, hi = result.window_s
     fig.suptitle(f"{result.log} {lo:g}–{hi:g} s through Betaflight 4.6 SITL with the log's tune; airframe: "
                  f"{result.airframe}", fontsize=10)
+    return fig
+
+
+def plot_replay_steps(result: Any) -> Any:
+    """Per axis the step response from set point to gyro, estimated the same way from the log and from the SITL
+    (:func:`aerobat.quadrotor.log_analysis.estimate_step_response`), with the medians of the steps found.
+
+    ``result`` is an :class:`aerobat.experiments.log_replay.LogReplay`.
+    """
+    from aerobat.plotting.flightlog import draw_step, step_words
+    from aerobat.quadrotor.log_analysis import estimate_step_response
+
+    fig = new_figure(figsize=(12, 4.4))
+    axes = fig.subplots(1, 3, sharey=True)
+    t = result.time_s
+    found = result.step_summary()
+    for k, (ax, name) in enumerate(zip(axes, _AXES, strict=True)):
+        logged = estimate_step_response(t, result.setpoint_log[:, k], result.gyro_log[:, k])
+        sim_sp = result.setpoint_sim[:, k] if np.all(np.isfinite(result.setpoint_sim[:, k])) \
+            else result.setpoint_model[:, k]
+        simulated = estimate_step_response(t, sim_sp, result.gyro_sim[:, k])
+        draw_step(ax, logged, "log", "tab:blue")
+        draw_step(ax, simulated, "SITL", "tab:red")
+        steps = found.get(name, {})
+        title = f"{name}\nlog: {step_words(logged)}\nSITL: {step_words(simulated)}"
+        if steps.get("steps"):
+            count = int(steps["steps"])
+            title += (f"\n{count} step{'s' if count != 1 else ''} found: rise {1e3 * steps['rise_log_s']:.0f} / "
+                      f"{1e3 * steps['rise_sim_s']:.0f} ms, overshoot {100 * steps['overshoot_log']:.0f} / "
+                      f"{100 * steps['overshoot_sim']:.0f} % (log / SITL)")
+        ax.set_title(title, fontsize=8, loc="left")
+        ax.axhline(1.0, color="k", lw=0.6, ls=":")
+        ax.set_xlabel("time after the step [ms]")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("gyro ÷ set-point step")
+    lo, hi = result.window_s
+    fig.suptitle(f"{result.log} {lo:g}–{hi:g} s: step responses, logged and through the SITL", fontsize=10)
     return fig

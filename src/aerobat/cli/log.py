@@ -129,6 +129,62 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def _what_if(args: argparse.Namespace, params: Any, source: str, out: Path, window: Any, progress: Any) -> int:
+    """``log replay FILE --tune OTHER --set NAME=VALUE``: the logged sticks with the log's tune and the other."""
+    import sys
+
+    from aerobat.experiments.log_replay import AXES
+    from aerobat.experiments.log_whatif import what_if
+    from aerobat.plotting import save_figure
+    from aerobat.plotting.log_replay import plot_what_if
+
+    say = console(args.json).print
+    tune = None
+    if args.tune is not None:
+        from aerobat.cli.common import read_tune
+
+        tune = read_tune(args.tune, option="--tune FILE:N")[0].tune  # checked as the firmware would be
+    result = what_if(args.file, tune=tune, changes=tuple(args.set or ()), window_s=window, params=params,
+                     airframe_source=source, step_min_deg_s=args.step_min_deg_s, seed=args.seed, progress=progress)
+    if sys.stderr.isatty():
+        print(file=sys.stderr)
+    lo, hi = result.flown.window_s
+    figure = out / f"{result.flown.log.replace('#', '-log')}_{lo:g}-{hi:g}s_whatif.png"
+    refuse_overwrite(figure, store_path=None, force=args.force, option="--out")
+    save_figure(plot_what_if(result), figure)
+    if args.json:
+        print(json_text({**result.summary(), "figure": str(figure)}))
+        return 0
+    say(f"{result.flown.log} {lo:g}–{hi:g} s: the logged sticks through Betaflight 4.6 SITL with the log's own tune "
+        f"and with {result.what_if_source}; airframe: {source}", highlight=False)
+    if result.differences:
+        say("  settings that differ, as the firmware runs them (the log's → the what-if): " + "; ".join(
+            f"{d.name} {d.flown} → {d.what_if}" for d in result.differences), highlight=False)
+    else:
+        say("  no setting differs: the what-if flies the log's own tune", highlight=False)
+    names = " / ".join(r.name for r in result.readings)
+    say(f"  per axis, {names}:", highlight=False)
+
+    def ms(v: float) -> str:
+        return f"{1e3 * v:.0f}" if v == v else "—"
+
+    def pct(v: float) -> str:
+        return f"{100 * v:.0f}" if v == v else "—"
+
+    for k, axis in enumerate(AXES):
+        a = [r.axes[k] for r in result.readings]
+        say(f"  {axis:5s} step response: 50 % at {' / '.join(ms(x.delay_s) for x in a)} ms, rise "
+            f"{' / '.join(ms(x.rise_s) for x in a)} ms, overshoot {' / '.join(pct(x.overshoot) for x in a)} %; "
+            f"{a[0].steps} set-point steps: rise {' / '.join(ms(x.step_rise_s) for x in a)} ms; tracking error rms "
+            f"{' / '.join(f'{x.tracking_rms_deg_s:.1f}' for x in a)} deg/s", highlight=False)
+    say(f"  motors: at >= 99 % {' / '.join(f'{100 * r.saturated_fraction:.1f}' for r in result.readings)} % of the "
+        f"time; noise above 20 Hz {' / '.join(f'{100 * r.motor_noise_rms:.2f}' for r in result.readings)} % rms",
+        highlight=False)
+    say("  the sticks are the logged ones: a pilot would have flown the other tune differently", highlight=False)
+    say(f"wrote {figure}", highlight=False)
+    return 0
+
+
 #: Rows of CSV made at a time: the export streams, never holding the log's text (or a copy of its table) whole.
 CSV_BLOCK_ROWS = 20_000
 
@@ -223,6 +279,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
             reported[0] = done
             print(f"  replayed {done:6.1f} / {total:.1f} s", file=sys.stderr, flush=True)
 
+    if args.tune is not None or args.set:
+        return _what_if(args, params, source, out, window, progress)
     result = replay_log(args.file, window_s=window, params=params, airframe_source=source,
                         step_min_deg_s=args.step_min_deg_s, seed=args.seed, progress=progress)
     if terminal:
@@ -325,6 +383,12 @@ def register(sub: Any) -> None:
     q.add_argument("--step-min-deg-s", type=finite_float(10.0, 2000.0, "deg/s"), default=100.0,
                    help="smallest set-point step the step-response metrics use")
     q.add_argument("--seed", type=bounded_int(0, 2**31 - 1), default=0, help="seeds the sensor noise")
+    q.add_argument("--tune", metavar="FILE[:N]", default=None,
+                   help="what-if: fly the logged sticks with this tune too (a CLI diff or dump, or another "
+                        "log's header, :N its log N) and show both beside the log (default: the log's own only)")
+    q.add_argument("--set", metavar="NAME=VALUE", action="append", default=None,
+                   help="what-if: change one setting, in the firmware's own terms (repeatable; on top of --tune, "
+                        "else of the log's own tune), e.g. --set p_roll=94")
     q.add_argument("--out", metavar="DIR", default=None, help="folder for the figure (default: out/replay-FILE)")
     q.add_argument("--force", action="store_true", help="replace a figure that exists")
     q.add_argument("--json", action="store_true", help="print one JSON object")

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -221,11 +221,14 @@ def _load(file: str | Path, index: int | None) -> FlightLog:
 def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[float, float] | None = None,
                params: Any = None, airframe_source: str = "the default 5-inch (params.airframe)",
                step_min_deg_s: float = 100.0, seed: int = 0, lead_in_s: float = 0.5,
-               progress: Callable[[float, float], None] | None = None) -> LogReplay:
+               progress: Callable[[float, float], None] | None = None, tune: Any = None,
+               changes: Sequence[str] = ()) -> LogReplay:
     """Replay ``file`` (``FILE`` or ``FILE:N``; ``index`` wins) through Betaflight and compare with the log.
 
     ``params`` (:class:`~aerobat.plants.betaflight.params.BetaflightParams`) gives the airframe,
-    sensors and firmware; its ``tune`` is replaced by the log's header. ``window_s`` (log time,
+    sensors and firmware; its ``tune`` is replaced by the log's header, or by ``tune`` (a
+    :class:`~aerobat.plants.betaflight.tune.Tune`: what-if), with ``changes`` (``NAME=VALUE`` each,
+    :func:`~aerobat.plants.betaflight.tune.with_settings`) on top. ``window_s`` (log time,
     seconds) limits the comparison; default the whole log. The flight starts ``lead_in_s`` before
     the window (where the log allows), so that the vehicle, which starts at rest, has caught up
     with the pilot when the comparison begins.
@@ -235,7 +238,7 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
     from aerobat.plants.betaflight.params import BetaflightParams
     from aerobat.plants.betaflight.plant import BetaflightPlant
     from aerobat.plants.betaflight.replay import StickTrack, channels_from_commands, replay_sticks
-    from aerobat.plants.betaflight.tune import tune_from_blackbox_header
+    from aerobat.plants.betaflight.tune import tune_from_blackbox_header, with_settings
     from aerobat.quadrotor.vehicle import fpv5
 
     log = _load(file, index)
@@ -252,8 +255,9 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
     for channel in (Channel.STICKS, Channel.THROTTLE_STICK, Channel.RATE_SETPOINT, Channel.GYRO,
                     Channel.MOTOR_COMMAND):
         cut.signal(channel, purpose="replay")
-    tune = tune_from_blackbox_header(dict(log.metadata.parameters), source=f"{log.path}#log{log.index}")
-    params = dataclasses.replace(params or BetaflightParams(), tune=tune)
+    if tune is None:
+        tune = tune_from_blackbox_header(dict(log.metadata.parameters), source=f"{log.path}#log{log.index}")
+    params = dataclasses.replace(params or BetaflightParams(), tune=with_settings(tune, changes))
     plant = BetaflightPlant(fpv5(), params, seed=seed)
     settings = plant.settings
     sticks = cut.signals[Channel.STICKS]

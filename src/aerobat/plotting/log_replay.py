@@ -8,7 +8,7 @@ import numpy as np
 
 from aerobat.plotting.files import new_figure
 
-__all__ = ["plot_replay", "plot_replay_steps"]
+__all__ = ["plot_replay", "plot_replay_steps", "plot_what_if"]
 
 _AXES = ("roll", "pitch", "yaw")
 
@@ -95,4 +95,60 @@ def plot_replay_steps(result: Any) -> Any:
     axes[0].set_ylabel("gyro ÷ set-point step")
     lo, hi = result.window_s
     fig.suptitle(f"{result.log} {lo:g}–{hi:g} s: step responses, logged and through the SITL", fontsize=10)
+    return fig
+
+
+def plot_what_if(result: Any) -> Any:
+    """The log, its twin (the log's own tune) and the what-if tune over the same sticks: step responses per
+    axis, then the tracking error, the motors' noise and their saturation side by side.
+
+    ``result`` is an :class:`aerobat.experiments.log_whatif.WhatIf`.
+    """
+    from aerobat.plotting.flightlog import draw_step, step_words
+    from aerobat.quadrotor.log_analysis import estimate_step_response
+
+    fig = new_figure(figsize=(13, 8))
+    grid = fig.subplots(2, 3)
+    flown, other = result.flown, result.what_if
+
+    def setpoint(r: Any) -> np.ndarray:
+        return r.setpoint_sim if np.all(np.isfinite(r.setpoint_sim)) else r.setpoint_model
+
+    colors = ("tab:blue", "tab:gray", "tab:red")
+    for k, (ax, name) in enumerate(zip(grid[0], _AXES, strict=True)):
+        curves = (estimate_step_response(flown.time_s, flown.setpoint_log[:, k], flown.gyro_log[:, k]),
+                  estimate_step_response(flown.time_s, setpoint(flown)[:, k], flown.gyro_sim[:, k]),
+                  estimate_step_response(other.time_s, setpoint(other)[:, k], other.gyro_sim[:, k]))
+        for r, reading, color in zip(curves, result.readings, colors, strict=True):
+            draw_step(ax, r, reading.name, color)
+        ax.set_title(f"{name}\n" + "\n".join(f"{reading.name}: {step_words(r)}"
+                                             for r, reading in zip(curves, result.readings, strict=True)),
+                     fontsize=7, loc="left")
+        ax.axhline(1.0, color="k", lw=0.6, ls=":")
+        ax.set_xlabel("time after the step [ms]")
+        ax.grid(alpha=0.3)
+    grid[0][0].set_ylabel("gyro ÷ set-point step")
+    width = 0.27
+    x = np.arange(3)
+    for j, (reading, color) in enumerate(zip(result.readings, colors, strict=True)):
+        grid[1][0].bar(x + (j - 1) * width, [a.tracking_rms_deg_s for a in reading.axes], width, color=color,
+                       label=reading.name)
+    grid[1][0].set_xticks(x, _AXES)
+    grid[1][0].set_ylabel("tracking error rms [°/s]")
+    grid[1][0].legend(fontsize=7)
+    names = [r.name for r in result.readings]
+    grid[1][1].bar(np.arange(3), [100.0 * r.motor_noise_rms for r in result.readings], color=colors)
+    grid[1][1].set_ylabel("motor noise above 20 Hz, rms [% of full]")
+    grid[1][2].bar(np.arange(3), [100.0 * r.saturated_fraction for r in result.readings], color=colors)
+    grid[1][2].set_ylabel("time with a motor ≥ 99 % [%]")
+    for ax in (grid[1][1], grid[1][2]):
+        ax.set_xticks(np.arange(3), [n.replace(", ", "\n") for n in names], fontsize=8)
+    for ax in grid[1]:
+        ax.grid(alpha=0.3, axis="y")
+    shown = ", ".join(f"{d.name} {d.flown} → {d.what_if}" for d in result.differences[:5])
+    more = f", … ({len(result.differences)} settings differ; the command lists them all)" \
+        if len(result.differences) > 5 else ""
+    lo, hi = flown.window_s
+    fig.suptitle(f"{flown.log} {lo:g}–{hi:g} s: the logged sticks with the log's tune and with the what-if\n"
+                 f"{shown or 'no setting differs'}{more}", fontsize=9)
     return fig

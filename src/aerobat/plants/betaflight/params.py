@@ -230,6 +230,8 @@ def params_to_table(params: BetaflightParams) -> dict[str, Any]:
         del table["tune"]
     else:
         table["tune"]["lines"] = [list(entry) for entry in params.tune.lines]
+        if not params.tune.changes:  # single --set changes (a what-if replay); stored forms before them had none
+            table["tune"].pop("changes", None)
     return table
 
 

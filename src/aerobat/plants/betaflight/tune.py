@@ -24,8 +24,9 @@ byte-order mark at the start of a file is skipped.
 
 from __future__ import annotations
 
+import dataclasses
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
@@ -34,7 +35,7 @@ from aerobat.errors import ConfigError
 
 from .cli_grammar import MAX_LINE_CHARS, parse_integer, shown, text_problem
 
-__all__ = ["Tune", "TuneError", "TuneKind", "load_tune", "parse_cli", "read_blackbox_headers",
+__all__ = ["Tune", "TuneError", "TuneKind", "load_tune", "parse_cli", "read_blackbox_headers", "with_settings",
            "tune_from_blackbox_header"]
 
 MAX_TUNE_BYTES = 64 * 1024 * 1024  # a blackbox file is read only up to its headers, but never more than this
@@ -94,6 +95,8 @@ class Tune:
         header's lines that are no setting (``command`` ``header``) are kept escaped, never sent.
     fields : for a blackbox header, the header field of each line (``line`` N is ``fields[N - 1]``),
         so that messages name it; empty for a CLI file.
+    changes : single changes made on top (:func:`with_settings`), ``NAME=VALUE`` each; their lines are
+        numbered −1, −2, … so that messages name the change.
     """
 
     firmware: str
@@ -104,6 +107,7 @@ class Tune:
     active_rateprofile: int
     lines: tuple[tuple[str, int, str, str, int], ...]
     fields: tuple[str, ...] = ()
+    changes: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         try:
@@ -125,7 +129,10 @@ class Tune:
                 raise ConfigError(f"tune {self.source}: {self.where(line)}: {problem}")
 
     def where(self, line: int) -> str:
-        """Where entry ``line`` came from, as messages name it: ``line 12`` or ``header field rollPID``."""
+        """Where entry ``line`` came from, as messages name it: ``line 12``, ``header field rollPID`` or ``--set
+        p_roll=90``."""
+        if line < 0 and -line <= len(self.changes):
+            return f"--set {self.changes[-line - 1]}"
         if self.kind is TuneKind.BLACKBOX:
             return f"header field {self.fields[line - 1]}" if 1 <= line <= len(self.fields) else f"header line {line}"
         return f"line {line}"
@@ -488,3 +495,38 @@ def load_tune(path: str | Path, *, log_index: int | None = None) -> Tune:
         raise TuneError(f"{path}:{log_index}: the file is a CLI diff/dump, not a blackbox log: it holds no log "
                         f"{log_index}")
     return parse_cli(text, source=str(path))
+
+
+_CHANGE = re.compile(r"([A-Za-z0-9_]+) *= *(.+?) *")
+
+
+def with_settings(tune: Tune, changes: Sequence[str]) -> Tune:
+    """``tune`` with single settings changed, each ``NAME=VALUE`` (``p_roll=90``), in the firmware's own terms.
+
+    A change lands in the section (master, the flown profile or rate profile) where ``tune`` sets that name,
+    else in master, after everything the tune sets, so it wins. Values are checked when the tune is
+    translated (:func:`~aerobat.plants.betaflight.translate.translate`), and a refusal names the change.
+
+    Raises
+    ------
+    TuneError
+        A change that is not ``NAME=VALUE``.
+    """
+    if not changes:
+        return tune
+    flown = {name: (section, tune.active_profile if section == "profile" else
+                    tune.active_rateprofile if section == "rateprofile" else 0)
+             for section, name, _, _ in tune.active_settings()}
+    lines = list(tune.lines)
+    texts = []
+    for k, change in enumerate(changes, start=1):
+        match = _CHANGE.fullmatch(str(change).strip())
+        if match is None or text_problem(str(change)) is not None:
+            raise TuneError(f"--set {shown(str(change))}: expected NAME=VALUE, e.g. --set p_roll=90")
+        name, value = match.group(1).lower(), match.group(2)
+        section, index = flown.get(name, ("master", 0))
+        lines.append((section, index, name, value, -(len(tune.changes) + k)))
+        texts.append(f"{name}={value}")
+    changed = "; ".join(texts)
+    return dataclasses.replace(tune, source=f"{tune.source} with {changed}", lines=tuple(lines),
+                               changes=tune.changes + tuple(texts))

@@ -1,0 +1,71 @@
+"""What-if replays of the ROMA F5's flights (issue 42): the numbers docs/plants.md quotes.
+
+    .venv/bin/python scripts/results_whatif.py
+
+Flight 1, 40–62 s (three roll steps), flown with the log's own tune and with single roll changes; then
+flight 3, 20–40 s, with the TII Racing KakuteH7's 4.3.1 diff. Each row: the step response estimated from
+set point to gyro (50 % time, rise 10 → 90 %, overshoot), the medians over the set-point steps found, the
+tracking error, and the motors' saturation and noise; "log" is the real flight read the same way.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+ROMA = SHARED / "flight-logs" / "betaflight" / "diatone-roma-f5.bbl"
+KAKUTE = SHARED / "betaflight-configs" / "tii-racing-kakuteh7-4.3.1-diff.txt"
+AXIS = {"roll": 0, "pitch": 1, "yaw": 2}
+
+
+def _ms(v: float) -> str:
+    return "—" if math.isnan(v) else f"{1e3 * v:.1f}"
+
+
+def _pct(v: float) -> str:
+    return "—" if math.isnan(v) else f"{100 * v:.1f}"
+
+
+def rows(result, axis: str, label: str, include_log: bool) -> list[str]:
+    k = AXIS[axis]
+    out = []
+    for reading in result.readings[(0 if include_log else 1):]:
+        a = reading.axes[k]
+        name = label if reading.name == "SITL, what-if" else reading.name
+        out.append(f"| {name} | {_ms(a.delay_s)} | {_ms(a.rise_s)} | {_pct(a.overshoot)} | {a.steps}: "
+                   f"{_ms(a.step_rise_s)} ms, {_pct(a.step_overshoot)} % | {a.tracking_rms_deg_s:.1f} | "
+                   f"{100 * reading.saturated_fraction:.1f} | {100 * reading.motor_noise_rms:.2f} |")
+    return out
+
+
+def main() -> None:
+    from aerobat.experiments.log_whatif import what_if
+    from aerobat.plants.betaflight.tune import load_tune
+
+    if not ROMA.is_file():
+        raise SystemExit(f"{ROMA} is absent: the real logs are needed")
+    head = ["| flown | 50 % [ms] | rise [ms] | overshoot [%] | steps found: rise, overshoot (medians) | "
+            "tracking rms [°/s] | motor ≥ 99 % [% of time] | motor noise > 20 Hz [% rms] |",
+            "|---|---|---|---|---|---|---|---|"]
+    own = {n: v for _, n, v, _ in load_tune(ROMA, log_index=1).active_settings()}
+    p, i = int(own["p_roll"]), int(own["i_roll"])
+    print(f"### ROMA F5 flight 1, 40–62 s, roll (the log's tune: p_roll {p}, i_roll {i}, f_roll {own['f_roll']})\n")
+    lines = list(head)
+    for k, change in enumerate((f"p_roll={2 * p}", f"p_roll={p // 2}", f"i_roll={2 * i}")):
+        result = what_if(f"{ROMA}:1", changes=[change], window_s=(40.0, 62.0))
+        lines += rows(result, "roll", f"SITL, {change}", include_log=(k == 0))
+        if k:
+            lines.pop(-2)  # the twin once
+    print("\n".join(lines) + "\n")
+    if KAKUTE.is_file():
+        result = what_if(f"{ROMA}:3", tune=load_tune(KAKUTE), window_s=(20.0, 40.0))
+        print(f"### ROMA F5 flight 3, 20–40 s, with {KAKUTE.name}: {len(result.differences)} settings differ\n")
+        print(", ".join(f"{d.name} {d.flown} → {d.what_if}" for d in result.differences) + "\n")
+        for axis in ("roll", "pitch"):
+            print(f"{axis}:\n")
+            print("\n".join(head + rows(result, axis, "SITL, the KakuteH7's tune", include_log=True)) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -127,6 +127,59 @@ def check_session_mcap(path: Path, store: Store, session_id: int) -> dict[str, i
         # trials follow one another on the timeline, never overlapping
         starts = [next(reader.iter_messages(topics=[f"/trial/{i.index}/pose"]))[2].log_time for i in flown]
         assert starts == sorted(starts) and summary.statistics.message_start_time == starts[0]
+        # every trial's samples on one channel (issue 44): t_s from the program's start each time, so a
+        # Plot panel overlays the trials; the fields docs/browse.md says every plant fills are never null,
+        # those only the nominal plant measures are null exactly where the store holds NaN
+        from aerobat.quadrotor.dynamics import rotation_angles
+
+        filled = ("x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "roll_rad", "pitch_rad", "yaw_rad",
+                  "p_est_rad_s", "q_est_rad_s", "r_est_rad_s", "collective_m_s2", "p_hat_rad_s", "q_hat_rad_s",
+                  "r_hat_rad_s")
+        measured = ("p_rad_s", "q_rad_s", "r_rad_s", "f1_n", "f2_n", "f3_n", "f4_n")
+        assert schemas["/trials/state"] == "aerobat.TrialSample"
+        trajectories = [(it.index, np.asarray(it.times_s), np.asarray(it.states)) for it in flown]
+        assert counts["/trials/state"] == sum(len(stored_t) for _, stored_t, _ in trajectories)
+        samples = [(m.log_time, json.loads(m.data)) for _, _, m in reader.iter_messages(topics=["/trials/state"])]
+        by_trial: dict[int, list[tuple[int, dict[str, Any]]]] = {}
+        for stamp, sample in samples:
+            by_trial.setdefault(sample["trial"], []).append((stamp, sample))
+        assert list(by_trial) == [index for index, _, _ in trajectories]  # one trial after the other
+        last_t_s = math.inf
+        for index, stored_t, stored_x in trajectories:
+            trial = by_trial[index]
+            t_s = np.array([s["t_s"] for _, s in trial])
+            period = float(np.median(np.diff(stored_t))) if len(stored_t) > 1 else 1.0
+            assert len(trial) == len(stored_t) and np.array_equal(t_s, stored_t)
+            assert -1e-6 < t_s[0] < period and t_s[0] < last_t_s  # restarts at the program's start for every trial
+            assert np.all(np.diff(t_s) > 0)  # and grows within it
+            last_t_s = t_s[-1]
+            pose_stamps = [m.log_time for _, _, m in reader.iter_messages(topics=[f"/trial/{index}/pose"])]
+            assert [stamp for stamp, _ in trial] == pose_stamps  # the same instants as the trial's poses
+            for name in filled:
+                assert None not in [s[name] for _, s in trial], name
+            assert [s["z_m"] for _, s in trial] == stored_x[:, 2].tolist()
+            assert np.allclose([s["roll_rad"] for _, s in trial], rotation_angles(stored_x)[:, 0])
+            for k, name in enumerate(measured):
+                assert [s[name] for _, s in trial] == as_json(stored_x[:, 10 + k]), name
+        # the scene: one message at the start, an entity per measured trial with its whole path, and the maneuver
+        assert schemas["/scene"] == "foxglove.SceneUpdate" and counts["/scene"] == 1
+        ((_, _, message, scene),) = reader.iter_decoded_messages(topics=["/scene"])
+        assert message.log_time == samples[0][0]
+        entities = {e.id: e for e in scene.entities}
+        assert list(entities) == [f"trial/{index}" for index, _, _ in trajectories] + ["maneuver"]
+        for index, stored_t, stored_x in trajectories:
+            entity = entities[f"trial/{index}"]
+            (line,) = entity.lines
+            assert entity.frame_id == "world" and line.type == 0  # LINE_STRIP
+            assert len(line.points) == len(stored_t) == counts[f"/trial/{index}/pose"]
+            assert np.array_equal([[p.x, p.y, p.z] for p in line.points], stored_x[:, 0:3])
+            end = entity.spheres[0].pose.position
+            assert [end.x, end.y, end.z] == stored_x[-1, 0:3].tolist()
+            assert {kv.key: kv.value for kv in entity.metadata}["trial"] == str(index)
+        colours = [(entities[f"trial/{index}"].lines[0].color.r, entities[f"trial/{index}"].lines[0].color.b)
+                   for index, _, _ in trajectories]
+        assert colours == sorted(colours) and (len(colours) == 1 or colours[0] != colours[-1])  # blue to red
+        assert len(entities["maneuver"].spheres) == 1  # the start
     return counts
 
 

@@ -8,20 +8,30 @@ Every trial with a measured trajectory becomes, on one timeline (trial after tri
   draws the body's axes flying);
 * ``/trial/N/state`` — JSON: velocity, body rates and the four rotor thrusts (plottable);
 * ``/trial/N/command`` — JSON: the program's commands (collective, p̂, q̂, r̂) at each sample;
+* ``/trials/state`` — JSON, every trial's samples on one channel, each with its ``trial`` and
+  ``t_s`` (seconds since the program started): a Plot panel with ``t_s`` on its x-axis overlays
+  the trials (position, velocity, rotation angles, rates, thrusts and commands);
+* ``/scene`` — one ``foxglove.SceneUpdate`` at the start: every measured trial's path, the
+  maneuver's start and target (:mod:`aerobat.export.mcap_scene`);
 * ``/errors`` — JSON, one per stored trial (measured or not) at its end: status, every error
-  component and the position error;
+  component and the position error (with ``trial`` on the x-axis: the learning curve);
 * ``/firmware`` — JSON, one per trial: what the plant recorded of its firmware (Betaflight: the
   firmware, arming, hover and frame counters); per-sample firmware traces are sent only when
   the store holds them (today's plants do not store them).
 
-Foxglove's published protobuf schemas (``foxglove-schemas-protobuf``) are used for poses and
-transforms, JSON Schema for the plottable channels, so no user has to write a layout.
+A value a plant does not measure is null, never made up: the motion-capture plants (arena,
+RotorPy, Betaflight, a flight controller) measure neither body rates nor rotor thrusts, only the
+nominal plant (the design model flown) has them.
+
+Foxglove's published protobuf schemas (``foxglove-schemas-protobuf``) are used for poses,
+transforms and the scene, JSON Schema for the plottable channels, so no user has to write a layout.
 """
 
 from __future__ import annotations
 
 import json
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
@@ -30,8 +40,10 @@ from typing import Any
 import numpy as np
 
 from aerobat.errors import MissingDependency
+from aerobat.export.mcap_scene import TrialPath, maneuver_marks, scene_update
 from aerobat.fileio import atomic_output
 from aerobat.store import Store
+from aerobat.store.records import IterationRecord
 
 __all__ = ["GAP_S", "McapSummary", "write_session_mcap"]
 
@@ -46,6 +58,11 @@ _ESTIMATED_RATES = ("p_est_rad_s", "q_est_rad_s", "r_est_rad_s")
 """Body rates estimated from the measured attitude (:func:`~aerobat.quadrotor.attitude_rates.body_rates_from_attitude`),
 sent beside the measured ones: a plant that measures no rates (the arena's motion capture) still has them."""
 
+_ANGLES = ("roll_rad", "pitch_rad", "yaw_rad")
+"""Rotation angles about body x, y, z, unwrapped (:func:`~aerobat.quadrotor.dynamics.rotation_angles`: a triple
+roll flip ends at 6π), from the measured attitude and its accumulated rotation."""
+_POSITION = ((0, "x_m"), (1, "y_m"), (2, "z_m"))
+
 _STATE_SCHEMA = {
     "type": "object", "title": "aerobat.TrialState",
     "properties": {"trial": {"type": "integer"}, "t_s": {"type": "number"},
@@ -56,6 +73,15 @@ _COMMAND_SCHEMA = {
     "type": "object", "title": "aerobat.Command",
     "properties": {"trial": {"type": "integer"}, "t_s": {"type": "number"},
                    **{k: {"type": ["number", "null"]} for _, k in _COMMAND_COLUMNS}}}
+_NULL_NUMBER = {"type": ["number", "null"]}
+_OVERLAY_SCHEMA = {
+    "type": "object", "title": "aerobat.TrialSample",
+    "description": "every trial's samples on one channel: plot against t_s to overlay the trials",
+    "properties": {"trial": {"type": "integer"},
+                   "t_s": {"type": "number", "description": "seconds since the program started"},
+                   **{k: _NULL_NUMBER for _, k in _POSITION}, **{k: _NULL_NUMBER for k in _ANGLES},
+                   **{k: _NULL_NUMBER for _, k in _STATE_COLUMNS}, **{k: _NULL_NUMBER for k in _ESTIMATED_RATES},
+                   **{k: _NULL_NUMBER for _, k in _COMMAND_COLUMNS}}}
 _ERROR_SCHEMA = {"type": "object", "title": "aerobat.TrialError",
                  "properties": {"trial": {"type": "integer"}, "status": {"type": "string"},
                                 "position_error_m": {"type": ["number", "null"]},
@@ -100,23 +126,48 @@ def _json_safe(value: Any) -> Any:
     return value if value is None or isinstance(value, str | int | bool) else str(value)
 
 
+_CHUNK = 20
+"""Trials read from the store at a time: a few trajectories in memory, never a whole session's."""
+
+
+def _with_trajectories(store: Store, session_id: int, indices: list[int]) -> Iterator[IterationRecord]:
+    """The session's iterations ``indices`` in order, with their trajectories, :data:`_CHUNK` at a time."""
+    for k in range(0, len(indices), _CHUNK):
+        yield from store.iterations(session_id, trajectories=True, plant_state=False, indices=indices[k:k + _CHUNK])
+
+
+def _position_error_m(error: np.ndarray, mask: np.ndarray) -> float:
+    return float(np.linalg.norm(error[mask])) if mask.any() else math.nan
+
+
+def _paths(store: Store, session_id: int, indices: list[int], mask: np.ndarray) -> list[TrialPath]:
+    """Every measured trial's positions (the scene's first pass over the trajectories)."""
+    return [TrialPath(it.index, np.asarray(it.states, dtype=np.float64)[:, 0:3].copy(), it.status.value,
+                      _position_error_m(it.error, mask))
+            for it in _with_trajectories(store, session_id, indices)
+            if it.times_s is not None and it.states is not None and len(it.times_s)]
+
+
 def write_session_mcap(store: Store, session_id: int, path: str | Path) -> McapSummary:
     """Write session ``session_id``'s trials to an MCAP file at ``path`` (see the module's description).
 
     Written by :func:`aerobat.fileio.atomic_output`: into a temporary file next to ``path`` that then
     replaces it, so a link at ``path`` is replaced (never written through), the store is never written
     (:class:`~aerobat.errors.ConfigError`), and a write that fails leaves the old file whole (a full
-    disk is :class:`~aerobat.errors.DiskFull`).
+    disk is :class:`~aerobat.errors.DiskFull`). The trajectories are read twice, a few at a time:
+    once for the scene (written first, at the start), once for the samples.
     """
     try:
         from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
         from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
+        from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
         from mcap.writer import Writer
         from mcap_protobuf.schema import register_schema
     except ImportError as exc:
         raise MissingDependency(str(exc.name or "mcap"), extra="viewers", purpose="export --format mcap") from None
     from aerobat.core.registry import from_spec
     from aerobat.quadrotor.attitude_rates import body_rates_from_attitude
+    from aerobat.quadrotor.dynamics import RATE_INT, rotation_angles
 
     rec = store.session(session_id)
     mrec = store.maneuver(rec.maneuver_id)
@@ -128,15 +179,19 @@ def write_session_mcap(store: Store, session_id: int, path: str | Path) -> McapS
     start_ns = clock_ns = _epoch_ns(rec.started_at)
     first_ns: int | None = None
     last_ns = start_ns
+    indices = [it.index for it in store.iterations(session_id)]
+    paths = _paths(store, session_id, indices, mask)
     with atomic_output(path, option="--output", stores=(store.path,)) as stream:
         writer = Writer(stream)
         writer.start(profile="", library="aerobat")
         pose_schema = register_schema(writer, PoseInFrame)
         tf_schema = register_schema(writer, FrameTransform)
+        scene_schema = register_schema(writer, SceneUpdate)
         json_schemas = {name: writer.register_schema(name=str(schema["title"]), encoding="jsonschema",
                                                      data=json.dumps(schema).encode())
                         for name, schema in (("state", _STATE_SCHEMA), ("command", _COMMAND_SCHEMA),
-                                             ("errors", _ERROR_SCHEMA), ("firmware", _FIRMWARE_SCHEMA))}
+                                             ("overlay", _OVERLAY_SCHEMA), ("errors", _ERROR_SCHEMA),
+                                             ("firmware", _FIRMWARE_SCHEMA))}
         channels: dict[str, int] = {}
 
         def channel(topic: str, schema_id: int, encoding: str) -> int:
@@ -155,46 +210,53 @@ def write_session_mcap(store: Store, session_id: int, path: str | Path) -> McapS
         def emit_json(topic: str, kind: str, time_ns: int, value: dict[str, Any]) -> None:
             emit(topic, json_schemas[kind], "json", time_ns, json.dumps(value, allow_nan=False).encode())
 
-        indices = [it.index for it in store.iterations(session_id)]
-        for k in range(0, len(indices), 20):  # a few trajectories in memory at a time
-            for it in store.iterations(session_id, trajectories=True, plant_state=False, indices=indices[k:k + 20]):
-                t0 = clock_ns
-                if it.times_s is not None and it.states is not None and len(it.times_s):
-                    trials.append(it.index)
-                    times = np.asarray(it.times_s, dtype=np.float64)
-                    states = np.asarray(it.states, dtype=np.float64)
-                    commands = maneuver.program(it.params).commands_at(times)
-                    estimated = body_rates_from_attitude(times, states[:, 6:10])
-                    stamps = t0 + np.round((times - times[0]) * 1e9).astype(np.int64)
-                    for row, t, x, u, w in zip(stamps.tolist(), times.tolist(), states, commands, estimated,
-                                               strict=True):
-                        pose = PoseInFrame(frame_id="world")
-                        pose.timestamp.FromNanoseconds(row)
-                        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = map(float, x[0:3])
-                        q = pose.pose.orientation
-                        q.w, q.x, q.y, q.z = map(float, x[6:10])
-                        emit(f"/trial/{it.index}/pose", pose_schema, "protobuf", row, pose.SerializeToString())
-                        tf = FrameTransform(parent_frame_id="world", child_frame_id="body")
-                        tf.timestamp.FromNanoseconds(row)
-                        tf.translation.x, tf.translation.y, tf.translation.z = map(float, x[0:3])
-                        tf.rotation.w, tf.rotation.x, tf.rotation.y, tf.rotation.z = map(float, x[6:10])
-                        emit("/tf", tf_schema, "protobuf", row, tf.SerializeToString())
-                        emit_json(f"/trial/{it.index}/state", "state", row, {
-                            "trial": it.index, "t_s": t, **{name: _finite(x[k]) for k, name in _STATE_COLUMNS},
-                            **{name: _finite(w[k]) for k, name in enumerate(_ESTIMATED_RATES)}})
-                        emit_json(f"/trial/{it.index}/command", "command", row, {
-                            "trial": it.index, "t_s": t, **{name: _finite(u[k]) for k, name in _COMMAND_COLUMNS}})
-                    end = int(stamps[-1])
-                else:
-                    end = t0
-                position = float(np.linalg.norm(it.error[mask])) if mask.any() else math.nan
-                emit_json("/errors", "errors", end, {
-                    "trial": it.index, "status": it.status, "position_error_m": _finite(position),
-                    "error": {n: _finite(v) for n, v in zip(mrec.error_names, it.error.tolist(), strict=True)},
-                    "message": it.message})
-                emit_json("/firmware", "firmware", end, {"trial": it.index, "plant": rec.plant_kind,
-                                                         "info": _json_safe(it.info)})
-                clock_ns = end + int(GAP_S * 1e9)
+        if paths:
+            scene = scene_update(paths, maneuver_marks(maneuver, mrec.position_mask), start_ns)
+            emit("/scene", scene_schema, "protobuf", start_ns, scene.SerializeToString())
+        del paths
+        for it in _with_trajectories(store, session_id, indices):
+            t0 = clock_ns
+            if it.times_s is not None and it.states is not None and len(it.times_s):
+                trials.append(it.index)
+                times = np.asarray(it.times_s, dtype=np.float64)
+                states = np.asarray(it.states, dtype=np.float64)
+                commands = maneuver.program(it.params).commands_at(times)
+                estimated = body_rates_from_attitude(times, states[:, 6:10])
+                angles = (rotation_angles(states[:, :RATE_INT.stop]) if states.shape[1] >= RATE_INT.stop
+                          else np.full((len(times), 3), np.nan))
+                stamps = t0 + np.round((times - times[0]) * 1e9).astype(np.int64)
+                for row, t, x, u, w, a in zip(stamps.tolist(), times.tolist(), states, commands, estimated, angles,
+                                              strict=True):
+                    pose = PoseInFrame(frame_id="world")
+                    pose.timestamp.FromNanoseconds(row)
+                    pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = map(float, x[0:3])
+                    q = pose.pose.orientation
+                    q.w, q.x, q.y, q.z = map(float, x[6:10])
+                    emit(f"/trial/{it.index}/pose", pose_schema, "protobuf", row, pose.SerializeToString())
+                    tf = FrameTransform(parent_frame_id="world", child_frame_id="body")
+                    tf.timestamp.FromNanoseconds(row)
+                    tf.translation.x, tf.translation.y, tf.translation.z = map(float, x[0:3])
+                    tf.rotation.w, tf.rotation.x, tf.rotation.y, tf.rotation.z = map(float, x[6:10])
+                    emit("/tf", tf_schema, "protobuf", row, tf.SerializeToString())
+                    state = {name: _finite(x[k]) for k, name in _STATE_COLUMNS}
+                    rates = {name: _finite(w[k]) for k, name in enumerate(_ESTIMATED_RATES)}
+                    command = {name: _finite(u[k]) for k, name in _COMMAND_COLUMNS}
+                    emit_json(f"/trial/{it.index}/state", "state", row, {"trial": it.index, "t_s": t, **state,
+                                                                          **rates})
+                    emit_json(f"/trial/{it.index}/command", "command", row, {"trial": it.index, "t_s": t, **command})
+                    emit_json("/trials/state", "overlay", row, {
+                        "trial": it.index, "t_s": t, **{name: _finite(x[k]) for k, name in _POSITION},
+                        **{name: _finite(a[k]) for k, name in enumerate(_ANGLES)}, **state, **rates, **command})
+                end = int(stamps[-1])
+            else:
+                end = t0
+            emit_json("/errors", "errors", end, {
+                "trial": it.index, "status": it.status, "position_error_m": _finite(_position_error_m(it.error, mask)),
+                "error": {n: _finite(v) for n, v in zip(mrec.error_names, it.error.tolist(), strict=True)},
+                "message": it.message})
+            emit_json("/firmware", "firmware", end, {"trial": it.index, "plant": rec.plant_kind,
+                                                     "info": _json_safe(it.info)})
+            clock_ns = end + int(GAP_S * 1e9)
         writer.finish()
     return McapSummary(path=path, session_id=session_id, messages=counts,
                        start_ns=start_ns if first_ns is None else first_ns, end_ns=last_ns, trials=tuple(trials))

@@ -1,4 +1,4 @@
-"""A Betaflight session's MCAP file (issue 26): every trial's pose stream, the plant's firmware records."""
+"""A Betaflight session's MCAP file (issues 26, 44): every trial's pose stream and path, the firmware records."""
 
 from __future__ import annotations
 
@@ -29,3 +29,12 @@ def test_a_betaflight_session_reads_back_from_its_mcap_file(tmp_path, firmware):
     assert all(r["info"]["firmware"].startswith("Betaflight 4.6") for r in records)
     assert [r["trial"] for r in records] == [i.index for i in iterations]
     assert [r["info"]["frames_sent"] for r in records] == [i.info.get("frames_sent") for i in iterations]
+    # the trials overlaid (check_session_mcap checks t_s and the scene's paths): motion capture measures
+    # neither the body rates nor the motor thrusts, and the store keeps no firmware trace, so they are null
+    with path.open("rb") as stream:
+        samples = [json.loads(m.data) for _, _, m in make_reader(stream).iter_messages(topics=["/trials/state"])]
+    assert {s["trial"] for s in samples} == {i.index for i in iterations if i.trajectory_rows}
+    for name in ("p_rad_s", "q_rad_s", "r_rad_s", "f1_n", "f2_n", "f3_n", "f4_n"):
+        assert {s[name] for s in samples} == {None}, name
+    assert None not in [s["p_est_rad_s"] for s in samples] and None not in [s["collective_m_s2"] for s in samples]
+    assert [t for t in counts if "firmware" in t] == ["/firmware"]  # no per-sample firmware channel

@@ -1,6 +1,7 @@
 """What-if replays of the ROMA F5's flights (issue 42): the numbers docs/plants.md quotes.
 
-    .venv/bin/python scripts/results_whatif.py
+    .venv/bin/python scripts/results_whatif.py            # single changes, another quad's tune
+    .venv/bin/python scripts/results_whatif.py props      # the props' direction against the log's motors
 
 Flight 1, 40–62 s (three roll steps), flown with the log's own tune and with single roll changes; then
 flight 3, 20–40 s, with the TII Racing KakuteH7's 4.3.1 diff. Each row: the step response estimated from
@@ -39,7 +40,41 @@ def rows(result, axis: str, label: str, include_log: bool) -> list[str]:
     return out
 
 
+def _band(x, dt: float, low_hz: float, high_hz: float):
+    import numpy as np
+
+    spectrum = np.fft.rfft(x - x.mean())
+    f = np.fft.rfftfreq(x.size, dt)
+    spectrum[(f < low_hz) | (f > high_hz)] = 0.0
+    return np.fft.irfft(spectrum, x.size)
+
+
+def props() -> None:
+    """Flights 2 and 3, whole, flown with props in and props out: the motors' yaw mix against the log's."""
+    import numpy as np
+
+    from aerobat.experiments.log_replay import replay_log
+
+    mix = np.array([1.0, -1.0, -1.0, 1.0])  # M1 + M4 − M2 − M3 in Betaflight's motor order: props in, yaw left
+    print("| flight | props | yaw mix correlation: raw | 1–20 Hz | gyro rms roll · pitch · yaw [°/s] |")
+    print("|---|---|---|---|---|")
+    for index in (2, 3):
+        for out in (False, True):
+            r = replay_log(ROMA, index=index, props_out=out)
+            dt = float(np.median(np.diff(r.time_s)))
+            sim, log = r.motors_sim @ mix, r.motors_log @ mix
+            raw = float(np.corrcoef(sim, log)[0, 1])
+            band = float(np.corrcoef(_band(sim, dt, 1.0, 20.0), _band(log, dt, 1.0, 20.0))[0, 1])
+            rms = " · ".join(f"{g.rms:.1f}" for g in r.gyro)
+            print(f"| {index} | {'out' if out else 'in'} | {raw:+.3f} | {band:+.3f} | {rms} |")
+
+
 def main() -> None:
+    import sys
+
+    if sys.argv[1:] == ["props"]:
+        props()
+        return
     from aerobat.experiments.log_whatif import what_if
     from aerobat.plants.betaflight.tune import load_tune
 

@@ -304,6 +304,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     say(f"{result.log} {lo:g}–{hi:g} s replayed through Betaflight 4.6 SITL with the log's own tune, in ACRO, in "
         f"the air; airframe: {source} ({result.wall_s:.1f} s wall, {result.lockstep_steps} lockstep steps)",
         highlight=False)
+    say(f"  props {result.props}: the SITL's mixer and the physics' spins follow it", highlight=False)
     if result.excluded_s:
         say(f"  {result.excluded_s:.1f} s left out: within 0.5 s of a logged gyro at its 2000 deg/s limit (a crash)",
             highlight=False)

@@ -178,6 +178,7 @@ def airframe_from_log_fit(fit: LogFit, *, base: Any | None = None) -> dict[str, 
     from a lag. Flown as a pure delay, the ROMA F5's 12 ms made the tune's roll loop limit-cycle
     (motors between idle and full; docs/plants.md). :func:`airframe_notes` says so in the file.
     """
+    from aerobat.logs.betaflight import props_out
     from aerobat.plants.betaflight.params import Airframe
 
     base = base or Airframe()
@@ -193,6 +194,7 @@ def airframe_from_log_fit(fit: LogFit, *, base: Any | None = None) -> dict[str, 
         curve_min_speed_ratio=min(max(fit.model.r, 0.0), 0.9), curve_shape=min(max(fit.model.k, 0.0), 1.0),
         motor_tau_up_s=tau, motor_tau_down_s=tau,
         kappa_m=min(max(_require(fit, "kappa_m"), 1e-4), 0.5),
+        props_out=props_out(fit.layout),
     )
     for key, value in list(table.items()):
         if isinstance(value, tuple):
@@ -210,14 +212,17 @@ _GIVEN_AIRFRAME = ("mass_kg", "motor_x_m", "motor_y_m")
 def airframe_notes(fit: LogFit, base: Any | None = None) -> list[str]:
     """Comment lines for the written ``[airframe]``: which fields the log gave, which were given or assumed, which
     are the plant's defaults (a log does not tell them), and what the fit gave that the table does not use."""
+    from aerobat.logs.betaflight import props_out
     from aerobat.plants.betaflight.params import Airframe
 
     defaults = [name for name in dataclasses.asdict(base or Airframe())
-                if name not in _FITTED_AIRFRAME + _GIVEN_AIRFRAME]
+                if name not in _FITTED_AIRFRAME + _GIVEN_AIRFRAME + ("props_out",)]
     return [f"fitted to the log: {', '.join(_FITTED_AIRFRAME)} (I_zz and kappa_m with the assumed I_zz ratio "
             f"{fit.geometry.inertia_zz_ratio:.3g} of I_xx + I_yy);",
             f"given, not identified: {', '.join(_GIVEN_AIRFRAME)} (--mass-kg, --motor-x-m, --motor-y-m, else the "
             f"prior's);",
+            f"props_out = {'true' if props_out(fit.layout) else 'false'}: the log's mixer (the SITL's "
+            f"yaw_motors_reversed and the physics' spins follow it);",
             f"NOT identified, the Betaflight plant's defaults: {', '.join(defaults)};",
             f"the fit's delay from motor command to the logged (filtered) gyro: {fit.model.delay_s * 1e3:.1f} ms;",
             "not used as output_delay_s: it includes gyro filtering the SITL's firmware runs itself, a 250 Hz",

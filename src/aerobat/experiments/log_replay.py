@@ -95,6 +95,8 @@ class LogReplay:
     motors : per motor M1..M4.
     steps : every step found.
     wall_s : wall time of the flight; steps: lockstep steps.
+    props : which way the propellers turned (``in`` or ``out``, from the log's mixer) and why: the SITL's
+        ``yaw_motors_reversed`` and the physics' spins follow it.
     """
 
     log: str
@@ -121,6 +123,7 @@ class LogReplay:
     wall_s: float
     lockstep_steps: int
     excluded_s: float = 0.0
+    props: str = "in"
 
     def step_summary(self) -> dict[str, dict[str, float]]:
         """Per axis: steps found, median rise time [s] and overshoot (fraction), logged and simulated."""
@@ -153,7 +156,7 @@ class LogReplay:
                         for term, row in zip("PIDF", self.pid, strict=True)},
                 "tracking": axes(self.tracking, AXES), "motors": axes(self.motors, ("M1", "M2", "M3", "M4")),
                 "steps": self.step_summary(), "step_list": [dataclasses.asdict(s) for s in self.steps],
-                "excluded_s": self.excluded_s,
+                "excluded_s": self.excluded_s, "props": self.props,
                 "wall_s": self.wall_s, "lockstep_steps": self.lockstep_steps}
 
 
@@ -222,13 +225,14 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
                params: Any = None, airframe_source: str = "the default 5-inch (params.airframe)",
                step_min_deg_s: float = 100.0, seed: int = 0, lead_in_s: float = 0.5,
                progress: Callable[[float, float], None] | None = None, tune: Any = None,
-               changes: Sequence[str] = ()) -> LogReplay:
+               changes: Sequence[str] = (), props_out: bool | None = None) -> LogReplay:
     """Replay ``file`` (``FILE`` or ``FILE:N``; ``index`` wins) through Betaflight and compare with the log.
 
     ``params`` (:class:`~aerobat.plants.betaflight.params.BetaflightParams`) gives the airframe,
     sensors and firmware; its ``tune`` is replaced by the log's header, or by ``tune`` (a
     :class:`~aerobat.plants.betaflight.tune.Tune`: what-if), with ``changes`` (``NAME=VALUE`` each,
-    :func:`~aerobat.plants.betaflight.tune.with_settings`) on top. ``window_s`` (log time,
+    :func:`~aerobat.plants.betaflight.tune.with_settings`) on top. The propellers turn as the log's mixer
+    says (:func:`log_props_out`), or as ``props_out`` says when given. ``window_s`` (log time,
     seconds) limits the comparison; default the whole log. The flight starts ``lead_in_s`` before
     the window (where the log allows), so that the vehicle, which starts at rest, has caught up
     with the pilot when the comparison begins.
@@ -257,7 +261,12 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
         cut.signal(channel, purpose="replay")
     if tune is None:
         tune = tune_from_blackbox_header(dict(log.metadata.parameters), source=f"{log.path}#log{log.index}")
-    params = dataclasses.replace(params or BetaflightParams(), tune=with_settings(tune, changes))
+    params = params or BetaflightParams()
+    from_log = props_out is None
+    if props_out is None:  # the log's mixer decides which way the propellers turn, whatever the airframe says
+        props_out = log_props_out(log)
+    params = dataclasses.replace(params, tune=with_settings(tune, changes),
+                                 airframe=dataclasses.replace(params.airframe, props_out=props_out))
     plant = BetaflightPlant(fpv5(), params, seed=seed)
     settings = plant.settings
     sticks = cut.signals[Channel.STICKS]
@@ -315,4 +324,17 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
         motors=tuple(AxisMatch.of(motors_sim[v, j], motors_log[v, j]) for j in range(4)),
         steps=tuple(s for s in _steps(t, sp_log, gyro_log, gyro_sim, step_min_deg_s)
                     if v[int(np.searchsorted(t, s.time_s))]),
-        wall_s=wall, lockstep_steps=trace.steps, excluded_s=float((~v).sum() * dt))
+        wall_s=wall, lockstep_steps=trace.steps, excluded_s=float((~v).sum() * dt),
+        props=("out" if props_out else "in") + (f" ({_mixer_note(log)})" if from_log else " (as asked)"))
+
+
+def log_props_out(log: FlightLog) -> bool:
+    """True when ``log``'s mixer turns the propellers out (:func:`aerobat.logs.betaflight.props_out`)."""
+    from aerobat.logs.betaflight import props_out
+
+    return props_out(log.motor_layout)
+
+
+def _mixer_note(log: FlightLog) -> str:
+    """What the reader said about the mixer (the header's ``yaw_motors_reversed`` or the yaw mixing)."""
+    return next((n for n in log.notes if "mixer" in n or "props" in n), "the log's mixer")

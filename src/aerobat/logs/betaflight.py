@@ -43,7 +43,7 @@ from aerobat.errors import ConfigError
 from aerobat.logs import blackbox_header
 from aerobat.quadrotor.flightlog import Channel, FlightLog, LogMetadata, LogSource, MotorLayout, Signal
 
-__all__ = ["FIELDS", "QUADX_LAYOUT", "quiet_orangebox", "raw_headers", "read_blackbox"]
+__all__ = ["FIELDS", "QUADX_LAYOUT", "props_out", "quiet_orangebox", "raw_headers", "read_blackbox"]
 
 G_M_S2 = 9.80665
 DSHOT_MIN, DSHOT_MAX = 48.0, 2047.0
@@ -105,6 +105,12 @@ def raw_headers(data: bytes, start: int) -> dict[str, str]:
 FIELDS = ("time", *(f"gyroADC[{i}]" for i in range(3)), *(f"accSmooth[{i}]" for i in range(3)),
           *(f"setpoint[{i}]" for i in range(4)), *(f"rcCommand[{i}]" for i in range(4)),
           *(f"motor[{i}]" for i in range(8)), *(f"axis{x}[{i}]" for x in "PIDF" for i in range(3)), "vbatLatest")
+
+
+def props_out(layout: MotorLayout | None) -> bool:
+    """True when ``layout`` is Betaflight's QUADX with the propellers turned out (every spin reversed)."""
+    return (layout is not None and layout.mixer.startswith("QUADX")
+            and tuple(layout.spins) == tuple(-s for s in QUADX_LAYOUT.spins))
 
 
 def _layout(headers: dict[str, str], motors: np.ndarray, table: np.ndarray, columns: dict[str, int]

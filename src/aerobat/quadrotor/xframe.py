@@ -32,6 +32,7 @@ import numba as nb
 import numpy as np
 
 from aerobat.core.bounds import Interval, Items, bounded, validate
+from aerobat.errors import ConfigError
 from aerobat.quadrotor.dynamics import P_FMAX, P_FMIN, P_KYAW, P_MX, P_MY, P_RATE_DN, P_RATE_UP, plant_vector
 from aerobat.quadrotor.vehicle import VehicleParams
 
@@ -75,6 +76,8 @@ class Airframe:
     thrust_coefficient_n_s2 : k in f = k Ω² (relates thrust to rotor speed for that torque).
     output_delay_s : time from the firmware's motor output to the ESC acting on it [s]
         (DShot frame and ESC processing; lockstep computes the loop in zero time).
+    props_out : the propellers turn the other way round from Betaflight's default (props in): every
+        motor's drag torque reverses, and the firmware flies with ``yaw_motors_reversed = ON``.
     """
 
     mass_kg: float = bounded(0.752, _MASS)
@@ -95,9 +98,18 @@ class Airframe:
     rotor_inertia_kg_m2: float = bounded(8e-6, Interval(0.0, 1e-2, unit="kg m²"))
     thrust_coefficient_n_s2: float = bounded(1.562522e-6, Interval(1e-9, 1e-2, unit="N s²"))
     output_delay_s: float = bounded(125e-6, Interval(0.0, 0.05, unit="s"))
+    props_out: bool = False
 
     def __post_init__(self) -> None:
         validate(self)
+        if not isinstance(self.props_out, bool):
+            raise ConfigError(f"props_out = {self.props_out!r}: expected true or false")
+
+    @property
+    def spins_ccw(self) -> tuple[bool, ...]:
+        """Whether each motor slot's propeller turns counter-clockwise seen from above: :data:`MOTOR_SPIN_CCW`
+        (props in), every one reversed with ``props_out``."""
+        return tuple(not ccw for ccw in MOTOR_SPIN_CCW) if self.props_out else MOTOR_SPIN_CCW
 
     def thrust_n(self, command: float) -> float:
         """Steady-state thrust of one rotor at motor command ``command`` (0 = stopped)."""
@@ -133,7 +145,7 @@ def xframe_plant(airframe: Airframe, *, thrust_gains: tuple[float, float, float,
                             rotor_thrust_max_n=a.thrust_max_n, collective_reduced_min_m_s2=1.0,
                             collective_reduced_max_m_s2=20.0, drag_constant_m=a.kappa_m)
     plant = plant_vector(carrier, thrust_gains=thrust_gains or a.thrust_gains, **terms)
-    for slot, ((fwd, right), ccw) in enumerate(zip(MOTOR_POSITIONS_FRD, MOTOR_SPIN_CCW, strict=True)):
+    for slot, ((fwd, right), ccw) in enumerate(zip(MOTOR_POSITIONS_FRD, a.spins_ccw, strict=True)):
         plant[P_MX + slot] = fwd * a.motor_x_m - a.com_offset_m[0]
         plant[P_MY + slot] = -right * a.motor_y_m - a.com_offset_m[1]  # FRD right = FLU −y
         plant[P_KYAW + slot] = -a.kappa_m if ccw else a.kappa_m

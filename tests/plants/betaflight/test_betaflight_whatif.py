@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from aerobat.cli import main
@@ -75,3 +76,21 @@ def test_a_4_3_1_diff_flown_on_a_roma_log_says_which_settings_differ(firmware, t
     assert differ["roll_rc_rate"] == ("100", "202") and len(differ) > 20
     assert [r["name"] for r in out["readings"]] == ["log", "SITL, the log's tune", "SITL, what-if"]
     assert Path(out["figure"]).stat().st_size > 20_000
+
+
+@needs_data
+def test_the_replay_turns_the_props_the_way_the_logs_mixer_does(firmware) -> None:
+    """The ROMA F5 flies props out (its yaw mixing says so). Flown props in, the SITL's motor yaw mix
+    (M1 + M4 − M2 − M3) ran against the log's (−0.55 on flight 3, 20–60 s); following the log it runs with it.
+    The gyro is the same either way: the spins and the mixer turn together."""
+    own = replay_log(ROMA, index=3, window_s=(20.0, 60.0))
+    forced_in = replay_log(ROMA, index=3, window_s=(20.0, 60.0), props_out=False)
+    assert own.props.startswith("out (mixer QUADX with props out") and forced_in.props == "in (as asked)"
+    mix = np.array([1.0, -1.0, -1.0, 1.0])
+
+    def r(result):
+        return float(np.corrcoef(result.motors_sim @ mix, result.motors_log @ mix)[0, 1])
+
+    assert r(own) > 0.45 and r(forced_in) < -0.45
+    for a, b in zip(own.gyro, forced_in.gyro, strict=True):
+        assert abs(a.rms - b.rms) < 0.1

@@ -37,13 +37,14 @@ __all__ = ["firmware_config", "firmware_design_model", "model_table", "plant_set
 
 
 def plant_settings(params: BetaflightParams) -> BetaflightSettings:
-    """The firmware settings the plant runs: ``settings.toml``, and the tune on top when there is one."""
+    """The firmware settings the plant runs: ``settings.toml``, the tune on top when there is one, and the mixer's
+    yaw the way the airframe's propellers turn."""
     settings = load_settings()
     if params.tune is not None:
         from aerobat.plants.betaflight.translate import translate
 
         settings = settings.with_tune(translate(params.tune))
-    return settings
+    return settings.with_props(params.airframe.props_out)
 
 
 def firmware_config(settings: BetaflightSettings, *, gyro_rate_hz: int) -> FirmwareConfig:
@@ -94,7 +95,10 @@ def _drag(config: VehicleConfig, params: BetaflightParams) -> dict[str, object]:
 
 def model_table(model: FirmwareModel) -> dict[str, Any]:
     """The model's stored form: what it is built from (firmware values, airframe, radio, drag, fidelity)."""
+    airframe = dataclass_to_table(model.airframe)
+    if not model.airframe.props_out:  # props in: the stored form before props_out existed
+        airframe.pop("props_out", None)
     return {"kind": "firmware", "description": model.description, "fidelity": model.fidelity.value,
-            "firmware": model.firmware.to_table(), "airframe": dataclass_to_table(model.airframe),
+            "firmware": model.firmware.to_table(), "airframe": airframe,
             "radio_rate_hz": 1.0 / model.radio_period_s,
             "aerodynamics": {k: list(v) if isinstance(v, tuple) else v for k, v in model.aerodynamics.items()}}

@@ -33,7 +33,7 @@ PINNED: dict[str, str] = {
     "failsafe_throttle_low_delay": "failsafe",
     "runaway_takeoff_prevention": "the offboard take-off at ~21 % throttle never ends the check, which then "
                                   "disarms flips (measured, settings.toml)",
-    "yaw_motors_reversed": "the physics' propeller spin directions",
+    "yaw_motors_reversed": "the physics' propeller spin directions (the airframe's props_out sets it)",
 }
 _AXES = ("roll", "pitch", "yaw")
 
@@ -123,6 +123,14 @@ class BetaflightSettings:
         values = tuple((n, v) for n, v in self.values if n not in extra) + tuple(extra.items())
         lines = [self.sha256, why, *(f"set {n} = {v}" for n, v in extra.items())]
         return replace(self, sha256=hashlib.sha256("\n".join(lines).encode()).hexdigest(), values=values)
+
+    def with_props(self, props_out: bool) -> BetaflightSettings:
+        """These settings with the mixer's yaw turned the way the airframe's propellers turn: unchanged for
+        props in (``settings.toml``'s pinned ``yaw_motors_reversed = OFF``), ``ON`` for props out
+        (:attr:`aerobat.quadrotor.xframe.Airframe.props_out`); the tune never sets it, the airframe does."""
+        if not props_out:
+            return self
+        return self.with_values({"yaw_motors_reversed": "ON"}, "props out: the airframe's propellers turn reversed")
 
     def cli_commands(self) -> list[str]:
         """All CLI commands, in the order they are applied (without ``save``)."""

@@ -226,6 +226,8 @@ def load_betaflight(path: str | Path) -> BetaflightParams:
 def params_to_table(params: BetaflightParams) -> dict[str, Any]:
     """The settings' stored form (the plant spec's ``settings``); the tune only when there is one."""
     table = dataclass_to_table(params)
+    if not params.airframe.props_out:  # props in, as every stored form before props_out existed
+        table["airframe"].pop("props_out", None)
     if params.tune is None:
         del table["tune"]
     else:

@@ -25,7 +25,6 @@ import math
 import numba as nb
 import numpy as np
 
-from aerobat.plants.betaflight.packets import MOTOR_SPIN_CCW
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.quadrotor.dynamics import N_STATE, P_IZZ, normalize_quaternion, plant_derivative
 from aerobat.quadrotor.xframe import add_rotor_reaction, curve_thrust, xframe_plant
@@ -121,7 +120,7 @@ def aux_vector(params: BetaflightParams, *, step_s: float, ground_z_m: float, gr
     aux[A_ACCEL_NOISE] = s.accel_noise_m_s2
     aux[A_ROTOR_J] = a.rotor_inertia_kg_m2
     aux[A_THRUST_COEF] = a.thrust_coefficient_n_s2
-    aux[A_SPIN : A_SPIN + 4] = [1.0 if ccw else -1.0 for ccw in MOTOR_SPIN_CCW]
+    aux[A_SPIN : A_SPIN + 4] = [1.0 if ccw else -1.0 for ccw in a.spins_ccw]
     return aux
 
 

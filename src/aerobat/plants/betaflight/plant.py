@@ -117,6 +117,8 @@ class BetaflightPlant:
 
             self.tune_report = translate(self.params.tune)
             self.settings = self.settings.with_tune(self.tune_report)
+        if settings is None:  # settings given are taken as they are (the fc plant's are the real board's)
+            self.settings = self.settings.with_props(self.params.airframe.props_out)
         self.binary = Path(binary) if binary is not None else ensure_sitl()
         self.eeprom = Path(eeprom) if eeprom is not None else ensure_eeprom(self.binary, settings=self.settings)
         self.start_m = np.zeros(3)

@@ -48,7 +48,7 @@ from aerobat.quadrotor.firmware.loop import hover
 from aerobat.quadrotor.firmware.sticks import N_LIMITS
 from aerobat.quadrotor.program import CompiledProgram, Program
 from aerobat.quadrotor.simulate import batch_threads
-from aerobat.quadrotor.xframe import MOTOR_SPIN_CCW, Airframe, xframe_plant
+from aerobat.quadrotor.xframe import Airframe, xframe_plant
 
 __all__ = ["Fidelity", "FirmwareModel", "FirmwareTrajectory"]
 
@@ -130,7 +130,7 @@ class FirmwareModel:
         self.frame[A_CURVE_K] = airframe.curve_shape
         self.frame[A_ROTOR_J] = airframe.rotor_inertia_kg_m2
         self.frame[A_THRUST_COEF] = airframe.thrust_coefficient_n_s2
-        self.frame[A_SPIN:A_SPIN + 4] = [1.0 if ccw else -1.0 for ccw in MOTOR_SPIN_CCW]
+        self.frame[A_SPIN:A_SPIN + 4] = [1.0 if ccw else -1.0 for ccw in airframe.spins_ccw]
         self.hover_thrust_n = airframe.mass_kg * self.gravity_m_s2 / 4.0
         if self.hover_thrust_n >= airframe.thrust_max_n:
             raise ConfigError(f"airframe: {airframe.mass_kg} kg cannot hover on four rotors of "

@@ -2,6 +2,7 @@
 
     .venv/bin/python scripts/results_whatif.py            # single changes, another quad's tune
     .venv/bin/python scripts/results_whatif.py props      # the props' direction against the log's motors
+    .venv/bin/python scripts/results_whatif.py twin       # flights 1-3 on the default and the identified airframe
 
 Flight 1, 40–62 s (three roll steps), flown with the log's own tune and with single roll changes; then
 flight 3, 20–40 s, with the TII Racing KakuteH7's 4.3.1 diff. Each row: the step response estimated from
@@ -69,11 +70,49 @@ def props() -> None:
             print(f"| {index} | {'out' if out else 'in'} | {raw:+.3f} | {band:+.3f} | {rms} |")
 
 
+def twin() -> None:
+    """Flights 1–3, whole, on the default 5-inch and on the airframe identified from flight 1 (as `identify
+    --log …:1 --airframe` writes it: props out from the mixer, a poorly excited axis from the prior's ratio)."""
+    import contextlib
+    import io
+    import tempfile
+
+    import numpy as np
+
+    from aerobat.cli import main as cli
+    from aerobat.experiments.log_replay import replay_log
+    from aerobat.plants.betaflight.params import load_betaflight
+
+    with tempfile.TemporaryDirectory(prefix="aerobat-twin-") as work:
+        airframe = Path(work) / "roma_bf.toml"
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+            code = cli(["identify", "--log", f"{ROMA}:1", "--vehicle", "fpv5", "--mass-kg", "0.55", "--motor-x-m",
+                        "0.08", "--motor-y-m", "0.08", "--output", str(Path(work) / "roma.toml"), "--airframe",
+                        str(airframe)])
+        if code != 0:
+            raise SystemExit(f"identify failed ({code})")
+        identified = load_betaflight(airframe)
+        print("| flight | airframe | gyro rms (corr.) roll · pitch · yaw [°/s] | tracking error corr. raw / 1–20 Hz, "
+              "roll · pitch · yaw | motors corr. | P-term corr. roll · pitch · yaw |")
+        print("|---|---|---|---|---|---|")
+        for index in (1, 2, 3):
+            for name, params in (("default 5-inch", None), ("identified from flight 1", identified)):
+                r = replay_log(ROMA, index=index, params=params)
+                gyro = " · ".join(f"{g.rms:.1f} ({g.correlation:.3f})" for g in r.gyro)
+                track = " · ".join(f"{e.correlation:.2f} / {e.band_correlation:.2f}" for e in r.tracking)
+                motors = np.array([m.correlation for m in r.motors])
+                p_term = " · ".join(f"{m.correlation:.2f}" if m is not None else "—" for m in r.pid[0])
+                print(f"| {index} | {name} | {gyro} | {track} | {motors.min():.2f}–{motors.max():.2f} | {p_term} |")
+
+
 def main() -> None:
     import sys
 
     if sys.argv[1:] == ["props"]:
         props()
+        return
+    if sys.argv[1:] == ["twin"]:
+        twin()
         return
     from aerobat.experiments.log_whatif import what_if
     from aerobat.plants.betaflight.tune import load_tune

@@ -160,7 +160,7 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
             say(f"identifying from {', '.join(str(r) for r in refs)}: mass {geometry.mass_kg:g} kg, motors at "
                 f"(±{geometry.motor_x_m:g}, ±{geometry.motor_y_m:g}) m, prior {prior.name} ({chosen})")
 
-    result = identify_from_logs(refs, geometry, before_fit=starting)
+    result = identify_from_logs(refs, geometry, before_fit=starting, prior=prior)
     fit = result.fit
     config = vehicle_from_log_fit(fit, prior, name=args.name or out.stem, idle_command=result.idle_command)
     save_vehicle(config, out, header=f"identified by aerobat identify --log from {fit.name} around the prior "
@@ -174,7 +174,7 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
         pilot = {"vehicle_mass_kg": airframe["mass_kg"]}
         write_text(args.airframe, f"# [airframe] of the Betaflight plant from {fit.name} (prior {prior.name})\n"
                                   + "".join(f"# {line}\n" for line in airframe_notes(fit))
-                                  + "".join(f"# CHECK: {line}\n" for line in warnings)
+                                  + "".join(f"# CHECK: {line}\n" for line in [*result.excitation_notes, *warnings])
                                   + tomli_w.dumps({"airframe": airframe, "pilot": pilot}))
     if args.json:
         print(json_text({
@@ -185,6 +185,7 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
                            for name, v in result.validations},
             "fit_segments_s": fit.fit_segments_s, "holdout_segments_s": fit.holdout_segments_s,
             "notes": list(fit.notes), "warnings": warnings, "prior": prior.name, "wall_s": fit.wall_s,
+            "excitation_deg_s": dict(zip(("roll", "pitch", "yaw"), result.excitation.rms_deg_s, strict=True)),
             "out": str(out), "figure": str(figure), "airframe": args.airframe}))
         return 0
     _print_log_fit(result)

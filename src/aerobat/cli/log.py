@@ -313,7 +313,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         sp, curve, g, e = result.setpoint[k], result.setpoint_curve[k], result.gyro[k], result.tracking[k]
         say(f"  {axis:5s} set point: firmware {sp.rms:5.2f} r {sp.correlation:6.4f}, tune's curve {curve.rms:5.2f} "
             f"r {curve.correlation:6.4f} of {sp.logged_rms:5.1f} | gyro {g.rms:5.1f} r {g.correlation:5.3f} of "
-            f"{g.logged_rms:5.1f} | tracking error {e.rms:5.1f} r {e.correlation:6.3f} of {e.logged_rms:5.1f}",
+            f"{g.logged_rms:5.1f} | tracking error {e.rms:5.1f} r {e.correlation:6.3f} "
+            f"(1-20 Hz {e.band_correlation:6.3f}) of {e.logged_rms:5.1f}",
             highlight=False)
     say("  motors: " + "; ".join(f"M{j + 1} rms {m.rms:.3f} r {m.correlation:.3f}"
                                  for j, m in enumerate(result.motors)),
@@ -389,7 +390,7 @@ def register(sub: Any) -> None:
                         "log's header, :N its log N) and show both beside the log (default: the log's own only)")
     q.add_argument("--set", metavar="NAME=VALUE", action="append", default=None,
                    help="what-if: change one setting, in the firmware's own terms (repeatable; on top of --tune, "
-                        "else of the log's own tune), e.g. --set p_roll=94")
+                        "else of the log's own tune), e.g. --set p_roll=94 (default: none)")
     q.add_argument("--out", metavar="DIR", default=None, help="folder for the figure (default: out/replay-FILE)")
     q.add_argument("--force", action="store_true", help="replace a figure that exists")
     q.add_argument("--json", action="store_true", help="print one JSON object")

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.errors import ConfigError, IdentificationFailed
+from aerobat.experiments.log_excitation import axis_excitation, with_prior_for_poorly_excited_axes
 from aerobat.logs import read_logs
 from aerobat.logs.files import LogFormat, check_log_file, detect_format
 from aerobat.logs.refs import LogRef, parse_log_ref
@@ -51,6 +52,8 @@ class LogIdentification:
     fitted : the logs fitted (``file#N``).
     validations : per other log of the same files, its prediction metrics, or the reason it
         could not be used.
+    excitation : each axis's motion in the logs fitted (:class:`~.log_excitation.AxisExcitation`).
+    excitation_notes : what identification did about a poorly excited axis (empty: nothing).
     """
 
     fit: LogFit
@@ -58,6 +61,8 @@ class LogIdentification:
     validations: tuple[tuple[str, tuple[ChannelMetrics, ...] | str], ...]
     logs: tuple[FlightLog, ...] = ()
     prepared: tuple[PreparedLog, ...] = ()
+    excitation: Any = None
+    excitation_notes: tuple[str, ...] = ()
 
     @property
     def idle_command(self) -> float | None:
@@ -85,8 +90,13 @@ def _load(refs: Sequence[LogRef]) -> tuple[list[FlightLog], list[FlightLog]]:
 
 def identify_from_logs(refs: Sequence[LogRef | str | os.PathLike[str]], geometry: Geometry, *,
                        options: LogFitOptions | None = None,
-                       before_fit: Callable[[], None] | None = None) -> LogIdentification:
+                       before_fit: Callable[[], None] | None = None,
+                       prior: VehicleConfig | None = None) -> LogIdentification:
     """Fit ``geometry``'s vehicle on the logs ``refs`` and validate on the other logs of the same files.
+
+    Each axis's excitation is measured (:func:`~.log_excitation.axis_excitation`); with a ``prior``, the inertia of
+    a poorly excited roll or pitch axis comes from the other axis and the prior's ratio, and the notes say so
+    (:func:`~.log_excitation.with_prior_for_poorly_excited_axes`).
 
     ``before_fit`` is called once the logs are read and found fit to identify (each a multirotor's, with
     enough flight, one motor layout), before the fit: where a caller says that it starts, so that a log
@@ -107,6 +117,10 @@ def identify_from_logs(refs: Sequence[LogRef | str | os.PathLike[str]], geometry
     if before_fit is not None:
         before_fit()
     fit = fit_log(prepared, layout, geometry, options=options)
+    excitation = axis_excitation(chosen)
+    excitation_notes: list[str] = []
+    if prior is not None:
+        fit, excitation_notes = with_prior_for_poorly_excited_axes(fit, excitation, prior)
     validations: list[tuple[str, tuple[ChannelMetrics, ...] | str]] = []
     for log in others:
         try:
@@ -114,7 +128,8 @@ def identify_from_logs(refs: Sequence[LogRef | str | os.PathLike[str]], geometry
         except ConfigError as exc:
             validations.append((log.name, str(exc).split(": ", 1)[-1]))
     return LogIdentification(fit=fit, fitted=tuple(log.name for log in chosen), validations=tuple(validations),
-                             logs=tuple(chosen), prepared=tuple(prepared))
+                             logs=tuple(chosen), prepared=tuple(prepared), excitation=excitation,
+                             excitation_notes=tuple(excitation_notes))
 
 
 def _require(fit: LogFit, name: str) -> float:

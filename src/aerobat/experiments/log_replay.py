@@ -39,6 +39,7 @@ from aerobat.errors import ConfigError
 from aerobat.experiments.log_identify import parse_log_ref
 from aerobat.logs import read_logs
 from aerobat.quadrotor.flightlog import Channel, FlightLog, LogSource
+from aerobat.quadrotor.log_analysis import band_pass
 
 __all__ = ["AxisMatch", "LogReplay", "StepMatch", "find_steps", "replay_log"]
 
@@ -50,19 +51,28 @@ SATURATED_DEG_S = 1900.0
 _CRASH_MARGIN_S = 0.5
 
 
+def _correlation(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.corrcoef(a, b)[0, 1]) if np.std(a) > 0 and np.std(b) > 0 else math.nan
+
+
 @dataclass(frozen=True)
 class AxisMatch:
-    """Simulated against logged on one series: rms of the difference, correlation, and the logged spread."""
+    """Simulated against logged on one series: rms of the difference, correlation, and the logged spread.
+
+    ``band_correlation`` is the correlation of the two in :data:`BAND_HZ` (nan where not computed).
+    """
 
     rms: float
     correlation: float
     logged_rms: float
+    band_correlation: float = math.nan
 
     @staticmethod
-    def of(sim: np.ndarray, real: np.ndarray) -> AxisMatch:
+    def of(sim: np.ndarray, real: np.ndarray, dt_s: float | None = None) -> AxisMatch:
         diff = float(np.sqrt(np.mean((sim - real) ** 2)))
-        corr = float(np.corrcoef(sim, real)[0, 1]) if np.std(sim) > 0 and np.std(real) > 0 else math.nan
-        return AxisMatch(diff, corr, float(np.sqrt(np.mean(real ** 2))))
+        band = (_correlation(band_pass(sim, dt_s), band_pass(real, dt_s))
+                if dt_s is not None and dt_s > 0 and sim.size > 8 else math.nan)
+        return AxisMatch(diff, _correlation(sim, real), float(np.sqrt(np.mean(real ** 2))), band)
 
 
 @dataclass(frozen=True)
@@ -318,10 +328,10 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
         pid=tuple(tuple(AxisMatch.of(pid_sim[v, k, j], pid[v, k, j])
                         if np.all(np.isfinite(pid[v, k, j])) and np.all(np.isfinite(pid_sim[v, k, j])) else None
                         for j in range(3)) for k in range(4)),
-        gyro=tuple(AxisMatch.of(gyro_sim[v, j], gyro_log[v, j]) for j in range(3)),
-        tracking=tuple(AxisMatch.of(sp_model[v, j] - gyro_sim[v, j], sp_log[v, j] - gyro_log[v, j])
+        gyro=tuple(AxisMatch.of(gyro_sim[v, j], gyro_log[v, j], dt) for j in range(3)),
+        tracking=tuple(AxisMatch.of(sp_model[v, j] - gyro_sim[v, j], sp_log[v, j] - gyro_log[v, j], dt)
                        for j in range(3)),
-        motors=tuple(AxisMatch.of(motors_sim[v, j], motors_log[v, j]) for j in range(4)),
+        motors=tuple(AxisMatch.of(motors_sim[v, j], motors_log[v, j], dt) for j in range(4)),
         steps=tuple(s for s in _steps(t, sp_log, gyro_log, gyro_sim, step_min_deg_s)
                     if v[int(np.searchsorted(t, s.time_s))]),
         wall_s=wall, lockstep_steps=trace.steps, excluded_s=float((~v).sum() * dt),

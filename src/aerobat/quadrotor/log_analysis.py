@@ -25,9 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["CALM_SPECIFIC_FORCE_G", "CRASH_SEARCH_S", "CRASH_SPECIFIC_FORCE_G", "GYRO_SATURATION_DEG_S",
-           "RESPONSE_S", "Crash", "StepResponse", "ThrottleSpectrogram", "estimate_step_response", "find_crash",
-           "plot_limits", "throttle_spectrogram"]
+__all__ = ["BAND_HZ", "CALM_SPECIFIC_FORCE_G", "CRASH_SEARCH_S", "CRASH_SPECIFIC_FORCE_G", "GYRO_SATURATION_DEG_S",
+           "RESPONSE_S", "Crash", "StepResponse", "ThrottleSpectrogram", "estimate_step_response", "band_pass",
+           "find_crash", "plot_limits", "throttle_spectrogram"]
 
 GYRO_SATURATION_DEG_S = 1900.0
 """A gyro sample at or above this [°/s] is saturated (95 % of Betaflight's 2000 °/s full scale)."""
@@ -37,6 +37,8 @@ CRASH_SEARCH_S = 3.0
 """A crash is looked for in the log's last seconds only [s]: a log ends at the crash or soon after."""
 CALM_SPECIFIC_FORCE_G = 4.0
 """Specific force [g] below which a sample before an impact still belongs to the flight."""
+BAND_HZ = (1.0, 20.0)
+"""The band a pilot reads a tracking error in [Hz]: above the trims and drifts, below frame vibration."""
 RESPONSE_S = 0.5
 """The step response's length [s]."""
 _G = 9.80665
@@ -74,6 +76,14 @@ def find_crash(time_s: np.ndarray, gyro_deg_s: np.ndarray, specific_force_m_s2: 
             found.append(Crash(_onset(ft, a, int(hit[0]), CALM_SPECIFIC_FORCE_G),
                                f"specific force {a[hit[0]]:.1f} g"))
     return min(found, key=lambda c: c.time_s) if found else None
+
+
+def band_pass(x: np.ndarray, dt_s: float, band_hz: tuple[float, float] = BAND_HZ) -> np.ndarray:
+    """``x`` (evenly spaced by ``dt_s``) with only its content in ``band_hz`` kept (FFT, mean removed)."""
+    spectrum = np.fft.rfft(x - x.mean())
+    f = np.fft.rfftfreq(x.size, dt_s)
+    spectrum[(f < band_hz[0]) | (f > band_hz[1])] = 0.0
+    return np.fft.irfft(spectrum, x.size)
 
 
 def _onset(t: np.ndarray, magnitude: np.ndarray, hit: int, calm: float) -> float:

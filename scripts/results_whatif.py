@@ -3,6 +3,7 @@
     .venv/bin/python scripts/results_whatif.py            # single changes, another quad's tune
     .venv/bin/python scripts/results_whatif.py props      # the props' direction against the log's motors
     .venv/bin/python scripts/results_whatif.py twin       # flights 1-3 on the default and the identified airframe
+    .venv/bin/python scripts/results_whatif.py gecko      # the Gecko: fitted on its first half, replayed on the rest
 
 Flight 1, 40–62 s (three roll steps), flown with the log's own tune and with single roll changes; then
 flight 3, 20–40 s, with the TII Racing KakuteH7's 4.3.1 diff. Each row: the step response estimated from
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 ROMA = SHARED / "flight-logs" / "betaflight" / "diatone-roma-f5.bbl"
@@ -72,7 +74,8 @@ def props() -> None:
 
 def twin() -> None:
     """Flights 1–3, whole, on the default 5-inch and on the airframe identified from flight 1 (as `identify
-    --log …:1 --airframe` writes it: props out from the mixer, a poorly excited axis from the prior's ratio)."""
+    --log …:1 --airframe` writes it: props out from the mixer, a poorly excited axis from the prior's ratio, the
+    battery's reference voltage), thrust following the logged battery, and once at constant thrust."""
     import contextlib
     import io
     import tempfile
@@ -96,8 +99,10 @@ def twin() -> None:
               "roll · pitch · yaw | motors corr. | P-term corr. roll · pitch · yaw |")
         print("|---|---|---|---|---|---|")
         for index in (1, 2, 3):
-            for name, params in (("default 5-inch", None), ("identified from flight 1", identified)):
-                r = replay_log(ROMA, index=index, params=params)
+            for name, params, battery in (("default 5-inch", None, True),
+                                          ("identified from flight 1", identified, True),
+                                          ("identified, thrust constant (--no-battery)", identified, False)):
+                r = replay_log(ROMA, index=index, params=params, battery=battery)
                 gyro = " · ".join(f"{g.rms:.1f} ({g.correlation:.3f})" for g in r.gyro)
                 track = " · ".join(f"{e.correlation:.2f} / {e.band_correlation:.2f}" for e in r.tracking)
                 motors = np.array([m.correlation for m in r.motors])
@@ -105,8 +110,63 @@ def twin() -> None:
                 print(f"| {index} | {name} | {gyro} | {track} | {motors.min():.2f}–{motors.max():.2f} | {p_term} |")
 
 
+GECKO = SHARED / "flight-logs" / "betaflight" / "aikonf7-gecko.bbl"
+
+
+def _identify_airframe(work: Path, log: str, extra: list[str]) -> Path:
+    import contextlib
+    import io
+
+    from aerobat.cli import main as cli
+
+    airframe = work / "airframe.toml"
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        code = cli(["identify", "--log", log, "--vehicle", "fpv5", *extra, "--output", str(work / "vehicle.toml"),
+                    "--airframe", str(airframe)])
+    if code != 0:
+        raise SystemExit(f"identify failed ({code})")
+    return airframe
+
+
+def _replay_rows(path: Path, index: int, window: tuple[float, float] | None, rows: list[tuple[str, Any]]) -> None:
+    import numpy as np
+
+    from aerobat.experiments.log_replay import replay_log
+
+    mix = np.array([1.0, -1.0, -1.0, 1.0])
+    for name, params in rows:
+        r = replay_log(path, index=index, window_s=window, params=params)
+        gyro = " · ".join(f"{g.rms:.1f} ({g.correlation:.3f})" for g in r.gyro)
+        track = " · ".join(f"{e.correlation:.2f} / {e.band_correlation:.2f}" for e in r.tracking)
+        steps = r.step_summary()
+        rise = " · ".join(f"{1e3 * s['rise_log_s']:.0f} / {1e3 * s['rise_sim_s']:.0f} ms, "
+                          f"{100 * s['overshoot_log']:.0f} / {100 * s['overshoot_sim']:.0f} %"
+                          if s["steps"] else "—" for s in steps.values())
+        yaw = float(np.corrcoef(r.motors_sim @ mix, r.motors_log @ mix)[0, 1])
+        print(f"| {name} | {gyro} | {track} | {rise} | {yaw:+.2f} |")
+
+
+def gecko() -> None:
+    """The Gecko (one 134 s log, mass and frame unknown: the 5-inch preset's): identified on 0–67 s, replayed on
+    67–134 s with the default 5-inch and with what identification wrote."""
+    import tempfile
+
+    from aerobat.plants.betaflight.params import load_betaflight
+
+    with tempfile.TemporaryDirectory(prefix="aerobat-gecko-") as work:
+        airframe = load_betaflight(_identify_airframe(Path(work), str(GECKO), ["--window-s", "0", "67"]))
+        print("| airframe | gyro rms (corr.) roll · pitch · yaw [°/s] | tracking error corr. raw / 1–20 Hz | "
+              "steps: rise, overshoot log / SITL (medians) | yaw mix corr. |")
+        print("|---|---|---|---|---|")
+        _replay_rows(GECKO, 1, (67.0, 133.8), [("default 5-inch", None), ("identified on 0–67 s", airframe)])
+
+
 def main() -> None:
     import sys
+
+    if sys.argv[1:] == ["gecko"]:
+        gecko()
+        return
 
     if sys.argv[1:] == ["props"]:
         props()

@@ -160,7 +160,8 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
             say(f"identifying from {', '.join(str(r) for r in refs)}: mass {geometry.mass_kg:g} kg, motors at "
                 f"(±{geometry.motor_x_m:g}, ±{geometry.motor_y_m:g}) m, prior {prior.name} ({chosen})")
 
-    result = identify_from_logs(refs, geometry, before_fit=starting, prior=prior)
+    window = tuple(args.window_s) if args.window_s else None
+    result = identify_from_logs(refs, geometry, before_fit=starting, prior=prior, window_s=window)
     fit = result.fit
     config = vehicle_from_log_fit(fit, prior, name=args.name or out.stem, idle_command=result.idle_command)
     save_vehicle(config, out, header=f"identified by aerobat identify --log from {fit.name} around the prior "
@@ -169,7 +170,7 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
     warnings = identification_warnings(fit, prior)
     airframe = None
     if args.airframe:
-        airframe = airframe_from_log_fit(fit)
+        airframe = airframe_from_log_fit(fit, battery_reference_v=result.battery_reference_v)
         # the pilot flies with the mass the user gave, as a pilot who weighed the quad would
         pilot = {"vehicle_mass_kg": airframe["mass_kg"]}
         write_text(args.airframe, f"# [airframe] of the Betaflight plant from {fit.name} (prior {prior.name})\n"
@@ -290,6 +291,10 @@ def register(sub: Any) -> None:
                       help="with --log: motor distance from the centre along y (default: the prior's arm / √2)")
     logs.add_argument("--airframe", metavar="FILE.toml", default=None,
                       help="with --log: also write the Betaflight plant's [airframe] section (default: not written)")
+    logs.add_argument("--window-s", nargs=2, type=finite_float(0.0, 1e6, "s"), metavar=("START", "END"),
+                      default=None,
+                      help="with --log: fit only this window of each log named [s], e.g. its first half, and "
+                           "validate on the rest of it too (default: whole logs)")
     fit = p.add_argument_group("the fit")
     fit.add_argument("--max-position-rms-mm", type=finite_float(0.01, 10000.0, "mm"), default=20.0,
                      help="refuse a fit whose position residual is larger (RMS)")

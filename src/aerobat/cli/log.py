@@ -282,7 +282,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     if args.tune is not None or args.set:
         return _what_if(args, params, source, out, window, progress)
     result = replay_log(args.file, window_s=window, params=params, airframe_source=source,
-                        step_min_deg_s=args.step_min_deg_s, seed=args.seed, progress=progress)
+                        step_min_deg_s=args.step_min_deg_s, seed=args.seed, progress=progress,
+                        battery=not args.no_battery)
     if terminal:
         print(file=sys.stderr)
     stem = result.log.replace("#", "-log")
@@ -305,6 +306,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         f"the air; airframe: {source} ({result.wall_s:.1f} s wall, {result.lockstep_steps} lockstep steps)",
         highlight=False)
     say(f"  props {result.props}: the SITL's mixer and the physics' spins follow it", highlight=False)
+    say(f"  battery: {result.battery}", highlight=False)
     if result.excluded_s:
         say(f"  {result.excluded_s:.1f} s left out: within 0.5 s of a logged gyro at its 2000 deg/s limit (a crash)",
             highlight=False)
@@ -385,6 +387,8 @@ def register(sub: Any) -> None:
     q.add_argument("--step-min-deg-s", type=finite_float(10.0, 2000.0, "deg/s"), default=100.0,
                    help="smallest set-point step the step-response metrics use")
     q.add_argument("--seed", type=bounded_int(0, 2**31 - 1), default=0, help="seeds the sensor noise")
+    q.add_argument("--no-battery", action="store_true",
+                   help="keep thrust constant (default: thrust follows the logged battery voltage, × (V/V_ref)²)")
     q.add_argument("--tune", metavar="FILE[:N]", default=None,
                    help="what-if: fly the logged sticks with this tune too (a CLI diff or dump, or another "
                         "log's header, :N its log N) and show both beside the log (default: the log's own only)")

@@ -65,6 +65,18 @@ class LogIdentification:
     excitation_notes: tuple[str, ...] = ()
 
     @property
+    def battery_reference_v(self) -> float | None:
+        """The battery voltage the fit's thrust holds at [V]: the median in flight over the logs fitted
+        (:func:`~.log_replay.flying_voltage_v`, weighted by their lengths); None without a logged voltage."""
+        from aerobat.experiments.log_replay import flying_voltage_v
+
+        volts = [(flying_voltage_v(log), log.duration_s) for log in self.logs]
+        volts = [(v, w) for v, w in volts if math.isfinite(v)]
+        if not volts:
+            return None
+        return float(sum(v * w for v, w in volts) / sum(w for _, w in volts))
+
+    @property
     def idle_command(self) -> float | None:
         """Betaflight's armed idle as a motor command (the low end of the header's motorOutput), else None."""
         for log in self.logs:
@@ -72,6 +84,24 @@ class LogIdentification:
             if low.isdigit():
                 return (float(low) - 48.0) / 1999.0
         return None
+
+
+def _windowed(chosen: list[FlightLog], others: list[FlightLog], window_s: tuple[float, float]
+              ) -> tuple[list[FlightLog], list[FlightLog]]:
+    """The logs ``chosen`` cut to ``window_s`` (named ``file#N@a-b s``), and the parts outside it with ``others``."""
+    start, end = window_s
+    if not 0.0 <= start < end:
+        raise ConfigError(f"--window-s {start:g} {end:g}: the window must start at 0 s or later and end after it")
+    cut: list[FlightLog] = []
+    rest: list[FlightLog] = []
+    for log in chosen:
+        if start >= log.duration_s:
+            raise ConfigError(f"--window-s {start:g} {end:g}: {log.name} lasts {log.duration_s:.1f} s")
+        cut.append(dataclasses.replace(log.window(start, end), window_s=(start, min(end, log.duration_s))))
+        for a, b in ((0.0, start), (end, log.duration_s)):
+            if b - a >= 8.0:  # enough flight to validate on
+                rest.append(dataclasses.replace(log.window(a, b), window_s=(a, b)))
+    return cut, [*rest, *others]
 
 
 def _load(refs: Sequence[LogRef]) -> tuple[list[FlightLog], list[FlightLog]]:
@@ -91,12 +121,14 @@ def _load(refs: Sequence[LogRef]) -> tuple[list[FlightLog], list[FlightLog]]:
 def identify_from_logs(refs: Sequence[LogRef | str | os.PathLike[str]], geometry: Geometry, *,
                        options: LogFitOptions | None = None,
                        before_fit: Callable[[], None] | None = None,
-                       prior: VehicleConfig | None = None) -> LogIdentification:
+                       prior: VehicleConfig | None = None,
+                       window_s: tuple[float, float] | None = None) -> LogIdentification:
     """Fit ``geometry``'s vehicle on the logs ``refs`` and validate on the other logs of the same files.
 
     Each axis's excitation is measured (:func:`~.log_excitation.axis_excitation`); with a ``prior``, the inertia of
     a poorly excited roll or pitch axis comes from the other axis and the prior's ratio, and the notes say so
-    (:func:`~.log_excitation.with_prior_for_poorly_excited_axes`).
+    (:func:`~.log_excitation.with_prior_for_poorly_excited_axes`). ``window_s`` (log time) fits only that window
+    of each log named; the rest of each (before and after it) validates with the file's other logs.
 
     ``before_fit`` is called once the logs are read and found fit to identify (each a multirotor's, with
     enough flight, one motor layout), before the fit: where a caller says that it starts, so that a log
@@ -106,6 +138,8 @@ def identify_from_logs(refs: Sequence[LogRef | str | os.PathLike[str]], geometry
     if not parsed:
         raise ConfigError("identify: no log given")
     chosen, others = _load(parsed)
+    if window_s is not None:
+        chosen, others = _windowed(chosen, others, window_s)
     layouts = {log.motor_layout for log in chosen}
     prepared = [prepare_log(log) for log in chosen]
     if len(layouts) != 1 or None in layouts:
@@ -180,11 +214,13 @@ def vehicle_from_log_fit(fit: LogFit, prior: VehicleConfig, *, name: str = "iden
     return dataclasses.replace(prior.with_vehicle(vehicle, name=name), effects=ModelEffects(), source=source)
 
 
-def airframe_from_log_fit(fit: LogFit, *, base: Any | None = None) -> dict[str, Any]:
+def airframe_from_log_fit(fit: LogFit, *, base: Any | None = None,
+                          battery_reference_v: float | None = None) -> dict[str, Any]:
     """The Betaflight plant's ``[airframe]`` table for the identified quad (fields of ``Airframe``).
 
     ``base`` (an :class:`~aerobat.plants.betaflight.params.Airframe`) gives what a log does not
-    tell: motor spread, rotor inertia, output delay; its defaults otherwise.
+    tell: motor spread, rotor inertia, output delay; its defaults otherwise. ``battery_reference_v``
+    (:attr:`LogIdentification.battery_reference_v`) is the voltage the fitted thrust holds at.
 
     The output delay stays the base's (the SITL's ESC delay), not the fit's ``delay_s``: the fit
     measures from the logged motor command to the logged, *filtered* gyro, so its delay includes
@@ -211,10 +247,15 @@ def airframe_from_log_fit(fit: LogFit, *, base: Any | None = None) -> dict[str, 
         kappa_m=min(max(_require(fit, "kappa_m"), 1e-4), 0.5),
         props_out=props_out(fit.layout),
     )
+    if battery_reference_v is not None:
+        table["battery_reference_v"] = battery_reference_v
+    else:
+        table.pop("battery_reference_v", None)  # TOML has no null
     for key, value in list(table.items()):
         if isinstance(value, tuple):
             table[key] = list(value)
     checked: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in table.items()}
+    checked.setdefault("battery_reference_v", None)
     Airframe(**checked)  # validates
     return table
 
@@ -231,13 +272,15 @@ def airframe_notes(fit: LogFit, base: Any | None = None) -> list[str]:
     from aerobat.plants.betaflight.params import Airframe
 
     defaults = [name for name in dataclasses.asdict(base or Airframe())
-                if name not in _FITTED_AIRFRAME + _GIVEN_AIRFRAME + ("props_out",)]
+                if name not in _FITTED_AIRFRAME + _GIVEN_AIRFRAME + ("props_out", "battery_reference_v")]
     return [f"fitted to the log: {', '.join(_FITTED_AIRFRAME)} (I_zz and kappa_m with the assumed I_zz ratio "
             f"{fit.geometry.inertia_zz_ratio:.3g} of I_xx + I_yy);",
             f"given, not identified: {', '.join(_GIVEN_AIRFRAME)} (--mass-kg, --motor-x-m, --motor-y-m, else the "
             f"prior's);",
             f"props_out = {'true' if props_out(fit.layout) else 'false'}: the log's mixer (the SITL's "
             f"yaw_motors_reversed and the physics' spins follow it);",
+            "battery_reference_v (when the log records a voltage): its median in flight, where thrust_max_n "
+            "holds; a log replay scales thrust by (V/battery_reference_v)²;",
             f"NOT identified, the Betaflight plant's defaults: {', '.join(defaults)};",
             f"the fit's delay from motor command to the logged (filtered) gyro: {fit.model.delay_s * 1e3:.1f} ms;",
             "not used as output_delay_s: it includes gyro filtering the SITL's firmware runs itself, a 250 Hz",

@@ -107,6 +107,7 @@ class LogReplay:
     wall_s : wall time of the flight; steps: lockstep steps.
     props : which way the propellers turned (``in`` or ``out``, from the log's mixer) and why: the SITL's
         ``yaw_motors_reversed`` and the physics' spins follow it.
+    battery : how thrust followed the logged battery voltage (or why not).
     """
 
     log: str
@@ -134,6 +135,7 @@ class LogReplay:
     lockstep_steps: int
     excluded_s: float = 0.0
     props: str = "in"
+    battery: str = "not followed"
 
     def step_summary(self) -> dict[str, dict[str, float]]:
         """Per axis: steps found, median rise time [s] and overshoot (fraction), logged and simulated."""
@@ -166,7 +168,7 @@ class LogReplay:
                         for term, row in zip("PIDF", self.pid, strict=True)},
                 "tracking": axes(self.tracking, AXES), "motors": axes(self.motors, ("M1", "M2", "M3", "M4")),
                 "steps": self.step_summary(), "step_list": [dataclasses.asdict(s) for s in self.steps],
-                "excluded_s": self.excluded_s, "props": self.props,
+                "excluded_s": self.excluded_s, "props": self.props, "battery": self.battery,
                 "wall_s": self.wall_s, "lockstep_steps": self.lockstep_steps}
 
 
@@ -235,14 +237,16 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
                params: Any = None, airframe_source: str = "the default 5-inch (params.airframe)",
                step_min_deg_s: float = 100.0, seed: int = 0, lead_in_s: float = 0.5,
                progress: Callable[[float, float], None] | None = None, tune: Any = None,
-               changes: Sequence[str] = (), props_out: bool | None = None) -> LogReplay:
+               changes: Sequence[str] = (), props_out: bool | None = None, battery: bool = True) -> LogReplay:
     """Replay ``file`` (``FILE`` or ``FILE:N``; ``index`` wins) through Betaflight and compare with the log.
 
     ``params`` (:class:`~aerobat.plants.betaflight.params.BetaflightParams`) gives the airframe,
     sensors and firmware; its ``tune`` is replaced by the log's header, or by ``tune`` (a
     :class:`~aerobat.plants.betaflight.tune.Tune`: what-if), with ``changes`` (``NAME=VALUE`` each,
     :func:`~aerobat.plants.betaflight.tune.with_settings`) on top. The propellers turn as the log's mixer
-    says (:func:`log_props_out`), or as ``props_out`` says when given. ``window_s`` (log time,
+    says (:func:`log_props_out`), or as ``props_out`` says when given. With ``battery`` (and a logged
+    voltage) thrust follows the battery: every rotor's thrust × (V/V_ref)², V the logged voltage and
+    V_ref the airframe's ``battery_reference_v`` (else the log's median in flight). ``window_s`` (log time,
     seconds) limits the comparison; default the whole log. The flight starts ``lead_in_s`` before
     the window (where the log allows), so that the vehicle, which starts at rest, has caught up
     with the pilot when the comparison begins.
@@ -283,8 +287,10 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
     t = sticks.time_s
     throttle = cut.signals[Channel.THROTTLE_STICK].at(t)[:, 0]
     channels = channels_from_commands(settings, sticks.values * 500.0, throttle)
+    scale, battery_note = (_battery_scale(log, t, params.airframe.battery_reference_v) if battery
+                           else (None, "not followed (as asked)"))
     wall = time.perf_counter()
-    trace = replay_sticks(plant, StickTrack(t, channels), progress=progress)
+    trace = replay_sticks(plant, StickTrack(t, channels), progress=progress, thrust_scale=scale)
     wall = time.perf_counter() - wall
     rel = t - t[0]
     keep = t >= start - 1e-9
@@ -335,7 +341,38 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
         steps=tuple(s for s in _steps(t, sp_log, gyro_log, gyro_sim, step_min_deg_s)
                     if v[int(np.searchsorted(t, s.time_s))]),
         wall_s=wall, lockstep_steps=trace.steps, excluded_s=float((~v).sum() * dt),
-        props=("out" if props_out else "in") + (f" ({_mixer_note(log)})" if from_log else " (as asked)"))
+        props=("out" if props_out else "in") + (f" ({_mixer_note(log)})" if from_log else " (as asked)"),
+        battery=battery_note)
+
+
+FLYING_MOTOR = 0.15
+"""A log sample whose mean motor command is above this fraction is in flight (for the battery's reference)."""
+
+
+def flying_voltage_v(log: FlightLog) -> float:
+    """The median battery voltage [V] of ``log`` while it flies (mean motor command above :data:`FLYING_MOTOR`);
+    nan without a logged voltage or a flying sample."""
+    if not (log.has(Channel.BATTERY_VOLTAGE) and log.has(Channel.MOTOR_COMMAND)):
+        return math.nan
+    b = log.signals[Channel.BATTERY_VOLTAGE]
+    flying = log.signals[Channel.MOTOR_COMMAND].at(b.time_s).mean(axis=1) > FLYING_MOTOR
+    volts = b.values[flying, 0]
+    volts = volts[np.isfinite(volts) & (volts > 0)]
+    return float(np.median(volts)) if volts.size else math.nan
+
+
+def _battery_scale(log: FlightLog, t: np.ndarray, reference_v: float | None) -> tuple[np.ndarray | None, str]:
+    """Per stick sample the thrust factor (V/V_ref)², and what it did."""
+    if not log.has(Channel.BATTERY_VOLTAGE):
+        return None, "not followed: the log records no battery voltage"
+    volts = log.signals[Channel.BATTERY_VOLTAGE].at(t)[:, 0]
+    ref = reference_v if reference_v is not None else flying_voltage_v(log)
+    which = "the airframe's battery_reference_v" if reference_v is not None else "the log's median in flight"
+    if not (math.isfinite(ref) and np.all(np.isfinite(volts)) and np.all(volts > 0)):
+        return None, "not followed: the logged voltage is not usable"
+    scale = (volts / ref) ** 2
+    return scale, (f"thrust × (V/{ref:.2f} V)², V the logged voltage, V_ref {which}: "
+                   f"{scale.min():.2f}–{scale.max():.2f}, median {np.median(scale):.2f}")
 
 
 def log_props_out(log: FlightLog) -> bool:

@@ -226,6 +226,8 @@ class FlightLog:
     signals : the series it holds, by channel.
     motor_layout : the mixer's geometry, if the source has one.
     notes : what the reader noticed (skipped frames, fields it did not understand).
+    window_s : the part of the log this is [s], when it is one that is named by its window (identification's
+        ``--window-s``); None: the log as read, or a part that keeps the log's name.
     """
 
     path: Path
@@ -236,11 +238,13 @@ class FlightLog:
     signals: Mapping[Channel, Signal]
     motor_layout: MotorLayout | None = None
     notes: tuple[str, ...] = ()
+    window_s: tuple[float, float] | None = None
 
     @property
     def name(self) -> str:
-        """``file.bbl#2``: the file and, if it holds several, the log."""
-        return f"{self.path.name}#{self.index}" if self.logs_in_file > 1 else self.path.name
+        """``file.bbl#2``: the file and, if it holds several, the log; ``@10-60s`` for a part named by its window."""
+        name = f"{self.path.name}#{self.index}" if self.logs_in_file > 1 else self.path.name
+        return name if self.window_s is None else f"{name}@{self.window_s[0]:g}-{self.window_s[1]:g}s"
 
     @property
     def duration_s(self) -> float:

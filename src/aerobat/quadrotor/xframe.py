@@ -78,6 +78,9 @@ class Airframe:
         (DShot frame and ESC processing; lockstep computes the loop in zero time).
     props_out : the propellers turn the other way round from Betaflight's default (props in): every
         motor's drag torque reverses, and the firmware flies with ``yaw_motors_reversed = ON``.
+    battery_reference_v : the battery voltage at which ``thrust_max_n`` holds [V] (an identified
+        airframe: the fitted logs' median in flight); a log replay scales thrust by (V/this)² with the
+        logged voltage V. None: the replayed log's own median in flight.
     """
 
     mass_kg: float = bounded(0.752, _MASS)
@@ -99,9 +102,10 @@ class Airframe:
     thrust_coefficient_n_s2: float = bounded(1.562522e-6, Interval(1e-9, 1e-2, unit="N s²"))
     output_delay_s: float = bounded(125e-6, Interval(0.0, 0.05, unit="s"))
     props_out: bool = False
+    battery_reference_v: float | None = bounded(None, Interval(1.0, 100.0, unit="V"))
 
     def __post_init__(self) -> None:
-        validate(self)
+        validate(self, skip=("battery_reference_v",) if self.battery_reference_v is None else ())
         if not isinstance(self.props_out, bool):
             raise ConfigError(f"props_out = {self.props_out!r}: expected true or false")
 

@@ -94,3 +94,24 @@ def test_the_replay_turns_the_props_the_way_the_logs_mixer_does(firmware) -> Non
     assert r(own) > 0.45 and r(forced_in) < -0.45
     for a, b in zip(own.gyro, forced_in.gyro, strict=True):
         assert abs(a.rms - b.rms) < 0.1
+
+
+@needs_data
+def test_thrust_follows_the_logged_battery(firmware) -> None:
+    """Flight 3 flies on a battery that sags from 23.2 to 16 V; replayed on an airframe whose thrust holds at
+    23.69 V, every rotor's thrust is scaled by (V/23.69)², and the flight differs from one at constant thrust."""
+    import dataclasses
+
+    from aerobat.plants.betaflight.params import BetaflightParams
+
+    base = BetaflightParams()
+    params = dataclasses.replace(base, airframe=dataclasses.replace(base.airframe, battery_reference_v=23.69))
+    sagging = replay_log(ROMA, index=3, window_s=(20.0, 24.0), params=params)
+    constant = replay_log(ROMA, index=3, window_s=(20.0, 24.0), params=params, battery=False)
+    assert sagging.battery.startswith("thrust × (V/23.69 V)²") and "battery_reference_v" in sagging.battery
+    assert constant.battery == "not followed (as asked)"
+    low, high = (float(x) for x in sagging.battery.split(": ")[1].split(",")[0].split("–"))
+    assert 0.4 < low < high < 1.0  # the battery never reaches the reference in this flight
+    assert not np.allclose(sagging.gyro_sim, constant.gyro_sim)
+    own = replay_log(ROMA, index=3, window_s=(20.0, 24.0))  # the default airframe: the log's own median
+    assert "the log's median in flight" in own.battery

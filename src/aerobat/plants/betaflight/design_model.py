@@ -98,6 +98,8 @@ def model_table(model: FirmwareModel) -> dict[str, Any]:
     airframe = dataclass_to_table(model.airframe)
     if not model.airframe.props_out:  # props in: the stored form before props_out existed
         airframe.pop("props_out", None)
+    if model.airframe.battery_reference_v is None:
+        airframe.pop("battery_reference_v", None)
     return {"kind": "firmware", "description": model.description, "fidelity": model.fidelity.value,
             "firmware": model.firmware.to_table(), "airframe": airframe,
             "radio_rate_hz": 1.0 / model.radio_period_s,

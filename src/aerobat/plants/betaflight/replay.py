@@ -24,7 +24,7 @@ import numpy as np
 
 from aerobat.errors import ConfigError
 from aerobat.plants.betaflight.firmware_settings import BetaflightSettings
-from aerobat.plants.betaflight.physics import airframe_plant
+from aerobat.plants.betaflight.physics import A_FMAX, airframe_plant
 from aerobat.plants.betaflight.rc import RC_MAX_US, RC_MID_US, RC_MIN_US
 
 __all__ = ["MOTOR_LOG_ORDER", "ReplayTrace", "StickTrack", "channels_from_commands", "replay_sticks"]
@@ -115,10 +115,12 @@ def channels_from_commands(settings: BetaflightSettings, roll_pitch_yaw: np.ndar
 
 
 def replay_sticks(plant: object, track: StickTrack, *, samples_per_frame: int = 4,
-                  progress: Callable[[float, float], None] | None = None) -> ReplayTrace:
+                  progress: Callable[[float, float], None] | None = None,
+                  thrust_scale: np.ndarray | None = None) -> ReplayTrace:
     """Fly ``track`` through ``plant``'s firmware (a :class:`~.plant.BetaflightPlant`) in ACRO, in the air.
 
-    ``progress(done_s, total_s)`` is called about once per simulated second.
+    ``progress(done_s, total_s)`` is called about once per simulated second. ``thrust_scale`` (one per
+    ``track.time_s``) multiplies every rotor's thrust from frame to frame (a battery's sag); None: 1.
     """
     from aerobat.plants.betaflight.plant import BetaflightPlant, TrialStop
 
@@ -140,8 +142,14 @@ def replay_sticks(plant: object, track: StickTrack, *, samples_per_frame: int = 
         tail = (*aux, *([RC_MIN_US] * (12 - len(aux))))
         t0 = flight.time_s
         next_report = 1.0
+        f_max = float(flight.aux[A_FMAX])
+        scale = None if thrust_scale is None else np.asarray(thrust_scale, dtype=float)
+        if scale is not None and scale.shape != track.time_s.shape:
+            raise ValueError(f"thrust_scale: {scale.shape}, expected one per track sample {track.time_s.shape}")
         for k in range(frames):
             c = track.at(track.time_s[0] + k * period)
+            if scale is not None:
+                flight.aux[A_FMAX] = f_max * float(np.interp(track.time_s[0] + k * period, track.time_s, scale))
             channels = (int(c[0]), int(c[1]), int(c[2]), int(c[3]), *tail)
             flight.sampled_frame(channels, rows[k * samples_per_frame:(k + 1) * samples_per_frame])
             if progress is not None and (k + 1) * period >= next_report:

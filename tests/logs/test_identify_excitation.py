@@ -63,3 +63,17 @@ def test_two_poorly_excited_axes_leave_the_fit_and_say_it_is_unchecked():
     assert fit.values["inertia_yy_kg_m2"][0] == 2e-3 and "both poorly excited" in notes[0]
     fit, notes = with_prior_for_poorly_excited_axes(Fit(), AxisExcitation((30.0, 40.0, 2.0)), fpv5())
     assert notes == []  # yaw's inertia is assumed anyway (the I_zz ratio)
+
+
+GECKO = DATA / "betaflight" / "aikonf7-gecko.bbl"
+
+
+@pytest.mark.skipif(not GECKO.is_file(), reason=f"the real flight logs are not here ({DATA} is absent)")
+def test_part_of_a_log_is_fitted_and_the_rest_of_it_validates():
+    result = identify_from_logs([GECKO], GEOMETRY, window_s=(0.0, 67.0), prior=fpv5())
+    assert result.fitted == ("aikonf7-gecko.bbl@0-67s",)
+    assert [name for name, _ in result.validations] == ["aikonf7-gecko.bbl@67-133.838s"]
+    assert not isinstance(result.validations[0][1], str)  # validated, not refused
+    assert result.battery_reference_v is not None and 13.0 < result.battery_reference_v < 17.0  # a 4S pack
+    with pytest.raises(Exception, match="lasts 133.8 s"):
+        identify_from_logs([GECKO], GEOMETRY, window_s=(200.0, 300.0))

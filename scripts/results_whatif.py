@@ -4,6 +4,7 @@
     .venv/bin/python scripts/results_whatif.py props      # the props' direction against the log's motors
     .venv/bin/python scripts/results_whatif.py twin       # flights 1-3 on the default and the identified airframe
     .venv/bin/python scripts/results_whatif.py gecko      # the Gecko: fitted on its first half, replayed on the rest
+    .venv/bin/python scripts/results_whatif.py spectra    # gyro spectra, log against SITL (docs/figures/logs)
 
 Flight 1, 40–62 s (three roll steps), flown with the log's own tune and with single roll changes; then
 flight 3, 20–40 s, with the TII Racing KakuteH7's 4.3.1 diff. Each row: the step response estimated from
@@ -161,8 +162,34 @@ def gecko() -> None:
         _replay_rows(GECKO, 1, (67.0, 133.8), [("default 5-inch", None), ("identified on 0–67 s", airframe)])
 
 
+def spectra() -> None:
+    """Flight 3, 20–60 s: the logged and the simulated gyro's spectra (the figure) and their rms above 20 Hz."""
+    import numpy as np
+
+    from aerobat.experiments.log_replay import replay_log
+    from aerobat.plotting import save_figure
+    from aerobat.plotting.log_replay import plot_replay_spectra
+    from aerobat.quadrotor.log_analysis import band_pass
+
+    r = replay_log(ROMA, index=3, window_s=(20.0, 60.0))
+    out = Path(__file__).resolve().parents[1] / "docs" / "figures" / "logs" / "roma3_replay_spectra.png"
+    save_figure(plot_replay_spectra(r), out)
+    dt = float(np.median(np.diff(r.time_s)))
+    nyquist = 0.5 / dt
+    print(f"gyro rms above 20 Hz (to {nyquist:.0f} Hz), flight 3, 20–60 s [°/s]: log / SITL")
+    for k, axis in enumerate(("roll", "pitch", "yaw")):
+        log, sim = (float(np.sqrt(np.mean(band_pass(x[:, k], dt, (20.0, nyquist)) ** 2)))
+                    for x in (r.gyro_log, r.gyro_sim))
+        print(f"  {axis:5s} {log:.2f} / {sim:.3f}")
+    print(f"figure written to {out}")
+
+
 def main() -> None:
     import sys
+
+    if sys.argv[1:] == ["spectra"]:
+        spectra()
+        return
 
     if sys.argv[1:] == ["gecko"]:
         gecko()

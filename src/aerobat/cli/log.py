@@ -258,7 +258,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
     from aerobat.experiments.log_replay import AXES, replay_log
     from aerobat.plotting import save_figure
-    from aerobat.plotting.log_replay import plot_replay, plot_replay_steps
+    from aerobat.plotting.log_replay import plot_replay, plot_replay_spectra, plot_replay_steps
 
     params, source = None, "the default 5-inch (settings.toml's airframe)"
     if args.airframe is not None:
@@ -289,13 +289,16 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     stem = result.log.replace("#", "-log")
     figure = out / f"{stem}_{result.window_s[0]:g}-{result.window_s[1]:g}s.png"
     steps_figure = figure.with_name(f"{figure.stem}_steps.png")
-    for path in (figure, steps_figure):
+    spectra_figure = figure.with_name(f"{figure.stem}_spectra.png")
+    for path in (figure, steps_figure, spectra_figure):
         refuse_overwrite(path, store_path=None, force=args.force, option="--out")
     save_figure(plot_replay(result), figure)
     save_figure(plot_replay_steps(result), steps_figure)
+    save_figure(plot_replay_spectra(result), spectra_figure)
     summary = result.summary()
     summary["figure"] = str(figure)
     summary["steps_figure"] = str(steps_figure)
+    summary["spectra_figure"] = str(spectra_figure)
     if result.tune_report is not None:
         summary["tune"] = result.tune_report.text()
     if args.json:
@@ -332,7 +335,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         f"{term} " + ", ".join(f"{axis} {m.rms:.1f} r {m.correlation:.2f} of {m.logged_rms:.1f}"
                                for axis, m in zip(AXES, row, strict=True) if m is not None)
         for term, row in zip("PIDF", result.pid, strict=True)), highlight=False)
-    say(f"wrote {figure} and {steps_figure}", highlight=False)
+    say(f"wrote {figure}, {steps_figure} and {spectra_figure}", highlight=False)
     return 0
 
 

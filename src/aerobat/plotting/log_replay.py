@@ -8,7 +8,7 @@ import numpy as np
 
 from aerobat.plotting.files import new_figure
 
-__all__ = ["plot_replay", "plot_replay_steps", "plot_what_if"]
+__all__ = ["plot_replay", "plot_replay_spectra", "plot_replay_steps", "plot_what_if"]
 
 _AXES = ("roll", "pitch", "yaw")
 
@@ -95,6 +95,36 @@ def plot_replay_steps(result: Any) -> Any:
     axes[0].set_ylabel("gyro ÷ set-point step")
     lo, hi = result.window_s
     fig.suptitle(f"{result.log} {lo:g}–{hi:g} s: step responses, logged and through the SITL", fontsize=10)
+    return fig
+
+
+def plot_replay_spectra(result: Any) -> Any:
+    """Per axis the power spectra of the logged and the simulated gyro over the replayed window (Welch, 256-sample
+    segments): what the firmware's filters meet in the air and in the SITL.
+
+    ``result`` is an :class:`aerobat.experiments.log_replay.LogReplay`.
+    """
+    from aerobat.plotting.flightlog import welch
+
+    fig = new_figure(figsize=(12, 4.2))
+    axes = fig.subplots(1, 3, sharey=True)
+    t = result.time_s
+    fs = 1.0 / float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    segment = int(min(256, t.size))
+    for k, (ax, name) in enumerate(zip(axes, _AXES, strict=True)):
+        for series, label, color in ((result.gyro_log[:, k], "log", "tab:blue"),
+                                     (result.gyro_sim[:, k], "SITL", "tab:red")):
+            f, p = welch(series - series.mean(), fs, segment)
+            keep = p > 0
+            ax.semilogy(f[keep], p[keep], lw=0.8, color=color, label=label)
+        ax.set_title(name, fontsize=10)
+        ax.set_xlabel("frequency [Hz]")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    axes[0].set_ylabel("gyro PSD [(°/s)²/Hz]")
+    lo, hi = result.window_s
+    fig.suptitle(f"{result.log} {lo:g}–{hi:g} s: gyro spectra, logged and through the SITL "
+                 f"(Welch, {segment}-sample segments at {fs:.0f} Hz)", fontsize=10)
     return fig
 
 

@@ -36,8 +36,8 @@ from typing import Any
 import numpy as np
 
 from aerobat.errors import ConfigError
-from aerobat.experiments.log_identify import parse_log_ref
 from aerobat.logs import read_logs
+from aerobat.logs.refs import parse_log_ref
 from aerobat.quadrotor.flightlog import Channel, FlightLog, LogSource
 from aerobat.quadrotor.log_analysis import band_pass
 

@@ -8,6 +8,7 @@ Run (needs the Betaflight SITL, built by ``make setup``; ../shared/data for the 
     .venv/bin/python scripts/results_firmware_model.py decompose   # the first attempt, world effect by effect
     .venv/bin/python scripts/results_firmware_model.py figure      # the paper model, the firmware model, a trial
     .venv/bin/python scripts/results_firmware_model.py smoothness  # where the firmware is not smooth (~1 min)
+    .venv/bin/python scripts/results_firmware_model.py translation # why the translation does not converge
     .venv/bin/python scripts/results_firmware_model.py all
 
 Each writes ``docs/figures/firmware_model/<name>.json`` (and the figure its PNG) and prints a table.
@@ -331,6 +332,45 @@ def cmd_maneuvers(seeds: list[int]) -> dict[str, Any]:
     return data
 
 
+def cmd_translation() -> dict[str, Any]:
+    """Why the translation to (5, 5) m does not converge on the firmware model: its final y against each switch
+    duration, near the paper model's p⁰, in steps of 0.1, 1 and 2 ms."""
+    from aerobat.experiments.designing import nominal_design
+    from aerobat.plants import PlantChoice
+    from aerobat.plants.betaflight.design_model import firmware_design_model
+    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.quadrotor.maneuvers import translation_maneuver
+    from aerobat.quadrotor.vehicle import fpv5
+
+    config = fpv5()
+    maneuver = translation_maneuver(config, (5.0, 5.0))
+    p0 = nominal_design(maneuver, config, plant=PlantChoice("betaflight", feedback="none"),
+                        design_model="paper").design.p_nominal
+    model = firmware_design_model(config, BetaflightParams())
+    steps = (-2e-3, -1e-3, -1e-4, 0.0, 1e-4, 1e-3, 2e-3)
+
+    def y_error(p: np.ndarray) -> float:
+        return float(maneuver.error(model.final_states([maneuver.program(p)])[0])[0])
+
+    rows = []
+    for k in range(len(p0)):
+        ys = []
+        for h in steps:
+            p = p0.copy()
+            p[k] += h
+            ys.append(y_error(p))
+        slopes = [(ys[i + 1] - ys[i]) / (steps[i + 1] - steps[i]) for i in range(len(steps) - 1)]
+        rows.append({"parameter": f"p{k}", "y_m": ys, "slopes_m_per_s": slopes})
+    _write("translation", {"steps_s": list(steps), "p0": p0.tolist(), "rows": rows})
+    print("translation to (5, 5) m on the firmware model: y error [m] with p_k of the paper's p0 moved by "
+          + ", ".join(f"{1e3 * h:+g} ms" for h in steps))
+    for r in rows:
+        lo, hi = min(r["slopes_m_per_s"]), max(r["slopes_m_per_s"])
+        print(f"  {r['parameter']}: " + " ".join(f"{y:+.3f}" for y in r["y_m"])
+              + f"   slopes between neighbours {lo:+.0f} … {hi:+.0f} m/s")
+    return {"rows": rows}
+
+
 # -------------------------------------------------------------------- decompose
 
 
@@ -430,7 +470,8 @@ def cmd_figure() -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("what", choices=("agreement", "learn", "maneuvers", "decompose", "figure", "smoothness", "all"))
+    parser.add_argument("what", choices=("agreement", "learn", "maneuvers", "decompose", "figure", "smoothness",
+                                         "translation", "all"))
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5], help="plant seeds")
     parser.add_argument("--trials", type=int, default=30, help="trials per learning session")
     args = parser.parse_args(argv)
@@ -446,6 +487,8 @@ def main(argv: list[str] | None = None) -> int:
             cmd_figure()
         if args.what in ("smoothness", "all"):
             cmd_smoothness()
+        if args.what in ("translation", "all"):
+            cmd_translation()
         if args.what in ("learn", "all"):
             cmd_learn(work, args.seeds, args.trials)
     return 0

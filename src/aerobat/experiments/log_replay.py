@@ -41,7 +41,8 @@ from aerobat.logs.refs import parse_log_ref
 from aerobat.quadrotor.flightlog import Channel, FlightLog, LogSource
 from aerobat.quadrotor.log_analysis import band_pass
 
-__all__ = ["AxisMatch", "LogReplay", "StepMatch", "find_steps", "replay_log"]
+__all__ = ["FLYING_MOTOR", "AxisMatch", "LogReplay", "StepMatch", "find_steps", "flying_voltage_v",
+           "load_betaflight_log", "log_props_out", "replay_log"]
 
 AXES = ("roll", "pitch", "yaw")
 _STEP_RISE_S = 0.10
@@ -59,7 +60,8 @@ def _correlation(a: np.ndarray, b: np.ndarray) -> float:
 class AxisMatch:
     """Simulated against logged on one series: rms of the difference, correlation, and the logged spread.
 
-    ``band_correlation`` is the correlation of the two in :data:`BAND_HZ` (nan where not computed).
+    ``band_correlation`` is the correlation of the two in :data:`~aerobat.quadrotor.log_analysis.BAND_HZ`
+    (nan where not computed).
     """
 
     rms: float
@@ -220,7 +222,8 @@ def _steps(t: np.ndarray, sp: np.ndarray, log: np.ndarray, sim: np.ndarray, min_
     return found
 
 
-def _load(file: str | Path, index: int | None) -> FlightLog:
+def load_betaflight_log(file: str | Path, index: int | None = None) -> FlightLog:
+    """Log ``index`` (else the ``FILE:N`` in ``file``, else 1) of a Betaflight blackbox file; ConfigError otherwise."""
     ref = parse_log_ref(file)
     index = index if index is not None else (ref.index or 1)
     logs = read_logs(ref.path)
@@ -259,7 +262,7 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
     from aerobat.plants.betaflight.tune import tune_from_blackbox_header, with_settings
     from aerobat.quadrotor.vehicle import fpv5
 
-    log = _load(file, index)
+    log = load_betaflight_log(file, index)
     where = f"{log.path}: log {log.index}"
     duration = log.duration_s
     start, end = window_s if window_s is not None else (0.0, duration)

@@ -189,13 +189,13 @@ def what_if(file: str | Path, *, tune: Any = None, changes: Sequence[str] = (),
         given (nothing to compare) or a change is not ``NAME=VALUE`` or names no setting.
     """
     from aerobat.errors import ConfigError
-    from aerobat.experiments.log_replay import _load
+    from aerobat.experiments.log_replay import load_betaflight_log
     from aerobat.logs.refs import parse_log_ref
     from aerobat.plants.betaflight.tune import tune_from_blackbox_header, with_settings
 
     if tune is None and not changes:
         raise ConfigError("a what-if replay needs --tune OTHER or --set NAME=VALUE (or both)")
-    log = _load(file, None)
+    log = load_betaflight_log(file)
     own = tune_from_blackbox_header(dict(log.metadata.parameters), source=f"{log.path}#log{log.index}")
     other = with_settings(tune if tune is not None else own, changes)
     differences = tune_differences(own, other)  # refuses an unknown setting before anything flies

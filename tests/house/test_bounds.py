@@ -99,6 +99,12 @@ def _firmware_config():
     return firmware_config(plant_settings(BetaflightParams()), gyro_rate_hz=8000)
 
 
+def _airframe():
+    from aerobat.quadrotor.xframe import Airframe
+
+    return Airframe(battery_reference_v=23.7)  # a value, so that its bound is tested too (None: the log's median)
+
+
 EXAMPLES = {
     # classes with required fields (or a default of None): one valid instance each (the others are
     # built with their defaults)
@@ -111,6 +117,7 @@ EXAMPLES = {
     "aerobat.core.maneuver.ParameterSpec": _parameter_spec,
     "aerobat.core.maneuver.ErrorSpec": _error_spec,
     "aerobat.quadrotor.firmware.config.FirmwareConfig": _firmware_config,
+    "aerobat.quadrotor.xframe.Airframe": _airframe,
     "aerobat.store.query.SessionQuery": lambda: __import__("aerobat.store.query", fromlist=["SessionQuery"])
     .SessionQuery(study=3, limit=50, offset=100),  # values, so that their bounds are tested too (None: all)
 }

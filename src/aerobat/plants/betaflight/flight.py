@@ -57,7 +57,21 @@ from aerobat.plants.betaflight.sitl import SitlProcess
 from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose
 from aerobat.quadrotor.dynamics import N_STATE
 
-__all__ = ["CHUNK_FRAMES", "Flight", "NonFinite"]
+__all__ = ["CHUNK_FRAMES", "N_SAMPLE", "SAMPLE_MOTORS", "SAMPLE_PID", "SAMPLE_RATES", "SAMPLE_SETPOINT", "SAMPLE_TIME",
+           "Flight", "NonFinite"]
+
+# the columns of a row of :meth:`Flight.sampled_frame`
+SAMPLE_TIME = 0
+"""The flight's time [s]."""
+SAMPLE_RATES = slice(1, 4)
+"""The true body rates p, q, r [rad/s], body FLU."""
+SAMPLE_MOTORS = slice(4, 8)
+"""The firmware's four motor commands, packet order (0..1)."""
+SAMPLE_SETPOINT = slice(8, 11)
+"""The firmware's rate set point roll, pitch, yaw [deg/s]."""
+SAMPLE_PID = slice(11, 23)
+"""The PID terms, axis-major: roll's P, I, D, F, then pitch's, then yaw's (firmware units)."""
+N_SAMPLE = 23
 
 _SLICE_S = 0.05  # the compiled shared-memory wait's timeout: then the watchdog takes the step
 
@@ -268,11 +282,11 @@ class Flight:
         self.counters[C_CONTACT] = 0
 
     def sampled_frame(self, channels_us: Sequence[int], rows: np.ndarray) -> None:
-        """One lossless radio frame, sampled: ``rows`` (k, 23) gets k evenly spaced samples of the frame.
+        """One lossless radio frame, sampled: ``rows`` (k, :data:`N_SAMPLE`) gets k evenly spaced samples of the frame.
 
-        Row j is (time [s], true body rates p, q, r [rad/s] FLU, the firmware's four motor commands in
-        packet order, its set point roll, pitch, yaw [deg/s] and P, I, D, F of roll, pitch, yaw) after
-        the frame's (j + 1)-th k-th part; k must divide the frame's gyro periods.
+        Row j (columns ``SAMPLE_*``: time [s], true body rates p, q, r [rad/s] FLU, the firmware's four motor
+        commands in packet order, its set point roll, pitch, yaw [deg/s] and P, I, D, F of roll, pitch, yaw)
+        is taken after the frame's (j + 1)-th k-th part; k must divide the frame's gyro periods.
         """
         parts = rows.shape[0]
         if self.frame_steps % parts:
@@ -281,9 +295,9 @@ class Flight:
         for j in range(parts):
             self.run_frames(Mode.STREAM if j == 0 else Mode.STEPS, 1, steps=self.frame_steps // parts,
                             channels_us=channels, radio=Radio.LOSSLESS if j == 0 else Radio.NONE)
-            rows[j, 0] = self.time_s
-            rows[j, 1:4] = self.x[10:13]
-            rows[j, 4:23] = self.motors
+            rows[j, SAMPLE_TIME] = self.time_s
+            rows[j, SAMPLE_RATES] = self.x[10:13]
+            rows[j, SAMPLE_MOTORS.start:N_SAMPLE] = self.motors  # the motor packet: motors, set point, PID terms
 
     def run_frames(self, mode: Mode, frames: int, *, steps: int | None = None, radio: Radio = Radio.LOSSY,
                    channels_us: np.ndarray | None = None, pilot: AnglePilot | ProgramPilot | None = None,

@@ -19,13 +19,25 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from aerobat.errors import ConfigError
 from aerobat.plants.betaflight.firmware_settings import BetaflightSettings
+from aerobat.plants.betaflight.flight import (
+    N_SAMPLE,
+    SAMPLE_MOTORS,
+    SAMPLE_PID,
+    SAMPLE_RATES,
+    SAMPLE_SETPOINT,
+    SAMPLE_TIME,
+)
 from aerobat.plants.betaflight.physics import A_FMAX, airframe_plant
 from aerobat.plants.betaflight.rc import RC_MAX_US, RC_MID_US, RC_MIN_US
+
+if TYPE_CHECKING:
+    from aerobat.plants.betaflight.plant import BetaflightPlant
 
 __all__ = ["MOTOR_LOG_ORDER", "ReplayTrace", "StickTrack", "channels_from_commands", "replay_sticks"]
 
@@ -114,7 +126,7 @@ def channels_from_commands(settings: BetaflightSettings, roll_pitch_yaw: np.ndar
     return out
 
 
-def replay_sticks(plant: object, track: StickTrack, *, samples_per_frame: int = 4,
+def replay_sticks(plant: BetaflightPlant, track: StickTrack, *, samples_per_frame: int = 4,
                   progress: Callable[[float, float], None] | None = None,
                   thrust_scale: np.ndarray | None = None) -> ReplayTrace:
     """Fly ``track`` through ``plant``'s firmware (a :class:`~.plant.BetaflightPlant`) in ACRO, in the air.
@@ -122,10 +134,8 @@ def replay_sticks(plant: object, track: StickTrack, *, samples_per_frame: int = 
     ``progress(done_s, total_s)`` is called about once per simulated second. ``thrust_scale`` (one per
     ``track.time_s``) multiplies every rotor's thrust from frame to frame (a battery's sag); None: 1.
     """
-    from aerobat.plants.betaflight.plant import BetaflightPlant, TrialStop
+    from aerobat.plants.betaflight.plant import TrialStop
 
-    if not isinstance(plant, BetaflightPlant):
-        raise TypeError("replay_sticks needs a BetaflightPlant")
     params = plant.params
     flight = plant.open_flight(rng=np.random.default_rng(plant.seed), plant=airframe_plant(params))
     with flight:
@@ -137,7 +147,7 @@ def replay_sticks(plant: object, track: StickTrack, *, samples_per_frame: int = 
         flight.release()
         period = 1.0 / params.radio.rate_hz
         frames = max(1, math.ceil(track.duration_s / period))
-        rows = np.empty((frames * samples_per_frame, 23))
+        rows = np.empty((frames * samples_per_frame, N_SAMPLE))
         aux = plant.settings.aux_us(ARM=True, ANGLE=False)
         tail = (*aux, *([RC_MIN_US] * (12 - len(aux))))
         t0 = flight.time_s
@@ -156,10 +166,11 @@ def replay_sticks(plant: object, track: StickTrack, *, samples_per_frame: int = 
                 progress((k + 1) * period, frames * period)
                 next_report += 1.0
         steps = flight.tick
-    motors = rows[:, 4:8][:, list(MOTOR_LOG_ORDER)]
-    terms = rows[:, 8:23].copy()
-    if not np.any(terms):  # a SITL whose motor packet carries the motors only
-        terms[:] = np.nan
-    pid = terms[:, 3:].reshape(-1, 3, 4).transpose(0, 2, 1)
-    return ReplayTrace(time_s=rows[:, 0] - t0, rates_rad_s=rows[:, 1:4].copy(), motors=motors,
-                       setpoint_deg_s=terms[:, :3], pid=pid, armed_at_s=armed, steps=steps)
+    motors = rows[:, SAMPLE_MOTORS][:, list(MOTOR_LOG_ORDER)]
+    setpoint, pid_terms = rows[:, SAMPLE_SETPOINT].copy(), rows[:, SAMPLE_PID].copy()
+    if not (np.any(setpoint) or np.any(pid_terms)):  # a SITL whose motor packet carries the motors only
+        setpoint[:] = np.nan
+        pid_terms[:] = np.nan
+    pid = pid_terms.reshape(-1, 3, 4).transpose(0, 2, 1)
+    return ReplayTrace(time_s=rows[:, SAMPLE_TIME] - t0, rates_rad_s=rows[:, SAMPLE_RATES].copy(), motors=motors,
+                       setpoint_deg_s=setpoint, pid=pid, armed_at_s=armed, steps=steps)

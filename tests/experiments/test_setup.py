@@ -67,3 +67,19 @@ def test_the_report_says_required_from_optional():
     assert all(kind is PieceKind.OPTIONAL for name, kind in kinds.items() if name != "python dependencies")
     with pytest.raises(KeyError):
         report.piece("no such piece")
+
+
+def test_setup_compiles_only_the_kernel_groups_asked_for_and_names_the_groups_it_knows(capsys):
+    """make demo compiles the playback and arena groups only (`aerobat setup --kernels playback,arena`)."""
+    from aerobat.cli import main
+    from aerobat.experiments.warmup import PARTS, warm_up
+
+    assert PARTS == ("playback", "arena", "firmware")
+    assert main(["setup", "--no-betaflight", "--kernels", "playback,sitl"]) == 2
+    err = capsys.readouterr().err
+    assert "--kernels playback,sitl: unknown group(s) sitl; allowed: playback, arena, firmware" in err
+    with pytest.raises(ValueError, match="unknown kernel group"):
+        warm_up(parts=("nope",))
+    lines: list[str] = []
+    warm_up(workers=1, progress=lines.append, parts=("playback",))  # cached here: seconds
+    assert [line.split()[0] for line in lines] == ["playback"]

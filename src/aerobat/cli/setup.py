@@ -7,6 +7,7 @@ import json
 from typing import Any
 
 from aerobat.cli.common import HelpFormatter, console
+from aerobat.errors import ConfigError
 
 __all__ = ["register"]
 
@@ -48,7 +49,16 @@ def _cmd_setup(args: argparse.Namespace) -> int:
             _print_report(report)
         return 0 if report.ok else 1
     progress = (lambda line: None) if args.json else (lambda line: console().print(line, markup=False))
-    result = set_up(betaflight=not args.no_betaflight, kernels=not args.no_kernels, progress=progress)
+    groups = tuple(g.strip() for g in args.kernels.split(",")) if args.kernels else None
+    if groups is not None:
+        from aerobat.experiments.warmup import PARTS
+
+        unknown = sorted(set(groups) - set(PARTS))
+        if unknown:
+            raise ConfigError(f"--kernels {args.kernels}: unknown group(s) {', '.join(unknown)}; allowed: "
+                              f"{', '.join(PARTS)}")
+    result = set_up(betaflight=not args.no_betaflight, kernels=not args.no_kernels, progress=progress,
+                    kernel_groups=groups)
     if args.json:
         print(json.dumps({"steps": [{"step": s, "outcome": o.value, "message": m} for s, o, m in result.steps],
                           "pieces": _report_rows(result.report), "ok": result.report.ok and not result.failed}))
@@ -70,5 +80,8 @@ def register(sub: Any) -> None:
                    help="only look: install, build and compile nothing (default: set up, then look)")
     p.add_argument("--no-betaflight", action="store_true", help="do not build the Betaflight SITL (default: build it)")
     p.add_argument("--no-kernels", action="store_true", help="do not compile the kernels (default: compile them)")
+    p.add_argument("--kernels", metavar="GROUPS", default=None,
+                   help="compile only these kernel groups, comma-separated: playback, arena, firmware "
+                        "(make demo: playback,arena) (default: all)")
     p.add_argument("--json", action="store_true", help="print one JSON object (default: a list)")
     p.set_defaults(func=_cmd_setup)

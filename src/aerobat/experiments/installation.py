@@ -207,12 +207,14 @@ class SetupResult:
         return any(outcome is SetupStep.FAILED for _, outcome, _ in self.steps)
 
 
-def set_up(*, betaflight: bool = True, kernels: bool = True, progress: Progress | None = None) -> SetupResult:
+def set_up(*, betaflight: bool = True, kernels: bool = True, progress: Progress | None = None,
+           kernel_groups: tuple[str, ...] | None = None) -> SetupResult:
     """Build the Betaflight SITL (where a C compiler is there) and compile the kernels, then check.
 
     A missing compiler skips the SITL with the reason (every other plant still works); a build
     that was tried and failed is a failed step. Compiling the kernels takes one to two minutes of
-    CPU the first time and seconds when they are cached.
+    CPU the first time and seconds when they are cached; ``kernel_groups`` compiles only those
+    (:data:`aerobat.experiments.warmup.PARTS`; default: all).
     """
     say = progress or (lambda line: None)
     steps: list[tuple[str, SetupStep, str]] = []
@@ -224,7 +226,7 @@ def set_up(*, betaflight: bool = True, kernels: bool = True, progress: Progress 
         say("compiling the kernels (one to two minutes the first time, seconds when cached)")
         start = time.perf_counter()
         try:
-            warm_up(progress=say)
+            warm_up(progress=say, parts=kernel_groups)
         except Exception as exc:  # noqa: BLE001 - a failed compile is reported as the step's outcome
             steps.append(("kernels", SetupStep.FAILED, f"{type(exc).__name__}: {exc}"))
         else:

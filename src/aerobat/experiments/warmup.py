@@ -31,23 +31,29 @@ __all__ = ["warm_up"]
 _HEARTBEAT_S = 15.0
 
 
-def warm_up(workers: int = 2, progress: Callable[[str], None] | None = None) -> float:
+def warm_up(workers: int = 2, progress: Callable[[str], None] | None = None,
+            parts: tuple[str, ...] | None = None) -> float:
     """Compile (or load from numba's cache) every kernel a command uses; returns the seconds it took.
 
-    The kernels fall into three groups (the playback kernels with the ones RotorPy and Betaflight
-    call, the arena's trial, and the firmware design model), compiled in ``workers`` processes side
-    by side (numba writes each cache file atomically, so a kernel two need is safe). ``progress`` gets
-    a line as each group is ready and, while any is still compiling, one every 15 s naming them.
+    The kernels fall into three groups (:data:`PARTS`: the playback kernels with the ones RotorPy and
+    Betaflight call, the arena's trial, and the firmware design model), compiled in ``workers`` processes
+    side by side (numba writes each cache file atomically, so a kernel two need is safe). ``parts``
+    compiles only those groups (``make demo``: playback and arena; default: all). ``progress`` gets a
+    line as each group is ready and, while any is still compiling, one every 15 s naming them.
     """
     say = progress or (lambda line: None)
+    chosen = PARTS if parts is None else tuple(p for p in PARTS if p in parts)
+    unknown = sorted(set(parts or ()) - set(PARTS))
+    if unknown:
+        raise ValueError(f"unknown kernel group(s) {', '.join(unknown)}; allowed: {', '.join(PARTS)}")
     start = time.perf_counter()
     if workers > 1:
         from concurrent.futures import FIRST_COMPLETED, wait
 
         from aerobat.experiments.lifetime import process_pool
 
-        with process_pool(min(workers, len(PARTS))) as pool:  # its workers die with this process
-            pending = {pool.submit(_warm_part, part): part for part in PARTS}
+        with process_pool(min(workers, len(chosen))) as pool:  # its workers die with this process
+            pending = {pool.submit(_warm_part, part): part for part in chosen}
             while pending:
                 done, _ = wait(pending, timeout=_HEARTBEAT_S, return_when=FIRST_COMPLETED)
                 for future in done:
@@ -57,7 +63,7 @@ def warm_up(workers: int = 2, progress: Callable[[str], None] | None = None) -> 
                     say(f"  still compiling: {', '.join(sorted(pending.values()))} "
                         f"({time.perf_counter() - start:.0f} s)")
     else:
-        for part in PARTS:
+        for part in chosen:
             _warm_part(part)
             say(f"  {part} kernels ready ({time.perf_counter() - start:.0f} s)")
     return time.perf_counter() - start

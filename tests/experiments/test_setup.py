@@ -74,10 +74,10 @@ def test_setup_compiles_only_the_kernel_groups_asked_for_and_names_the_groups_it
     from aerobat.cli import main
     from aerobat.experiments.warmup import PARTS, warm_up
 
-    assert PARTS == ("playback", "arena", "firmware")
+    assert PARTS == ("playback", "arena", "plants", "firmware")
     assert main(["setup", "--no-betaflight", "--kernels", "playback,sitl"]) == 2
     err = capsys.readouterr().err
-    assert "--kernels playback,sitl: unknown group(s) sitl; allowed: playback, arena, firmware" in err
+    assert "--kernels playback,sitl: unknown group(s) sitl; allowed: playback, arena, plants, firmware" in err
     with pytest.raises(ValueError, match="unknown kernel group"):
         warm_up(parts=("nope",))
     lines: list[str] = []

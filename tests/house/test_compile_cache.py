@@ -103,7 +103,7 @@ def test_the_warm_up_fills_the_cache_in_two_processes_and_then_loads_it(tmp_path
     cold = subprocess.run([sys.executable, "-m", "aerobat.experiments.warmup"], env=env, capture_output=True,
                           text=True, timeout=600)
     assert cold.returncode == 0 and "compiled kernels ready" in cold.stdout, cold.stderr
-    for part in ("playback", "arena", "firmware"):  # issue 44: setup says what is ready, never silent for minutes
+    for part in ("playback", "arena", "plants", "firmware"):  # issue 44: setup says what is ready, never silent
         assert f"  {part} kernels ready (" in cold.stdout, cold.stdout
     written = {path: path.stat().st_mtime_ns for path in cache.rglob("*.nb[ci]")}
     assert len(written) >= 20  # both processes' kernels are there (index and data of each)

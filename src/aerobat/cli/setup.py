@@ -81,7 +81,7 @@ def register(sub: Any) -> None:
     p.add_argument("--no-betaflight", action="store_true", help="do not build the Betaflight SITL (default: build it)")
     p.add_argument("--no-kernels", action="store_true", help="do not compile the kernels (default: compile them)")
     p.add_argument("--kernels", metavar="GROUPS", default=None,
-                   help="compile only these kernel groups, comma-separated: playback, arena, firmware "
+                   help="compile only these kernel groups, comma-separated: playback, arena, plants, firmware "
                         "(make demo: playback,arena) (default: all)")
     p.add_argument("--json", action="store_true", help="print one JSON object (default: a list)")
     p.set_defaults(func=_cmd_setup)

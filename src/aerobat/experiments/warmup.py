@@ -35,8 +35,7 @@ def warm_up(workers: int = 2, progress: Callable[[str], None] | None = None,
             parts: tuple[str, ...] | None = None) -> float:
     """Compile (or load from numba's cache) every kernel a command uses; returns the seconds it took.
 
-    The kernels fall into three groups (:data:`PARTS`: the playback kernels with the ones RotorPy and
-    Betaflight call, the arena's trial, and the firmware design model), compiled in ``workers`` processes
+    The kernels fall into four groups (:data:`PARTS`), compiled in ``workers`` processes
     side by side (numba writes each cache file atomically, so a kernel two need is safe). ``parts``
     compiles only those groups (``make demo``: playback and arena; default: all). ``progress`` gets a
     line as each group is ready and, while any is still compiling, one every 15 s naming them.
@@ -69,7 +68,9 @@ def warm_up(workers: int = 2, progress: Callable[[str], None] | None = None,
     return time.perf_counter() - start
 
 
-PARTS = ("playback", "arena", "firmware")
+PARTS = ("playback", "arena", "plants", "firmware")
+"""The kernel groups: playback (simulate, the batch, the nominal model), the arena's trial, the kernels the
+RotorPy and Betaflight plants call from Python with the blackbox decoder, and the firmware design model."""
 
 
 def _warm_part(part: str) -> None:
@@ -98,16 +99,18 @@ def _warm_part(part: str) -> None:
         Arena(config, seed=0, feedback="tracking").fly(program)
         Arena(config, seed=0, feedback="none").fly(program)
         return
+    if part == "plants":  # what RotorPy and Betaflight call from Python, and the blackbox decoder
+        from aerobat.logs.blackbox_decode import warm_up as blackbox_decoder
+
+        _plant_kernels(simulate(program, config))
+        blackbox_decoder()  # `log info` and `identify --log` on a Betaflight log
+        return
     # an identified vehicle's rate-loop latency runs its own continuous kernel
     lagging = dataclasses.replace(config, effects=ModelEffects(rate_latency_s=(0.005, 0.005, 0.005)))
     simulate(program, config, mode="sampled")
     simulate(program, lagging)
     simulate_batch([program, program], config)
     NominalModel(config).final_states([program])
-    _plant_kernels(simulate(program, config))
-    from aerobat.logs.blackbox_decode import warm_up as blackbox_decoder
-
-    blackbox_decoder()  # `log info` and `identify --log` on a Betaflight log
 
 
 def _plant_kernels(nominal: object) -> None:

@@ -44,20 +44,12 @@ def rows(result, axis: str, label: str, include_log: bool) -> list[str]:
     return out
 
 
-def _band(x, dt: float, low_hz: float, high_hz: float):
-    import numpy as np
-
-    spectrum = np.fft.rfft(x - x.mean())
-    f = np.fft.rfftfreq(x.size, dt)
-    spectrum[(f < low_hz) | (f > high_hz)] = 0.0
-    return np.fft.irfft(spectrum, x.size)
-
-
 def props() -> None:
     """Flights 2 and 3, whole, flown with props in and props out: the motors' yaw mix against the log's."""
     import numpy as np
 
     from aerobat.experiments.log_replay import replay_log
+    from aerobat.quadrotor.log_analysis import band_pass
 
     mix = np.array([1.0, -1.0, -1.0, 1.0])  # M1 + M4 − M2 − M3 in Betaflight's motor order: props in, yaw left
     print("| flight | props | yaw mix correlation: raw | 1–20 Hz | gyro rms roll · pitch · yaw [°/s] |")
@@ -68,7 +60,7 @@ def props() -> None:
             dt = float(np.median(np.diff(r.time_s)))
             sim, log = r.motors_sim @ mix, r.motors_log @ mix
             raw = float(np.corrcoef(sim, log)[0, 1])
-            band = float(np.corrcoef(_band(sim, dt, 1.0, 20.0), _band(log, dt, 1.0, 20.0))[0, 1])
+            band = float(np.corrcoef(band_pass(sim, dt), band_pass(log, dt))[0, 1])  # 1–20 Hz
             rms = " · ".join(f"{g.rms:.1f}" for g in r.gyro)
             print(f"| {index} | {'out' if out else 'in'} | {raw:+.3f} | {band:+.3f} | {rms} |")
 

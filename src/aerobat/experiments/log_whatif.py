@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.experiments.log_replay import AXES, LogReplay, replay_log
-from aerobat.quadrotor.log_analysis import estimate_step_response
+from aerobat.quadrotor.log_analysis import band_pass, estimate_step_response
 
 __all__ = ["NOISE_ABOVE_HZ", "SATURATED_MOTOR", "AxisReading", "FlightReading", "TuneDifference", "WhatIf",
            "read_flight", "tune_differences", "what_if"]
@@ -115,13 +115,11 @@ def _plain(value: Any) -> Any:
 
 
 def _high_pass_rms(t: np.ndarray, x: np.ndarray, above_hz: float) -> float:
-    """rms of ``x``'s content above ``above_hz`` (FFT, evenly spaced ``t``)."""
+    """rms of ``x``'s content above ``above_hz`` (evenly spaced ``t``), by :func:`.band_pass`."""
     if x.size < 4:
         return math.nan
     dt = float(np.median(np.diff(t)))
-    spectrum = np.fft.rfft(x - x.mean())
-    spectrum[np.fft.rfftfreq(x.size, dt) < above_hz] = 0.0
-    return float(np.sqrt(np.mean(np.fft.irfft(spectrum, x.size) ** 2)))
+    return float(np.sqrt(np.mean(band_pass(x, dt, (above_hz, 0.5 / dt)) ** 2)))
 
 
 def read_flight(name: str, time_s: np.ndarray, setpoint_deg_s: np.ndarray, gyro_deg_s: np.ndarray,

@@ -125,8 +125,24 @@ def check_session_mcap(path: Path, store: Store, session_id: int) -> dict[str, i
         names = store.maneuver(store.session(session_id).maneuver_id).error_names
         assert [errors[-1]["error"][n] for n in names] == last.error.tolist()
         # trials follow one another on the timeline, never overlapping
-        starts = [next(reader.iter_messages(topics=[f"/trial/{i.index}/pose"]))[2].log_time for i in flown]
+        starts = [min(m.log_time for _, _, m in reader.iter_messages(
+            topics=[f"/trial/{i.index}/pose", f"/trial/{i.index}/firmware"])) for i in flown]
         assert starts == sorted(starts) and summary.statistics.message_start_time == starts[0]
+        # a plant's own signals (schema 7): every sample on its trial's channel and on the overlay, as stored,
+        # on the trial's timeline (its first sample, measured or the plant's, at the trial's start)
+        for it in flown:
+            if it.signals is None:
+                assert f"/trial/{it.index}/firmware" not in counts
+                continue
+            sent = [(m.log_time, json.loads(m.data))
+                    for _, _, m in reader.iter_messages(topics=[f"/trial/{it.index}/firmware"])]
+            assert len(sent) == len(it.signals.times_s) and [s["t_s"] for _, s in sent] == it.signals.times_s.tolist()
+            for k, name in enumerate(it.signals.names):
+                assert [s[name] for _, s in sent] == as_json(it.signals.values[:, k]), name
+            pose_t0 = next(reader.iter_messages(topics=[f"/trial/{it.index}/pose"]))[2].log_time
+            first_s = min(it.times_s[0], it.signals.times_s[0])
+            assert abs(sent[0][0] - pose_t0 - round((it.signals.times_s[0] - it.times_s[0]) * 1e9)) <= 1
+            assert min(sent[0][0], pose_t0) == starts[flown.index(it)] and first_s <= it.times_s[0]
         # every trial's samples on one channel (issue 44): t_s from the program's start each time, so a
         # Plot panel overlays the trials; the fields docs/browse.md says every plant fills are never null,
         # those only the nominal plant measures are null exactly where the store holds NaN
@@ -164,7 +180,7 @@ def check_session_mcap(path: Path, store: Store, session_id: int) -> dict[str, i
         # the scene: one message at the start, an entity per measured trial with its whole path, and the maneuver
         assert schemas["/scene"] == "foxglove.SceneUpdate" and counts["/scene"] == 1
         ((_, _, message, scene),) = reader.iter_decoded_messages(topics=["/scene"])
-        assert message.log_time == samples[0][0]
+        assert message.log_time == starts[0] <= samples[0][0]  # at the first trial's start
         entities = {e.id: e for e in scene.entities}
         assert list(entities) == [f"trial/{index}" for index, _, _ in trajectories] + ["maneuver"]
         for index, stored_t, stored_x in trajectories:

@@ -121,3 +121,42 @@ def test_the_scene_marks_where_a_maneuver_starts_and_ends():
     assert [round(e.lines[0].color.r, 3) for e in scene.entities[:3]] == [0.15, 0.575, 1.0]
     cube = scene.entities[3].cubes[0].pose.position
     assert (cube.x, cube.y, cube.z) == (0.0, 1.5, -0.5)
+
+
+def test_a_plants_own_signals_are_exported_per_trial_and_overlaid(tmp_path):
+    """A plant's Signals (schema 7; Betaflight's motors, set point, PID terms) on /trial/N/firmware and
+    /trials/firmware, on the trial's timeline; a sample before the first pose (the radio's latency)
+    starts the trial there; NaN is null."""
+    import dataclasses
+
+    from aerobat.core.learning import Iteration, IterationStatus
+    from aerobat.core.plant import Signals
+    from aerobat.plants import Arena
+    from browse_fixtures import CONFIG, DESIGN, FLIP, VEHICLE
+
+    db, path = tmp_path / "s.sqlite", tmp_path / "s.mcap"
+    trial = Arena(CONFIG, seed=3).fly(FLIP.program(DESIGN.p_nominal))
+    times = np.arange(-0.012, trial.times_s[-1], 0.004)
+    values = np.column_stack([np.sin(times), 800.0 * np.cos(times), np.full(times.size, np.nan)])
+    trial = dataclasses.replace(trial, signals=Signals(times, ("motor1", "setpoint_roll_deg_s", "p_roll"), values))
+    with Store(db) as store:
+        sid = store.create_session(vehicle=VEHICLE, plant_kind="arena", plant_config={}, maneuver=FLIP,
+                                   design=DESIGN, seed=3, rule={"name": "paper"}, target_iterations=2,
+                                   start_params=DESIGN.p_nominal)
+        for index in (1, 2):
+            store.append_iteration(sid, Iteration(index, index, IterationStatus.OK, DESIGN.p_nominal,
+                                                  np.full(len(FLIP.errors), 0.1), 1.0, 1.0,
+                                                  np.zeros_like(DESIGN.p_nominal), "measured", trial))
+    assert call(["export", str(sid), "--db", str(db), "--format", "mcap", "--output", str(path)])[0] == 0
+    with Store(db, create=False) as store:
+        counts = check_session_mcap(path, store, sid)  # values, times and the timeline against the store
+    assert counts["/trial/1/firmware"] == counts["/trial/2/firmware"] == times.size
+    assert counts["/trials/firmware"] == 2 * times.size
+    overlay = read_json(path, "/trials/firmware")
+    assert [s["trial"] for s in overlay] == [1] * times.size + [2] * times.size
+    assert {s["p_roll"] for s in overlay} == {None} and None not in [s["setpoint_roll_deg_s"] for s in overlay]
+    with path.open("rb") as stream:
+        reader = make_reader(stream)
+        first_signal = next(reader.iter_messages(topics=["/trial/1/firmware"]))[2].log_time
+        first_pose = next(reader.iter_messages(topics=["/trial/1/pose"]))[2].log_time
+    assert first_pose - first_signal == round((trial.times_s[0] + 0.012) * 1e9)

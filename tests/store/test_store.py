@@ -94,7 +94,7 @@ def assert_one_line(err: str, code: int, expected: int = 2, *fragments: str) -> 
 def test_new_store_has_current_schema_wal_and_foreign_keys(tmp_path):
     path = tmp_path / "a.sqlite"
     with Store(path) as store:
-        assert store.schema_version == SCHEMA_VERSION == 6
+        assert store.schema_version == SCHEMA_VERSION == 7
         assert store.integrity_check() == []
         conn = store._db
         assert conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
@@ -241,7 +241,7 @@ def _corrupted_sqlite(path: Path) -> None:
 def _newer_store(path: Path) -> None:
     Store(path).close()
     conn = sqlite3.connect(path)
-    conn.execute("PRAGMA user_version = 7")
+    conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION + 1}")
     conn.close()
 
 
@@ -250,7 +250,7 @@ def _newer_store(path: Path) -> None:
     (lambda p: p.write_text("name = 'not a database'\n"), StoreFormatError, "not an SQLite file"),
     (_foreign_sqlite, StoreFormatError, "another application: tables customers"),
     (_corrupted_sqlite, StoreFormatError, "not a usable aerobat database"),
-    (_newer_store, StoreVersionError, "schema version 7"),
+    (_newer_store, StoreVersionError, f"schema version {SCHEMA_VERSION + 1}"),
 ])
 def test_foreign_corrupted_and_newer_files_are_refused_untouched(tmp_path, capsys, make, error, fragment):
     path = tmp_path / "x.sqlite"
@@ -360,7 +360,7 @@ def test_a_version_1_store_is_migrated_in_place_with_its_data_intact(tmp_path, c
     path = tmp_path / "old.sqlite"
     expected = _v1_fixture(path)
     with Store(path) as store:
-        assert store.migrated_from == [1, 2, 3, 4, 5]  # version 1 → 2 → 3 → 4 → 5 → 6
+        assert store.migrated_from == [1, 2, 3, 4, 5, 6]  # version 1 → 2 → … → 7
         assert store.schema_version == SCHEMA_VERSION
         assert store.integrity_check() == []
         for (sid, idx), (params, nxt, error, status) in expected.items():

@@ -164,7 +164,7 @@ def test_a_version_4_store_is_migrated_with_every_record_checksummed(tmp_path):
     conn.commit()
     conn.close()
     with Store(path) as store:
-        assert store.migrated_from == [4, 5] and store.schema_version == 6
+        assert store.migrated_from == [4, 5, 6] and store.schema_version == 7
         assert [it.index for it in store.iterations(1)] == [1] and store.session(1).n_measured == 1
         store.verify_session(1)
         for table in checksums.COVERED:  # every row of every table has its checksum
@@ -195,13 +195,15 @@ def test_a_version_5_store_is_migrated_with_the_notes_its_messages_say(tmp_path)
                                                   0.5, 1.0, np.zeros_like(params),
                                                   message_with_notes("measured", said), None, said))
     with contextlib.closing(sqlite3.connect(path)) as conn:  # the file as version 5 wrote it
-        conn.execute("ALTER TABLE iterations DROP COLUMN notes")
-        checksums.backfill(conn, "iterations", [c for c in checksums.COVERED["iterations"] if c != "notes"])
+        for column in ("notes", *V7_COLUMNS):
+            conn.execute(f"ALTER TABLE iterations DROP COLUMN {column}")
+        checksums.backfill(conn, "iterations", [c for c in checksums.COVERED["iterations"]
+                                                if c != "notes" and c not in V7_COLUMNS])
         conn.execute("UPDATE iterations SET gamma = 0.25 WHERE idx = 3")  # damaged before the migration
         conn.execute("PRAGMA user_version = 5")
         conn.commit()
     with Store(path) as store:
-        assert store.migrated_from == [5] and store.schema_version == 6
+        assert store.migrated_from == [5, 6] and store.schema_version == 7
         got = store.iterations(sid, indices=[1, 2])
         assert [it.notes for it in got] == [(), notes] and got[1].message == message_with_notes("measured", notes)
         assert store._db.execute("SELECT count(*) FROM iterations WHERE notes IS NULL").fetchone()[0] == 0
@@ -210,6 +212,86 @@ def test_a_version_5_store_is_migrated_with_the_notes_its_messages_say(tmp_path)
     raw(path, "UPDATE iterations SET notes = '[]' WHERE idx = 2")  # the notes are covered by the checksum
     with Store(path, create=False) as store, pytest.raises(StoreFormatError, match="fails its checksum"):
         store.iterations(sid, indices=[2])
+
+
+V7_COLUMNS = ("signal_names", "signal_rows", "signal_codec", "signal_checksum", "signals")
+
+
+def _flip_session(store, trials):
+    """A session of the browse fixtures' flip with one iteration per trial."""
+    import numpy as np
+
+    from aerobat.core.learning import Iteration, IterationStatus
+    from browse_fixtures import DESIGN, FLIP, VEHICLE
+
+    params = DESIGN.p_nominal.copy()
+    sid = store.create_session(vehicle=VEHICLE, plant_kind="betaflight", plant_config={}, maneuver=FLIP,
+                               design=DESIGN, seed=None, rule={"name": "paper"}, target_iterations=len(trials),
+                               start_params=params)
+    for i, trial in enumerate(trials, start=1):
+        store.append_iteration(sid, Iteration(i, i, IterationStatus.OK, params, np.full(len(FLIP.errors), 0.1),
+                                              0.5, 1.0, np.zeros_like(params), "measured", trial))
+    return sid
+
+
+def _trial(signals):
+    import numpy as np
+
+    from aerobat.core.plant import Trial, TrialStatus
+    from aerobat.quadrotor.dynamics import N_STATE
+
+    times = np.linspace(0.0, 0.5, 51)
+    states = np.tile(np.arange(N_STATE, dtype=float), (51, 1))
+    return Trial(TrialStatus.OK, "ok", states[-1], times, states, states[0], {}, signals)
+
+
+def test_a_plants_signals_are_stored_read_back_and_covered_by_their_checksum(tmp_path):
+    """Schema 7: the signals a plant sampled (a flight controller's set point, PID terms, motors) round-trip."""
+    import numpy as np
+
+    from aerobat.core.plant import Signals
+
+    rng = np.random.default_rng(7)
+    times = np.arange(40) / 250.0
+    signals = Signals(times, ("motor1", "setpoint_roll_deg_s", "p_roll"), rng.normal(size=(40, 3)) * [1, 900, 300])
+    path = tmp_path / "s.sqlite"
+    with Store(path) as store:
+        sid = _flip_session(store, [_trial(signals), _trial(None)])
+        with_signals, without = store.iterations(sid, trajectories=True)
+        assert without.signals is None and store.iterations(sid)[0].signals is None  # read only with trajectories
+        got = with_signals.signals
+        assert got is not None and got.names == signals.names
+        np.testing.assert_allclose(got.times_s, times, rtol=1e-7)
+        np.testing.assert_allclose(got.values, signals.values, rtol=1e-6)  # float32, as trajectories are
+        np.testing.assert_array_equal(got.column("setpoint_roll_deg_s"), got.values[:, 1])
+    raw(path, "UPDATE iterations SET signals = zeroblob(length(signals)) WHERE idx = 1")
+    with Store(path, create=False) as store:
+        assert len(store.iterations(sid)) == 2  # the rows themselves are intact
+        with pytest.raises(StoreFormatError, match="plant's signals of iteration 1 of session 1 fails its checksum"):
+            store.iterations(sid, trajectories=True)
+    raw(path, "UPDATE iterations SET signal_names = '[\"a\", \"b\", \"c\"]' WHERE idx = 1")  # covered by the row's
+    with Store(path, create=False) as store, pytest.raises(StoreFormatError, match="fails its checksum"):
+        store.iterations(sid, indices=[1])
+
+
+def test_a_version_6_store_is_migrated_with_its_checksums_kept(tmp_path):
+    """Schema 7 adds the signals columns: a version-6 row gets its new checksum; a damaged one stays refused."""
+    path = tmp_path / "v6.sqlite"
+    with Store(path) as store:
+        sid = _flip_session(store, [_trial(None), _trial(None), _trial(None)])
+    with contextlib.closing(sqlite3.connect(path)) as conn:  # the file as version 6 wrote it
+        for column in V7_COLUMNS:
+            conn.execute(f"ALTER TABLE iterations DROP COLUMN {column}")
+        checksums.backfill(conn, "iterations", [c for c in checksums.COVERED["iterations"] if c not in V7_COLUMNS])
+        conn.execute("UPDATE iterations SET gamma = 0.25 WHERE idx = 3")  # damaged before the migration
+        conn.execute("PRAGMA user_version = 6")
+        conn.commit()
+    with Store(path) as store:
+        assert store.migrated_from == [6] and store.schema_version == 7
+        got = store.iterations(sid, trajectories=True, indices=[1, 2])
+        assert [it.signals for it in got] == [None, None] and got[0].times_s is not None
+        with pytest.raises(StoreFormatError, match=r"idx 3\) fails its checksum"):  # still caught
+            store.iterations(sid)
 
 
 def test_docs_state_the_real_schema_version():

@@ -10,7 +10,7 @@ from aerobat.core.design import Design, DesignStatus, FinalStateModel, design, f
 from aerobat.core.learning import Iteration, IterationStatus, Learner, Session, SessionStatus, learn
 from aerobat.core.maneuver import ErrorKind, ErrorSpec, Maneuver, ParameterSpec
 from aerobat.core.notes import IterationNote, NoteKind
-from aerobat.core.plant import Plant, StatefulPlant, Trial, TrialStatus
+from aerobat.core.plant import Plant, Signals, StatefulPlant, Trial, TrialStatus
 from aerobat.core.registry import Registry, from_spec, register_maneuver
 from aerobat.core.rules import RULES, RuleChoice, UpdateRule, make_rule
 
@@ -33,6 +33,7 @@ __all__ = [
     "RuleChoice",
     "Session",
     "SessionStatus",
+    "Signals",
     "StatefulPlant",
     "Trial",
     "TrialStatus",

@@ -14,7 +14,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["Plant", "StatefulPlant", "Trial", "TrialStatus", "repeats_exactly"]
+__all__ = ["Plant", "Signals", "StatefulPlant", "Trial", "TrialStatus", "repeats_exactly"]
 
 
 class TrialStatus(StrEnum):
@@ -52,6 +52,46 @@ _TRIAL_MEANINGS = {
 
 
 @dataclass(frozen=True)
+class Signals:
+    """What a plant sampled inside itself while it flew the maneuver, beside the measured states.
+
+    A flight controller in the loop has signals no motion capture sees: its rate set point,
+    its PID terms, its motor commands. A plant that has them returns them here, a row per
+    sample, so they are stored with the trial and exported beside its trajectory.
+
+    Attributes
+    ----------
+    times_s : (K,) sample times relative to the maneuver start [s].
+    names : (C,) one name per column, its unit in the name (``setpoint_roll_deg_s``).
+    values : (K, C) the samples.
+    """
+
+    times_s: np.ndarray
+    names: tuple[str, ...]
+    values: np.ndarray
+
+    def __post_init__(self) -> None:
+        times = np.asarray(self.times_s, dtype=np.float64).reshape(-1)
+        values = np.asarray(self.values, dtype=np.float64)
+        names = tuple(str(n) for n in self.names)
+        if values.shape != (times.size, len(names)):
+            raise ValueError(f"signals: values {values.shape}, expected {(times.size, len(names))} "
+                             f"(one row per time, one column per name)")
+        if len(set(names)) != len(names) or not all(names):
+            raise ValueError(f"signals: names must be distinct and non-empty, not {names}")
+        object.__setattr__(self, "times_s", times)
+        object.__setattr__(self, "names", names)
+        object.__setattr__(self, "values", values)
+
+    def column(self, name: str) -> np.ndarray:
+        """The samples of one signal."""
+        try:
+            return self.values[:, self.names.index(name)]
+        except ValueError:
+            raise KeyError(f"no signal {name!r}; there are {', '.join(self.names)}") from None
+
+
+@dataclass(frozen=True)
 class Trial:
     """Outcome of flying one program.
 
@@ -64,6 +104,8 @@ class Trial:
     states : (M, N_STATE) measured states at those times (the measurement rate).
     start_state : (N_STATE,) measured state at the maneuver start (for initial-state compensation).
     info : plant-specific extras (attempts, latencies…), JSON-ready.
+    signals : what the plant sampled inside itself during the maneuver (:class:`Signals`: a flight
+        controller's set point, PID terms and motors), None for a plant that has none.
     """
 
     status: TrialStatus
@@ -73,6 +115,7 @@ class Trial:
     states: np.ndarray
     start_state: np.ndarray
     info: dict[str, Any] = field(default_factory=dict)
+    signals: Signals | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "status", TrialStatus(self.status))

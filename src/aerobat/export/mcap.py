@@ -16,8 +16,13 @@ Every trial with a measured trajectory becomes, on one timeline (trial after tri
 * ``/errors`` — JSON, one per stored trial (measured or not) at its end: status, every error
   component and the position error (with ``trial`` on the x-axis: the learning curve);
 * ``/firmware`` — JSON, one per trial: what the plant recorded of its firmware (Betaflight: the
-  firmware, arming, hover and frame counters); per-sample firmware traces are sent only when
-  the store holds them (today's plants do not store them).
+  firmware, arming, hover and frame counters);
+* ``/trial/N/firmware`` — JSON, what the plant sampled inside itself, one message per sample, for
+  a plant that has such signals (:class:`~aerobat.core.plant.Signals`, stored since schema 7;
+  Betaflight: motors ``motor1..4``, the true rates ``rate_roll_deg_s``…, the set point
+  ``setpoint_roll_deg_s``… and the PID terms ``p_roll``, ``i_roll``, ``d_roll``, ``f_roll``…,
+  a sample per radio frame); ``/trials/firmware`` the same for every trial on one channel, each
+  with its ``trial`` and ``t_s``, to overlay them.
 
 A value a plant does not measure is null, never made up: the motion-capture plants (arena,
 RotorPy, Betaflight, a flight controller) measure neither body rates nor rotor thrusts, only the
@@ -39,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from aerobat.core.plant import Signals
 from aerobat.errors import MissingDependency
 from aerobat.export.mcap_scene import TrialPath, maneuver_marks, scene_update
 from aerobat.fileio import atomic_output
@@ -86,6 +92,15 @@ _ERROR_SCHEMA = {"type": "object", "title": "aerobat.TrialError",
                  "properties": {"trial": {"type": "integer"}, "status": {"type": "string"},
                                 "position_error_m": {"type": ["number", "null"]},
                                 "error": {"type": "object"}, "message": {"type": "string"}}}
+def _signals_schema(names: tuple[str, ...]) -> dict[str, Any]:
+    """The JSON Schema of one sample of a plant's signals (its columns as they are named)."""
+    return {"type": "object", "title": "aerobat.PlantSignals",
+            "description": "what the plant sampled inside itself (a flight controller's motors, set point, PID terms)",
+            "properties": {"trial": {"type": "integer"},
+                           "t_s": {"type": "number", "description": "seconds since the program started"},
+                           **{name: _NULL_NUMBER for name in names}}}
+
+
 _FIRMWARE_SCHEMA = {"type": "object", "title": "aerobat.TrialPlantInfo",
                     "properties": {"trial": {"type": "integer"}, "plant": {"type": "string"},
                                    "info": {"type": "object"}}}
@@ -210,6 +225,22 @@ def write_session_mcap(store: Store, session_id: int, path: str | Path) -> McapS
         def emit_json(topic: str, kind: str, time_ns: int, value: dict[str, Any]) -> None:
             emit(topic, json_schemas[kind], "json", time_ns, json.dumps(value, allow_nan=False).encode())
 
+        def emit_signals(index: int, signals: Signals, first_s: float, t0: int) -> int:
+            """A trial's signals, ``t0`` [ns] at ``first_s`` [s]; returns the last sample's time [ns]."""
+            kind = f"signals:{','.join(signals.names)}"
+            if kind not in json_schemas:
+                schema = _signals_schema(signals.names)
+                json_schemas[kind] = writer.register_schema(name=str(schema["title"]), encoding="jsonschema",
+                                                            data=json.dumps(schema).encode())
+            stamps = t0 + np.round((signals.times_s - first_s) * 1e9).astype(np.int64)
+            for row, t, values in zip(stamps.tolist(), signals.times_s.tolist(), signals.values.tolist(),
+                                      strict=True):
+                sample = {"trial": index, "t_s": t, **{n: _finite(v) for n, v in zip(signals.names, values,
+                                                                                      strict=True)}}
+                emit_json(f"/trial/{index}/firmware", kind, row, sample)
+                emit_json("/trials/firmware", kind, row, sample)
+            return int(stamps[-1])
+
         if paths:
             scene = scene_update(paths, maneuver_marks(maneuver, mrec.position_mask), start_ns)
             emit("/scene", scene_schema, "protobuf", start_ns, scene.SerializeToString())
@@ -224,7 +255,11 @@ def write_session_mcap(store: Store, session_id: int, path: str | Path) -> McapS
                 estimated = body_rates_from_attitude(times, states[:, 6:10])
                 angles = (rotation_angles(states[:, :RATE_INT.stop]) if states.shape[1] >= RATE_INT.stop
                           else np.full((len(times), 3), np.nan))
-                stamps = t0 + np.round((times - times[0]) * 1e9).astype(np.int64)
+                signals = it.signals if it.signals is not None and it.signals.times_s.size else None
+                # the trial's first sample, measured or the plant's own (a firmware's frames start before the
+                # program reaches it: the radio's latency), is the trial's start on the timeline
+                first_s = float(times[0]) if signals is None else min(float(times[0]), float(signals.times_s[0]))
+                stamps = t0 + np.round((times - first_s) * 1e9).astype(np.int64)
                 for row, t, x, u, w, a in zip(stamps.tolist(), times.tolist(), states, commands, estimated, angles,
                                               strict=True):
                     pose = PoseInFrame(frame_id="world")
@@ -248,6 +283,8 @@ def write_session_mcap(store: Store, session_id: int, path: str | Path) -> McapS
                         "trial": it.index, "t_s": t, **{name: _finite(x[k]) for k, name in _POSITION},
                         **{name: _finite(a[k]) for k, name in enumerate(_ANGLES)}, **state, **rates, **command})
                 end = int(stamps[-1])
+                if signals is not None:
+                    end = max(end, emit_signals(it.index, signals, first_s, t0))
             else:
                 end = t0
             emit_json("/errors", "errors", end, {

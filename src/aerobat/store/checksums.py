@@ -48,12 +48,14 @@ COVERED: dict[str, tuple[str, ...]] = {
                  "last_error", "last_position_error_m", "current_params", "study_id", "tags", "notes"),
     "iterations": ("session_id", "idx", "correction", "status", "params", "next_params", "error", "gamma", "scale",
                    "message", "final_state", "start_state", "traj_rows", "traj_cols", "traj_codec", "info",
-                   "recorded_at", "plant_state", "learner_state", "traj_checksum", "notes"),
+                   "recorded_at", "plant_state", "learner_state", "traj_checksum", "notes", "signal_names",
+                   "signal_rows", "signal_codec", "signal_checksum"),
     "studies": ("id", "kind", "spec", "created_at", "command", "out_dir"),
     "study_jobs": ("study_id", "key", "spec", "result", "recorded_at", "status", "error", "attempts", "session_id"),
 }
-"""The columns each table's checksum covers, in order (every column but ``checksum`` and
-``iterations.trajectory``, which ``traj_checksum`` covers; ``iterations.notes`` since schema 6)."""
+"""The columns each table's checksum covers, in order (every column but ``checksum``,
+``iterations.trajectory``, which ``traj_checksum`` covers, and ``iterations.signals``, which
+``signal_checksum`` covers; ``iterations.notes`` since schema 6, the ``signal_*`` columns since 7)."""
 
 KEYS: dict[str, tuple[str, ...]] = {"meta": ("key",), "iterations": ("session_id", "idx"),
                                     "study_jobs": ("study_id", "key")}
@@ -131,10 +133,11 @@ def verify(path: Any, table: str, row: Sequence[Any]) -> dict[str, Any]:
     return values
 
 
-def verify_blob(path: Any, where: str, blob: bytes | None, stored: int | None) -> None:
-    """Raise if a trajectory does not give the checksum its row holds."""
+def verify_blob(path: Any, where: str, blob: bytes | None, stored: int | None, *,
+                what: str = "measured trajectory") -> None:
+    """Raise if a blob kept apart (a trajectory, a plant's signals) does not give the checksum its row holds."""
     if blob_checksum(blob) != stored:
-        raise StoreFormatError(f"{path}: the measured trajectory of {where} fails its checksum: it changed on disk, "
+        raise StoreFormatError(f"{path}: the {what} of {where} fails its checksum: it changed on disk, "
                                f"so it is not used — restore the store from a backup")
 
 

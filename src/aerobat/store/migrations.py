@@ -37,6 +37,11 @@ History
    the store read them back out of the message's words. The migration gives older rows the
    notes their messages say (:func:`legacy_notes_from_message`, kept for this migration only)
    and their new checksums; a row that failed its checksum before keeps failing it.
+7. What a plant sampled inside itself during each trial (``iterations.signals``: a flight
+   controller's set point, PID terms and motors, :class:`~aerobat.core.plant.Signals`), kept
+   apart like the trajectory: its names (``signal_names``, JSON), rows and codec in the row,
+   the samples in a blob with its own checksum (``signal_checksum``). Older rows have none;
+   the migration gives them their new checksums (a row that failed before keeps failing).
 """
 
 from __future__ import annotations
@@ -55,8 +60,8 @@ from aerobat.store.checksums import COVERED, backfill, record_checksum
 __all__ = ["APPLICATION_ID", "MIGRATIONS", "SCHEMA", "SCHEMA_V1", "SCHEMA_VERSION", "TABLES", "TABLES_SINCE",
            "legacy_notes_from_message", "migrate", "sql_statements"]
 
-SCHEMA_VERSION = 6
-"""The version this aerobat writes; it reads 1 to 5 (migrating them) and 6."""
+SCHEMA_VERSION = 7
+"""The version this aerobat writes; it reads 1 to 6 (migrating them) and 7."""
 
 APPLICATION_ID = 0x41455242
 """``PRAGMA application_id`` of aerobat stores ("AERB")."""
@@ -269,6 +274,15 @@ SCHEMA += "".join(f"\nALTER TABLE {column};" for column in _V5_COLUMNS) + "\n"
 _V6_COLUMN = "iterations ADD COLUMN notes TEXT"  # JSON list of {"kind", "parameter", "text"} (IterationNote)
 SCHEMA += f"ALTER TABLE {_V6_COLUMN};\n"
 
+_V7_COLUMNS = (
+    "iterations ADD COLUMN signal_names TEXT",                    # JSON list of the columns' names (Signals.names)
+    "iterations ADD COLUMN signal_rows INTEGER NOT NULL DEFAULT 0",
+    "iterations ADD COLUMN signal_codec TEXT",
+    "iterations ADD COLUMN signal_checksum INTEGER",              # CRC-32 of the signals blob
+    "iterations ADD COLUMN signals BLOB",                         # [times_s | values], as the trajectory is stored
+)
+SCHEMA += "".join(f"ALTER TABLE {column};\n" for column in _V7_COLUMNS)
+
 _STUDY_TABLES_V3 = """
 CREATE TABLE studies (
     id         INTEGER PRIMARY KEY,
@@ -360,13 +374,21 @@ def _migrate_3_to_4(conn: sqlite3.Connection) -> None:
 
 _ADDED_IN_6 = {"iterations": ("notes",)}
 """Covered columns that version 5 does not have yet."""
+_ADDED_IN_7 = {"iterations": ("signal_names", "signal_rows", "signal_codec", "signal_checksum")}
+"""Covered columns that version 6 does not have yet."""
+
+
+def _covered_before(table: str, version: int) -> list[str]:
+    """The columns a version's checksum of ``table`` covers (``version`` 5 or 6)."""
+    later = [_ADDED_IN_7] + ([_ADDED_IN_6] if version < 6 else [])
+    return [c for c in COVERED[table] if not any(c in added.get(table, ()) for added in later)]
 
 
 def _migrate_4_to_5(conn: sqlite3.Connection) -> None:
     for column in _V5_COLUMNS:
         conn.execute(f"ALTER TABLE {column}")
     for table in TABLES:
-        backfill(conn, table, [c for c in COVERED[table] if c not in _ADDED_IN_6.get(table, ())])
+        backfill(conn, table, _covered_before(table, 5))
 
 
 def legacy_notes_from_message(message: str) -> tuple[IterationNote, ...]:
@@ -386,7 +408,7 @@ def legacy_notes_from_message(message: str) -> tuple[IterationNote, ...]:
 
 def _migrate_5_to_6(conn: sqlite3.Connection) -> None:
     conn.execute(f"ALTER TABLE {_V6_COLUMN}")
-    old = [c for c in COVERED["iterations"] if c not in _ADDED_IN_6["iterations"]]  # a version-5 row's checksum
+    old = _covered_before("iterations", 5)  # a version-5 row's checksum
     updates = []
     for row in conn.execute(f"SELECT {', '.join(old)}, checksum FROM iterations").fetchall():
         values = dict(zip(old, row, strict=False))
@@ -397,9 +419,23 @@ def _migrate_5_to_6(conn: sqlite3.Connection) -> None:
     conn.executemany("UPDATE iterations SET notes = ?, checksum = ? WHERE session_id = ? AND idx = ?", updates)
 
 
+def _migrate_6_to_7(conn: sqlite3.Connection) -> None:
+    for column in _V7_COLUMNS:
+        conn.execute(f"ALTER TABLE {column}")
+    old = _covered_before("iterations", 6)  # a version-6 row's checksum
+    updates = []
+    for row in conn.execute(f"SELECT {', '.join(old)}, checksum FROM iterations").fetchall():
+        values = dict(zip(old, row, strict=False))
+        intact = row[-1] == record_checksum("iterations", row[:-1])
+        # the new columns, as a row without signals holds them: no names, 0 rows, no codec, no checksum
+        checksum = record_checksum("iterations", [*row[:-1], None, 0, None, None]) if intact else row[-1]
+        updates.append((checksum, values["session_id"], values["idx"]))
+    conn.executemany("UPDATE iterations SET checksum = ? WHERE session_id = ? AND idx = ?", updates)
+
+
 MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {1: _migrate_1_to_2, 2: _migrate_2_to_3,
                                                                3: _migrate_3_to_4, 4: _migrate_4_to_5,
-                                                               5: _migrate_5_to_6}
+                                                               5: _migrate_5_to_6, 6: _migrate_6_to_7}
 """``MIGRATIONS[n]`` takes a database from version n to n + 1 (inside the caller's transaction)."""
 
 

@@ -13,6 +13,7 @@ import numpy as np
 from aerobat.config import check_int, check_type, short_repr
 from aerobat.core.maneuver import ErrorKind
 from aerobat.core.outcomes import IterationStatus, SessionStatus
+from aerobat.core.plant import Signals
 from aerobat.errors import ConfigError, SessionNotFound, StoreFormatError
 from aerobat.store import checksums
 from aerobat.store.codec import TRAJECTORY_CODEC, decode_trajectory, from_columns, unpack_f8
@@ -228,11 +229,27 @@ class Reading(StudyTables):
                            config=self._loads(r["config"], f"plant {plant_id}"))
 
     # ---------------------------------------------------------- iterations
-    def _iteration(self, r: Mapping[str, Any], blob: bytes | None, trajectories: bool, plant_state: bool,
+    def _signals(self, r: Mapping[str, Any], blob: bytes | None, where: str) -> Signals | None:
+        """The plant's signals of a verified row (schema 7), verified against their checksum."""
+        checksums.verify_blob(self.path, where, blob, r["signal_checksum"], what="plant's signals")
+        if blob is None or not r["signal_rows"]:
+            return None
+        names = self._loads(r["signal_names"], where)
+        if r["signal_codec"] != TRAJECTORY_CODEC or not isinstance(names, list):
+            raise StoreFormatError(f"{self.path}: {where}: unknown signals encoding {r['signal_codec']!r}")
+        try:
+            times, values = decode_trajectory(blob, r["signal_rows"], 1 + len(names))
+            return Signals(times, tuple(names), values)
+        except (ValueError, zlib.error) as exc:
+            raise StoreFormatError(f"{self.path}: {where}: damaged signals ({exc})") from None
+
+    def _iteration(self, r: Mapping[str, Any], blobs: tuple[bytes | None, bytes | None] | None, plant_state: bool,
                    learner_state: bool) -> IterationRecord:
+        """A verified row as a record; ``blobs``: its trajectory and signals, to decode (None: not read)."""
         where = f"iteration {r['idx']} of session {r['session_id']}"
-        times = states = None
-        if trajectories:
+        times = states = signals = None
+        if blobs is not None:
+            blob = blobs[0]
             checksums.verify_blob(self.path, where, blob, r["traj_checksum"])
             if blob is not None and r["traj_rows"]:
                 if r["traj_codec"] != TRAJECTORY_CODEC:
@@ -241,6 +258,7 @@ class Reading(StudyTables):
                     times, states = decode_trajectory(blob, r["traj_rows"], r["traj_cols"])
                 except (ValueError, zlib.error) as exc:
                     raise StoreFormatError(f"{self.path}: {where}: damaged trajectory ({exc})") from None
+            signals = self._signals(r, blobs[1], where)
         status = self._enum(IterationStatus, r["status"], where)
         info = self._loads(r["info"], where) if r["info"] else {}
         plant = self._loads(r["plant_state"], where) if plant_state and r["plant_state"] else None
@@ -248,7 +266,7 @@ class Reading(StudyTables):
         try:  # the notes column (JSON) is decoded by the codec, from IterationRecord.notes' type
             return from_columns(  # type: ignore[no-any-return]
                 IterationRecord, r, index=r["idx"], status=status, trajectory_rows=r["traj_rows"], info=info,
-                times_s=times, states=states, plant_state=plant, learner_state=learner)
+                times_s=times, states=states, plant_state=plant, learner_state=learner, signals=signals)
         except (ValueError, TypeError, KeyError) as exc:
             raise StoreFormatError(f"{self.path}: {where}: damaged notes ({type(exc).__name__}: {exc}); restore "
                                    f"the store from a backup") from None
@@ -279,7 +297,8 @@ class Reading(StudyTables):
             wanted = sorted({check_int("indices", i, low=1, high=2**63 - 1) for i in indices})
             if not wanted:
                 return []
-        sql = f"SELECT {checksums.select_list('iterations')}{', trajectory' if trajectories else ''} FROM iterations " \
+        sql = f"SELECT {checksums.select_list('iterations')}{', trajectory, signals' if trajectories else ''} " \
+              f"FROM iterations " \
               f"WHERE session_id = ?"
         args: list[Any] = [session_id]
         if wanted is not None:
@@ -299,13 +318,14 @@ class Reading(StudyTables):
             finally:
                 if own:
                     self._db.execute("COMMIT")
-        checked = [(checksums.verify(self.path, "iterations", r[:n]), r[n] if trajectories else None) for r in rows]
+        checked = [(checksums.verify(self.path, "iterations", r[:n]), (r[n], r[n + 1]) if trajectories else None)
+                   for r in rows]
         found = [r["idx"] for r, _ in checked]
         if any(r["session_id"] != session_id for r, _ in checked) or (
                 count is not None and found != list(range(1, count + 1))):
             raise StoreFormatError(f"{self.path}: session {session_id}: its summary counts {count} iterations but "
                                    f"the store holds {len(found)} (damaged)")
-        return [self._iteration(r, blob, trajectories, plant_state, False) for r, blob in checked]
+        return [self._iteration(r, blobs, plant_state, False) for r, blobs in checked]
 
     def last_iteration(self, session_id: int) -> IterationRecord | None:
         """The session's last stored iteration, with the plant's and the learner's states (None if it has none)."""
@@ -313,7 +333,7 @@ class Reading(StudyTables):
         with self._guard(f"reading iterations of session {session_id}"):
             r = self._db.execute(f"SELECT {checksums.select_list('iterations')} FROM iterations WHERE session_id = ? "
                                  f"ORDER BY idx DESC LIMIT 1", (session_id,)).fetchone()
-        return None if r is None else self._iteration(checksums.verify(self.path, "iterations", r), None, False,
+        return None if r is None else self._iteration(checksums.verify(self.path, "iterations", r), None,
                                                       True, True)
 
     def verify_session(self, session_id: int) -> None:

@@ -12,6 +12,7 @@ from aerobat.core.design import Design, DesignStatus
 from aerobat.core.maneuver import ErrorKind, Maneuver
 from aerobat.core.notes import IterationNote
 from aerobat.core.outcomes import Iteration, IterationStatus, SessionStatus, step_to
+from aerobat.core.plant import Signals
 
 __all__ = [
     "DesignRecord",
@@ -243,6 +244,9 @@ class IterationRecord:
         rule's state; JSON table), if loaded and stored (schema 4).
     info : the plant's extras.
     notes : what learning noted about the correction (parameters held or pinned at a bound).
+    signals : what the plant sampled inside itself (:class:`~aerobat.core.plant.Signals`: a flight
+        controller's set point, PID terms and motors); None unless loaded with ``trajectories=True``
+        and stored (schema 7).
     """
 
     session_id: int
@@ -265,6 +269,7 @@ class IterationRecord:
     learner_state: dict[str, Any] | None = None
     info: dict[str, Any] = field(default_factory=dict)
     notes: tuple[IterationNote, ...] = ()
+    signals: Signals | None = None
 
     def __repr__(self) -> str:
         return f"IterationRecord(session {self.session_id}, {self.index}, {self.status.value!r})"

@@ -239,6 +239,10 @@ class Store(Browsing):
         if trial is not None and trial.times_s is not None and trial.states is not None and \
                 np.asarray(trial.times_s).size:
             traj = encode_trajectory(trial.times_s, trial.states)
+        signals = None if trial is None else trial.signals
+        sig: tuple[int, int, bytes | None] = (0, 0, None)
+        if signals is not None and signals.times_s.size:
+            sig = encode_trajectory(signals.times_s, signals.values)
         err = np.asarray(iteration.error, dtype=np.float64)
         ok = iteration.status is IterationStatus.OK
         mask = self._position_mask(session_id)
@@ -255,7 +259,10 @@ class Store(Browsing):
             "plant_state": None if plant_state is None else json.dumps(plant_state, separators=(",", ":")),
             "learner_state": None if learner_state is None else json.dumps(json_ready(dict(learner_state)),
                                                                            separators=(",", ":")),
-            "traj_checksum": checksums.blob_checksum(traj[2]), "trajectory": traj[2],
+            "traj_checksum": checksums.blob_checksum(traj[2]),
+            "signal_names": None if sig[2] is None else json.dumps(list(signals.names)),  # type: ignore[union-attr]
+            "signal_rows": sig[0], "signal_codec": TRAJECTORY_CODEC if sig[2] is not None else None,
+            "signal_checksum": checksums.blob_checksum(sig[2]), "trajectory": traj[2], "signals": sig[2],
         }
         return row, ok, position
 
@@ -277,8 +284,8 @@ class Store(Browsing):
             summary.update(n_measured=found["n_measured"] + 1, last_correction=correction, last_error=row["error"],
                            last_position_error_m=position)
         checksums.update(conn, self.path, "sessions", {"id": session_id}, summary, old=found)
-        checksums.insert(conn, "iterations", {k: v for k, v in row.items() if k != "trajectory"},
-                         extra={"trajectory": row["trajectory"]})
+        checksums.insert(conn, "iterations", {k: v for k, v in row.items() if k not in ("trajectory", "signals")},
+                         extra={"trajectory": row["trajectory"], "signals": row["signals"]})
 
     def claim_session(self, session_id: int, *, take_over: bool = False) -> SessionRecord:
         """Take over a session to resume it: it becomes ``running`` under this process.

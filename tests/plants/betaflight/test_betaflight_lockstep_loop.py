@@ -155,7 +155,9 @@ def _trial_record(trial: Trial, plant: BetaflightPlant) -> tuple[object, ...]:
               "driver_spin_s", "compiled_calls"}
     info = {key: value for key, value in trial.info.items() if key not in timing}
     return (trial.status, trial.message, trial.final_state.tobytes(), trial.times_s.tobytes(), trial.states.tobytes(),
-            trial.start_state.tobytes(), repr(sorted(info.items())), plant.last_truth[1].tobytes())
+            trial.start_state.tobytes(), repr(sorted(info.items())), plant.last_truth[1].tobytes(),
+            trial.signals.names if trial.signals is not None else None,  # the firmware's own signals, sampled alike
+            trial.signals.values.tobytes() if trial.signals is not None else None)
 
 
 @pytest.mark.parametrize("exchange", ["udp", "shm"])

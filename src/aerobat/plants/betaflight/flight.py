@@ -57,8 +57,8 @@ from aerobat.plants.betaflight.sitl import SitlProcess
 from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose
 from aerobat.quadrotor.dynamics import N_STATE
 
-__all__ = ["CHUNK_FRAMES", "N_SAMPLE", "SAMPLE_MOTORS", "SAMPLE_PID", "SAMPLE_RATES", "SAMPLE_SETPOINT", "SAMPLE_TIME",
-           "Flight", "NonFinite"]
+__all__ = ["CHUNK_FRAMES", "N_PACKET", "N_SAMPLE", "SAMPLE_MOTORS", "SAMPLE_PID", "SAMPLE_RATES", "SAMPLE_SETPOINT",
+           "SAMPLE_TIME", "Flight", "NonFinite"]
 
 # the columns of a row of :meth:`Flight.sampled_frame`
 SAMPLE_TIME = 0
@@ -72,6 +72,8 @@ SAMPLE_SETPOINT = slice(8, 11)
 SAMPLE_PID = slice(11, 23)
 """The PID terms, axis-major: roll's P, I, D, F, then pitch's, then yaw's (firmware units)."""
 N_SAMPLE = 23
+N_PACKET = N_SAMPLE - SAMPLE_MOTORS.start
+"""The motor packet's floats (motors, set point, PID terms) in a sample row, and at the end of a record row."""
 
 _SLICE_S = 0.05  # the compiled shared-memory wait's timeout: then the watchdog takes the step
 
@@ -96,6 +98,10 @@ class Flight:
     rng : the plant's generator (noise, radio drops).
     gravity_m_s2 : g.
     """
+
+    records_packet = True
+    """:meth:`run_frames` can record the firmware's motor packet after each frame (the lockstep SITL answers
+    every step with it; a flight controller on a serial link sends its motors only when asked)."""
 
     def __init__(self, binary: Path, eeprom: Path, params: BetaflightParams, plant: np.ndarray,
                  start_m: np.ndarray, rng: np.random.Generator, gravity_m_s2: float) -> None:
@@ -308,9 +314,10 @@ class Flight:
         frame or one for all (:attr:`Mode.STREAM`), or ``pilot``'s sticks (:attr:`Mode.ANGLE`: an
         :class:`~.frames.AnglePilot`; :attr:`Mode.PROGRAM`: a :class:`~.frames.ProgramPilot`);
         ``radio`` what the radio does with them. After each frame: a truth row into ``record``
-        (frames, 1 + state: time [s], true state), the flight-volume check around the start
-        (``check``: the floor or a motion-capture sample outside ``params.volume`` ends the run)
-        and the stop condition ``until``.
+        (frames, 1 + state: time [s], true state; with :data:`N_PACKET` more columns, the firmware's
+        motor packet after it: motors, set point, PID terms as in :data:`SAMPLE_MOTORS` on), the
+        flight-volume check around the start (``check``: the floor or a motion-capture sample
+        outside ``params.volume`` ends the run) and the stop condition ``until``.
 
         Raises :class:`~.errors.FirmwareNotResponding` (the watchdog) and :class:`NonFinite`.
         """
@@ -323,8 +330,9 @@ class Flight:
             raise ValueError(f"Mode.PROGRAM needs a ProgramPilot with ({frames}, 4) commands")
         if mode is not Mode.STEPS and channels_us is None and pilot is None:
             raise ValueError(f"{mode.name} needs the channels")
-        if record is not None and record.shape != (frames, 1 + N_STATE):
-            raise ValueError(f"record must be ({frames}, {1 + N_STATE}), not {record.shape}")
+        if record is not None and record.shape not in ((frames, 1 + N_STATE), (frames, 1 + N_STATE + N_PACKET)):
+            raise ValueError(f"record must be ({frames}, {1 + N_STATE}) or ({frames}, {1 + N_STATE + N_PACKET}), "
+                             f"not {record.shape}")
         if steps > self._noise_buffer.shape[0]:
             self._noise_buffer = np.zeros((steps, 6))
             self._mocap_noise = np.zeros((steps // self.mocap_every + 2, 6))

@@ -123,7 +123,9 @@ def run_frames_by_frame(flight: Any, volume: Volume | None, mode: Mode, frames: 
         flight.frame(channels, lossless=radio is Radio.LOSSLESS)
         if record is not None:
             record[k, 0] = flight.time_s
-            record[k, 1:] = flight.x
+            record[k, 1:1 + flight.x.size] = flight.x
+            if record.shape[1] > 1 + flight.x.size:  # asked for the firmware's motor packet too
+                record[k, 1 + flight.x.size:] = flight.motors[:record.shape[1] - 1 - flight.x.size]
         if check:
             if flight.on_floor:
                 return FramesRun(FramesEnd.FLOOR, k + 1)

@@ -285,8 +285,9 @@ def fly_frames(mode, frames, n, drop, resume, check, until, rng, cfg, fcfg, st, 
     ``channels``: (k, 16) RC channels [us], one row per frame or one for all (:data:`M_ANGLE`:
     the row its sticks fill in). ``pilot``, ``target``, ``integral``, ``gains``, ``limits``: the
     ANGLE pilot's (:func:`.pilot.angle_sticks`; the integral is updated in place). ``start`` and
-    ``volume`` (3, 2): the flight volume around the start [m]. ``record``: (frames, 1 + 21) truth
-    rows (time [s], state) after each frame, or empty. ``est``: scratch (3 + 3 + 4 + 4).
+    ``volume`` (3, 2): the flight volume around the start [m]. ``record``: (frames, 1 + 21 [+ 19]) truth
+    rows (time [s], state [, the motor packet: motors, set point, PID terms]) after each frame, or
+    empty. ``est``: scratch (3 + 3 + 4 + 4).
     :data:`Mode.PROGRAM`: ``commands`` (frames, 4) a row per frame, as sticks through ``limits``;
     with ``pilot[P_FEEDBACK]`` the feedback law first (``fb_gains``, ``reference``, the onboard
     state ``onboard`` updated in place, scratch ``fb_scratch`` (10) and ``relay`` (6)).
@@ -329,7 +330,9 @@ def fly_frames(mode, frames, n, drop, resume, check, until, rng, cfg, fcfg, st, 
         now_s = st[S_TICK] * step_s
         if record.shape[0] > 0:
             record[k, 0] = now_s
-            record[k, 1:] = x
+            record[k, 1:1 + x.shape[0]] = x
+            for j in range(record.shape[1] - 1 - x.shape[0]):  # the motor packet's floats, if asked for
+                record[k, 1 + x.shape[0] + j] = motors[j]
         if check:
             if counters[C_CONTACT]:
                 return CRASH_FLOOR, k + 1

@@ -41,6 +41,7 @@ __all__ = [
     "MOTOR_COUNT",
     "MOTOR_POSITIONS_FRD",
     "MOTOR_SPIN_CCW",
+    "MOTOR_LOG_ORDER",
     "MOTOR_PACKET_FLOATS",
     "MOTOR_STRUCT",
     "RC_STRUCT",
@@ -68,6 +69,9 @@ MOTOR_STRUCT = struct.Struct("<4f3f12f")
 the 4 motor commands (0..1), then the rate loop's set point (3, deg/s, what blackbox logs) and
 the P, I, D, F terms per axis (roll, pitch, yaw: 12). Its layout is defined here only."""
 MOTOR_PACKET_FLOATS = 19
+MOTOR_LOG_ORDER = (3, 0, 1, 2)
+"""Packet slot of Betaflight's motors M1..M4 (rear right, front right, rear left, front left):
+the SITL's packet is front right, rear left, front left, rear right (:mod:`.physics`)."""
 MOTOR_COUNT = 4
 
 

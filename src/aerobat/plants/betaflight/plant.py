@@ -34,11 +34,12 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.core.plant import Trial, TrialStatus
+from aerobat.core.plant import Signals, Trial, TrialStatus
 from aerobat.plants.betaflight.errors import FirmwareNotResponding
 from aerobat.plants.betaflight.firmware_settings import BetaflightSettings, load_settings
-from aerobat.plants.betaflight.flight import Flight, NonFinite
+from aerobat.plants.betaflight.flight import N_PACKET, Flight, NonFinite
 from aerobat.plants.betaflight.frames import AnglePilot, FeedbackLaw, FramesEnd, FramesRun, Mode, ProgramPilot, Until
+from aerobat.plants.betaflight.packets import MOTOR_LOG_ORDER
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import airframe_plant
 from aerobat.plants.betaflight.pilot import L_CLIMB, StickMap
@@ -59,7 +60,15 @@ from aerobat.quadrotor.program import CompiledProgram, Program
 from aerobat.quadrotor.simulate import simulate
 from aerobat.quadrotor.vehicle import VehicleConfig
 
-__all__ = ["BetaflightPlant"]
+__all__ = ["SIGNAL_NAMES", "BetaflightPlant"]
+
+_AXES = ("roll", "pitch", "yaw")
+SIGNAL_NAMES = (*(f"motor{m}" for m in range(1, 5)), *(f"rate_{a}_deg_s" for a in _AXES),
+                *(f"setpoint_{a}_deg_s" for a in _AXES), *(f"{t}_{a}" for a in _AXES for t in "pidf"))
+"""What a trial's :class:`~aerobat.core.plant.Signals` hold, a row per radio frame of the maneuver:
+Betaflight's motor commands M1..M4 (0 stopped, 1 full), the true body rates in the firmware's
+axes (the simulated gyro before its noise and filters) [deg/s], the rate set point [deg/s] and
+the P, I, D, F terms of each axis in blackbox units (as Blackbox Explorer shows ``axisP[0]``…)."""
 
 _LAYOUT = StateLayout("betaflight", counters=("trials_flown",), fractions=("capacity",))
 
@@ -234,10 +243,11 @@ class BetaflightPlant:
 
     @staticmethod
     def _failed(status: TrialStatus, message: str, info: dict[str, Any],
-                times: np.ndarray | None = None, states: np.ndarray | None = None) -> Trial:
+                times: np.ndarray | None = None, states: np.ndarray | None = None,
+                signals: Signals | None = None) -> Trial:
         nan_state = np.full(N_STATE, np.nan)
         return Trial(status, message, nan_state, np.empty(0) if times is None else times,
-                     np.empty((0, N_STATE)) if states is None else states, nan_state.copy(), info)
+                     np.empty((0, N_STATE)) if states is None else states, nan_state.copy(), info, signals)
 
     def _fly(self, flight: Flight, compiled: CompiledProgram, info: dict[str, Any], wall: float) -> Trial:
         pilot = self.params.pilot
@@ -258,7 +268,7 @@ class BetaflightPlant:
             times, states = (measured_states(flight.mocap(), start_time, flight.time_s, self.start_m)
                              if start_time is not None else (None, None))
             self._keep_truth(truth, start_time)
-            return self._failed(stop.status, str(stop), info, times, states)
+            return self._failed(stop.status, str(stop), info, times, states, self._signals(truth, start_time))
         end_time = start_time + compiled.duration_s
         rows = flight.mocap()
         times, states = measured_states(rows, start_time, end_time, self.start_m)
@@ -270,19 +280,30 @@ class BetaflightPlant:
         info.update(self._timing(flight, wall))
         nan_state = np.full(N_STATE, np.nan)
         start_state = start_state if start_state is not None else nan_state.copy()
+        signals = self._signals(truth, start_time)
         if final is None or not (np.all(np.isfinite(final[:13])) and np.all(np.isfinite(final[17:]))):
             return Trial(TrialStatus.ABORTED, "too few motion-capture samples to estimate the final state", nan_state,
-                         times, states, start_state, info)
+                         times, states, start_state, info, signals)
         return Trial(TrialStatus.OK, f"maneuver flown through Betaflight ({info['steps']} lockstep steps, "
                                      f"{info['frames_dropped']}/{info['frames_sent']} radio frames lost)",
-                     final, times, states, start_state, info)
+                     final, times, states, start_state, info, signals)
 
     def _keep_truth(self, truth: list[np.ndarray], start_time: float | None) -> None:
         if truth and start_time is not None:
             rows = np.array(truth)
-            self.last_truth = (rows[:, 0] - start_time, rows[:, 1:])
+            self.last_truth = (rows[:, 0] - start_time, rows[:, 1:1 + N_STATE])
         else:
             self.last_truth = (np.empty(0), np.empty((0, N_STATE)))
+
+    @staticmethod
+    def _signals(truth: list[np.ndarray], start_time: float | None) -> Signals | None:
+        """The firmware's motor packet after each maneuver frame, with the true body rates, as :class:`Signals`."""
+        if not truth or start_time is None or len(truth[0]) == 1 + N_STATE:
+            return None
+        rows = np.array(truth)
+        packet = rows[:, 1 + N_STATE:]
+        columns = [packet[:, list(MOTOR_LOG_ORDER)], np.degrees(rows[:, 11:14]), packet[:, 4:7], packet[:, 7:19]]
+        return Signals(rows[:, 0] - start_time, SIGNAL_NAMES, np.column_stack(columns))
 
     # ------------------------------------------------------------- channels
     def channels(self, sticks: np.ndarray, *, arm: bool, angle: bool) -> tuple[int, ...]:
@@ -364,7 +385,8 @@ class BetaflightPlant:
         commands = frames_of(compiled, period, n)
         program = ProgramPilot(commands, self.limits, self.channels(np.zeros(4), arm=True, angle=False), period,
                                self._feedback_law(compiled, start_time) if self.feedback.enabled else None)
-        record = np.empty((n, 1 + N_STATE))
+        # the truth, then the firmware's motor packet (where the flight has it)
+        record = np.empty((n, 1 + N_STATE + (N_PACKET if flight.records_packet else 0)))
         run = flight.run_frames(Mode.PROGRAM, n, pilot=program, check=True, record=record)
         truth.extend(record[:run.frames])
         self._raise_crash(flight, run)

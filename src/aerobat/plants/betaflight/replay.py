@@ -33,6 +33,7 @@ from aerobat.plants.betaflight.flight import (
     SAMPLE_SETPOINT,
     SAMPLE_TIME,
 )
+from aerobat.plants.betaflight.packets import MOTOR_LOG_ORDER
 from aerobat.plants.betaflight.physics import A_FMAX, airframe_plant
 from aerobat.plants.betaflight.rc import RC_MAX_US, RC_MID_US, RC_MIN_US
 
@@ -41,9 +42,6 @@ if TYPE_CHECKING:
 
 __all__ = ["MOTOR_LOG_ORDER", "ReplayTrace", "StickTrack", "channels_from_commands", "replay_sticks"]
 
-MOTOR_LOG_ORDER = (3, 0, 1, 2)
-"""Packet slot of Betaflight's motors M1..M4 (rear right, front right, rear left, front left):
-the SITL's packet is front right, rear left, front left, rear right (:mod:`.physics`)."""
 
 
 @dataclass(frozen=True)

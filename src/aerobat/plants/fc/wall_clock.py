@@ -72,6 +72,10 @@ class WallClockFlight:
     volume : the flight volume around the start, for the supervisor's checks (:meth:`run_frames`).
     """
 
+    records_packet = False
+    """Rows of ``record`` hold the truth only: the board's set point and PID terms never reach the link, and
+    its motors only when asked (an MSP request per frame would take the link's time from the frames)."""
+
     def __init__(self, msp: MspClient, poses: PoseSource, monitor: SafetyMonitor, *, rate_hz: float,
                  time_zero_s: float, start_m: np.ndarray, floor_z_m: float, command_latency_s: float,
                  battery_period_s: float = 1.0, rotation_stick_us: float = 100.0,

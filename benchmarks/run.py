@@ -362,6 +362,21 @@ def bench_betaflight_section() -> list[str]:
             "2.5 m below the start, settling, the flip, the return, landing and disarming.", ""]
 
 
+def bench_exchange_load_section(rounds: int = 5) -> list[str]:
+    """The exchange at load 0, 1 and 2 (``benchmarks/bench_exchange_load.py``), as markdown lines."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from aerobat.plants.betaflight.errors import FirmwareUnavailable
+
+    try:
+        import bench_exchange_load
+
+        results = bench_exchange_load.run(rounds)
+    except FirmwareUnavailable as error:
+        return ["## Betaflight on a shared machine", "",
+                f"Not measured: the SITL is unavailable here ({str(error).splitlines()[0]}).", ""]
+    return [*bench_exchange_load.section(results, rounds), ""]
+
+
 def bench_logs_section() -> list[str]:
     """Reading and identifying from real flight logs (``benchmarks/bench_logs.py``), as markdown lines."""
     sys.path.insert(0, str(ROOT / "benchmarks"))
@@ -515,7 +530,8 @@ def main() -> None:
         print(json.dumps(results, default=float))
         return
     # the firmware and log benches: the report only, not --json
-    text = report(results, bench_betaflight_section() + bench_logs_section() + bench_store_section())
+    text = report(results, bench_betaflight_section() + bench_exchange_load_section() + bench_logs_section()
+                  + bench_store_section())
     print(text)
     if args.write:
         # keep the hand-measured sections that follow the marker (other benchmark scripts)

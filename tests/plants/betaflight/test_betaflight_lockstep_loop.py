@@ -152,7 +152,7 @@ def test_the_firmware_packet_is_received_whole() -> None:
 
 def _trial_record(trial: Trial, plant: BetaflightPlant) -> tuple[object, ...]:
     timing = {"wall_s", "real_time_factor", "firmware_cpu_s", "wall_per_firmware_cpu", "firmware_spin_s",
-              "driver_spin_s", "compiled_calls"}
+              "driver_spin_s", "compiled_calls", "driver_sleeping_share", "driver_spin_switches", "driver_spin_probes"}
     info = {key: value for key, value in trial.info.items() if key not in timing}
     return (trial.status, trial.message, trial.final_state.tobytes(), trial.times_s.tobytes(), trial.states.tobytes(),
             trial.start_state.tobytes(), repr(sorted(info.items())), plant.last_truth[1].tobytes(),

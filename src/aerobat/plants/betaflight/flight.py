@@ -41,7 +41,7 @@ from aerobat.plants.betaflight.lockstep import (
     RESUME_STEP,
     SEND_FAILED,
 )
-from aerobat.plants.betaflight.packets import MOTOR_STRUCT, RC_STRUCT, Exchange
+from aerobat.plants.betaflight.packets import MOTOR_STRUCT, RC_STRUCT, Exchange, SpinPolicy
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import (
     A_GROUND,
@@ -53,6 +53,7 @@ from aerobat.plants.betaflight.physics import (
     ground_state,
     prime,
 )
+from aerobat.plants.betaflight.shm import SpinChoices
 from aerobat.plants.betaflight.sitl import SitlProcess
 from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose
 from aerobat.quadrotor.dynamics import N_STATE
@@ -166,9 +167,11 @@ class Flight:
         prime(self.x, self.plant, self.aux, self.counters, self._noise(1)[0], self.packet, self.scratch)
         self.firmware_cpu_s: float | None = None
         self.spun = (0.0, 0.0)
+        self.choices: SpinChoices | None = None
         if fw.exchange is Exchange.SHM:
             self._cfg[fr.K_EXCHANGE] = fr.X_SHM
-            self._cfg[fr.K_SPIN_NS] = round(fw.spin_us * 1e3)
+            # a negative budget: the exchange measures whether spinning pays (shm_exchange.c, choose_spin)
+            self._cfg[fr.K_SPIN_NS] = round(fw.spin_us * 1e3) * (-1 if fw.spin is SpinPolicy.MEASURED else 1)
         from aerobat.plants.betaflight.frame_loop import fly_frames
 
         self._fly_frames = fly_frames
@@ -188,6 +191,7 @@ class Flight:
         """Kill the firmware and release its ports and files (idempotent)."""
         self.firmware_cpu_s = self.firmware_cpu_time_s()
         self.spun = self.spun_s()
+        self.choices = self.spin_choices()
         self.sitl.close()
 
     def firmware_cpu_time_s(self) -> float | None:
@@ -202,6 +206,14 @@ class Flight:
         """
         now = self.sitl.spun_s()
         return self.spun if math.isnan(now[0]) else now
+
+    def spin_choices(self) -> SpinChoices | None:
+        """What the driver's measured spin policy chose so far (after :meth:`close`: at its end; None: not
+        measured, over UDP or with a fixed policy)."""
+        if self._cfg[fr.K_SPIN_NS] >= 0:
+            return None
+        now = self.sitl.spin_choices()
+        return now if now is not None else self.choices
 
     def __enter__(self) -> Flight:
         return self

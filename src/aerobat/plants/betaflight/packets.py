@@ -47,6 +47,7 @@ __all__ = [
     "RC_STRUCT",
     "STATE_STRUCT",
     "SitlState",
+    "SpinPolicy",
     "pack_rc",
     "pack_state",
 ]
@@ -60,6 +61,16 @@ class Exchange(StrEnum):
     """Datagrams on loopback sockets (two system calls per packet on each side)."""
     SHM = "shm"
     """A shared memory region (:mod:`.shm`): a spin, then a futex sleep; no system call while both run."""
+
+
+class SpinPolicy(StrEnum):
+    """Whether the driver spins for the firmware's answer over shared memory (up to ``spin_us``)."""
+
+    MEASURED = "measured"
+    """Spin or sleep at once, whichever steps faster, measured as the flight goes (a loaded machine
+    sleeps: spinning there takes the core the firmware or another process needs)."""
+    ALWAYS = "always"
+    """Spin up to ``spin_us`` on every wait (the fastest on a machine with a core free for each side)."""
 
 
 STATE_STRUCT = struct.Struct("<18d")

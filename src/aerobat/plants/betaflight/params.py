@@ -28,7 +28,7 @@ from aerobat.config import (
     write_file,
 )
 from aerobat.core.bounds import Interval, Items, OneOf, bounded, validate
-from aerobat.plants.betaflight.packets import Exchange
+from aerobat.plants.betaflight.packets import Exchange, SpinPolicy
 from aerobat.plants.betaflight.tune import Tune
 from aerobat.plants.world_params import Aerodynamics, Disturbances, Drift, MotionCapture, Volume
 from aerobat.quadrotor.xframe import Airframe
@@ -159,12 +159,17 @@ class Firmware:
         the other before sleeping on a futex (adaptive below it). With it an instance keeps two
         cores busy (:func:`instance_cores`: studies run ``cpu_count // 2`` at once); 0 sleeps at
         once, for as many instances as cores (docs/performance.md, issue 27).
+    spin : whether the driver spins (up to ``spin_us``): ``"always"`` on every wait (the default);
+        ``"measured"`` spins or sleeps at once, whichever its 25 ms epochs measure stepping faster.
+        Measured at load 0, 1 and 2, the fixed spin is the faster default here (issue 46,
+        docs/performance.md, "Betaflight on a shared machine").
     """
 
     gyro_rate_hz: int = bounded(8000, OneOf(GYRO_RATES_HZ, unit="Hz"))
     step_timeout_s: float = bounded(2.0, Interval(0.05, 60.0, unit="s"))
     exchange: Exchange = bounded(Exchange.SHM, OneOf(Exchange))
     spin_us: float = bounded(20.0, Interval(0.0, 1000.0, unit="µs"))
+    spin: SpinPolicy = bounded(SpinPolicy.ALWAYS, OneOf(SpinPolicy))
 
     def __post_init__(self) -> None:
         validate(self)

@@ -229,6 +229,11 @@ class BetaflightPlant:
         simulated = flight.time_s if flight is not None else 0.0
         cpu = flight.firmware_cpu_time_s() if flight is not None else None
         spun, driver_spun = flight.spun_s() if flight is not None else (0.0, 0.0)
+        choices = flight.spin_choices() if flight is not None else None
+        # the driver's measured spin policy (shm_exchange.c, choose_spin): the waits that slept at once
+        policy = {} if choices is None else {"driver_sleeping_share": choices.sleeping_share,
+                                             "driver_spin_switches": choices.switches,
+                                             "driver_spin_probes": choices.probes}
         return {"wall_s": elapsed, "simulated_s": simulated,
                 "steps": flight.tick if flight is not None else 0,
                 "real_time_factor": simulated / elapsed if elapsed > 0 else math.nan,
@@ -239,7 +244,7 @@ class BetaflightPlant:
                 # time spinning: under load it includes preemption)
                 "firmware_spin_s": spun, "driver_spin_s": driver_spun,
                 # Python's turns: calls into the compiled frame loop (the firmware may nap in each)
-                "compiled_calls": flight.compiled_calls - 1 if flight is not None else 0}
+                "compiled_calls": flight.compiled_calls - 1 if flight is not None else 0, **policy}
 
     @staticmethod
     def _failed(status: TrialStatus, message: str, info: dict[str, Any],

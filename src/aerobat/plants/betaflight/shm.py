@@ -22,13 +22,14 @@ import shutil
 import struct
 import subprocess
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from .build import default_cache_dir
 from .errors import FirmwareUnavailable
 
-__all__ = ["SHM_SIZE", "ShmRegion", "ensure_library", "library"]
+__all__ = ["SHM_SIZE", "ShmRegion", "SpinChoices", "ensure_library", "library"]
 
 SHM_SIZE = 4096
 """Bytes of the region (sitl.c's and shm_exchange.c's SHM_SIZE)."""
@@ -40,6 +41,39 @@ SPIN_S = 20e-6
 
 _OFF_DRIVER_SPIN_NS = 80  # shm_exchange.c's SHM_OFF_DRIVER_SPIN_NS
 _OFF_FIRMWARE_SPIN_NS = 136  # SHM_OFF_SPIN_NS
+_OFF_DRIVER_POLICY = 1024  # SHM_OFF_DRIVER_POLICY
+_POLICY_STRUCT = struct.Struct("<3q6I2d4Q")
+"""shm_exchange.c's struct spin_policy: epoch start, last wait, epoch length [ns]; the epoch's and the last
+wait's state packet, home mode, mode, epochs until the probe, backoff; cost per step spinning, sleeping [ns];
+steps spinning, sleeping; switches; probes."""
+_LEARNED: tuple[int, int, int, float, float] | None = None
+"""What the last region of this process learned (home mode, epochs until its next probe, backoff, costs):
+the next one starts there, so
+a study's trials do not each probe from scratch (the probes still follow a load that changes)."""
+
+
+@dataclass(frozen=True)
+class SpinChoices:
+    """What the driver's measured spin policy chose over a flight (zeros when it was not asked to measure)."""
+
+    steps_spinning: int
+    """Lockstep steps flown with the driver spinning for the answer (counted at the waits)."""
+    steps_sleeping: int
+    switches: int
+    """Times the mode it flies between probes changed."""
+    probes: int
+    """Short epochs it tried the other mode for."""
+    step_ns_spinning: float
+    """Wall time per step last measured spinning [ns] (0: never)."""
+    step_ns_sleeping: float
+    sleeping_now: bool = False
+    """The mode it flies between probes is sleeping."""
+
+    @property
+    def sleeping_share(self) -> float:
+        """The steps flown sleeping at once ÷ all (NaN: none counted)."""
+        total = self.steps_spinning + self.steps_sleeping
+        return self.steps_sleeping / total if total else math.nan
 
 _loaded: ctypes.CDLL | None = None
 
@@ -85,7 +119,8 @@ def library() -> ctypes.CDLL:
                            ("aerobat_shm_wait_motor", (ptr, ptr, i64, i64, i64)),
                            ("aerobat_shm_poll_motor", (ptr, ptr, i64)),
                            ("aerobat_shm_wait_state", (ptr, ptr, i64, i64, i64, i64)),
-                           ("aerobat_shm_take_rc", (ptr, ptr, i64, i64))):
+                           ("aerobat_shm_take_rc", (ptr, ptr, i64, i64)),
+                           ("aerobat_shm_choose_spin", (ptr, i64, i64, i64))):
             function = getattr(lib, name)
             function.argtypes, function.restype = args, i64
         lib.aerobat_shm_init.argtypes, lib.aerobat_shm_init.restype = (ptr,), None
@@ -123,6 +158,10 @@ class ShmRegion:
             raise
         self.address = _address(self._map)
         self._lib.aerobat_shm_init(self.address)
+        if _LEARNED is not None:  # the measured spin policy starts from what the last region learned
+            home, until_probe, backoff, spinning_ns, sleeping_ns = _LEARNED
+            _POLICY_STRUCT.pack_into(self._map, _OFF_DRIVER_POLICY, 0, 0, 0, 0, 0, home, home, until_probe, backoff,
+                                     spinning_ns, sleeping_ns, 0, 0, 0, 0)
 
     def handed_over(self) -> None:
         """Close this process's descriptor (after the firmware inherited it)."""
@@ -132,8 +171,12 @@ class ShmRegion:
 
     def close(self) -> None:
         """Unmap the region (idempotent); its address must not be used afterwards."""
+        global _LEARNED
         self.handed_over()
         if self._map is not None:
+            fields = _POLICY_STRUCT.unpack_from(self._map, _OFF_DRIVER_POLICY)
+            if fields[2]:  # the policy ran (a measured spin): keep what it learned
+                _LEARNED = (fields[5], fields[7], fields[8], fields[9], fields[10])
             self._map.close()
             self._map = None
             self.address = 0
@@ -149,6 +192,15 @@ class ShmRegion:
         firmware_ns = struct.unpack_from("<Q", self._map, _OFF_FIRMWARE_SPIN_NS)[0]
         driver_ns = struct.unpack_from("<Q", self._map, _OFF_DRIVER_SPIN_NS)[0]
         return (firmware_ns * 1e-9, driver_ns * 1e-9)
+
+    def spin_choices(self) -> SpinChoices | None:
+        """The driver's measured spin policy so far (None once closed)."""
+        if self._map is None:
+            return None
+        fields = _POLICY_STRUCT.unpack_from(self._map, _OFF_DRIVER_POLICY)
+        return SpinChoices(steps_spinning=fields[11], steps_sleeping=fields[12], switches=fields[13],
+                           probes=fields[14], step_ns_spinning=fields[9], step_ns_sleeping=fields[10],
+                           sleeping_now=fields[5] == 1)
 
     def publish_state(self, packet: Any) -> None:
         """Publish a state packet (a buffer of 144 bytes)."""

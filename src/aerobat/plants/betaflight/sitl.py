@@ -35,13 +35,16 @@ import time
 import weakref
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .errors import FirmwareExited, FirmwareNotResponding, FirmwareUnavailable
 from .link import FirmwareLink
 from .packets import MOTOR_STRUCT, Exchange, SitlState, pack_rc, pack_state
 from .ports import SitlPorts, allocate_ports
 from .rc import RADIO_LOST_US, RC_CHANNEL_COUNT
+
+if TYPE_CHECKING:
+    from .shm import SpinChoices
 
 __all__ = ["SitlPorts", "SitlProcess", "allocate_ports"]
 
@@ -527,6 +530,10 @@ class SitlProcess:
         if self._shm is None:
             return (0.0, 0.0)
         return self._shm.spun_s()
+
+    def spin_choices(self) -> SpinChoices | None:
+        """The driver's measured spin policy so far (:class:`~.shm.SpinChoices`); None over UDP or once closed."""
+        return None if self._shm is None else self._shm.spin_choices()
 
     def cpu_time_s(self) -> float | None:
         """CPU time the firmware process has used so far [s] (``/proc/<pid>/schedstat``); None if unknown."""

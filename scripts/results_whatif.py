@@ -5,6 +5,7 @@
     .venv/bin/python scripts/results_whatif.py twin       # flights 1-3 on the default and the identified airframe
     .venv/bin/python scripts/results_whatif.py gecko      # the Gecko: fitted on its first half, replayed on the rest
     .venv/bin/python scripts/results_whatif.py spectra    # gyro spectra, log against SITL (docs/figures/logs)
+    .venv/bin/python scripts/results_whatif.py delay      # how much of the fit's 12 ms delay flight 1 decides
 
 Flight 1, 40–62 s (three roll steps), flown with the log's own tune and with single roll changes; then
 flight 3, 20–40 s, with the TII Racing KakuteH7's 4.3.1 diff. Each row: the step response estimated from
@@ -176,8 +177,43 @@ def spectra() -> None:
     print(f"figure written to {out}")
 
 
+DELAYS_MS = (0.0, 1.5, 4.0, 6.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0, 16.0, 20.0)
+COST_BOUND = 1.05
+"""A delay whose best fit costs at most 5 % more than the free fit's is not excluded by the log."""
+
+
+def delay() -> None:
+    """The fit of ROMA flight 1 with its command-to-thrust delay held at each of :data:`DELAYS_MS`."""
+    import numpy as np
+
+    from aerobat.experiments.log_identify import identify_from_logs
+    from aerobat.quadrotor.identification.logfit import Geometry, delay_profile
+
+    geometry = Geometry(mass_kg=0.55, motor_x_m=0.08, motor_y_m=0.08, inertia_zz_ratio=0.935)
+    result = identify_from_logs([f"{ROMA}:1"], geometry)
+    fit = result.fit
+    points = delay_profile(result.prepared, fit.layout, geometry, fit, [d / 1e3 for d in DELAYS_MS])
+    print(f"### ROMA F5 flight 1: the fit with its delay held (free fit: delay {1e3 * fit.model.delay_s:.1f} ms, "
+          f"motor time constant {1e3 * fit.model.tau_s:.1f} ms)\n")
+    print("| delay [ms] | motor time constant [ms] | delay + time constant [ms] | fit cost ÷ free fit's | "
+          "held-out R² roll, pitch, yaw, specific force |\n|---|---|---|---|---|")
+    for pt in points:
+        print(f"| {1e3 * pt.delay_s:.1f} | {1e3 * pt.tau_s:.1f} | {1e3 * (pt.delay_s + pt.tau_s):.1f} | "
+              f"{pt.cost:.3f} | " + ", ".join(f"{m.r2:.2f}" for m in pt.holdout) + " |")
+    delays = np.array([pt.delay_s for pt in points])
+    costs = np.array([pt.cost for pt in points])
+    inside = delays[costs <= COST_BOUND]
+    print(f"\nDelays whose fit costs ≤ {COST_BOUND:.2f}× the free fit's: {1e3 * inside.min():.1f}–"
+          f"{1e3 * inside.max():.1f} ms (on this grid); with the log's gyro filters only (1.5 ms) it costs "
+          f"{costs[list(DELAYS_MS).index(1.5)]:.2f}×, with no delay {costs[0]:.2f}×.")
+
+
 def main() -> None:
     import sys
+
+    if sys.argv[1:] == ["delay"]:
+        delay()
+        return
 
     if sys.argv[1:] == ["spectra"]:
         spectra()

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -45,10 +45,12 @@ from aerobat.quadrotor.identification.logdata import PreparedLog, band, smooth
 __all__ = [
     "CHANNELS",
     "ChannelMetrics",
+    "DelayPoint",
     "Geometry",
     "LogFit",
     "LogFitOptions",
     "LogModel",
+    "delay_profile",
     "fit_log",
     "metrics",
     "predict",
@@ -316,16 +318,79 @@ def _solve(mats: list[np.ndarray], zs: list[np.ndarray | None], y: np.ndarray, r
     return _solve_linear(mats, [m if z is None else z for m, z in zip(mats, zs, strict=True)], y, rows)
 
 
+def _rows(logs: Sequence[PreparedLog]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The logs' stacked targets, and their fit and held-out rows."""
+    y = np.vstack([targets(log) for log in logs])
+    train = np.concatenate([log.in_flight & ~log.holdout for log in logs])
+    holdout = np.concatenate([log.holdout for log in logs])
+    return y, train, holdout
+
+
+@dataclass(frozen=True)
+class DelayPoint:
+    """The fit with its command-to-thrust delay held at ``delay_s`` (:func:`delay_profile`).
+
+    ``tau_s``, ``r``, ``k``: the other nonlinear parameters refitted; ``cost``: the fit blocks'
+    normalized sum of squares ÷ its value at the free fit's delay; ``holdout``: the held-out
+    blocks' metrics (the moments' band, as :attr:`LogFit.holdout_metrics`).
+    """
+
+    delay_s: float
+    tau_s: float
+    cost: float
+    holdout: tuple[ChannelMetrics, ...]
+
+
+def delay_profile(logs: PreparedLog | Sequence[PreparedLog], layout: MotorLayout, geometry: Geometry,
+                  fit: LogFit, delays_s: Sequence[float], *, options: LogFitOptions | None = None
+                  ) -> tuple[DelayPoint, ...]:
+    """The fit ``fit`` refitted with its delay held at each of ``delays_s`` [s] (the motor's time constant,
+    thrust curve and every linear coefficient free): how much of the delay the logs decide."""
+    logs = (logs,) if isinstance(logs, PreparedLog) else tuple(logs)
+    options = options or LogFitOptions()
+    y, train, holdout = _rows(logs)
+    m = fit.model
+    best = np.array([m.tau_s, m.delay_s, m.r, m.k])
+    lo = np.array([_TAU_S[0], 0.0, 0.0, 0.0])
+    hi = np.array([_TAU_S[1], max(options.max_delay_s, max(delays_s) + 1e-3), 0.6, 1.0])
+    scale = np.std(y[train], axis=0)
+    scale[scale <= 0] = 1.0
+
+    def cost(theta: np.ndarray, coefs: list[np.ndarray]) -> float:
+        mats, _ = _stacked(logs, layout, geometry, theta)
+        return float(sum(np.sum(((y[train, c] - mats[c][train] @ coefs[c]) / scale[c]) ** 2) for c in range(4)))
+
+    mats, zs = _stacked(logs, layout, geometry, best, options.instrument_setpoint)
+    reference = cost(best, _solve(mats, zs, y, train))
+    points = []
+    for delay in delays_s:
+        start = np.clip(best, lo + 1e-6, hi - 1e-6)
+        theta, coefs, _ = _fit_rows(logs, layout, geometry, y, train, start, (lo, hi), {1: float(delay)},
+                                    iv=options.instrument_setpoint)
+        model = _model(theta, coefs)
+        predicted = np.vstack([predict(log, model, layout, geometry) for log in logs])
+        points.append(DelayPoint(delay_s=float(delay), tau_s=model.tau_s, cost=cost(theta, coefs) / reference,
+                                 holdout=metrics(y, predicted, holdout)))
+    return tuple(points)
+
+
 def _fit_rows(logs: Sequence[PreparedLog], layout: MotorLayout, geometry: Geometry, y: np.ndarray,
-              rows: np.ndarray, x0: np.ndarray, bounds: tuple[np.ndarray, np.ndarray], fixed_tau: float | None,
+              rows: np.ndarray, x0: np.ndarray, bounds: tuple[np.ndarray, np.ndarray], fixed: Mapping[int, float],
               max_nfev: int = 60, iv: bool = False) -> tuple[np.ndarray, list[np.ndarray], int]:
+    """The nonlinear parameters (tau, delay, r, k) fitted on ``rows``, those in ``fixed`` (index: value) held."""
     scale = np.std(y[rows], axis=0)
     scale[scale <= 0] = 1.0
     sub = np.flatnonzero(rows)
     evaluations = 0
+    free = [i for i in range(len(x0)) if i not in fixed]
+    held = np.asarray(x0, dtype=float).copy()
+    for i, value in fixed.items():
+        held[i] = value
 
     def full(theta: np.ndarray) -> np.ndarray:
-        return np.concatenate([[fixed_tau], theta]) if fixed_tau is not None else theta
+        out = held.copy()
+        out[free] = theta
+        return out
 
     def residuals(theta: np.ndarray) -> np.ndarray:
         nonlocal evaluations
@@ -335,7 +400,7 @@ def _fit_rows(logs: Sequence[PreparedLog], layout: MotorLayout, geometry: Geomet
         return np.concatenate([(y[sub, c] - mats[c][sub] @ coefs[c]) / scale[c] for c in range(4)])
 
     lo, hi = bounds
-    start, lower, upper = (x0[1:], lo[1:], hi[1:]) if fixed_tau is not None else (x0, lo, hi)
+    start, lower, upper = x0[free], lo[free], hi[free]
     sol = optimize.least_squares(residuals, start, bounds=(lower, upper), x_scale="jac", diff_step=1e-3,
                                  xtol=1e-6, ftol=1e-8, max_nfev=max_nfev)
     theta = full(sol.x)
@@ -409,16 +474,15 @@ def fit_log(logs: PreparedLog | Sequence[PreparedLog], layout: MotorLayout, geom
         fixed_tau = x0[0]
         notes.append(f"motor commands logged at {slowest:.0f} Hz, too slow to show the motor's time "
                      f"constant: it is fixed at {fixed_tau * 1e3:.0f} ms, not identified")
-    y = np.vstack([targets(log) for log in logs])
-    train = np.concatenate([log.in_flight & ~log.holdout for log in logs])
-    holdout = np.concatenate([log.holdout for log in logs])
+    y, train, holdout = _rows(logs)
     offsets = np.cumsum([0] + [int(log.block.max()) + 1 for log in logs[:-1]])
     block = np.concatenate([np.where(log.block >= 0, log.block + off, -1) for log, off in zip(logs, offsets,
                                                                                               strict=True)])
     lo = np.array([_TAU_S[0], 0.0, 0.0, 0.0])
     hi = np.array([_TAU_S[1], options.max_delay_s, 0.6, 1.0])
     start = np.clip(np.array(x0, dtype=float), lo + 1e-6, hi - 1e-6)
-    theta, coefs, evaluations = _fit_rows(logs, layout, geometry, y, train, start, (lo, hi), fixed_tau, iv=iv)
+    held = {0: fixed_tau} if fixed_tau is not None else {}
+    theta, coefs, evaluations = _fit_rows(logs, layout, geometry, y, train, start, (lo, hi), held, iv=iv)
     model = _model(theta, coefs)
     names = ", ".join(log.name for log in logs)
     if min(model.gains) <= 0:
@@ -435,7 +499,7 @@ def fit_log(logs: PreparedLog | Sequence[PreparedLog], layout: MotorLayout, geom
         samples = []
         for g in range(groups):
             drop = np.isin(block, blocks[g::groups])
-            th, cf, n = _fit_rows(logs, layout, geometry, y, train & ~drop, theta, (lo, hi), fixed_tau, max_nfev=12,
+            th, cf, n = _fit_rows(logs, layout, geometry, y, train & ~drop, theta, (lo, hi), held, max_nfev=12,
                                   iv=iv)
             evaluations += n
             samples.append(_quantities(_model(th, cf), geometry))

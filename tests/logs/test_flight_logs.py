@@ -17,7 +17,7 @@ import pytest
 
 from aerobat.cli import main
 from aerobat.errors import ConfigError
-from aerobat.logs import Channel, LogSource, read_log, read_logs
+from aerobat.logs import Channel, LogFormat, read_log, read_logs
 
 DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "flight-logs"
 pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"the real flight logs are not here ({DATA} is absent)")
@@ -53,7 +53,7 @@ def test_gecko_is_one_log_of_133_8_s_at_500_frames_a_second():
 @pytest.mark.parametrize("path,duration", list(zip(CF, (50.0, 62.2, 46.7), strict=True)), ids=lambda x: str(x)[-5:])
 def test_crazyflie_logs_at_about_1_khz(path, duration):
     log = read_log(path)
-    assert log.source is LogSource.CRAZYFLIE
+    assert log.source is LogFormat.CRAZYFLIE and log.source.firmware == "crazyflie"
     assert log.duration_s == pytest.approx(duration, abs=0.3)
     assert log.signal(Channel.GYRO).rate_hz == pytest.approx(1011, rel=0.01)
     u = log.signal(Channel.MOTOR_COMMAND).values
@@ -62,7 +62,7 @@ def test_crazyflie_logs_at_about_1_khz(path, duration):
 
 def test_px4_ulog_is_about_69_s_in_flu_and_z_up():
     log = read_log(PX4)
-    assert log.source is LogSource.PX4 and log.metadata.is_multirotor
+    assert log.source is LogFormat.ULOG and log.source.firmware == "px4" and log.metadata.is_multirotor
     assert log.duration_s == pytest.approx(69.0, abs=0.5)
     acc = log.signal(Channel.SPECIFIC_FORCE).values
     # at rest before take-off the accelerometer reads +g along body z (up) in FLU

@@ -54,7 +54,8 @@ def log_summary(log: Any) -> dict[str, Any]:
     """One log as a JSON-ready table: durations, rates, fields, firmware and a tune summary."""
     meta = log.metadata
     return {
-        "file": str(log.path), "index": log.index, "logs_in_file": log.logs_in_file, "source": log.source.value,
+        "file": str(log.path), "index": log.index, "logs_in_file": log.logs_in_file,
+        "source": log.source.firmware, "format": log.source.value,
         "duration_s": round(log.duration_s, 3),
         "firmware": meta.firmware, "firmware_version": meta.firmware_version, "board": meta.board,
         "craft_name": meta.craft_name, "vehicle_type": meta.vehicle_type, "start_time": meta.start_time,

@@ -38,7 +38,7 @@ import numpy as np
 from aerobat.errors import ConfigError
 from aerobat.logs import read_logs
 from aerobat.logs.refs import parse_log_ref
-from aerobat.quadrotor.flightlog import Channel, FlightLog, LogSource
+from aerobat.quadrotor.flightlog import Channel, FlightLog, LogFormat
 from aerobat.quadrotor.log_analysis import band_pass
 
 __all__ = ["FLYING_MOTOR", "AxisMatch", "LogReplay", "StepMatch", "find_steps", "flying_voltage_v",
@@ -230,8 +230,8 @@ def load_betaflight_log(file: str | Path, index: int | None = None) -> FlightLog
     if index > len(logs):
         raise ConfigError(f"{ref.path}: log {index} does not exist; the file holds {len(logs)} log(s)")
     log = logs[index - 1]
-    if log.source is not LogSource.BETAFLIGHT:
-        raise ConfigError(f"{ref.path}: a {log.source.value} log; replay needs a Betaflight blackbox log "
+    if log.source is not LogFormat.BLACKBOX:
+        raise ConfigError(f"{ref.path}: a {log.source.firmware} log; replay needs a Betaflight blackbox log "
                           "(its header is the tune, its rcCommand the sticks)")
     return log
 

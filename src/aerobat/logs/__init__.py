@@ -23,7 +23,7 @@ from aerobat.config import check_int
 from aerobat.errors import ConfigError
 from aerobat.logs.files import MAX_LOG_BYTES, LogFormat, check_log_file, detect_format
 from aerobat.logs.refs import LogRef, parse_log_ref
-from aerobat.quadrotor.flightlog import Channel, FlightLog, LogMetadata, LogSource, MotorLayout, Signal
+from aerobat.quadrotor.flightlog import Channel, FlightLog, LogMetadata, MotorLayout, Signal
 
 __all__ = [
     "MAX_LOG_BYTES",
@@ -32,7 +32,6 @@ __all__ = [
     "LogFormat",
     "LogMetadata",
     "LogRef",
-    "LogSource",
     "MotorLayout",
     "Signal",
     "detect_format",

@@ -41,7 +41,7 @@ import numpy as np
 
 from aerobat.errors import ConfigError
 from aerobat.logs import blackbox_header
-from aerobat.quadrotor.flightlog import Channel, FlightLog, LogMetadata, LogSource, MotorLayout, Signal
+from aerobat.quadrotor.flightlog import Channel, FlightLog, LogFormat, LogMetadata, MotorLayout, Signal
 
 __all__ = ["FIELDS", "QUADX_LAYOUT", "props_out", "quiet_orangebox", "raw_headers", "read_blackbox"]
 
@@ -259,5 +259,5 @@ def _read_one(path: Path, data: bytes, index: int, count: int, start: int, end: 
         parameters=headers,
         start_time=headers.get("Log start datetime", ""),
     )
-    return FlightLog(path=path, index=index, logs_in_file=count, source=LogSource.BETAFLIGHT, metadata=metadata,
+    return FlightLog(path=path, index=index, logs_in_file=count, source=LogFormat.BLACKBOX, metadata=metadata,
                      signals=signals, motor_layout=layout, notes=tuple(notes))

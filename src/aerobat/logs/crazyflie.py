@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from aerobat.errors import ConfigError
-from aerobat.quadrotor.flightlog import Channel, FlightLog, LogMetadata, LogSource, MotorLayout, Signal
+from aerobat.quadrotor.flightlog import Channel, FlightLog, LogFormat, LogMetadata, MotorLayout, Signal
 
 __all__ = ["CRAZYFLIE_LAYOUT", "read_crazyflie"]
 
@@ -245,7 +245,7 @@ def read_crazyflie(path: Path) -> list[FlightLog]:
         parameters={"event": types[eid][0], "variables": ",".join(f"{n}({t})" for n, t in types[eid][1]),
                     "format_version": "2", "boot_time_s": f"{t_us[0] * 1e-6:.6f}"},
     )
-    return [FlightLog(path=path, index=1, logs_in_file=1, source=LogSource.CRAZYFLIE, metadata=metadata,
+    return [FlightLog(path=path, index=1, logs_in_file=1, source=LogFormat.CRAZYFLIE, metadata=metadata,
                       signals=signals, motor_layout=CRAZYFLIE_LAYOUT if motors is not None else None,
                       notes=tuple(notes))]
 

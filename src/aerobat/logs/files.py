@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import enum
 import os
 import stat
 from pathlib import Path
 
 from aerobat.config import as_path
 from aerobat.errors import ConfigError
+from aerobat.quadrotor.flightlog import LogFormat
 
 __all__ = ["MAX_LOG_BYTES", "LogFormat", "check_log_file", "detect_format"]
 
@@ -19,14 +19,6 @@ MAX_LOG_BYTES = 1 << 30
 _BLACKBOX_MAGIC = b"H Product:Blackbox flight data recorder"
 _ULOG_MAGIC = b"ULog\x01\x12\x35"
 _CRAZYFLIE_MAGIC = 0xBC
-
-
-class LogFormat(enum.Enum):
-    """A log file's format, from its first bytes."""
-
-    BLACKBOX = "blackbox"
-    ULOG = "ulog"
-    CRAZYFLIE = "crazyflie"
 
 
 _SUFFIXES = {".bbl": LogFormat.BLACKBOX, ".bfl": LogFormat.BLACKBOX, ".txt": LogFormat.BLACKBOX,

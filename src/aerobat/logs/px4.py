@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from aerobat.errors import ConfigError, MissingDependency
-from aerobat.quadrotor.flightlog import Channel, FlightLog, LogMetadata, LogSource, MotorLayout, Signal
+from aerobat.quadrotor.flightlog import Channel, FlightLog, LogFormat, LogMetadata, MotorLayout, Signal
 
 __all__ = ["PX4_QUADX_LAYOUT", "read_ulog"]
 
@@ -198,5 +198,5 @@ def read_ulog(path: Path) -> list[FlightLog]:
         parameters={k: f"{v:g}" if isinstance(v, float) else str(v) for k, v in params.items()},
         start_time=str(info.get("time_ref_utc", "")),
     )
-    return [FlightLog(path=path, index=1, logs_in_file=1, source=LogSource.PX4, metadata=metadata, signals=signals,
+    return [FlightLog(path=path, index=1, logs_in_file=1, source=LogFormat.ULOG, metadata=metadata, signals=signals,
                       motor_layout=layout, notes=tuple(notes))]

@@ -37,18 +37,26 @@ __all__ = [
     "Channel",
     "FlightLog",
     "LogMetadata",
-    "LogSource",
+    "LogFormat",
     "MotorLayout",
     "Signal",
 ]
 
 
-class LogSource(enum.Enum):
-    """What wrote the log."""
+class LogFormat(enum.Enum):
+    """A flight log's format, which also says what wrote it (:attr:`firmware`)."""
 
-    BETAFLIGHT = "betaflight"
-    PX4 = "px4"
+    BLACKBOX = "blackbox"
+    ULOG = "ulog"
     CRAZYFLIE = "crazyflie"
+
+    @property
+    def firmware(self) -> str:
+        """What writes this format: ``"betaflight"`` (blackbox), ``"px4"`` (ULog), ``"crazyflie"``."""
+        return _FIRMWARE[self]
+
+
+_FIRMWARE = {LogFormat.BLACKBOX: "betaflight", LogFormat.ULOG: "px4", LogFormat.CRAZYFLIE: "crazyflie"}
 
 
 class Channel(enum.Enum):
@@ -221,7 +229,7 @@ class FlightLog:
     path : the file it was read from.
     index : which log in the file, from 1.
     logs_in_file : how many logs the file holds.
-    source : what wrote it.
+    source : its format, and with it what wrote it (:attr:`LogFormat.firmware`).
     metadata : firmware, board, craft and the whole tune.
     signals : the series it holds, by channel.
     motor_layout : the mixer's geometry, if the source has one.
@@ -233,7 +241,7 @@ class FlightLog:
     path: Path
     index: int
     logs_in_file: int
-    source: LogSource
+    source: LogFormat
     metadata: LogMetadata
     signals: Mapping[Channel, Signal]
     motor_layout: MotorLayout | None = None

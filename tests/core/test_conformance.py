@@ -99,3 +99,22 @@ def test_the_kit_catches_a_rule_that_forgets_its_state():
 
     with pytest.raises(AssertionError, match="resumed"):
         check_rule(lambda: Forgetful(TOY_DESIGN), TOY, ToyPlant(seed=2, noise_m=0.01), TOY_DESIGN, trials=8)
+
+
+def test_a_plant_declares_whether_its_trials_repeat_on_the_protocol():
+    """``repeatable`` is declared on a protocol (issue 43), not read by name: a plant without it repeats exactly."""
+    from aerobat.core.plant import MaybeRepeatablePlant, repeats_exactly
+    from aerobat.plants.fc.plant import FlightControllerPlant
+
+    class Simulated:
+        name = "simulated"
+
+        def fly(self, program):
+            raise AssertionError("not flown")
+
+    class OnTheWallClock(Simulated):
+        repeatable = False
+
+    assert repeats_exactly(Simulated()) and not isinstance(Simulated(), MaybeRepeatablePlant)
+    assert not repeats_exactly(OnTheWallClock()) and isinstance(OnTheWallClock(), MaybeRepeatablePlant)
+    assert FlightControllerPlant.repeatable is False

@@ -14,7 +14,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["Plant", "Signals", "StatefulPlant", "Trial", "TrialStatus", "repeats_exactly"]
+__all__ = ["MaybeRepeatablePlant", "Plant", "Signals", "StatefulPlant", "Trial", "TrialStatus", "repeats_exactly"]
 
 
 class TrialStatus(StrEnum):
@@ -151,11 +151,20 @@ class StatefulPlant(Plant, Protocol):
     def set_state(self, state: dict[str, Any]) -> None: ...
 
 
-def repeats_exactly(plant: Any) -> bool:
-    """True unless the plant says its trials never repeat bit for bit (``repeatable = False``).
+@runtime_checkable
+class MaybeRepeatablePlant(Plant, Protocol):
+    """A plant that says whether its trials repeat bit for bit from the same seed and state.
 
-    A plant on the wall clock (a real flight controller, or the real firmware rehearsed in real
-    time) sets it: its saved state still resumes its generators and counters, but timing decides
-    every trial, so a resumed session is not exact and the conformance kit does not ask for a repeat.
+    A plant without ``repeatable`` repeats exactly (every simulated one). A plant on the wall clock
+    (a real flight controller, or the real firmware rehearsed in real time) declares
+    ``repeatable = False``: its saved state still resumes its generators and counters, but timing
+    decides every trial, so a resumed session is not exact and the conformance kit does not ask
+    for a repeat.
     """
-    return bool(getattr(plant, "repeatable", True))
+
+    repeatable: bool
+
+
+def repeats_exactly(plant: Any) -> bool:
+    """True unless the plant declares its trials never repeat bit for bit (:class:`MaybeRepeatablePlant`)."""
+    return not isinstance(plant, MaybeRepeatablePlant) or bool(plant.repeatable)

@@ -197,7 +197,7 @@ class FlightControllerPlant(BetaflightPlant):
     """
 
     name = "fc"
-    repeatable = False  # on the wall clock: timing decides every trial (aerobat.core.plant.repeats_exactly)
+    repeatable = False  # on the wall clock: timing decides every trial (aerobat.core.plant.MaybeRepeatablePlant)
 
     def __init__(self, config: VehicleConfig, connection: Connection, params: BetaflightParams | None = None, *,
                  limits: SafetyLimits | None = None, seed: int = 0, settings: BetaflightSettings | None = None,

@@ -5,10 +5,11 @@ or 2 busy loops beside the benchmark, each a process spinning on the CPU) it fli
 triple flip at 8 kHz with every exchange choice, interleaved round by round so that each suffers
 the same load:
 
-* ``default`` — what a user gets (``BetaflightParams()``);
+* ``default`` — what a user gets (``BetaflightParams()``: spinning shared memory, the driver and the
+  firmware on a core each, :mod:`aerobat.plants.betaflight.cores`);
 * ``measured spin`` — shared memory, the driver measures whether to spin or sleep (``spin = "measured"``);
 * ``spinning shm`` — shared memory, both sides spin up to ``spin_us`` before sleeping (the driver
-  its whole budget on every wait);
+  its whole budget on every wait), placed on cores by the scheduler (``pin_cores = False``);
 * ``unspun shm`` — shared memory, ``spin_us = 0``: both sides sleep on the futex at once;
 * ``udp`` — loopback sockets.
 
@@ -45,7 +46,7 @@ from aerobat.plants.betaflight.plant import BetaflightPlant  # noqa: E402
 CHOICES: dict[str, dict[str, Any]] = {
     "default": {},
     "measured spin": {"firmware__exchange": "shm", "firmware__spin": "measured"},
-    "spinning shm": {"firmware__exchange": "shm", "firmware__spin": "always"},
+    "spinning shm": {"firmware__exchange": "shm", "firmware__spin": "always", "firmware__pin_cores": False},
     "unspun shm": {"firmware__exchange": "shm", "firmware__spin_us": 0.0},
     "udp": {"firmware__exchange": "udp"},
 }
@@ -95,7 +96,8 @@ def measure_load(load: int, rounds: int, program: Any) -> dict[str, Any]:
                    "ok": all(t["status"] == "ok" for t in runs[c])} for c in CHOICES}
     digests = {c: [t["digest"] for t in runs[c]] for c in CHOICES}
     best = max(FIXED, key=lambda c: summary[c]["factor_median"])
-    return {"load": load, "load_1min_before": before, "load_1min_after": after, "runs": runs, "summary": summary,
+    return {"load": load, "finished_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()),
+            "load_1min_before": before, "load_1min_after": after, "runs": runs, "summary": summary,
             "fastest_fixed": best, "default_over_fastest": summary["default"]["factor_median"]
             / summary[best]["factor_median"],
             "measured_over_fastest": summary["measured spin"]["factor_median"] / summary[best]["factor_median"],
@@ -115,13 +117,16 @@ def section(results: list[dict[str, Any]], rounds: int) -> list[str]:
              "",
              f"The nominal 3D triple flip at 8 kHz with each exchange, {rounds} interleaved rounds (seeds 1–{rounds}) "
              "beside 0, 1 and 2 busy loops (processes spinning on the CPU); medians. The default is spinning "
-             "shared memory; `measured spin` lets the driver measure whether to spin or sleep (`firmware.spin = "
-             "\"measured\"`); the fixed choices are spinning shared memory (`spin = \"always\"`), unspun shared "
-             "memory (`spin_us = 0`) and UDP. "
+             "shared memory with the driver's thread and the firmware on a core each (`firmware.pin_cores`); "
+             "`measured spin` lets the driver measure whether to spin or sleep (`firmware.spin = \"measured\"`); "
+             "the fixed choices are spinning shared memory placed by the scheduler (`pin_cores = false`), unspun "
+             "shared memory (`spin_us = 0`) and UDP. "
              "Target (issue 46): the default within 10 % of the fastest fixed choice at each load, and ≥ 100× "
              "quiet.", "",
              "| busy loops | exchange | real-time factor (median; each round) | wall ÷ firmware CPU (median) "
              "| measured spin: steps sleeping, switches |", "|---|---|---|---|---|"]
+    if results and "finished_utc" in results[-1]:
+        lines[2:2] = [f"Measured: the run that ended {results[-1]['finished_utc']} UTC.", ""]
     for result in results:
         for choice, s in result["summary"].items():
             runs = result["runs"][choice]
@@ -137,13 +142,19 @@ def section(results: list[dict[str, Any]], rounds: int) -> list[str]:
                      f"trials bit for bit: {result['same_trials']} |")
     floor = "; ".join(f"{r['load']} loops {r['summary']['default']['factor_median'] / same:.2f}"
                       for r in results for same in [r["summary"]["spinning shm"]["factor_median"]])
-    lines += ["", "The `default` and `spinning shm` rows fly the same configuration: their ratio is this "
-              f"benchmark's noise floor at each load ({floor}). Beside busy loops a trial's real-time factor is "
-              "bimodal (see each round), so a median of a few rounds moves by tens of per cent between identical "
-              "configurations, more than the 10 % the target asks to resolve. Unspun shared memory (both sides "
+    lines += ["", "The `default` differs from `spinning shm` only by the cores it holds (their ratio at each "
+              f"load: {floor}). Left to the scheduler, a trial beside busy loops is bimodal (see each round): the "
+              "driver and the firmware are often put on one core, where each spins while the other cannot run. "
+              "Unspun shared memory (both sides "
               "sleep) is slow on a quiet machine: a sleeping side costs a futex wake on an idle core every step. "
-              "The measured spin is not the default: beside two busy loops it tends to settle on sleeping "
-              "(docs/plants.md gives the runs), which flew about half as fast as fixed spinning."]
+              "The measured spin (`spin = \"measured\"`) is not the default: with the cores held, spinning is "
+              "the fastest at every load measured; without them it settled on sleeping beside two busy loops in "
+              "earlier runs (docs/plants.md), its epochs measuring the co-location that holding the cores removes. "
+              "The hand-over costs measured for issue 27 (`benchmarks/cache_line_pingpong.c`: a step's round trip "
+              "through the kernel 3.4 µs by yielding on one core, 9.0 µs by futex waits across cores) bound what "
+              "a machine allows when the two cannot spin on a core each: at 8 kHz at most 37× and 14× real time. "
+              "Spinning on held cores hands over without the kernel (0.054 µs a round trip), which is how the "
+              "default flies faster than either beside busy loops."]
     return lines
 
 

@@ -30,6 +30,7 @@ import numpy as np
 
 from aerobat.errors import ConfigError
 from aerobat.plants.betaflight import frames as fr
+from aerobat.plants.betaflight.cores import CorePair, claim_core_pair
 from aerobat.plants.betaflight.frames import AnglePilot, FramesEnd, FramesRun, Mode, ProgramPilot, Radio, Until
 from aerobat.plants.betaflight.lockstep import (
     DONE,
@@ -168,6 +169,8 @@ class Flight:
         self.firmware_cpu_s: float | None = None
         self.spun = (0.0, 0.0)
         self.choices: SpinChoices | None = None
+        self.cores: CorePair | None = None
+        """The cores held for the driver's thread and the firmware (spinning shared memory, ``pin_cores``)."""
         if fw.exchange is Exchange.SHM:
             self._cfg[fr.K_EXCHANGE] = fr.X_SHM
             # a negative budget: the exchange measures whether spinning pays (shm_exchange.c, choose_spin)
@@ -183,6 +186,8 @@ class Flight:
                        np.full((1, 16), 1000, dtype=np.int64), self._no_pilot, self._no_program, self._no_record)
         self.sitl = SitlProcess(binary, eeprom, gyro_rate_hz=fw.gyro_rate_hz, step_timeout_s=fw.step_timeout_s,
                                 exchange=fw.exchange, spin_us=fw.spin_us)
+        if fw.exchange is Exchange.SHM and fw.spin_us > 0 and fw.pin_cores and self.sitl.pid is not None:
+            self.cores = claim_core_pair(self.sitl.pid)
         self._cfg[fr.K_STATE_FD], self._cfg[fr.K_MOTOR_FD] = self.sitl.socket_fds
         self._cfg[fr.K_RC_FD] = self.sitl.rc_socket_fd
 
@@ -193,6 +198,8 @@ class Flight:
         self.spun = self.spun_s()
         self.choices = self.spin_choices()
         self.sitl.close()
+        if self.cores is not None:
+            self.cores.release()
 
     def firmware_cpu_time_s(self) -> float | None:
         """CPU time the firmware process has used so far [s] (after :meth:`close`: at its end; None if unknown)."""

@@ -163,6 +163,11 @@ class Firmware:
         ``"measured"`` spins or sleeps at once, whichever its 25 ms epochs measure stepping faster.
         Measured at load 0, 1 and 2, the fixed spin is the faster default here (issue 46,
         docs/performance.md, "Betaflight on a shared machine").
+    pin_cores : over spinning shared memory, hold a core each for the driver's thread and the
+        firmware during a flight (:mod:`aerobat.plants.betaflight.cores`: a free pair of the
+        allowed cores, none pinned when every pair is taken): beside a busy process the scheduler
+        otherwise puts the two on one core, where they spin against each other (15× real time
+        against 60× pinned).
     """
 
     gyro_rate_hz: int = bounded(8000, OneOf(GYRO_RATES_HZ, unit="Hz"))
@@ -170,6 +175,7 @@ class Firmware:
     exchange: Exchange = bounded(Exchange.SHM, OneOf(Exchange))
     spin_us: float = bounded(20.0, Interval(0.0, 1000.0, unit="µs"))
     spin: SpinPolicy = bounded(SpinPolicy.ALWAYS, OneOf(SpinPolicy))
+    pin_cores: bool = True
 
     def __post_init__(self) -> None:
         validate(self)

@@ -29,6 +29,7 @@ playback read the same program.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -150,7 +151,6 @@ class Program:
         check_type("ramp_down", self.ramp_down, RampDown, "a RampDown")
         check_type("name", self.name, str, "a string")
         validate(self)
-        seen: dict[tuple[str, float], int] = {}
         end = self.duration_s
         for index, sw in enumerate(self.switches):
             # the common case in a few comparisons (programs are built inside every design iteration);
@@ -160,13 +160,8 @@ class Program:
                     or type(sw.value) not in _PLAIN or not 0.0 <= sw.time_s < end
                     or not limits[0] <= sw.value <= limits[1]):
                 _check_switch(index, sw, end)
-            key = (sw.channel, float(sw.time_s))
-            if key in seen:
-                raise ConfigError(
-                    f"switch {index} ({sw.channel}): overlaps switch {seen[key]} — two switches on one channel at "
-                    f"time_s = {sw.time_s:g}"
-                )
-            seen[key] = index
+        if len({(sw.channel, float(sw.time_s)) for sw in self.switches}) != len(self.switches):
+            _check_overlaps(self.switches)
 
     def compile(self) -> CompiledProgram:
         """Segment breakpoints and per-segment polynomial command coefficients."""
@@ -179,6 +174,19 @@ class Program:
 
 _LIMITS = {channel: _channel_limits(channel) for channel in CHANNELS}
 _PLAIN = (float, int)
+
+
+def _check_overlaps(switches: Sequence[Switch]) -> None:
+    """Raise the ConfigError that names the first switch overlapping an earlier one on its channel."""
+    seen: dict[tuple[str, float], int] = {}
+    for index, sw in enumerate(switches):
+        key = (sw.channel, float(sw.time_s))
+        if key in seen:
+            raise ConfigError(
+                f"switch {index} ({sw.channel}): overlaps switch {seen[key]} — two switches on one channel at "
+                f"time_s = {sw.time_s:g}"
+            )
+        seen[key] = index
 
 
 def _check_switch(index: int, sw: Any, end: float) -> None:
@@ -251,36 +259,70 @@ def _compile(program: Program) -> CompiledProgram:
     ramp_c = float(program.ramp_down.collective_s)
     ramp_r = float(program.ramp_down.rates_s)
     switches = program.switches
+    index = _CHANNEL_INDEX
+    # (time, channel, value), in time and then channel order (no two switches share both)
+    ordered = sorted([(float(sw.time_s), index[sw.channel], sw.value) for sw in switches])
     times = {0.0, T}
-    times.update([float(sw.time_s) for sw in switches])
+    times.update([o[0] for o in ordered])
     for ramp in (ramp_c, ramp_r):
         if 0.0 < ramp < T:
             times.add(T - ramp)
     breaks = sorted(times)
     K = len(breaks) - 1
-    index = _CHANNEL_INDEX
-    # (time, channel, value), in time and then channel order (no two switches share both)
-    ordered = sorted([(sw.time_s, index[sw.channel], sw.value) for sw in switches])
     g = program.hover_collective_m_s2
-    value = [g, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]  # latest value per channel, in CHANNELS order
-    integral = [0.0, 0.0, 0.0]  # ∫ accel up to the current segment start
+    # latest value per channel (CHANNELS order: collective, p̂, q̂, r̂, then the three accelerations)
+    c_val, p_val, q_val, r_val, ap, aq, ar = g, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    ip = iq = ir = 0.0  # ∫ accel up to the current segment start
     rows: list[float] = []
+    add = rows.extend
     count = len(ordered)
     j = 0
+    start_c = T - ramp_c - 1e-15
+    start_r = T - ramp_r - 1e-15
+    inv_c = -1.0 / ramp_c if ramp_c > 0.0 else 0.0
+    inv_r = -1.0 / ramp_r if ramp_r > 0.0 else 0.0
     for k in range(K):
-        t0, t1 = breaks[k], breaks[k + 1]
+        t0 = breaks[k]
+        t1 = breaks[k + 1]
         while j < count and ordered[j][0] <= t0:
-            value[ordered[j][1]] = float(ordered[j][2])
+            _, ch, v = ordered[j]
+            v = float(v)
+            if ch == 0:
+                c_val = v
+            elif ch == 1:
+                p_val = v
+            elif ch == 2:
+                q_val = v
+            elif ch == 3:
+                r_val = v
+            elif ch == 4:
+                ap = v
+            elif ch == 5:
+                aq = v
+            else:
+                ar = v
             j += 1
-        wc0, wc1 = _envelope(t0, T, ramp_c) if ramp_c > 0.0 else (1.0, 0.0)
-        wr0, wr1 = _envelope(t0, T, ramp_r) if ramp_r > 0.0 else (1.0, 0.0)
-        raw_c = value[0]
-        rows += (g + wc0 * (raw_c - g), wc1 * (raw_c - g), 0.0)
-        for axis in range(3):
-            accel = value[4 + axis]
-            rate0 = value[1 + axis] + integral[axis]
-            rows += (wr0 * rate0, wr0 * accel + wr1 * rate0, wr1 * accel)
-            integral[axis] += accel * (t1 - t0)
+        # the ramp envelopes w(t0 + τ) = w0 + w1 τ (_envelope, inlined)
+        if ramp_c > 0.0 and not t0 < start_c:
+            wc0, wc1 = (T - t0) / ramp_c, inv_c
+        else:
+            wc0, wc1 = 1.0, 0.0
+        if ramp_r > 0.0 and not t0 < start_r:
+            wr0, wr1 = (T - t0) / ramp_r, inv_r
+        else:
+            wr0, wr1 = 1.0, 0.0
+        dc = c_val - g
+        rp = p_val + ip
+        rq = q_val + iq
+        rr = r_val + ir
+        add((g + wc0 * dc, wc1 * dc, 0.0,
+             wr0 * rp, wr0 * ap + wr1 * rp, wr1 * ap,
+             wr0 * rq, wr0 * aq + wr1 * rq, wr1 * aq,
+             wr0 * rr, wr0 * ar + wr1 * rr, wr1 * ar))
+        dt = t1 - t0
+        ip += ap * dt
+        iq += aq * dt
+        ir += ar * dt
     coeffs = np.array(rows, dtype=float).reshape(K, 4, 3)
     return CompiledProgram(np.array(breaks), coeffs, np.array([g, 0.0, 0.0, 0.0]))
 

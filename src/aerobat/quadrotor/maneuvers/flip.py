@@ -256,21 +256,22 @@ class MultiFlip:
         flip_ch, lat_ch = ("accel_p", "accel_q") if self.axis == "roll" else ("accel_q", "accel_p")
         # a later event at the same instant (zero-length stage) replaces the earlier one
         events: dict[tuple[str, float], float] = {}
+        at = [round(t, 12) for t in starts]  # each stage's start as an event key
         for k, (collective, accel) in enumerate(zip(st.collectives_m_s2.tolist(), st.accelerations_rad_s2.tolist(),
                                                     strict=True)):
-            events[("collective", round(starts[k], 12))] = collective
-            events[(flip_ch, round(starts[k], 12))] = accel
+            events[("collective", at[k])] = collective
+            events[(flip_ch, at[k])] = accel
         if self.dims == 3:
             q = p.tolist()
             # eq 43: F1(A, t_s, t_Δ) = A·sgn(t_s + t_Δ/2 − t)/t_Δ² on the stage [t_s, t_s + t_Δ]
             for k, amplitude in ((0, q[5]), (1, q[6]), (3, q[7])):
                 _triangle(events, lat_ch, starts[k], durations[k], durations[k], amplitude)
-            events[(lat_ch, round(starts[2], 12))] = 0.0
-            events[(lat_ch, round(starts[4], 12))] = 0.0
+            events[(lat_ch, at[2])] = 0.0
+            events[(lat_ch, at[4])] = 0.0
             # eqs 44, 46: F2 with t_Δ = p1 + p4 over accelerate and over recover
             span = q[1] + q[4]
             _triangle(events, "accel_r", 0.0, q[1], span, q[8])
-            events[("accel_r", round(starts[1], 12))] = 0.0
+            events[("accel_r", at[1])] = 0.0
             _triangle(events, "accel_r", starts[4], q[4], span, q[8])
         switches = tuple(
             make_switch(t, ch, v) for (ch, t), v in sorted(events.items(), key=_event_time)

@@ -270,8 +270,7 @@ def _compile(program: Program) -> CompiledProgram:
     breaks = sorted(times)
     K = len(breaks) - 1
     g = program.hover_collective_m_s2
-    # latest value per channel (CHANNELS order: collective, p̂, q̂, r̂, then the three accelerations)
-    c_val, p_val, q_val, r_val, ap, aq, ar = g, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    value = [g, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]  # latest value per channel, in CHANNELS order
     ip = iq = ir = 0.0  # ∫ accel up to the current segment start
     rows: list[float] = []
     add = rows.extend
@@ -285,24 +284,10 @@ def _compile(program: Program) -> CompiledProgram:
         t0 = breaks[k]
         t1 = breaks[k + 1]
         while j < count and ordered[j][0] <= t0:
-            _, ch, v = ordered[j]
-            v = float(v)
-            if ch == 0:
-                c_val = v
-            elif ch == 1:
-                p_val = v
-            elif ch == 2:
-                q_val = v
-            elif ch == 3:
-                r_val = v
-            elif ch == 4:
-                ap = v
-            elif ch == 5:
-                aq = v
-            else:
-                ar = v
+            value[ordered[j][1]] = float(ordered[j][2])
             j += 1
-        # the ramp envelopes w(t0 + τ) = w0 + w1 τ (_envelope, inlined)
+        c_val, p_val, q_val, r_val, ap, aq, ar = value
+        # the ramp envelopes w(t0 + τ) = w0 + w1 τ on this segment (breakpoints include T − ramp)
         if ramp_c > 0.0 and not t0 < start_c:
             wc0, wc1 = (T - t0) / ramp_c, inv_c
         else:
@@ -325,13 +310,6 @@ def _compile(program: Program) -> CompiledProgram:
         ir += ar * dt
     coeffs = np.array(rows, dtype=float).reshape(K, 4, 3)
     return CompiledProgram(np.array(breaks), coeffs, np.array([g, 0.0, 0.0, 0.0]))
-
-
-def _envelope(t0: float, T: float, ramp: float) -> tuple[float, float]:
-    """Ramp envelope w(t0 + τ) = w0 + w1 τ on a segment starting at t0 (breakpoints include T − ramp)."""
-    if ramp <= 0.0 or t0 < T - ramp - 1e-15:
-        return 1.0, 0.0
-    return (T - t0) / ramp, -1.0 / ramp
 
 
 # ---------------------------------------------------------------------------- TOML

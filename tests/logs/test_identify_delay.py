@@ -9,17 +9,11 @@ cost a third more, so a dead time well beyond the filters is in the log (docs/pl
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
+from test_identify_excitation import GEOMETRY, ROMA, needs_data  # the ROMA F5's log and geometry, as identified there
 
 from aerobat.experiments.log_identify import identify_from_logs
-from aerobat.quadrotor.identification.logfit import Geometry, delay_profile
-
-DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "flight-logs"
-ROMA = DATA / "betaflight" / "diatone-roma-f5.bbl"
-GEOMETRY = Geometry(mass_kg=0.55, motor_x_m=0.08, motor_y_m=0.08, inertia_zz_ratio=0.935)
-needs_data = pytest.mark.skipif(not ROMA.is_file(), reason=f"the real flight logs are not here ({DATA} is absent)")
+from aerobat.quadrotor.identification.logfit import delay_profile
 
 
 @needs_data

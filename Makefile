@@ -14,7 +14,7 @@ COMPILED := $(VENV)/.stamp-compiled
 DEMO_COMPILED := $(VENV)/.stamp-compiled-demo
 KERNEL_SOURCES := $(wildcard src/aerobat/quadrotor/*.py src/aerobat/quadrotor/firmware/*.py src/aerobat/plants/*.py \
 	src/aerobat/plants/arena/*.py \
-	src/aerobat/plants/betaflight/*.py \
+	src/aerobat/plants/betaflight/*.py src/aerobat/firmware/betaflight/*.py \
 	src/aerobat/logs/blackbox_*.py)
 OUT ?= out
 # the extras make installs: every optional piece, the tests' and the docs'
@@ -35,8 +35,8 @@ $(STAMP): pyproject.toml
 betaflight: $(STAMP)
 	$(VENV)/bin/aerobat setup --no-kernels
 
-$(COMPILED): $(STAMP) $(KERNEL_SOURCES) src/aerobat/plants/betaflight/lockstep.patch \
-		src/aerobat/plants/betaflight/shm_exchange.c
+$(COMPILED): $(STAMP) $(KERNEL_SOURCES) src/aerobat/firmware/betaflight/lockstep.patch \
+		src/aerobat/firmware/betaflight/shm_exchange.c
 	find src/aerobat -name '*.nbi' -delete -o -name '*.nbc' -delete
 	$(VENV)/bin/aerobat setup
 	touch $(COMPILED) $(DEMO_COMPILED)

@@ -348,7 +348,7 @@ def bench_arena() -> dict:
 def bench_betaflight_section() -> list[str]:
     """Lockstep and timing of the Betaflight plant (``benchmarks/bench_betaflight.py``), as markdown lines."""
     sys.path.insert(0, str(ROOT / "benchmarks"))
-    from aerobat.plants.betaflight.errors import FirmwareUnavailable
+    from aerobat.firmware.betaflight.errors import FirmwareUnavailable
 
     lines = ["## Betaflight firmware in the loop (`benchmarks/bench_betaflight.py`)", ""]
     try:
@@ -365,7 +365,7 @@ def bench_betaflight_section() -> list[str]:
 def bench_exchange_load_section(rounds: int = 5) -> list[str]:
     """The exchange at load 0, 1 and 2 (``benchmarks/bench_exchange_load.py``), as markdown lines."""
     sys.path.insert(0, str(ROOT / "benchmarks"))
-    from aerobat.plants.betaflight.errors import FirmwareUnavailable
+    from aerobat.firmware.betaflight.errors import FirmwareUnavailable
 
     try:
         import bench_exchange_load

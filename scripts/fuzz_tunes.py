@@ -145,7 +145,7 @@ def diff_with(version: bytes, lines: list[bytes]) -> bytes:
 
 
 def table() -> dict[str, Any]:
-    from aerobat.plants.betaflight.sitl_table import SITL_TABLE_PATH
+    from aerobat.firmware.betaflight.sitl_table import SITL_TABLE_PATH
 
     return dict(json.loads(SITL_TABLE_PATH.read_text())["settings"])
 

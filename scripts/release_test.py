@@ -27,8 +27,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 EXTRAS = "replay,logs,viewers"
-MUST_SHIP = ("aerobat/quadrotor/vehicles/hummingbird.toml", "aerobat/plants/betaflight/lockstep.patch",
-             "aerobat/plants/betaflight/sitl_settings.json", "aerobat/examples/single_flip.toml",
+MUST_SHIP = ("aerobat/quadrotor/vehicles/hummingbird.toml", "aerobat/firmware/betaflight/lockstep.patch",
+             "aerobat/firmware/betaflight/sitl_settings.json", "aerobat/examples/single_flip.toml",
              "aerobat/examples/maneuvers/", "aerobat/py.typed")
 
 

@@ -52,8 +52,8 @@ def roma_setup(work: Path) -> tuple[Any, Any]:
     import io
 
     from aerobat.cli.app import main
+    from aerobat.firmware.betaflight.tune import load_tune
     from aerobat.plants.betaflight.params import load_betaflight
-    from aerobat.plants.betaflight.tune import load_tune
     from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
 
     vehicle, airframe = work / "roma.toml", work / "roma_bf.toml"

@@ -230,7 +230,7 @@ def main() -> None:
         twin()
         return
     from aerobat.experiments.log_whatif import what_if
-    from aerobat.plants.betaflight.tune import load_tune
+    from aerobat.firmware.betaflight.tune import load_tune
 
     if not ROMA.is_file():
         raise SystemExit(f"{ROMA} is absent: the real logs are needed")

@@ -16,8 +16,8 @@ from aerobat.core.design import design
 from aerobat.core.registry import from_spec, registered_kinds
 from aerobat.core.rules import RULES, IscModel, make_rule
 from aerobat.core.testing import ToyManeuver, ToyModel, ToyPlant, check_maneuver, check_plant, check_rule
+from aerobat.firmware.betaflight.errors import FirmwareUnavailable
 from aerobat.plants import PLANTS, PlantChoice
-from aerobat.plants.betaflight.errors import FirmwareUnavailable
 from aerobat.quadrotor.maneuvers import MultiFlip, load_maneuver_file, translation_maneuver
 from aerobat.quadrotor.simulate import NominalModel
 from aerobat.quadrotor.vehicle import hummingbird

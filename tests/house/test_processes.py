@@ -233,8 +233,8 @@ def test_an_abandoned_local_run_ends_its_workers_at_once():
 
 def test_sigkill_of_a_betaflight_study_leaves_no_firmware(tmp_path, commands):
     """Each worker's SITL firmware dies with its worker, which dies with the study (PR_SET_PDEATHSIG chain)."""
-    from aerobat.plants.betaflight.build import BINARY_NAME, ensure_sitl
-    from aerobat.plants.betaflight.errors import FirmwareUnavailable
+    from aerobat.firmware.betaflight.build import BINARY_NAME, ensure_sitl
+    from aerobat.firmware.betaflight.errors import FirmwareUnavailable
 
     try:
         ensure_sitl()
@@ -274,7 +274,7 @@ def test_a_firmware_build_tool_stops_when_its_owner_is_killed(tmp_path):
     """``make`` (pip, patch) of a Betaflight build whose owner got SIGKILL used to run on, unowned."""
     marker = tmp_path / "tool-started"
     owner = (f"from pathlib import Path\n"
-             f"from aerobat.plants.betaflight.build import _run_logged\n"
+             f"from aerobat.firmware.betaflight.build import _run_logged\n"
              f"_run_logged(['sh', '-c', 'touch {marker}; exec sleep 300'], Path({str(tmp_path)!r}), "
              f"Path({str(tmp_path / 'build.log')!r}), 'a build step')\n")
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(SRC), *filter(None, [os.environ.get("PYTHONPATH")])])}

@@ -49,7 +49,7 @@ ALLOWED_TEXT_KINDS = {
     ("experiments/setup.py", "kind == 'arena'"): _PLANT,
     ("experiments/studies/feedback.py", "plant.kind == 'arena'"): _PLANT,
     ("logs/blackbox_header.py", "kind == 'P'"): "a blackbox header's frame letter (I, P): log file text at the edge",
-    **{("plants/betaflight/firmware_settings.py", f"kind == {word!r}"): _FIRMWARE
+    **{("firmware/betaflight/settings.py", f"kind == {word!r}"): _FIRMWARE
        for word in ("ACTUAL", "BETAFLIGHT", "RACEFLIGHT", "KISS", "QUICK", "SCALE", "CLIP")},
 }
 """(module, comparison) of a ``kind`` with text that stays text, with the reason."""

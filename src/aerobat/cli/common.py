@@ -440,15 +440,15 @@ def read_tune(path: str | Path, log_index: int | None = None,
     """What the tune in ``path`` (``FILE:N``: log N of a blackbox file) becomes on the SITL, checked as the
     firmware would be configured; nothing runs. ``log_index`` is the log given by ``option`` instead.
 
-    Returns the :class:`~aerobat.plants.betaflight.translate.TuneReport`, the tune's full-stick rates
+    Returns the :class:`~aerobat.firmware.betaflight.translate.TuneReport`, the tune's full-stick rates
     [deg/s] per axis and its ``rates_type``. A tune that cannot be read, names an unknown setting or
     holds a value that is no value of its setting is bad input (:class:`~aerobat.errors.ConfigError`).
     """
+    from aerobat.firmware.betaflight.configure import check_commands
+    from aerobat.firmware.betaflight.settings import load_settings
+    from aerobat.firmware.betaflight.translate import translate
+    from aerobat.firmware.betaflight.tune import TuneError, load_tune
     from aerobat.logs.refs import parse_log_ref
-    from aerobat.plants.betaflight.configure import check_commands
-    from aerobat.plants.betaflight.firmware_settings import load_settings
-    from aerobat.plants.betaflight.translate import translate
-    from aerobat.plants.betaflight.tune import TuneError, load_tune
 
     named = parse_log_ref(path)
     ref = named.with_index(log_index, option)

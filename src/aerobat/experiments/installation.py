@@ -137,7 +137,7 @@ def _compiler_piece() -> Piece:
 
 
 def _sitl_path() -> Path:
-    from aerobat.plants.betaflight.build import BINARY_NAME, build_dir_for, find_patch
+    from aerobat.firmware.betaflight.build import BINARY_NAME, build_dir_for, find_patch
 
     return build_dir_for(find_patch()) / BINARY_NAME
 
@@ -235,8 +235,8 @@ def set_up(*, betaflight: bool = True, kernels: bool = True, progress: Progress 
 
 
 def _build_sitl(say: Progress) -> tuple[str, SetupStep, str]:
-    from aerobat.plants.betaflight.build import ensure_sitl
-    from aerobat.plants.betaflight.errors import FirmwareUnavailable
+    from aerobat.firmware.betaflight.build import ensure_sitl
+    from aerobat.firmware.betaflight.errors import FirmwareUnavailable
 
     if _sitl_piece().present:
         done = f"already built: {_sitl_path()}"
@@ -258,8 +258,8 @@ def _build_shm_helper() -> str:
 
     The plant's default exchange needs it (``firmware.exchange = "shm"``); ``"udp"`` does not.
     """
-    from aerobat.plants.betaflight.errors import FirmwareUnavailable
-    from aerobat.plants.betaflight.shm import ensure_library
+    from aerobat.firmware.betaflight.errors import FirmwareUnavailable
+    from aerobat.firmware.betaflight.shm import ensure_library
 
     try:
         ensure_library()

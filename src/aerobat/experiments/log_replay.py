@@ -98,7 +98,7 @@ class LogReplay:
     ----------
     log : ``file#N``; window_s the replayed window (log time).
     airframe : where the airframe came from.
-    tune_report : what the tune became on the SITL (:class:`~aerobat.plants.betaflight.translate.TuneReport`).
+    tune_report : what the tune became on the SITL (:class:`~aerobat.firmware.betaflight.translate.TuneReport`).
     time_s, setpoint_log, setpoint_model, setpoint_sim, gyro_log, gyro_sim, motors_log, motors_sim,
         pid_log, pid_sim : the traces (pid: (n, 4, 3) P, I, D, F terms per axis, firmware units; NaN
         where not logged or not reported).
@@ -245,8 +245,8 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
 
     ``params`` (:class:`~aerobat.plants.betaflight.params.BetaflightParams`) gives the airframe,
     sensors and firmware; its ``tune`` is replaced by the log's header, or by ``tune`` (a
-    :class:`~aerobat.plants.betaflight.tune.Tune`: what-if), with ``changes`` (``NAME=VALUE`` each,
-    :func:`~aerobat.plants.betaflight.tune.with_settings`) on top. The propellers turn as the log's mixer
+    :class:`~aerobat.firmware.betaflight.tune.Tune`: what-if), with ``changes`` (``NAME=VALUE`` each,
+    :func:`~aerobat.firmware.betaflight.tune.with_settings`) on top. The propellers turn as the log's mixer
     says (:func:`log_props_out`), or as ``props_out`` says when given. With ``battery`` (and a logged
     voltage) thrust follows the battery: every rotor's thrust × (V/V_ref)², V the logged voltage and
     V_ref the airframe's ``battery_reference_v`` (else the log's median in flight). ``window_s`` (log time,
@@ -256,10 +256,10 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
     """
     import time
 
+    from aerobat.firmware.betaflight.tune import tune_from_blackbox_header, with_settings
     from aerobat.plants.betaflight.params import BetaflightParams
     from aerobat.plants.betaflight.plant import BetaflightPlant
     from aerobat.plants.betaflight.replay import StickTrack, channels_from_commands, replay_sticks
-    from aerobat.plants.betaflight.tune import tune_from_blackbox_header, with_settings
     from aerobat.quadrotor.vehicle import fpv5
 
     log = load_betaflight_log(file, index)

@@ -156,10 +156,10 @@ def _readings(flown: LogReplay, other: LogReplay) -> tuple[FlightReading, Flight
 
 
 def tune_differences(flown: Any, other: Any) -> tuple[TuneDifference, ...]:
-    """The settings two tunes (:class:`~aerobat.plants.betaflight.tune.Tune`) give different values, as the
+    """The settings two tunes (:class:`~aerobat.firmware.betaflight.tune.Tune`) give different values, as the
     firmware runs them (each translated to 4.6 over its defaults), sorted by name."""
-    from aerobat.plants.betaflight.firmware_settings import load_settings
-    from aerobat.plants.betaflight.translate import translate
+    from aerobat.firmware.betaflight.settings import load_settings
+    from aerobat.firmware.betaflight.translate import translate
 
     base = load_settings()
     a, b = base.with_tune(translate(flown)), base.with_tune(translate(other))
@@ -188,8 +188,8 @@ def what_if(file: str | Path, *, tune: Any = None, changes: Sequence[str] = (),
     """
     from aerobat.errors import ConfigError
     from aerobat.experiments.log_replay import load_betaflight_log
+    from aerobat.firmware.betaflight.tune import tune_from_blackbox_header, with_settings
     from aerobat.logs.refs import parse_log_ref
-    from aerobat.plants.betaflight.tune import tune_from_blackbox_header, with_settings
 
     if tune is None and not changes:
         raise ConfigError("a what-if replay needs --tune OTHER or --set NAME=VALUE (or both)")
@@ -197,9 +197,9 @@ def what_if(file: str | Path, *, tune: Any = None, changes: Sequence[str] = (),
     own = tune_from_blackbox_header(dict(log.metadata.parameters), source=f"{log.path}#log{log.index}")
     other = with_settings(tune if tune is not None else own, changes)
     differences = tune_differences(own, other)  # refuses an unknown setting before anything flies
-    from aerobat.plants.betaflight.configure import check_commands
-    from aerobat.plants.betaflight.firmware_settings import load_settings
-    from aerobat.plants.betaflight.translate import translate
+    from aerobat.firmware.betaflight.configure import check_commands
+    from aerobat.firmware.betaflight.settings import load_settings
+    from aerobat.firmware.betaflight.translate import translate
 
     report = translate(other)
     for _, _, line, why in report.refused:  # a change asked for by name is never dropped quietly

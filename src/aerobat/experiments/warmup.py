@@ -182,8 +182,8 @@ def _betaflight_kernels(x: np.ndarray, cmd: np.ndarray) -> None:
     prime(world, plant, aux, counters, noise[0], packet, scratch)
     step(world, np.zeros(4, dtype=np.float32), plant, aux, np.zeros((2, 4)), counters, noise[1], packet, scratch)
     # the compiled lockstep loop (a run of no steps: nothing is sent)
+    from aerobat.firmware.betaflight.packets import MOTOR_STRUCT
     from aerobat.plants.betaflight.lockstep import N_IO, run_steps
-    from aerobat.plants.betaflight.packets import MOTOR_STRUCT
     from aerobat.plants.lab_kernels import MOCAP_COLUMNS
 
     block = np.zeros(MOTOR_STRUCT.size, dtype=np.uint8)
@@ -191,7 +191,7 @@ def _betaflight_kernels(x: np.ndarray, cmd: np.ndarray) -> None:
               np.zeros((2, 4)), counters, noise, np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)),
               np.zeros(N_IO, dtype=np.int64), packet, scratch)
     # and its shared-memory twin, where the exchange's C helper can be compiled (no compiler: skipped)
-    from aerobat.plants.betaflight.errors import FirmwareUnavailable
+    from aerobat.firmware.betaflight.errors import FirmwareUnavailable
 
     try:
         from aerobat.plants.betaflight.lockstep_shm import run_steps_shm

@@ -4,7 +4,7 @@ A file often holds several logs (one per arming); each is a header of ``H name:v
 (the firmware, the board, the craft and the whole tune) and delta-encoded frames.
 aerobat's compiled decoder reads the frames (orangebox 0.4.0, which read them before at
 ~70 µs a frame, is the tests' reference); the raw header text is kept as written, so the tune
-can be applied to the firmware as the pilot had it (:mod:`aerobat.plants.betaflight`).
+can be applied to the firmware as the pilot had it (:mod:`aerobat.firmware.betaflight.tune`).
 
 Units (Betaflight 4.x, data version 2): ``time`` µs; ``gyroADC`` and ``setpoint[0..2]``
 deg/s; ``accSmooth`` in units of the header's ``acc_1G``; ``motor`` in the header's

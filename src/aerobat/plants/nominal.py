@@ -6,11 +6,13 @@ import numpy as np
 
 from aerobat.config import check_number, check_type
 from aerobat.core.plant import Trial, TrialStatus
+from aerobat.plants.spec import PlantSpec
+from aerobat.quadrotor.feedback import Feedback, FeedbackScheme
 from aerobat.quadrotor.program import Program
 from aerobat.quadrotor.simulate import DEFAULT_MAX_STEP_S, check_max_step, simulate
 from aerobat.quadrotor.vehicle import VehicleConfig
 
-__all__ = ["NominalPlant"]
+__all__ = ["SPEC", "NominalPlant"]
 
 
 class NominalPlant:
@@ -44,3 +46,16 @@ class NominalPlant:
             return Trial(TrialStatus.ABORTED, "non-finite state in the nominal simulation", np.full_like(final, np.nan),
                          times, states, traj.states[0])
         return Trial(TrialStatus.OK, "nominal model", final.copy(), times, states, traj.states[0].copy())
+
+
+def _build(config: VehicleConfig, settings: object, *, seed: int, feedback: Feedback,
+           design_model: VehicleConfig | None) -> NominalPlant:
+    # the reference is its own flight, so every feedback correction is zero; it flies the nominal vehicle it
+    # is built around (``config``), noiseless, whatever the seed and whichever model the programs came from
+    del settings, seed, feedback, design_model
+    return NominalPlant(config)
+
+
+SPEC = PlantSpec("nominal", "the design model itself: continuous time, no noise", _build,
+                 feedback=tuple(FeedbackScheme))
+"""The nominal plant's entry in the plant registry (``--plant nominal``)."""

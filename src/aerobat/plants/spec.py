@@ -13,7 +13,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from aerobat.core.bounds import SEEDS, bounded, validate
 from aerobat.core.plant import Plant
@@ -22,7 +22,7 @@ from aerobat.errors import ConfigError, MissingDependency
 from aerobat.quadrotor.feedback import OPEN_LOOP, Feedback, FeedbackScheme, as_feedback
 from aerobat.quadrotor.vehicle import VehicleConfig
 
-__all__ = ["PLANTS", "DesignModel", "PlantChoice", "PlantSpec"]
+__all__ = ["PLANTS", "DesignModel", "PlantChoice", "PlantFactory", "PlantSpec"]
 
 
 class DesignModel(StrEnum):
@@ -43,6 +43,22 @@ class DesignModel(StrEnum):
                                       "feedforward, filters, mixer, throttle path) around the airframe"}[self]
 
 
+class PlantFactory(Protocol):
+    """What builds one plant: every plant kind's ``build`` has this one signature.
+
+    ``config`` is the nominal vehicle the plant is built around; ``settings`` the kind's settings (its
+    dataclass, or None for a kind without); ``seed`` seeds its random generator; ``feedback`` is what its
+    onboard loop mixes into the program (one of the kind's :attr:`PlantSpec.feedback` schemes);
+    ``design_model`` the vehicle the programs were designed on when it is not ``config`` (None: the same),
+    whose flight of each program the feedback tracks. A kind that has no use for an argument says so in
+    its spec's summary or docs; none is dropped silently by the registry.
+    """
+
+    def __call__(self, config: VehicleConfig, settings: Any, *, seed: int, feedback: Feedback,
+                 design_model: VehicleConfig | None) -> Plant:
+        """The plant."""
+
+
 @dataclass(frozen=True)
 class PlantSpec:
     """How to build one kind of plant.
@@ -51,17 +67,14 @@ class PlantSpec:
     ----------
     name : what users write (``"arena"``).
     summary : one line for listings.
-    build : ``build(config, settings, seed) -> plant``; ``config`` is the nominal vehicle.
+    build : the :class:`PlantFactory`: ``build(config, settings, *, seed, feedback, design_model) -> plant``.
     load_settings : ``load_settings(path) -> settings`` from a TOML file (None: the kind takes no file).
     settings_from_table, settings_to_table : the settings' stored form and back (None: no settings).
     default_settings : the settings used when no file is given.
     requires : ``(module, extra)`` pairs of optional packages the plant needs.
     option : the command-line option that takes the settings file (``--arena``).
-    feedback : the feedback schemes the plant's onboard loop can run (:mod:`aerobat.quadrotor.feedback`);
-        a plant with more than ``none`` is built as ``build(config, settings, seed, feedback)``.
+    feedback : the feedback schemes the plant's onboard loop can run (:mod:`aerobat.quadrotor.feedback`).
     default_feedback : the scheme used when none is chosen.
-    design_model : the plant takes ``design_model=`` (the model the programs were designed on, when it is
-        not the vehicle the plant is built around): its feedback tracks that model's flight.
     cores : ``cores(settings) -> int``, the cores one instance keeps busy (None: 1). A study runs
         ``cpu_count // cores`` instances at once unless told otherwise
         (:func:`aerobat.experiments.execution.default_workers`).
@@ -72,7 +85,7 @@ class PlantSpec:
 
     name: str
     summary: str
-    build: Callable[[VehicleConfig, Any, int], Plant]
+    build: PlantFactory
     load_settings: Callable[[str | Path], Any] | None = None
     settings_from_table: Callable[[Mapping[str, Any], str], Any] | None = None
     settings_to_table: Callable[[Any], dict[str, Any]] | None = None
@@ -81,7 +94,6 @@ class PlantSpec:
     option: str | None = None
     feedback: tuple[FeedbackScheme, ...] = (FeedbackScheme.NONE,)
     default_feedback: FeedbackScheme = FeedbackScheme.NONE
-    design_model: bool = False
     cores: Callable[[Any], int] | None = None
     firmware_model: Callable[[VehicleConfig, Any], tuple[Any, dict[str, Any]]] | None = None
 
@@ -211,12 +223,8 @@ class PlantChoice:
         """
         spec = self.spec
         spec.check_available()
-        if spec.feedback == (FeedbackScheme.NONE,):
-            return spec.build(config, self.settings, self.seed)
-        if design_model is not None and design_model != config and spec.design_model:
-            return spec.build(config, self.settings, self.seed, self.feedback,  # type: ignore[call-arg]
-                              design_model=design_model)
-        return spec.build(config, self.settings, self.seed, self.feedback)  # type: ignore[call-arg]
+        return spec.build(config, self.settings, seed=self.seed, feedback=self.feedback,
+                          design_model=None if design_model == config else design_model)
 
     def __repr__(self) -> str:
         return f"PlantChoice({self.kind!r}, seed={self.seed}, feedback={self.feedback.scheme.value!r})"

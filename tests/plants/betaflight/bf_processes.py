@@ -6,7 +6,7 @@ import os
 import time
 from pathlib import Path
 
-from aerobat.plants.betaflight.build import BINARY_NAME
+from aerobat.firmware.betaflight.build import BINARY_NAME
 
 
 def sitl_processes(parent: int | None = None) -> list[int]:

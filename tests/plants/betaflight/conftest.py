@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 from bf_processes import sitl_processes
 
-from aerobat.plants.betaflight.errors import FirmwareUnavailable
+from aerobat.firmware.betaflight.errors import FirmwareUnavailable
 
 
 @pytest.fixture(autouse=True)
@@ -28,8 +28,8 @@ def no_firmware_left_behind() -> Iterator[None]:
 @pytest.fixture(scope="session")
 def firmware() -> tuple[Path, Path]:
     """(SITL binary, configured eeprom), built and configured once per cache."""
-    from aerobat.plants.betaflight.build import ensure_sitl
-    from aerobat.plants.betaflight.configure import ensure_eeprom
+    from aerobat.firmware.betaflight.build import ensure_sitl
+    from aerobat.firmware.betaflight.configure import ensure_eeprom
 
     try:
         binary = ensure_sitl()

@@ -3,8 +3,8 @@ from __future__ import annotations
 import pytest
 
 from aerobat.errors import ConfigError
-from aerobat.plants.betaflight.errors import ConfigureFailed, LinkClosed, LinkTimeout
-from aerobat.plants.betaflight.firmware_cli import CliClient
+from aerobat.firmware.betaflight.cli import CliClient
+from aerobat.firmware.betaflight.errors import ConfigureFailed, LinkClosed, LinkTimeout
 
 
 class FakeCli:

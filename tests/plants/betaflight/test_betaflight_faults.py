@@ -21,11 +21,11 @@ from bf_processes import sitl_processes, wait_gone
 from aerobat.core.design import design
 from aerobat.core.learning import IterationStatus, learn
 from aerobat.core.plant import TrialStatus
+from aerobat.firmware.betaflight.sitl import SitlProcess
+from aerobat.firmware.betaflight.transport import TcpTransport
 from aerobat.plants.betaflight.flight import Flight
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.plant import BetaflightPlant
-from aerobat.plants.betaflight.sitl import SitlProcess
-from aerobat.plants.betaflight.transport import TcpTransport
 from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel
 from aerobat.quadrotor.vehicle import fpv5
@@ -137,7 +137,7 @@ def test_no_firmware_outlives_a_failed_test(firmware: tuple[Path, Path], tmp_pat
     test_file = tmp_path / "test_leaks.py"
     test_file.write_text(_owner_script(f"""
         from pathlib import Path
-        from aerobat.plants.betaflight.sitl import SitlProcess
+        from aerobat.firmware.betaflight.sitl import SitlProcess
 
         def test_fails_with_a_firmware_running():
             sitl = SitlProcess(Path({str(firmware[0])!r}), Path({str(firmware[1])!r}))

@@ -70,8 +70,8 @@ def test_a_step_has_its_sensor_row_before_its_physics() -> None:
 
 
 def test_polling_for_the_answer_takes_it_only_once_it_came() -> None:
-    from aerobat.plants.betaflight.errors import FirmwareUnavailable
-    from aerobat.plants.betaflight.shm import ShmRegion, library
+    from aerobat.firmware.betaflight.errors import FirmwareUnavailable
+    from aerobat.firmware.betaflight.shm import ShmRegion, library
 
     try:
         lib = library()

@@ -13,12 +13,12 @@ import pytest
 
 from aerobat.core.design import design
 from aerobat.core.plant import Trial
-from aerobat.plants.betaflight.errors import FirmwareNotResponding
+from aerobat.firmware.betaflight.errors import FirmwareNotResponding
+from aerobat.firmware.betaflight.packets import MOTOR_STRUCT
 from aerobat.plants.betaflight.flight import Flight, FramesEnd, FramesRun
 from aerobat.plants.betaflight.frame_by_frame import run_frames_by_frame
 from aerobat.plants.betaflight.frames import S_DROPPED, S_SENT, S_TICK, Mode, Radio, Until
 from aerobat.plants.betaflight.lockstep import IO_LOG
-from aerobat.plants.betaflight.packets import MOTOR_STRUCT
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import airframe_plant, step
 from aerobat.plants.betaflight.plant import BetaflightPlant

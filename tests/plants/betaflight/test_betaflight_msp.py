@@ -4,8 +4,8 @@ import struct
 
 import pytest
 
-from aerobat.plants.betaflight.errors import LinkTimeout, MspError
-from aerobat.plants.betaflight.msp import (
+from aerobat.firmware.betaflight.errors import LinkTimeout, MspError
+from aerobat.firmware.betaflight.msp import (
     MAX_ANSWER_BYTES,
     MSP_API_VERSION,
     MSP_SET_RAW_RC,

@@ -2,7 +2,7 @@ from __future__ import annotations
 
 import struct
 
-from aerobat.plants.betaflight.packets import (
+from aerobat.firmware.betaflight.packets import (
     MOTOR_STRUCT,
     RC_STRUCT,
     STATE_STRUCT,

@@ -2,7 +2,7 @@ from __future__ import annotations
 
 import pytest
 
-from aerobat.plants.betaflight.rc import (
+from aerobat.firmware.betaflight.rc import (
     RADIO_LOST_US,
     RC_CHANNEL_COUNT,
     RcCommand,

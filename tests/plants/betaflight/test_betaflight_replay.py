@@ -14,11 +14,11 @@ import pytest
 
 from aerobat.cli import main
 from aerobat.experiments.log_replay import find_steps, replay_log
+from aerobat.firmware.betaflight.settings import load_settings
+from aerobat.firmware.betaflight.translate import translate
+from aerobat.firmware.betaflight.tune import load_tune
 from aerobat.logs import Channel, read_log
-from aerobat.plants.betaflight.firmware_settings import load_settings
 from aerobat.plants.betaflight.replay import StickTrack, channels_from_commands
-from aerobat.plants.betaflight.translate import translate
-from aerobat.plants.betaflight.tune import load_tune
 
 DATA = Path(__file__).resolve().parents[3].parent / "shared" / "data" / "flight-logs"  # ../shared/data
 ROMA = DATA / "betaflight" / "diatone-roma-f5.bbl"

@@ -1,7 +1,7 @@
 """The real firmware through a serial device: the SITL's UART1 (TCP) as a pseudo-terminal.
 
 What a flight controller on /dev/ttyACM0 will take, the firmware takes here through the same
-code (:class:`~aerobat.plants.fc.SerialTransport` on a :class:`~aerobat.plants.fc.PtyBridge`):
+code (:class:`~aerobat.firmware.betaflight.serial_link.SerialTransport` on a :class:`~aerobat.plants.fc.PtyBridge`):
 MSP status, arming flags, attitude, battery and ``MSP_SET_RAW_RC``; a cut link raises LinkClosed.
 """
 
@@ -13,10 +13,10 @@ import pytest
 
 pytest.importorskip("serial", reason="pyserial is not installed (pip install 'aerobat[fc]')")
 
-from aerobat.plants.betaflight.configure import AtRestStepper  # noqa: E402
-from aerobat.plants.betaflight.errors import LinkClosed  # noqa: E402
-from aerobat.plants.betaflight.msp import BatteryAlert, MspClient  # noqa: E402
-from aerobat.plants.betaflight.sitl import SitlProcess  # noqa: E402
+from aerobat.firmware.betaflight.configure import AtRestStepper  # noqa: E402
+from aerobat.firmware.betaflight.errors import LinkClosed  # noqa: E402
+from aerobat.firmware.betaflight.msp import BatteryAlert, MspClient  # noqa: E402
+from aerobat.firmware.betaflight.sitl import SitlProcess  # noqa: E402
 from aerobat.plants.fc import PtyBridge, SerialTransport  # noqa: E402
 
 

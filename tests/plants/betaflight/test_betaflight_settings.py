@@ -2,7 +2,7 @@ from __future__ import annotations
 
 import pytest
 
-from aerobat.plants.betaflight.firmware_settings import load_settings
+from aerobat.firmware.betaflight.settings import load_settings
 
 
 def test_packaged_settings_render_cli_commands() -> None:

@@ -17,15 +17,15 @@ from test_betaflight_faults import sabotage, wait_gone
 from aerobat.core.design import design
 from aerobat.core.plant import TrialStatus
 from aerobat.errors import ConfigError
-from aerobat.plants.betaflight.configure import AT_REST_LEVEL, step_at_rest
-from aerobat.plants.betaflight.errors import FirmwareExited, FirmwareNotResponding
+from aerobat.firmware.betaflight.configure import AT_REST_LEVEL, step_at_rest
+from aerobat.firmware.betaflight.errors import FirmwareExited, FirmwareNotResponding
+from aerobat.firmware.betaflight.packets import Exchange
+from aerobat.firmware.betaflight.shm import ensure_library
+from aerobat.firmware.betaflight.sitl import SitlProcess
 from aerobat.plants.betaflight.flight import Flight
-from aerobat.plants.betaflight.packets import Exchange
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import airframe_plant
 from aerobat.plants.betaflight.plant import BetaflightPlant
-from aerobat.plants.betaflight.shm import ensure_library
-from aerobat.plants.betaflight.sitl import SitlProcess
 from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel
 from aerobat.quadrotor.vehicle import fpv5

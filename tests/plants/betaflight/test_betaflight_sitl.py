@@ -16,12 +16,12 @@ from pathlib import Path
 import pytest
 from bf_processes import running, wait_gone
 
-from aerobat.plants.betaflight.configure import AT_REST_LEVEL, step_at_rest
-from aerobat.plants.betaflight.errors import FirmwareExited, FirmwareNotResponding
-from aerobat.plants.betaflight.firmware_settings import load_settings
-from aerobat.plants.betaflight.packets import SitlState
-from aerobat.plants.betaflight.rc import RADIO_LOST_US, RcCommand
-from aerobat.plants.betaflight.sitl import SitlProcess
+from aerobat.firmware.betaflight.configure import AT_REST_LEVEL, step_at_rest
+from aerobat.firmware.betaflight.errors import FirmwareExited, FirmwareNotResponding
+from aerobat.firmware.betaflight.packets import SitlState
+from aerobat.firmware.betaflight.rc import RADIO_LOST_US, RcCommand
+from aerobat.firmware.betaflight.settings import load_settings
+from aerobat.firmware.betaflight.sitl import SitlProcess
 
 SETTINGS = load_settings()
 PERIOD_S = 125e-6
@@ -145,7 +145,7 @@ def test_a_sweep_leaves_a_directory_being_set_up_and_removes_a_dead_owners(tmp_p
     # found by two trials starting side by side: a sweep read an owner file the other process had
     # created but not yet written, and failed on its empty text. The owner file is now written under
     # another name and renamed, so a sweep sees a whole one or none.
-    from aerobat.plants.betaflight import sitl as sitl_module
+    from aerobat.firmware.betaflight import sitl as sitl_module
 
     monkeypatch.setattr(sitl_module.tempfile, "gettempdir", lambda: str(tmp_path))
     being_set_up = tmp_path / (sitl_module._WORKDIR_PREFIX + "new")
@@ -170,7 +170,7 @@ def test_firmware_never_outlives_its_owner(firmware: tuple[Path, Path], ending: 
         f"""
         import sys
         from pathlib import Path
-        from aerobat.plants.betaflight.sitl import SitlProcess
+        from aerobat.firmware.betaflight.sitl import SitlProcess
         sitl = SitlProcess(Path({str(binary)!r}), Path({str(eeprom)!r}))
         print(sitl.pid, sitl.workdir, flush=True)
         sys.stdin.readline()  # exit (atexit finalizer) when told

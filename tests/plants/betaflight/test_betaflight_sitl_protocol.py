@@ -7,10 +7,10 @@ from pathlib import Path
 
 import pytest
 
-from aerobat.plants.betaflight.configure import AT_REST_LEVEL
-from aerobat.plants.betaflight.errors import FirmwareExited, FirmwareNotResponding
-from aerobat.plants.betaflight.rc import RcCommand
-from aerobat.plants.betaflight.sitl import SitlProcess
+from aerobat.firmware.betaflight.configure import AT_REST_LEVEL
+from aerobat.firmware.betaflight.errors import FirmwareExited, FirmwareNotResponding
+from aerobat.firmware.betaflight.rc import RcCommand
+from aerobat.firmware.betaflight.sitl import SitlProcess
 
 FAKE = Path(__file__).with_name("fake_sitl.py")
 

@@ -12,8 +12,8 @@ import ctypes
 
 import pytest
 
-from aerobat.plants.betaflight import shm
-from aerobat.plants.betaflight.errors import FirmwareUnavailable
+from aerobat.firmware.betaflight import shm
+from aerobat.firmware.betaflight.errors import FirmwareUnavailable
 
 SPIN_NS = 20_000
 EPOCH_NS = 25_000_000

@@ -8,19 +8,19 @@ from pathlib import Path
 
 import pytest
 
-from aerobat.plants import PlantChoice
-from aerobat.plants.betaflight.firmware_settings import load_settings
-from aerobat.plants.betaflight.params import Airframe, BetaflightParams
-from aerobat.plants.betaflight.pilot import StickMap, stick_for_rate, throttle_for_collective
-from aerobat.plants.betaflight.sitl_table import load_table
-from aerobat.plants.betaflight.translate import translate
-from aerobat.plants.betaflight.tune import (
+from aerobat.firmware.betaflight.settings import load_settings
+from aerobat.firmware.betaflight.sitl_table import load_table
+from aerobat.firmware.betaflight.translate import translate
+from aerobat.firmware.betaflight.tune import (
     TuneError,
     load_tune,
     parse_cli,
     read_blackbox_headers,
     tune_from_blackbox_header,
 )
+from aerobat.plants import PlantChoice
+from aerobat.plants.betaflight.params import Airframe, BetaflightParams
+from aerobat.plants.betaflight.pilot import StickMap, stick_for_rate, throttle_for_collective
 
 DATA = Path("/work/shared/data")
 DIFF = DATA / "betaflight-configs" / "tii-racing-kakuteh7-4.3.1-diff.txt"

@@ -10,11 +10,11 @@ import pytest
 
 from aerobat.cli import main
 from aerobat.core.design import design
-from aerobat.plants.betaflight.configure import AtRestStepper
+from aerobat.firmware.betaflight.configure import AtRestStepper
+from aerobat.firmware.betaflight.sitl import SitlProcess
+from aerobat.firmware.betaflight.tune import load_tune
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.plant import BetaflightPlant
-from aerobat.plants.betaflight.sitl import SitlProcess
-from aerobat.plants.betaflight.tune import load_tune
 from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel
 from aerobat.quadrotor.vehicle import fpv5
@@ -98,7 +98,7 @@ def test_a_crafted_header_never_reaches_the_firmware(firmware: tuple[Path, Path]
     import time
 
     from aerobat.errors import ConfigError
-    from aerobat.plants.betaflight.sitl_table import load_table
+    from aerobat.firmware.betaflight.sitl_table import load_table
 
     binary, eeprom = firmware
     payload = "\x7f" * 19 + "set p_roll = 123"
@@ -152,9 +152,9 @@ def test_a_resumed_session_flies_the_stored_tune(firmware: tuple[Path, Path], tm
 def test_settings_that_would_not_arm_get_a_clear_message(firmware: tuple[Path, Path]) -> None:
     import dataclasses
 
-    from aerobat.plants.betaflight.configure import check_arms
-    from aerobat.plants.betaflight.errors import ConfigureFailed
-    from aerobat.plants.betaflight.firmware_settings import load_settings
+    from aerobat.firmware.betaflight.configure import check_arms
+    from aerobat.firmware.betaflight.errors import ConfigureFailed
+    from aerobat.firmware.betaflight.settings import load_settings
 
     binary, eeprom = firmware
     settings = load_settings()
@@ -169,8 +169,8 @@ def test_settings_that_would_not_arm_get_a_clear_message(firmware: tuple[Path, P
 def test_the_shipped_settings_table_is_what_the_built_sitl_accepts(firmware: tuple[Path, Path]) -> None:
     import json
 
-    from aerobat.plants.betaflight.sitl_table import SITL_TABLE_PATH
-    from aerobat.plants.betaflight.table_reader import read_table
+    from aerobat.firmware.betaflight.sitl_table import SITL_TABLE_PATH
+    from aerobat.firmware.betaflight.table_reader import read_table
 
     shipped = json.loads(SITL_TABLE_PATH.read_text())
     read = read_table(firmware[0])

@@ -17,11 +17,11 @@ import tomli_w
 
 from aerobat.cli import main
 from aerobat.errors import ConfigError
-from aerobat.plants.betaflight.firmware_settings import load_settings
+from aerobat.firmware.betaflight.settings import load_settings
+from aerobat.firmware.betaflight.sitl_table import load_table
+from aerobat.firmware.betaflight.translate import translate
+from aerobat.firmware.betaflight.tune import TuneError, load_tune, parse_cli, tune_from_blackbox_header
 from aerobat.plants.betaflight.params import load_betaflight
-from aerobat.plants.betaflight.sitl_table import load_table
-from aerobat.plants.betaflight.translate import translate
-from aerobat.plants.betaflight.tune import TuneError, load_tune, parse_cli, tune_from_blackbox_header
 
 HEADER = (b"H Product:Blackbox flight data recorder by Nicholas Sherlock\n"
           b"H Firmware revision:Betaflight 4.2.9 (e097f4ab7) STM32F7X2\n"
@@ -142,7 +142,7 @@ def test_features_are_sent_as_the_firmware_reads_them() -> None:
 
 def test_the_last_check_before_the_cli_refuses_what_the_firmware_would_change() -> None:
     """Whatever made the settings, configuring refuses a value the build does not take as written."""
-    from aerobat.plants.betaflight.configure import check_commands
+    from aerobat.firmware.betaflight.configure import check_commands
 
     settings = load_settings()
     check_commands(settings)  # the shipped settings pass
@@ -197,7 +197,7 @@ def test_lines_end_where_the_firmwares_cli_ends_them(tmp_path: Path) -> None:
 
 def test_a_file_larger_than_any_tune_is_refused_at_once(tmp_path: Path) -> None:
     """Found by the tunes fuzz phase: a 16 MB diff took 9 s and 500 MB; a header of 500,000 lines 4 s."""
-    from aerobat.plants.betaflight.tune import MAX_CLI_BYTES, MAX_HEADER_LINES
+    from aerobat.firmware.betaflight.tune import MAX_CLI_BYTES, MAX_HEADER_LINES
 
     big = tmp_path / "big.txt"
     big.write_bytes(V460.encode() + b"set p_roll = 45\n" * (MAX_CLI_BYTES // 16 + 1))

@@ -16,7 +16,7 @@ from aerobat.cli import main
 from aerobat.errors import ConfigError
 from aerobat.experiments.log_replay import replay_log
 from aerobat.experiments.log_whatif import tune_differences, what_if
-from aerobat.plants.betaflight.tune import TuneError, load_tune, with_settings
+from aerobat.firmware.betaflight.tune import TuneError, load_tune, with_settings
 from aerobat.quadrotor.log_analysis import estimate_step_response
 
 SHARED = Path(__file__).resolve().parents[3].parent / "shared" / "data"

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from aerobat.errors import ConfigError
+from aerobat.firmware.betaflight.settings import load_settings
 from aerobat.plants import PLANTS, PlantChoice
-from aerobat.plants.betaflight.firmware_settings import load_settings
 from aerobat.plants.betaflight.params import Airframe, BetaflightParams, load_betaflight, save_betaflight
 from aerobat.plants.betaflight.physics import (
     A_GROUND,

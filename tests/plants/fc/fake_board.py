@@ -8,7 +8,7 @@ import struct
 import threading
 import tty
 
-from aerobat.plants.betaflight.msp import crc8_dvb_s2
+from aerobat.firmware.betaflight.msp import crc8_dvb_s2
 
 
 def _response(command: int, payload: bytes) -> bytes:

@@ -20,7 +20,7 @@ from fake_board import FakeBoard  # noqa: E402
 from aerobat.core.design import design  # noqa: E402
 from aerobat.core.plant import TrialStatus  # noqa: E402
 from aerobat.errors import ConfigError  # noqa: E402
-from aerobat.plants.betaflight.msp import (  # noqa: E402
+from aerobat.firmware.betaflight.msp import (  # noqa: E402
     FEATURE_RX_MSP,
     MSP_BATTERY_STATE,
     MSP_FAILSAFE_CONFIG,

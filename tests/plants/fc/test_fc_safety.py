@@ -5,8 +5,7 @@ from __future__ import annotations
 import pytest
 
 from aerobat.errors import ConfigError
-from aerobat.plants.betaflight.firmware_settings import ModeRange
-from aerobat.plants.betaflight.msp import (
+from aerobat.firmware.betaflight.msp import (
     FEATURE_RX_MSP,
     Battery,
     BatteryAlert,
@@ -14,6 +13,7 @@ from aerobat.plants.betaflight.msp import (
     StatusEx,
     decode_arming_disable_flags,
 )
+from aerobat.firmware.betaflight.settings import ModeRange
 from aerobat.plants.fc import SafetyLimits, SafetyMonitor, StopReason, configuration_problems, preflight
 
 LIMITS = SafetyLimits()

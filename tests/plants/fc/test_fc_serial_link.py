@@ -16,8 +16,8 @@ from fake_board import FakeBoard
 pytest.importorskip("serial", reason="pyserial is not installed (pip install 'aerobat[fc]')")
 
 from aerobat.errors import ConfigError  # noqa: E402
-from aerobat.plants.betaflight.errors import LinkClosed  # noqa: E402
-from aerobat.plants.betaflight.msp import (  # noqa: E402
+from aerobat.firmware.betaflight.errors import LinkClosed  # noqa: E402
+from aerobat.firmware.betaflight.msp import (  # noqa: E402
     MSP_API_VERSION,
     MSP_BATTERY_STATE,
     MSP_SET_RAW_RC,

@@ -18,7 +18,7 @@ pytestmark = pytest.mark.xdist_group("real_time")  # flights on the wall clock: 
 
 from fake_board import FakeBoard  # noqa: E402
 
-from aerobat.plants.betaflight.msp import (  # noqa: E402
+from aerobat.firmware.betaflight.msp import (  # noqa: E402
     MSP_BATTERY_STATE,
     MSP_SET_RAW_RC,
     MSP_STATUS_EX,

@@ -2,5 +2,6 @@
 
 from aerobat.plants.arena.arena import Arena
 from aerobat.plants.arena.params import ArenaParams, load_arena, save_arena
+from aerobat.plants.arena.spec import SPEC
 
-__all__ = ["Arena", "ArenaParams", "load_arena", "save_arena"]
+__all__ = ["SPEC", "Arena", "ArenaParams", "load_arena", "save_arena"]

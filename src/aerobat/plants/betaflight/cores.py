@@ -19,7 +19,7 @@ import os
 import threading
 from dataclasses import dataclass, field
 
-from aerobat.plants.betaflight.build import default_cache_dir
+from aerobat.firmware.betaflight.build import default_cache_dir
 
 __all__ = ["CorePair", "claim_core_pair"]
 

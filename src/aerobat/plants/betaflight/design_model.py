@@ -3,7 +3,7 @@
 :func:`firmware_config` reads the values the design model needs
 (:data:`aerobat.quadrotor.firmware.config.READ`) from the firmware's resolved configuration:
 Betaflight 4.6's defaults (the build's own table), aerobat's ``settings.toml`` and, when the
-plant flies a pilot's tune, the tune as :func:`.translate.translate` applies it.
+plant flies a pilot's tune, the tune as :func:`aerobat.firmware.betaflight.translate.translate` applies it.
 :func:`firmware_design_model` builds the :class:`~aerobat.quadrotor.firmware.FirmwareModel`:
 
 * the firmware as configured;
@@ -26,7 +26,7 @@ import math
 from typing import Any
 
 from aerobat.config import dataclass_to_table
-from aerobat.plants.betaflight.firmware_settings import BetaflightSettings, load_settings
+from aerobat.firmware.betaflight.settings import BetaflightSettings, load_settings
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.pilot import StickMap
 from aerobat.quadrotor.firmware import Fidelity, FirmwareConfig, FirmwareModel
@@ -41,7 +41,7 @@ def plant_settings(params: BetaflightParams) -> BetaflightSettings:
     yaw the way the airframe's propellers turn."""
     settings = load_settings()
     if params.tune is not None:
-        from aerobat.plants.betaflight.translate import translate
+        from aerobat.firmware.betaflight.translate import translate
 
         settings = settings.with_tune(translate(params.tune))
     return settings.with_props(params.airframe.props_out)

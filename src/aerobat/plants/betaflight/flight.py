@@ -1,6 +1,6 @@
 """One flight: a firmware process, the physical world around it, the radio and motion capture.
 
-:class:`Flight` owns a fresh :class:`~.sitl.SitlProcess` and steps it in lockstep with
+:class:`Flight` owns a fresh :class:`~aerobat.firmware.betaflight.sitl.SitlProcess` and steps it in lockstep with
 :func:`.physics.step`: one state packet out, one motor packet back, one gyro period of physics.
 Time advances in radio frames: :meth:`Flight.frame` takes the channels the ground sends for one
 frame period; the radio drops the frame with the configured probability (seeded) or delivers it
@@ -29,6 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from aerobat.errors import ConfigError
+from aerobat.firmware.betaflight.packets import MOTOR_STRUCT, RC_STRUCT, Exchange, SpinPolicy
+from aerobat.firmware.betaflight.shm import SpinChoices
+from aerobat.firmware.betaflight.sitl import SitlProcess
 from aerobat.plants.betaflight import frames as fr
 from aerobat.plants.betaflight.cores import CorePair, claim_core_pair
 from aerobat.plants.betaflight.frames import AnglePilot, FramesEnd, FramesRun, Mode, ProgramPilot, Radio, Until
@@ -42,7 +45,6 @@ from aerobat.plants.betaflight.lockstep import (
     RESUME_STEP,
     SEND_FAILED,
 )
-from aerobat.plants.betaflight.packets import MOTOR_STRUCT, RC_STRUCT, Exchange, SpinPolicy
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import (
     A_GROUND,
@@ -54,8 +56,6 @@ from aerobat.plants.betaflight.physics import (
     ground_state,
     prime,
 )
-from aerobat.plants.betaflight.shm import SpinChoices
-from aerobat.plants.betaflight.sitl import SitlProcess
 from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose
 from aerobat.quadrotor.dynamics import N_STATE
 
@@ -338,7 +338,7 @@ class Flight:
         flight-volume check around the start (``check``: the floor or a motion-capture sample
         outside ``params.volume`` ends the run) and the stop condition ``until``.
 
-        Raises :class:`~.errors.FirmwareNotResponding` (the watchdog) and :class:`NonFinite`.
+        Raises :class:`~aerobat.firmware.betaflight.errors.FirmwareNotResponding` (the watchdog) and :class:`NonFinite`.
         """
         steps = self.frame_steps if steps is None else int(steps)
         if steps < 1 or frames < 0:

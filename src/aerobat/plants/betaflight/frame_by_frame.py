@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from aerobat.firmware.betaflight.rc import RC_MIN_US, stick_to_us
 from aerobat.plants.betaflight.frames import (
     AnglePilot,
     FeedbackLaw,
@@ -27,7 +28,6 @@ from aerobat.plants.betaflight.frames import (
     Until,
 )
 from aerobat.plants.betaflight.pilot import angle_sticks, program_sticks
-from aerobat.plants.betaflight.rc import RC_MIN_US, stick_to_us
 from aerobat.plants.world_params import Volume
 from aerobat.quadrotor.dynamics import quaternion_from_rotation_vector, quaternion_multiply
 from aerobat.quadrotor.feedback import apply_feedback, relay_deviation

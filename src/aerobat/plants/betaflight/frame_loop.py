@@ -32,6 +32,7 @@ import numba as nb
 import numpy as np
 from numba.core import types
 
+from aerobat.firmware.betaflight.packets import RC_STRUCT
 from aerobat.plants.betaflight.frame_noise import ALL, begin_draws, draw_noise
 from aerobat.plants.betaflight.frames import (
     CRASH_FLOOR,
@@ -82,7 +83,6 @@ from aerobat.plants.betaflight.frames import (
 )
 from aerobat.plants.betaflight.lockstep import DONE, IO_MOCAP_USED, SEND_FAILED, run_steps
 from aerobat.plants.betaflight.lockstep_shm import run_steps_shm
-from aerobat.plants.betaflight.packets import RC_STRUCT
 from aerobat.plants.betaflight.physics import C_CONTACT
 from aerobat.plants.betaflight.pilot import angle_sticks, program_sticks
 from aerobat.plants.lab_kernels import estimate_pose

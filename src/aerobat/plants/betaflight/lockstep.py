@@ -1,23 +1,24 @@
 """The lockstep exchange and the physics in one compiled loop: the steps of a frame in one call.
 
-:func:`run_steps` does, step after step, what a Python loop would — sample motion capture, send
-the state packet, receive the firmware's motor packet, advance the physics one gyro period
-(:func:`.physics.step`) — for a run of steps in which no RC frame is due, calling the C
-library's ``send`` and ``recv`` directly on the :class:`~.sitl.SitlProcess`'s UDP sockets. With
-an output delay of a step or more the physics runs between the send and the receive, while the
-firmware works (:func:`.physics.advance`). The frame loop (:mod:`.frame_loop`) calls it between
-RC frames; it returns whenever the exchange does not complete at once:
+:func:`run_steps` does, step after step, what a Python loop would — sample motion capture, send the
+state packet, receive the firmware's motor packet, advance the physics one gyro period
+(:func:`.physics.step`) — for a run of steps in which no RC frame is due, calling the C library's
+``send`` and ``recv`` directly on the UDP sockets of a
+:class:`~aerobat.firmware.betaflight.sitl.SitlProcess`. With an output delay of a step or more the
+physics runs between the send and the receive, while the firmware works (:func:`.physics.advance`).
+The frame loop (:mod:`.frame_loop`) calls it between RC frames; it returns whenever the exchange
+does not complete at once:
 
 * ``recv`` returns after the motor socket's kernel receive timeout (``SO_RCVTIMEO``, 50 ms) at
   the latest: the loop stops with :data:`NO_ANSWER` and the caller finishes that step's
-  exchange with the process's watchdog (:meth:`.sitl.SitlProcess.receive_into`), which raises
+  exchange with the process's watchdog (:meth:`aerobat.firmware.betaflight.sitl.SitlProcess.receive_into`), which raises
   when the firmware is gone or silent for the step timeout, and calls again with ``resume =
   io[IO_RESUME]``. No read waits without a timeout.
 * A failed ``send`` stops it with :data:`SEND_FAILED` (the caller retries in Python, which
   raises the right error); a non-finite state with :data:`NON_FINITE`.
 
 The firmware→driver packet is received whole into one byte block of
-:data:`~.packets.MOTOR_STRUCT`'s size (its layout is defined there only); the motor commands
+:data:`~aerobat.firmware.betaflight.packets.MOTOR_STRUCT`'s size (its layout is defined there only); the motor commands
 are its first four floats. The steps are the same arithmetic as the Python loop, so a seed
 repeats a flight bit for bit whichever path flies it.
 """

@@ -1,4 +1,4 @@
-"""The compiled lockstep loop over the shared-memory exchange (:mod:`.shm`) instead of UDP.
+"""The compiled lockstep loop over the shared-memory exchange (:mod:`aerobat.firmware.betaflight.shm`) instead of UDP.
 
 :func:`run_steps_shm` is :func:`.lockstep.run_steps` with each step's exchange through the
 region's C functions (``shm_exchange.c``: publish the state packet, spin then futex-wait for the
@@ -15,6 +15,7 @@ from __future__ import annotations
 import numba as nb
 from numba.core import types
 
+from aerobat.firmware.betaflight.shm import library
 from aerobat.plants.betaflight.frame_noise import ALL, draw_noise, sensor_draws_through
 from aerobat.plants.betaflight.frames import HELD_ROW, S_DRAW_TOTAL, S_DRAWN, S_HELD
 from aerobat.plants.betaflight.lockstep import (
@@ -30,7 +31,6 @@ from aerobat.plants.betaflight.lockstep import (
     SEND_FAILED,
 )
 from aerobat.plants.betaflight.physics import C_DELAY, advance, step, store_motors
-from aerobat.plants.betaflight.shm import library
 from aerobat.plants.lab_kernels import mocap_sample
 
 __all__ = ["run_steps_shm"]

@@ -7,7 +7,7 @@ omitted. Where the world around the vehicle is the same as the arena's, its sect
 Betaflight plant's own. Sources and reasons: ``docs/plants.md`` (Betaflight).
 
 The firmware's own configuration (PIDs, rates, modes) is not here: it is the
-versioned ``settings.toml`` applied through Betaflight's CLI (:mod:`.firmware_settings`).
+versioned ``settings.toml`` applied through Betaflight's CLI (:mod:`aerobat.firmware.betaflight.settings`).
 """
 
 from __future__ import annotations
@@ -28,8 +28,8 @@ from aerobat.config import (
     write_file,
 )
 from aerobat.core.bounds import Interval, Items, OneOf, bounded, validate
-from aerobat.plants.betaflight.packets import Exchange, SpinPolicy
-from aerobat.plants.betaflight.tune import Tune
+from aerobat.firmware.betaflight.packets import Exchange, SpinPolicy
+from aerobat.firmware.betaflight.tune import Tune
 from aerobat.plants.world_params import Aerodynamics, Disturbances, Drift, MotionCapture, Volume
 from aerobat.quadrotor.xframe import Airframe
 
@@ -153,7 +153,7 @@ class Firmware:
     step_timeout_s : wall time a lockstep step may wait for the firmware before it is declared
         hung (killed; the trial is lost, the next one starts a fresh firmware).
     exchange : how the per-step packets travel: ``"shm"`` (shared memory,
-        :mod:`aerobat.plants.betaflight.shm`; 50-60× real time for the 3D triple flip on this
+        :mod:`aerobat.firmware.betaflight.shm`; 50-60× real time for the 3D triple flip on this
         project's 2-core machine) or ``"udp"`` (loopback sockets; 5-6×). The same flight bit for bit.
     spin_us : over shared memory, the longest the firmware and the driver each busy-wait for
         the other before sleeping on a futex (adaptive below it). With it an instance keeps two
@@ -208,7 +208,8 @@ class BetaflightParams:
     pilot: Pilot = field(default_factory=Pilot)
     firmware: Firmware = field(default_factory=Firmware)
     tune: Tune | None = None
-    """A real quad's configuration applied on top of ``settings.toml`` (:func:`.tune.load_tune`); None: none."""
+    """A real quad's configuration applied on top of ``settings.toml``
+    (:func:`aerobat.firmware.betaflight.tune.load_tune`); None: none."""
 
     def replace(self, **sections: Any) -> BetaflightParams:
         """Copy with whole sections or ``section__field=value`` changes."""

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from aerobat.plants.betaflight.firmware_settings import BetaflightSettings
+from aerobat.firmware.betaflight.settings import BetaflightSettings
 from aerobat.plants.betaflight.params import Airframe
 from aerobat.quadrotor.firmware.sticks import (
     L_ANGLE_LIMIT,

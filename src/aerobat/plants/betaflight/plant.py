@@ -34,16 +34,17 @@ from typing import Any
 
 import numpy as np
 
+from aerobat.config import check_type
 from aerobat.core.plant import Signals, Trial, TrialStatus
-from aerobat.plants.betaflight.errors import FirmwareNotResponding
-from aerobat.plants.betaflight.firmware_settings import BetaflightSettings, load_settings
+from aerobat.firmware.betaflight.errors import FirmwareNotResponding
+from aerobat.firmware.betaflight.packets import MOTOR_LOG_ORDER
+from aerobat.firmware.betaflight.rc import RC_MIN_US, stick_to_us
+from aerobat.firmware.betaflight.settings import BetaflightSettings, load_settings
 from aerobat.plants.betaflight.flight import N_PACKET, Flight, NonFinite
 from aerobat.plants.betaflight.frames import AnglePilot, FeedbackLaw, FramesEnd, FramesRun, Mode, ProgramPilot, Until
-from aerobat.plants.betaflight.packets import MOTOR_LOG_ORDER
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import airframe_plant
 from aerobat.plants.betaflight.pilot import L_CLIMB, StickMap
-from aerobat.plants.betaflight.rc import RC_MIN_US, stick_to_us
 from aerobat.plants.mocap import estimate_final_state, measured_states
 from aerobat.plants.plant_state import StateLayout
 from aerobat.quadrotor.dynamics import N_STATE
@@ -95,13 +96,16 @@ class BetaflightPlant:
     params : the plant's settings (:class:`~.params.BetaflightParams`).
     seed : seeds the plant's generator (noise, wind, radio losses, motor spread per trial).
     binary, eeprom : the SITL binary and configured eeprom (default: built and configured on
-        first use, cached: :func:`.build.ensure_sitl`, :func:`.configure.ensure_eeprom`).
+        first use, cached: :func:`aerobat.firmware.betaflight.build.ensure_sitl`,
+        :func:`aerobat.firmware.betaflight.configure.ensure_eeprom`).
     settings : the firmware's settings (default: the packaged ``settings.toml``).
     feedback : what the offboard pilot mixes into the program's sticks (:mod:`aerobat.quadrotor.feedback`;
         default the best scheme measured, ``tracking``; ``"none"`` streams the program as it is).
         Betaflight runs no program, so the law runs in the pilot, at the radio's rate, on motion capture: the
         attitude is the latest motion-capture sample carried forward by the commanded rates over its age and the
         radio's latency (the pilot sees no gyro).
+    design_model : the vehicle the programs were designed on, if not ``config`` (a vehicle identified from
+        this plant): the feedback tracks that vehicle's flight of each program.
     """
 
     name = "betaflight"
@@ -109,11 +113,14 @@ class BetaflightPlant:
     def __init__(self, config: VehicleConfig, params: BetaflightParams | None = None, *, seed: int = 0,
                  binary: Path | None = None, eeprom: Path | None = None,
                  settings: BetaflightSettings | None = None,
-                 feedback: Feedback | FeedbackScheme | str | None = None) -> None:
-        from aerobat.plants.betaflight.build import ensure_sitl
-        from aerobat.plants.betaflight.configure import ensure_eeprom
+                 feedback: Feedback | FeedbackScheme | str | None = None,
+                 design_model: VehicleConfig | None = None) -> None:
+        from aerobat.firmware.betaflight.build import ensure_sitl
+        from aerobat.firmware.betaflight.configure import ensure_eeprom
 
         self.config = config
+        self.design_model = config if design_model is None else check_type(
+            "design_model", design_model, VehicleConfig, "a VehicleConfig or None")
         self.params = params or BetaflightParams()
         self.seed = seed
         self.rng = np.random.default_rng(seed)
@@ -122,7 +129,7 @@ class BetaflightPlant:
         self.settings = settings or load_settings()
         self.tune_report = None
         if self.params.tune is not None and self.settings.tune is None:
-            from aerobat.plants.betaflight.translate import translate
+            from aerobat.firmware.betaflight.translate import translate
 
             self.tune_report = translate(self.params.tune)
             self.settings = self.settings.with_tune(self.tune_report)
@@ -400,7 +407,7 @@ class BetaflightPlant:
 
     def _feedback_law(self, compiled: CompiledProgram, start_time: float) -> FeedbackLaw:
         """The feedback law as the offboard pilot runs it, around the nominal trajectory of ``compiled``."""
-        nominal = simulate(compiled, self.config, record=True)
+        nominal = simulate(compiled, self.design_model, record=True)
         reference = reference_from_trajectory(nominal.times_s, nominal.states, self.feedback.gains.reference_rate_hz)
         state, _ = onboard_state()
         return FeedbackLaw(self._fb_vector, reference.samples, reference.dt_s, state, compiled.duration_s, start_time,

@@ -10,8 +10,8 @@ each frame.
 The sticks come as Betaflight logs them (:func:`channels_from_commands`): ``rcCommand`` roll,
 pitch and yaw are ±500 after the deadband (yaw negated: a right stick is a negative
 ``rcCommand[2]``), so the pulse is 1500 ± (|rcCommand| + deadband); the throttle is the
-firmware's throttle after its curve, which :meth:`.firmware_settings.BetaflightSettings.throttle_us_for_motor`
-inverts to a pulse.
+firmware's throttle after its curve, which
+:meth:`aerobat.firmware.betaflight.settings.BetaflightSettings.throttle_us_for_motor` inverts to a pulse.
 """
 
 from __future__ import annotations
@@ -24,7 +24,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from aerobat.errors import ConfigError
-from aerobat.plants.betaflight.firmware_settings import BetaflightSettings
+from aerobat.firmware.betaflight.packets import MOTOR_LOG_ORDER
+from aerobat.firmware.betaflight.rc import RC_MAX_US, RC_MID_US, RC_MIN_US
+from aerobat.firmware.betaflight.settings import BetaflightSettings
 from aerobat.plants.betaflight.flight import (
     N_SAMPLE,
     SAMPLE_MOTORS,
@@ -33,9 +35,7 @@ from aerobat.plants.betaflight.flight import (
     SAMPLE_SETPOINT,
     SAMPLE_TIME,
 )
-from aerobat.plants.betaflight.packets import MOTOR_LOG_ORDER
 from aerobat.plants.betaflight.physics import A_FMAX, airframe_plant
-from aerobat.plants.betaflight.rc import RC_MAX_US, RC_MID_US, RC_MIN_US
 
 if TYPE_CHECKING:
     from aerobat.plants.betaflight.plant import BetaflightPlant

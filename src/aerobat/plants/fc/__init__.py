@@ -10,8 +10,6 @@ The modules, from the plant down:
   monitor at every frame; frame timing and acknowledgements kept for the trial's report.
 * :mod:`.world`, :mod:`.simulated_source` — the rehearsal: the SITL and the physics in a process
   of their own paced to the wall clock, and its motion capture over UDP.
-* :mod:`.serial_link` — :class:`SerialTransport`, the board's MSP port with pyserial (exclusive, no
-  DTR/RTS edge, stale input dropped, a vanished port raises ``LinkClosed``).
 * :mod:`.pty_bridge` — :class:`PtyBridge`, the SITL's TCP UART as a pseudo-terminal, so the
   rehearsal runs the serial code path.
 * :mod:`.pose_source` — :class:`PoseSource` and :class:`MotionCaptureSource` (libmotioncapture:
@@ -20,19 +18,23 @@ The modules, from the plant down:
   :class:`SafetyMonitor`: kill, geofence, motion-capture loss, link loss and low battery, each a
   :class:`StopReason`.
 
-MSP's battery state, feature and mode-range queries and ``MSP_SET_RAW_RC`` are in
-:mod:`aerobat.plants.betaflight.msp`. This package imports no plant at import time (the world
+The firmware's side (MSP with its battery state, feature and mode-range queries and ``MSP_SET_RAW_RC``,
+the serial port as a transport, RC channels, settings, tunes) is the library :mod:`aerobat.firmware.betaflight`
+(:class:`SerialTransport` is re-exported here). This package imports no plant at import time (the world
 process starts from :mod:`.world`); ``from aerobat.plants.fc.plant import FlightControllerPlant``.
 """
 
 from __future__ import annotations
 
+from aerobat.firmware.betaflight.serial_link import DEFAULT_BAUDRATE_BD, SerialTransport
+
 from .pose_source import MOTION_CAPTURE_SYSTEMS, MotionCaptureSource, Pose, PoseSource
 from .pty_bridge import PtyBridge
 from .safety import Preflight, SafetyLimits, SafetyMonitor, StopReason, configuration_problems, preflight
-from .serial_link import DEFAULT_BAUDRATE_BD, SerialTransport
+from .spec import SPEC
 
 __all__ = [
+    "SPEC",
     "DEFAULT_BAUDRATE_BD",
     "MOTION_CAPTURE_SYSTEMS",
     "MotionCaptureSource",

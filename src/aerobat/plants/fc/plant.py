@@ -40,13 +40,14 @@ import numpy as np
 
 from aerobat.core.plant import Trial, TrialStatus
 from aerobat.errors import ConfigError
-from aerobat.plants.betaflight.errors import LinkClosed, LinkTimeout, MspError
-from aerobat.plants.betaflight.firmware_settings import BetaflightSettings, load_settings
-from aerobat.plants.betaflight.msp import Battery, FailsafeConfig, MspClient, MspModeRange, StatusEx
+from aerobat.firmware.betaflight.errors import LinkClosed, LinkTimeout, MspError
+from aerobat.firmware.betaflight.msp import Battery, FailsafeConfig, MspClient, MspModeRange, StatusEx
+from aerobat.firmware.betaflight.rc import RC_MIN_US
+from aerobat.firmware.betaflight.serial_link import SerialTransport
+from aerobat.firmware.betaflight.settings import BetaflightSettings, load_settings
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.pilot import program_sticks
 from aerobat.plants.betaflight.plant import BetaflightPlant
-from aerobat.plants.betaflight.rc import RC_MIN_US
 from aerobat.quadrotor.firmware.sticks import frames_of
 from aerobat.quadrotor.program import CompiledProgram, Program
 from aerobat.quadrotor.vehicle import VehicleConfig
@@ -62,7 +63,6 @@ from .safety import (
     failsafe_problems,
     preflight,
 )
-from .serial_link import SerialTransport
 from .settings import FcSettings, LinkKind, fc_params
 from .simulated_source import SimulatedSource
 from .wall_clock import SafetyStop, WallClockFlight
@@ -194,6 +194,7 @@ class FlightControllerPlant(BetaflightPlant):
         the program's frames disarmed at the radio rate (their timing reported), then ends ``aborted``
         ("dry run"): nothing is measured.
     binary, eeprom : a rehearsal's firmware (built and configured on first use).
+    design_model : the vehicle the programs were designed on, if not ``config``: the feedback tracks its flight.
     """
 
     name = "fc"
@@ -201,10 +202,11 @@ class FlightControllerPlant(BetaflightPlant):
 
     def __init__(self, config: VehicleConfig, connection: Connection, params: BetaflightParams | None = None, *,
                  limits: SafetyLimits | None = None, seed: int = 0, settings: BetaflightSettings | None = None,
-                 feedback: Any = "none", dry_run: bool = False, start_m: Any = None, **firmware: Any) -> None:
+                 feedback: Any = "none", dry_run: bool = False, start_m: Any = None,
+                 design_model: VehicleConfig | None = None, **firmware: Any) -> None:
         settings = settings or load_settings().with_values(MSP_RC_SETTINGS, "RC frames over MSP")
         super().__init__(config, params if params is not None else fc_params(), seed=seed, settings=settings,
-                         feedback=feedback, **firmware)
+                         feedback=feedback, design_model=design_model, **firmware)
         self.connection = connection
         self.dry_run = dry_run
         if start_m is not None:
@@ -393,12 +395,12 @@ class FlightControllerPlant(BetaflightPlant):
 
 
 def build_fc_plant(config: VehicleConfig, settings: FcSettings, *, seed: int = 0,
-                   feedback: Any = None) -> FlightControllerPlant:
+                   feedback: Any = None, design_model: VehicleConfig | None = None) -> FlightControllerPlant:
     """The plant ``--plant fc --fc FILE`` flies: a rehearsal, or a board and the room's motion capture."""
     feedback = "none" if feedback is None else feedback
     if settings.link.kind is LinkKind.REHEARSAL:
         return FlightControllerPlant(config, RehearsalConnection({}), settings.betaflight, seed=seed,
-                                     feedback=feedback, dry_run=settings.link.dry_run)
+                                     feedback=feedback, dry_run=settings.link.dry_run, design_model=design_model)
     connection = BoardConnection(settings.link.port, None, settings.link.baudrate_bd)
     connection.check()  # the port first: a missing board is refused before the motion capture is asked
     mocap = settings.mocap
@@ -407,6 +409,7 @@ def build_fc_plant(config: VehicleConfig, settings: FcSettings, *, seed: int = 0
     # a board runs its own firmware: no SITL is built or configured for it
     return FlightControllerPlant(config, connection, settings.betaflight, limits=settings.limits, seed=seed,
                                  feedback=feedback, dry_run=settings.link.dry_run, start_m=settings.start_m,
+                                 design_model=design_model,
                                  binary=Path(os.devnull), eeprom=Path(os.devnull))
 
 

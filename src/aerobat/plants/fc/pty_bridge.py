@@ -2,13 +2,13 @@
 
 The Betaflight SITL serves its UARTs over TCP; a real flight controller is a serial device.
 :class:`PtyBridge` makes the first look like the second, so the code that will talk to a real
-board (:class:`~.serial_link.SerialTransport`, pyserial, termios) is the code a rehearsal runs:
-it opens a pseudo-terminal in raw mode (binary MSP passes unchanged), connects to the TCP port
+board (:class:`~aerobat.firmware.betaflight.serial_link.SerialTransport`, pyserial, termios) is the code a
+rehearsal runs: it opens a pseudo-terminal in raw mode (binary MSP passes unchanged), connects to the TCP port
 and copies bytes both ways on a background thread, with every wait bounded.
 
 When the TCP side closes (the firmware exited), the bridge closes the terminal too, so a reader
 of the device sees what it would see when a USB board disappears: the port fails
-(:class:`~aerobat.plants.betaflight.errors.LinkClosed` through the transport). :meth:`PtyBridge.close`
+(:class:`~aerobat.firmware.betaflight.errors.LinkClosed` through the transport). :meth:`PtyBridge.close`
 does the same on purpose, which is how the tests cut the link.
 """
 
@@ -21,7 +21,7 @@ import threading
 import time
 import tty
 
-from aerobat.plants.betaflight.errors import LinkTimeout
+from aerobat.firmware.betaflight.errors import LinkTimeout
 
 __all__ = ["PtyBridge"]
 

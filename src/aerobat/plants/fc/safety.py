@@ -24,8 +24,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.core.bounds import Interval, Span, bounded, validate
-from aerobat.plants.betaflight.firmware_settings import ModeRange
-from aerobat.plants.betaflight.msp import (
+from aerobat.firmware.betaflight.msp import (
     FEATURE_RX_MSP,
     Battery,
     BatteryAlert,
@@ -34,6 +33,7 @@ from aerobat.plants.betaflight.msp import (
     MspModeRange,
     StatusEx,
 )
+from aerobat.firmware.betaflight.settings import ModeRange
 from aerobat.plants.world_params import Volume
 
 __all__ = ["Preflight", "SafetyLimits", "SafetyMonitor", "StopReason", "configuration_problems", "failsafe_problems",

@@ -25,10 +25,10 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.plants.betaflight.errors import LinkClosed, LinkTimeout
+from aerobat.firmware.betaflight.errors import LinkClosed, LinkTimeout
+from aerobat.firmware.betaflight.msp import MSP_BATTERY_STATE, MSP_SET_RAW_RC, Battery, MspClient
 from aerobat.plants.betaflight.frame_by_frame import run_frames_by_frame
 from aerobat.plants.betaflight.frames import FramesRun, Mode
-from aerobat.plants.betaflight.msp import MSP_BATTERY_STATE, MSP_SET_RAW_RC, Battery, MspClient
 from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose
 from aerobat.plants.world_params import Volume
 from aerobat.quadrotor.dynamics import N_STATE
@@ -57,7 +57,7 @@ class WallClockFlight:
 
     Parameters
     ----------
-    msp : the flight controller's MSP client (on a :class:`~.serial_link.SerialTransport`).
+    msp : the flight controller's MSP client (on a :class:`~aerobat.firmware.betaflight.serial_link.SerialTransport`).
     poses : the vehicle's motion capture.
     monitor : the safety monitor (its limits, its kill).
     rate_hz : RC frames per second.

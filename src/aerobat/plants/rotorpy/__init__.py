@@ -21,8 +21,10 @@ from aerobat.plants.rotorpy.settings import (
     shipped_quad_params,
     validate_overrides,
 )
+from aerobat.plants.rotorpy.spec import SPEC
 
 __all__ = [
+    "SPEC",
     "INSTALL_HINT",
     "PAPER_RATE_GAINS_PER_S",
     "PAPER_ROTOR_THRUST_MAX_N",

@@ -33,8 +33,8 @@ from aerobat.errors import ConfigError
 from .build import ensure_sitl
 from .cli_grammar import line_problem, shown
 from .errors import BetaflightError, ConfigureFailed, FirmwareNotResponding
-from .firmware_settings import BetaflightSettings, load_settings
 from .packets import SitlState
+from .settings import BetaflightSettings, load_settings
 from .sitl import SitlProcess
 from .sitl_table import Verdict, load_table
 

@@ -1,4 +1,4 @@
-"""A serial port as a :class:`~aerobat.plants.betaflight.transport.Transport`: the flight controller's MSP port.
+"""A serial port as a :class:`~aerobat.firmware.betaflight.transport.Transport`: the flight controller's MSP port.
 
 :class:`SerialTransport` opens a port with pyserial the way a flight controller needs it:
 
@@ -12,7 +12,7 @@
 ``read(max_bytes, timeout_s)`` waits at most ``timeout_s`` for the first byte and then returns
 whatever else has arrived, so an MSP reply is not held back for the full timeout. A port that
 disappears (a USB board that reboots re-enumerates, possibly under another name) raises
-:class:`~aerobat.plants.betaflight.errors.LinkClosed`; the owner re-opens it.
+:class:`~aerobat.firmware.betaflight.errors.LinkClosed`; the owner re-opens it.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from aerobat.errors import ConfigError, MissingDependency
-from aerobat.plants.betaflight.errors import LinkClosed, LinkTimeout
+from aerobat.firmware.betaflight.errors import LinkClosed, LinkTimeout
 
 __all__ = ["DEFAULT_BAUDRATE_BD", "SerialTransport"]
 

@@ -10,7 +10,7 @@ Every tool it runs (pip, patch, make) gets SIGTERM when the thread that runs the
 (Linux ``PR_SET_PDEATHSIG``; make passes it on to its compilers): a build whose owner is
 killed stops instead of compiling on, unowned, while the next owner builds again.
 
-Run ``python -m aerobat.plants.betaflight.build [--cache-dir DIR]`` to build
+Run ``python -m aerobat.firmware.betaflight.build [--cache-dir DIR]`` to build
 with progress output.
 """
 

@@ -7,7 +7,7 @@ creates that region as a memfd (no file in ``/dev/shm``: the memory goes when th
 that maps it is gone, whichever way it ends), maps it here and hands the descriptor to the
 firmware process. The atomics and the futex calls are in ``shm_exchange.c``, compiled once with
 the host C compiler into ``<cache>/shm-<source sha256[:12]>/`` (:func:`ensure_library`) and
-called through ctypes here and from the compiled loop (:mod:`.lockstep_shm`).
+called through ctypes here and from the compiled loop (:mod:`aerobat.plants.betaflight.lockstep_shm`).
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ LIBRARY_NAME = "libaerobat_shm.so"
 _SOURCE = Path(__file__).with_name("shm_exchange.c")
 SPIN_S = 20e-6
 """The default longest spin of the driver for the firmware's answer before it sleeps on the futex [s]
-(adaptive below it): :attr:`.params.Firmware.spin_us`."""
+(adaptive below it): :attr:`aerobat.plants.betaflight.params.Firmware.spin_us`."""
 
 _OFF_DRIVER_SPIN_NS = 80  # shm_exchange.c's SHM_OFF_DRIVER_SPIN_NS
 _OFF_FIRMWARE_SPIN_NS = 136  # SHM_OFF_SPIN_NS

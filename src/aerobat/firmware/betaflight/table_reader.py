@@ -1,6 +1,6 @@
 """Read the settings a SITL build accepts from the firmware's own CLI (writes ``sitl_settings.json``).
 
-``python -m aerobat.plants.betaflight.table_reader [OUT.json]`` starts a SITL from a blank eeprom,
+``python -m aerobat.firmware.betaflight.table_reader [OUT.json]`` starts a SITL from a blank eeprom,
 takes every setting's name and section from ``dump all`` and its range or allowed values and
 default from ``get NAME`` (about half a minute), and writes the table :mod:`.sitl_table` loads.
 """

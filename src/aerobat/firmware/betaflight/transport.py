@@ -6,7 +6,7 @@ SITL's UART1, which Betaflight serves over TCP (5761 by default, per instance
 in the lockstep build).
 
 The serial transport of a real flight controller is
-:class:`aerobat.plants.fc.serial_link.SerialTransport` (pyserial): exclusive, no DTR/RTS edge
+:class:`aerobat.firmware.betaflight.serial_link.SerialTransport` (pyserial): exclusive, no DTR/RTS edge
 (some boards reset on one), stale input dropped after opening, ``read`` returning what arrived
 within its timeout, and :class:`LinkClosed` when the port disappears (``save``, ``exit`` and
 ``reboot`` reset the MCU, and the USB device re-enumerates, possibly under another name: the

@@ -13,7 +13,7 @@ encoding of :mod:`.rc`, re-exported here.
 
 from __future__ import annotations
 
-from .firmware_cli import CLI_PROMPT, CliClient
+from .cli import CLI_PROMPT, CliClient
 from .msp import (
     ARMING_DISABLE_FLAG_NAMES,
     ApiVersion,

@@ -47,7 +47,7 @@ class FirmwareUnavailable(BetaflightError):
 
 
 class CliLineRefused(ConfigError):
-    """A line :class:`~.firmware_cli.CliClient` does not send: the firmware's CLI would not run it as written
+    """A line :class:`~.cli.CliClient` does not send: the firmware's CLI would not run it as written
     (:func:`~.cli_grammar.line_problem`). A :class:`ValueError`, so a caller's bad argument reads as one."""
 
 

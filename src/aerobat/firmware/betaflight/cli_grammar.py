@@ -8,7 +8,7 @@ character before it, TAB and ``?`` complete a command name instead of being kept
 the CLI and reboots, Ctrl-L clears the screen. A line holding any of these, or more characters
 than the buffer keeps, is not the line the firmware runs (19 DELs turn ``set profile_name =
 …set p_roll = 123`` into ``set p_roll = 123``): :func:`line_problem` says what is wrong with
-such a line, and :class:`~.firmware_cli.CliClient` sends none.
+such a line, and :class:`~.cli.CliClient` sends none.
 
 ``set NAME = VALUE`` (cli/cli.c ``cliSet``) reads an integer setting with ``atoi``/``strtol``,
 which stop at the first character that is not a decimal digit: ``1e2`` is 1, ``45.9`` is 45,

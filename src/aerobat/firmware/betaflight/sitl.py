@@ -496,7 +496,7 @@ class SitlProcess:
 
     @property
     def shm_address(self) -> int | None:
-        """Address of the shared-memory region in this process (None for the UDP exchange), for :mod:`.lockstep_shm`.
+        """Address of the shared-memory region in this process (None for the UDP exchange), for a compiled loop.
 
         Valid until :meth:`close`. After a failed exchange, finish it with :meth:`exchange` or
         :meth:`receive_into`, which apply the watchdog.
@@ -505,7 +505,7 @@ class SitlProcess:
 
     @property
     def socket_fds(self) -> tuple[int, int]:
-        """(state socket, motor socket) file descriptors, for a compiled exchange (:mod:`.lockstep`).
+        """(state socket, motor socket) file descriptors, for a compiled exchange loop (the lockstep plant's).
 
         The state socket is connected to the firmware (``send``); the motor socket has a kernel
         receive timeout (``recv`` returns within it). After a failed exchange, finish it with
@@ -515,7 +515,7 @@ class SitlProcess:
 
     @property
     def rc_socket_fd(self) -> int:
-        """The RC socket's file descriptor (connected to the receiver; sends time out), for :mod:`.frame_loop`.
+        """The RC socket's file descriptor (connected to the receiver; sends time out), for a compiled frame loop.
 
         After a failed send, send the frame with :meth:`send_rc`, which raises the right error.
         """

@@ -35,7 +35,7 @@ import re
 from dataclasses import dataclass, field
 
 from .cli_grammar import parse_integer, shown
-from .firmware_settings import PINNED
+from .settings import PINNED
 from .sitl_table import SitlTable, Verdict, load_table
 from .tune import Tune, TuneError, TuneKind
 

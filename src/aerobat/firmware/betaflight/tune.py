@@ -505,7 +505,7 @@ def with_settings(tune: Tune, changes: Sequence[str]) -> Tune:
 
     A change lands in the section (master, the flown profile or rate profile) where ``tune`` sets that name,
     else in master, after everything the tune sets, so it wins. Values are checked when the tune is
-    translated (:func:`~aerobat.plants.betaflight.translate.translate`), and a refusal names the change.
+    translated (:func:`~aerobat.firmware.betaflight.translate.translate`), and a refusal names the change.
 
     Raises
     ------

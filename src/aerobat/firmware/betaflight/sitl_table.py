@@ -5,7 +5,7 @@ the SITL has no OSD, VTX, ESC telemetry, ... so the authoritative list of what *
 accepts is what its CLI reports. :func:`.table_reader.read_table` starts a SITL from a blank eeprom, takes the
 names and their section (master, PID profile, rate profile) from ``dump all`` and each one's range
 or allowed values and default from ``get NAME``. The result is shipped as ``sitl_settings.json``
-(so parsing a tune needs no firmware); ``python -m aerobat.plants.betaflight.table_reader``
+(so parsing a tune needs no firmware); ``python -m aerobat.firmware.betaflight.table_reader``
 regenerates it (:mod:`.table_reader`).
 """
 

@@ -82,7 +82,7 @@ the P, I, D, F terms per axis (roll, pitch, yaw: 12). Its layout is defined here
 MOTOR_PACKET_FLOATS = 19
 MOTOR_LOG_ORDER = (3, 0, 1, 2)
 """Packet slot of Betaflight's motors M1..M4 (rear right, front right, rear left, front left):
-the SITL's packet is front right, rear left, front left, rear right (:mod:`.physics`)."""
+the SITL's packet is front right, rear left, front left, rear right (:mod:`aerobat.plants.betaflight.physics`)."""
 MOTOR_COUNT = 4
 
 

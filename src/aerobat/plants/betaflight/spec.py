@@ -1,0 +1,71 @@
+"""The Betaflight plant's entry in the plant registry (``--plant betaflight``).
+
+Light at import: the plant, its settings and the firmware design model are imported by the functions
+that need them, so that listing plants starts no firmware and compiles nothing.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from aerobat.core.plant import Plant
+from aerobat.plants.spec import PlantSpec
+from aerobat.quadrotor.feedback import DEFAULT_SCHEME, Feedback, FeedbackScheme
+from aerobat.quadrotor.vehicle import VehicleConfig
+
+__all__ = ["SPEC", "firmware_model"]
+
+
+def _build(config: VehicleConfig, settings: Any, *, seed: int, feedback: Feedback,
+           design_model: VehicleConfig | None) -> Plant:
+    from aerobat.plants.betaflight.plant import BetaflightPlant
+
+    return BetaflightPlant(config, settings, seed=seed, feedback=feedback, design_model=design_model)
+
+
+def firmware_model(config: VehicleConfig, settings: Any) -> tuple[Any, dict[str, Any]]:
+    """The design model with this plant's flight controller (``settings``: its params) around ``config``,
+    and the model's stored form."""
+    from aerobat.plants.betaflight.design_model import firmware_design_model, model_table
+
+    model = firmware_design_model(config, settings)
+    return model, model_table(model)
+
+
+def _cores(settings: Any) -> int:
+    from aerobat.plants.betaflight.params import instance_cores
+
+    return instance_cores(settings)
+
+
+def _load(path: str | Path) -> Any:
+    from aerobat.plants.betaflight.params import load_betaflight
+
+    return load_betaflight(path)
+
+
+def _from_table(table: Any, source: str) -> Any:
+    from aerobat.config import dataclass_from_table
+    from aerobat.plants.betaflight.params import BetaflightParams
+
+    return dataclass_from_table(BetaflightParams, table, source=source)
+
+
+def _to_table(settings: Any) -> dict[str, Any]:
+    from aerobat.plants.betaflight.params import params_to_table
+
+    return params_to_table(settings)
+
+
+def _default() -> Any:
+    from aerobat.plants.betaflight.params import BetaflightParams
+
+    return BetaflightParams()
+
+
+SPEC = PlantSpec(
+    "betaflight", "a 5-inch racer flown by Betaflight 4.6's own firmware (SITL in lockstep) in the arena",
+    _build, load_settings=_load, settings_from_table=_from_table, settings_to_table=_to_table,
+    default_settings=_default, option="--betaflight", feedback=tuple(FeedbackScheme),
+    default_feedback=DEFAULT_SCHEME, cores=_cores, firmware_model=firmware_model)

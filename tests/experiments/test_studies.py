@@ -19,7 +19,8 @@ from aerobat.core.design import design
 from aerobat.errors import ConfigError
 from aerobat.experiments.execution import DaskExecutor, LocalExecutor
 from aerobat.experiments.job import Job, run_job
-from aerobat.experiments.studies import RobustnessRanges, robustness_jobs, sample_arena, summarize_robustness
+from aerobat.experiments.studies import RobustnessRanges, robustness_jobs, summarize_robustness
+from aerobat.plants.arena.sampling import sample_arena
 from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel
 from aerobat.store import Store

@@ -248,6 +248,19 @@ def _designed_on(nominal: Any) -> str:
 # ----------------------------------------------------------------- robustness
 
 
+def _sampled_plants() -> tuple[str, ...]:
+    from aerobat.plants import sampled_plants
+
+    return sampled_plants()
+
+
+def _scenarios_of(plant: str) -> tuple[str, ...]:
+    """The feedback study's scenarios the plant ``plant`` declares (``default`` first)."""
+    from aerobat.plants import PLANTS
+
+    return tuple(s.name for s in PLANTS.get(plant, source="--plant").scenarios)
+
+
 def _cmd_robustness(args: argparse.Namespace) -> int:
     from aerobat.core.rules import RuleChoice
     from aerobat.experiments.studies import RobustnessRanges, load_ranges, robustness_study
@@ -388,7 +401,8 @@ def _cmd_feedback(args: argparse.Namespace) -> int:
     from aerobat.quadrotor.feedback import Feedback
 
     schemes = parse_schemes(args.schemes)
-    scenarios = parse_scenarios(args.scenarios, plant=args.plant)
+    scenarios = (parse_scenarios(args.scenarios, plant=args.plant) if args.scenarios is not None
+                 else list(_scenarios_of(args.plant)))
     plant = plant_choice_from_args(args)
     plant.spec.check_available()
     for scheme in schemes:
@@ -462,8 +476,9 @@ def register(sub: Any) -> None:
                      help="position tolerance of success [m]")
     rob.add_argument("--ranges", metavar="FILE.toml",
                      help="sampling ranges, a [ranges] table (default: docs/plants.md's)")
-    rob.add_argument("--plant", choices=("arena", "betaflight"), default="arena",
-                     help="whose true vehicle is sampled (docs/plants.md says what varies)")
+    rob.add_argument("--plant", choices=_sampled_plants(), default="arena",
+                     help="whose true vehicle is sampled: a plant whose spec says how (docs/plants.md says what "
+                          "varies)")
     rob.add_argument("--feedback", choices=choices_of(FeedbackScheme), default=None,
                      help="onboard feedback of every vehicle, see docs/feedback.md "
                           "(default: the plant's best measured)")
@@ -497,8 +512,9 @@ def register(sub: Any) -> None:
     add_maneuver_options(fb)
     fb.add_argument("--schemes", metavar="LIST", default=",".join(choices_of(FeedbackScheme)),
                     help="comma list of feedback schemes")
-    fb.add_argument("--scenarios", metavar="LIST", default="default,gyro-x5,lossy-link,slow-link",
-                    help="comma list of arena scenarios (docs/feedback.md)")
+    fb.add_argument("--scenarios", metavar="LIST", default=None,
+                    help="comma list of the plant's scenarios, docs/feedback.md (default: every scenario the plant "
+                         "has; the arena's: " + ",".join(_scenarios_of("arena")) + ")")
     fb.add_argument("--seeds", type=bounded_int(1, 1000), default=20, help="plant seeds per scheme and scenario")
     fb.add_argument("--trials", type=bounded_int(2, 1000), default=30, help="measured trials per run")
     fb.add_argument("--rule", default="paper", help="update rule (see docs/method.md)")

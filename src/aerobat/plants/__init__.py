@@ -42,6 +42,7 @@ __all__ = [
     "Trial",
     "TrialStatus",
     "load_arena",
+    "sampled_plants",
 ]
 
 BUILT_IN = (
@@ -56,3 +57,8 @@ BUILT_IN = (
 for _module in BUILT_IN:
     _spec: PlantSpec = importlib.import_module(_module).SPEC
     PLANTS.register(_spec.name, _spec)
+
+
+def sampled_plants() -> tuple[str, ...]:
+    """The registered plants a robustness study can sample: their spec says how (``PlantSpec.robustness``)."""
+    return tuple(name for name, spec in PLANTS.items() if spec.robustness is not None)

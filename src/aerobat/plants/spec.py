@@ -19,10 +19,11 @@ from aerobat.core.bounds import SEEDS, bounded, validate
 from aerobat.core.plant import Plant
 from aerobat.core.registry import Registry
 from aerobat.errors import ConfigError, MissingDependency
+from aerobat.plants.sampling import DEFAULT_SCENARIO, Sampling, Scenario
 from aerobat.quadrotor.feedback import OPEN_LOOP, Feedback, FeedbackScheme, as_feedback
 from aerobat.quadrotor.vehicle import VehicleConfig
 
-__all__ = ["PLANTS", "DesignModel", "PlantChoice", "PlantFactory", "PlantSpec"]
+__all__ = ["PLANTS", "DesignModel", "PlantChoice", "PlantFactory", "PlantSpec", "plant_spec"]
 
 
 class DesignModel(StrEnum):
@@ -81,6 +82,12 @@ class PlantSpec:
     firmware_model : ``firmware_model(config, settings) -> (model, table)``: the design model that
         contains the plant's flight controller, around the vehicle ``config``, and its stored form
         (None: the plant has no firmware to model; designs run on the paper's model).
+    robustness : how a robustness study draws one vehicle of this plant (None: the plant is not sampled,
+        and ``study robustness --plant NAME`` says so).
+    scenarios : the feedback study's scenarios on this plant, ``default`` first (default: ``default`` only).
+    module : for a plant outside aerobat's built-ins registered without an entry point, the module whose
+        import registers it (usually ``__name__`` where the spec is made). Every stored choice of the plant
+        carries it, so that a study's spawned workers, a resumed session or a stored job find the plant.
     """
 
     name: str
@@ -96,6 +103,17 @@ class PlantSpec:
     default_feedback: FeedbackScheme = FeedbackScheme.NONE
     cores: Callable[[Any], int] | None = None
     firmware_model: Callable[[VehicleConfig, Any], tuple[Any, dict[str, Any]]] | None = None
+    robustness: Sampling | None = None
+    scenarios: tuple[Scenario, ...] = (DEFAULT_SCENARIO,)
+    module: str | None = None
+
+    def scenario(self, name: str, *, source: str = "--scenarios") -> Scenario:
+        """The scenario ``name`` of this plant; :class:`ConfigError` naming the ones it has."""
+        for scenario in self.scenarios:
+            if scenario.name == name:
+                return scenario
+        raise ConfigError(f"{source}: the {self.name} plant has no scenario {name!r}; it has "
+                          f"{', '.join(s.name for s in self.scenarios)}")
 
     @property
     def design_models(self) -> tuple[DesignModel, ...]:
@@ -130,6 +148,19 @@ class PlantSpec:
 
 
 PLANTS: Registry[PlantSpec] = Registry("plant", "aerobat.plants")
+
+
+def plant_spec(kind: Any, module: Any = None, *, source: str) -> PlantSpec:
+    """The registered plant ``kind``; an unknown kind whose stored choice names its ``module`` (a plant
+    registered by importing it, :attr:`PlantSpec.module`) is looked up after importing that module."""
+    if isinstance(kind, str) and kind not in PLANTS and isinstance(module, str) \
+            and module.replace(".", "").replace("_", "").isalnum():
+        try:
+            importlib.import_module(module)
+        except ImportError as exc:
+            raise ConfigError(f"{source}.module: the module {module!r} of plant {kind!r} cannot be imported: "
+                              f"{exc}") from None
+    return PLANTS.get(kind, source=source)
 
 
 @dataclass(frozen=True)
@@ -192,7 +223,9 @@ class PlantChoice:
         (A table without ``feedback`` is the paper's open loop: what every store written before
         feedback existed holds.)
         """
-        table = {"kind": self.kind, "settings": self.settings_table(), "seed": self.seed}
+        table: dict[str, Any] = {"kind": self.kind, "settings": self.settings_table(), "seed": self.seed}
+        if self.spec.module is not None:
+            table["module"] = self.spec.module
         if self.feedback.enabled:
             table["feedback"] = self.feedback.to_table()
         return table
@@ -202,7 +235,7 @@ class PlantChoice:
         """Inverse of :meth:`to_table`."""
         if not isinstance(table, Mapping) or not isinstance(table.get("kind"), str):
             raise ConfigError(f"{source}: expected a plant table with a kind, got {table!r}")
-        spec = PLANTS.get(table["kind"], source=source)
+        spec = plant_spec(table["kind"], table.get("module"), source=source)
         settings = None
         stored = table.get("settings") or {}
         if stored:

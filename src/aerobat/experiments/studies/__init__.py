@@ -11,7 +11,6 @@ each study's rows, CSV and figures (``feedback_report(outcome, jobs)``, or
 
 from aerobat.experiments.studies.envelope import envelope_grid, envelope_jobs
 from aerobat.experiments.studies.feedback import (
-    SCENARIOS,
     feedback_study_jobs,
     parse_scenarios,
     parse_schemes,
@@ -35,14 +34,10 @@ from aerobat.experiments.studies.reports import (
     study_report,
 )
 from aerobat.experiments.studies.robustness import (
-    BETAFLIGHT_PROPERTIES,
-    SAMPLED_PROPERTIES,
     RobustnessRanges,
     RobustnessSummary,
     load_ranges,
     robustness_jobs,
-    sample_arena,
-    sample_betaflight,
     summarize_robustness,
 )
 from aerobat.experiments.studies.rules import DEFAULT_METHODS, parse_methods, rules_study_jobs, summarize_rules
@@ -61,10 +56,7 @@ from aerobat.experiments.studies.run_and_report import (
 from aerobat.experiments.studies.runner import FailedJob, StudyOutcome, run_study
 
 __all__ = [
-    "BETAFLIGHT_PROPERTIES",
     "DEFAULT_METHODS",
-    "SAMPLED_PROPERTIES",
-    "SCENARIOS",
     "EnvelopeCell",
     "EnvelopeReport",
     "FailedJob",
@@ -105,8 +97,6 @@ __all__ = [
     "rules_study",
     "rules_study_jobs",
     "run_study",
-    "sample_arena",
-    "sample_betaflight",
     "study_report",
     "summarize_feedback",
     "summarize_robustness",

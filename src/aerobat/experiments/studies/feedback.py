@@ -2,15 +2,14 @@
 
 Every (scenario, scheme) pair learns the same maneuver on the same plant seeds with the same
 update rule, so the only difference is what the onboard loop mixes into the program. Scenarios
-change the arena so that the feedback's assumptions fail: a gyro much worse than the estimator
-believes, a radio that loses or delays the relayed estimates.
+are the plant's (:attr:`aerobat.plants.PlantSpec.scenarios`): on the arena they change it so that the
+feedback's assumptions fail (a gyro much worse than the estimator believes, a radio that loses or delays
+the relayed estimates, :data:`aerobat.plants.arena.sampling.SCENARIOS`); every plant runs ``default``.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -20,45 +19,12 @@ from aerobat.core.maneuver import Maneuver
 from aerobat.errors import ConfigError
 from aerobat.experiments.designing import NominalDesign, job_design
 from aerobat.experiments.job import Job
-from aerobat.plants import ArenaParams, PlantChoice
+from aerobat.plants import PlantChoice
+from aerobat.plants.spec import PLANTS
 from aerobat.quadrotor.feedback import Feedback, FeedbackScheme
 from aerobat.quadrotor.vehicle import VehicleConfig
 
-__all__ = ["SCENARIOS", "feedback_study_jobs", "parse_scenarios", "parse_schemes", "summarize_feedback"]
-
-
-def _gyro_x5(p: ArenaParams) -> ArenaParams:
-    o = p.onboard
-    return dataclasses.replace(p, onboard=dataclasses.replace(
-        o, gyro_scale_error=(5.0 * o.gyro_scale_error[0], 5.0 * o.gyro_scale_error[1], 5.0 * o.gyro_scale_error[2]),
-        gyro_bias_rad_s=(5.0 * o.gyro_bias_rad_s[0], 5.0 * o.gyro_bias_rad_s[1], 5.0 * o.gyro_bias_rad_s[2])))
-
-
-def _lossy(p: ArenaParams) -> ArenaParams:
-    return dataclasses.replace(p, links=dataclasses.replace(p.links, command_drop_probability=0.3))
-
-
-def _slow(p: ArenaParams) -> ArenaParams:
-    return dataclasses.replace(p, links=dataclasses.replace(p.links, command_rate_hz=30.0, command_latency_s=0.03))
-
-
-@dataclasses.dataclass(frozen=True)
-class Scenario:
-    """A named change to the arena and what it tests."""
-
-    name: str
-    summary: str
-    change: Callable[[ArenaParams], ArenaParams]
-
-
-SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
-    Scenario("default", "the default arena", lambda p: p),
-    Scenario("gyro-x5", "gyro scale errors and biases 5× the default: the estimator integrates a bad gyro", _gyro_x5),
-    Scenario("lossy-link", "30 % of command packets lost, and the relayed estimates with them", _lossy),
-    Scenario("slow-link", "a 30 Hz radio with 30 ms latency (default 70 Hz, 10 ms): relayed estimates arrive "
-                          "late and seldom", _slow),
-)}
-"""Scenarios of the feedback study (arena only; other plants run ``default``)."""
+__all__ = ["feedback_study_jobs", "parse_scenarios", "parse_schemes", "summarize_feedback"]
 
 
 def parse_schemes(text: str, *, source: str = "--schemes") -> list[FeedbackScheme]:
@@ -72,16 +38,16 @@ def parse_schemes(text: str, *, source: str = "--schemes") -> list[FeedbackSchem
 
 
 def parse_scenarios(text: str, *, plant: str, source: str = "--scenarios") -> list[str]:
+    """The scenario names in ``text`` (comma-separated), each one the plant ``plant`` has."""
+    spec = PLANTS.get(plant, source="--plant")
+    known = ", ".join(s.name for s in spec.scenarios)
     names = [s.strip() for s in str(text).split(",") if s.strip()]
     if not names:
-        raise ConfigError(f"{source}: name at least one scenario ({', '.join(SCENARIOS)})")
+        raise ConfigError(f"{source}: name at least one scenario ({known})")
     for name in names:
-        if name not in SCENARIOS:
-            raise ConfigError(f"{source}: unknown scenario {name!r}; use {', '.join(SCENARIOS)}")
+        spec.scenario(name, source=source)
     if len(set(names)) != len(names):
         raise ConfigError(f"{source} {text!r}: a scenario is named twice")
-    if plant != "arena" and names != ["default"]:
-        raise ConfigError(f"{source} {text!r}: scenarios change the arena; with --plant {plant} use default")
     return names
 
 
@@ -91,10 +57,9 @@ def feedback_study_jobs(maneuver: Maneuver, design: Design | NominalDesign, mode
     """Every (scenario, scheme) on the same ``seeds`` plant seeds (``plant.seed``, ``plant.seed + 1``, …)."""
     design_table, model_table = job_design(design, model)
     jobs = []
+    spec = plant.spec
     for scenario in scenarios:
-        settings = plant.settings
-        if plant.kind == "arena":
-            settings = SCENARIOS[scenario].change(plant.settings or ArenaParams())
+        settings = spec.scenario(scenario).change(plant.settings)
         for scheme in schemes:
             choice = PlantChoice(plant.kind, settings, plant.seed, Feedback(scheme, plant.feedback.gains))
             for k in range(seeds):

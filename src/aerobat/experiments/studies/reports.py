@@ -32,12 +32,7 @@ from aerobat.errors import ConfigError
 from aerobat.experiments.job import Job, JobStatus
 from aerobat.experiments.studies.envelope import ENVELOPE_QUANTITIES, envelope_grid
 from aerobat.experiments.studies.feedback import summarize_feedback
-from aerobat.experiments.studies.robustness import (
-    BETAFLIGHT_PROPERTIES,
-    SAMPLED_PROPERTIES,
-    RobustnessSummary,
-    summarize_robustness,
-)
+from aerobat.experiments.studies.robustness import RobustnessSummary, sampled_properties, summarize_robustness
 from aerobat.experiments.studies.rules import summarize_rules
 from aerobat.experiments.studies.runner import FailedJob, StudyOutcome
 from aerobat.quadrotor.feedback import FeedbackScheme
@@ -386,10 +381,9 @@ def robustness_report(outcome: StudyOutcome, jobs: Sequence[Job], *, vehicles: i
 
     ``vehicles``: how many the study samples (default: one per job).
     """
-    plant = (_job_value(jobs, "plant") or {}).get("kind", "arena")
-    properties = BETAFLIGHT_PROPERTIES if plant == "betaflight" else SAMPLED_PROPERTIES
     keyed = sorted(outcome.results.items())
     results = [r for _, r in keyed]
+    properties = sampled_properties((_job_value(jobs, "plant") or {}).get("kind"), results)
     rows = tuple(RobustnessVehicle(key, bool(r.get("success")), r.get("trials_to_tolerance"),
                                    float(r.get("final_error_m", math.nan)), dict(r.get("properties") or {}))
                  for key, r in keyed)

@@ -93,7 +93,7 @@ def feedback_study(store: Store, maneuver: Maneuver, design: Design | NominalDes
     """Every (scenario, onboard scheme) learning ``maneuver`` on ``seeds`` plant seeds; its report.
 
     ``design`` is the maneuver's nominal design on ``model``; ``plant`` the plant every run flies
-    (the scenarios change an arena's settings, :data:`~aerobat.experiments.studies.feedback.SCENARIOS`).
+    (the scenarios are the plant's, :attr:`aerobat.plants.PlantSpec.scenarios`).
     """
     schemes = [FeedbackScheme(s) for s in schemes]
     jobs = feedback_study_jobs(maneuver, design, model, schemes=schemes, scenarios=list(scenarios), seeds=seeds,

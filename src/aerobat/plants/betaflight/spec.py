@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from aerobat.core.plant import Plant
+from aerobat.plants.betaflight.sampling import SAMPLING
 from aerobat.plants.spec import PlantSpec
 from aerobat.quadrotor.feedback import DEFAULT_SCHEME, Feedback, FeedbackScheme
 from aerobat.quadrotor.vehicle import VehicleConfig
@@ -68,4 +69,4 @@ SPEC = PlantSpec(
     "betaflight", "a 5-inch racer flown by Betaflight 4.6's own firmware (SITL in lockstep) in the arena",
     _build, load_settings=_load, settings_from_table=_from_table, settings_to_table=_to_table,
     default_settings=_default, option="--betaflight", feedback=tuple(FeedbackScheme),
-    default_feedback=DEFAULT_SCHEME, cores=_cores, firmware_model=firmware_model)
+    default_feedback=DEFAULT_SCHEME, cores=_cores, firmware_model=firmware_model, robustness=SAMPLING)

@@ -6,6 +6,7 @@ so nothing registered goes unchecked.
 
 from __future__ import annotations
 
+import importlib
 import math
 from pathlib import Path
 
@@ -17,7 +18,7 @@ from aerobat.core.registry import from_spec, registered_kinds
 from aerobat.core.rules import RULES, IscModel, make_rule
 from aerobat.core.testing import ToyManeuver, ToyModel, ToyPlant, check_maneuver, check_plant, check_rule
 from aerobat.firmware.betaflight.errors import FirmwareUnavailable
-from aerobat.plants import PLANTS, PlantChoice
+from aerobat.plants import BUILT_IN, PLANTS, PlantChoice
 from aerobat.quadrotor.maneuvers import MultiFlip, load_maneuver_file, translation_maneuver
 from aerobat.quadrotor.simulate import NominalModel
 from aerobat.quadrotor.vehicle import hummingbird
@@ -48,7 +49,10 @@ def test_maneuver_conforms(kind):
 
 
 def test_every_plant_has_a_check():
-    assert set(PLANTS.names()) == {"nominal", "arena", "rotorpy", "betaflight", "fc"}
+    # the built-in plants (a plant a test module registers, tests/plants/test_a_plant_defined_in_a_test.py,
+    # runs the kit in its own file)
+    built_in = {importlib.import_module(module).SPEC.name for module in BUILT_IN}
+    assert built_in == {"nominal", "arena", "rotorpy", "betaflight", "fc"} and built_in <= set(PLANTS.names())
 
 
 @pytest.mark.parametrize("kind", ["nominal", "arena", "rotorpy", "betaflight",

@@ -47,7 +47,6 @@ ALLOWED_TEXT_KINDS = {
     ("experiments/reports.py", "kind in ('flip', 'multiflip')"): _MANEUVER,
     ("experiments/sessions.py", "prec.kind != 'nominal'"): _PLANT,
     ("experiments/setup.py", "kind == 'arena'"): _PLANT,
-    ("experiments/studies/feedback.py", "plant.kind == 'arena'"): _PLANT,
     ("logs/blackbox_header.py", "kind == 'P'"): "a blackbox header's frame letter (I, P): log file text at the edge",
     **{("firmware/betaflight/settings.py", f"kind == {word!r}"): _FIRMWARE
        for word in ("ACTUAL", "BETAFLIGHT", "RACEFLIGHT", "KISS", "QUICK", "SCALE", "CLIP")},

@@ -263,9 +263,12 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
     params, source = None, "the default 5-inch (settings.toml's airframe)"
     if args.airframe is not None:
-        from aerobat.plants.betaflight.params import load_betaflight
+        from aerobat.plants import PLANTS, replaying_plants
 
-        params, source = load_betaflight(args.airframe), f"{args.airframe}"
+        spec = PLANTS.get(args.plant or replaying_plants()[0], source="--plant")
+        if spec.load_settings is None:
+            raise ConfigError(f"--airframe: the {spec.name} plant takes no settings file")
+        params, source = spec.load_settings(args.airframe), f"{args.airframe}"
     out = output_dir(Path(args.out) if args.out else Path("out") / f"replay-{Path(args.file).name.split(':')[0]}")
     window = tuple(args.window_s) if args.window_s else None
     say = console(args.json).print
@@ -284,7 +287,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         return _what_if(args, params, source, out, window, progress)
     result = replay_log(args.file, window_s=window, params=params, airframe_source=source,
                         step_min_deg_s=args.step_min_deg_s, seed=args.seed, progress=progress,
-                        battery=not args.no_battery)
+                        battery=not args.no_battery, plant=args.plant)
     if terminal:
         print(file=sys.stderr)
     stem = result.log.replace("#", "-log")
@@ -381,8 +384,8 @@ def register(sub: Any) -> None:
     q = cmds.add_parser("replay", help="fly a Betaflight log's sticks through the SITL with the log's tune and "
                                        "compare per axis", formatter_class=HelpFormatter)
     q.add_argument("file", metavar="FILE[:N]", help="a Betaflight blackbox log, :N its log N (default 1) (required)")
-    q.add_argument("--plant", choices=("betaflight",), default="betaflight",
-                   help=argparse.SUPPRESS)  # the one plant today; old command lines say it
+    q.add_argument("--plant", default=None,  # checked by the replay: parsing a log command imports no plant
+                   help=argparse.SUPPRESS)  # betaflight, the one built-in plant that replays logs; old lines say it
     q.add_argument("--airframe", metavar="FILE.toml", default=None,
                    help="a Betaflight plant file, e.g. the [airframe] that identify --log --airframe writes "
                         "(default: the packaged 5-inch)")

@@ -218,7 +218,7 @@ def airframe_from_log_fit(fit: LogFit, *, base: Any | None = None,
                           battery_reference_v: float | None = None) -> dict[str, Any]:
     """The Betaflight plant's ``[airframe]`` table for the identified quad (fields of ``Airframe``).
 
-    ``base`` (an :class:`~aerobat.plants.betaflight.params.Airframe`) gives what a log does not
+    ``base`` (an :class:`~aerobat.quadrotor.xframe.Airframe`) gives what a log does not
     tell: motor spread, rotor inertia, output delay; its defaults otherwise. ``battery_reference_v``
     (:attr:`LogIdentification.battery_reference_v`) is the voltage the fitted thrust holds at.
 
@@ -230,7 +230,7 @@ def airframe_from_log_fit(fit: LogFit, *, base: Any | None = None,
     (motors between idle and full; docs/plants.md). :func:`airframe_notes` says so in the file.
     """
     from aerobat.logs.betaflight import props_out
-    from aerobat.plants.betaflight.params import Airframe
+    from aerobat.quadrotor.xframe import Airframe
 
     base = base or Airframe()
     g = fit.geometry
@@ -269,7 +269,7 @@ def airframe_notes(fit: LogFit, base: Any | None = None) -> list[str]:
     """Comment lines for the written ``[airframe]``: which fields the log gave, which were given or assumed, which
     are the plant's defaults (a log does not tell them), and what the fit gave that the table does not use."""
     from aerobat.logs.betaflight import props_out
-    from aerobat.plants.betaflight.params import Airframe
+    from aerobat.quadrotor.xframe import Airframe
 
     defaults = [name for name in dataclasses.asdict(base or Airframe())
                 if name not in _FITTED_AIRFRAME + _GIVEN_AIRFRAME + ("props_out", "battery_reference_v")]

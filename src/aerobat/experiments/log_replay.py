@@ -240,28 +240,35 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
                params: Any = None, airframe_source: str = "the default 5-inch (params.airframe)",
                step_min_deg_s: float = 100.0, seed: int = 0, lead_in_s: float = 0.5,
                progress: Callable[[float, float], None] | None = None, tune: Any = None,
-               changes: Sequence[str] = (), props_out: bool | None = None, battery: bool = True) -> LogReplay:
+               changes: Sequence[str] = (), props_out: bool | None = None, battery: bool = True,
+               plant: str | None = None) -> LogReplay:
     """Replay ``file`` (``FILE`` or ``FILE:N``; ``index`` wins) through Betaflight and compare with the log.
 
-    ``params`` (:class:`~aerobat.plants.betaflight.params.BetaflightParams`) gives the airframe,
-    sensors and firmware; its ``tune`` is replaced by the log's header, or by ``tune`` (a
-    :class:`~aerobat.firmware.betaflight.tune.Tune`: what-if), with ``changes`` (``NAME=VALUE`` each,
-    :func:`~aerobat.firmware.betaflight.tune.with_settings`) on top. The propellers turn as the log's mixer
-    says (:func:`log_props_out`), or as ``props_out`` says when given. With ``battery`` (and a logged
-    voltage) thrust follows the battery: every rotor's thrust × (V/V_ref)², V the logged voltage and
-    V_ref the airframe's ``battery_reference_v`` (else the log's median in flight). ``window_s`` (log time,
-    seconds) limits the comparison; default the whole log. The flight starts ``lead_in_s`` before
-    the window (where the log allows), so that the vehicle, which starts at rest, has caught up
-    with the pilot when the comparison begins.
+    ``plant`` flies it: a registered plant whose spec replays logs (:attr:`aerobat.plants.PlantSpec.replay`;
+    None: the first, :func:`aerobat.plants.replaying_plants`, which is ``betaflight`` among the built-ins).
+    ``params`` (the plant's settings, e.g. :class:`~aerobat.plants.betaflight.params.BetaflightParams`;
+    None: its defaults) gives the airframe, sensors and firmware; its ``tune`` is replaced by the log's
+    header, or by ``tune`` (a :class:`~aerobat.firmware.betaflight.tune.Tune`: what-if), with ``changes``
+    (``NAME=VALUE`` each, :func:`~aerobat.firmware.betaflight.tune.with_settings`) on top. The propellers
+    turn as the log's mixer says (:func:`log_props_out`), or as ``props_out`` says when given. With
+    ``battery`` (and a logged voltage) thrust follows the battery: every rotor's thrust × (V/V_ref)², V the
+    logged voltage and V_ref the airframe's ``battery_reference_v`` (else the log's median in flight).
+    ``window_s`` (log time, seconds) limits the comparison; default the whole log. The flight starts
+    ``lead_in_s`` before the window (where the log allows), so that the vehicle, which starts at rest, has
+    caught up with the pilot when the comparison begins.
     """
     import time
 
     from aerobat.firmware.betaflight.tune import tune_from_blackbox_header, with_settings
-    from aerobat.plants.betaflight.params import BetaflightParams
-    from aerobat.plants.betaflight.plant import BetaflightPlant
-    from aerobat.plants.betaflight.replay import StickTrack, channels_from_commands, replay_sticks
-    from aerobat.quadrotor.vehicle import fpv5
+    from aerobat.plants import PLANTS, replaying_plants
 
+    replaying = replaying_plants()
+    if plant is None and not replaying:
+        raise ConfigError("no registered plant replays a log (PlantSpec.replay)")
+    spec = PLANTS.get(replaying[0] if plant is None else plant, source="log replay --plant")
+    if spec.replay is None:
+        raise ConfigError(f"log replay --plant {spec.name}: the {spec.name} plant replays no log; plants that do: "
+                          f"{', '.join(replaying) or 'none'}")
     log = load_betaflight_log(file, index)
     where = f"{log.path}: log {log.index}"
     duration = log.duration_s
@@ -278,22 +285,19 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
         cut.signal(channel, purpose="replay")
     if tune is None:
         tune = tune_from_blackbox_header(dict(log.metadata.parameters), source=f"{log.path}#log{log.index}")
-    params = params or BetaflightParams()
     from_log = props_out is None
     if props_out is None:  # the log's mixer decides which way the propellers turn, whatever the airframe says
         props_out = log_props_out(log)
-    params = dataclasses.replace(params, tune=with_settings(tune, changes),
-                                 airframe=dataclasses.replace(params.airframe, props_out=props_out))
-    plant = BetaflightPlant(fpv5(), params, seed=seed)
-    settings = plant.settings
+    replayer = spec.replay(params, tune=with_settings(tune, changes), props_out=props_out, seed=seed)
+    settings = replayer.settings
     sticks = cut.signals[Channel.STICKS]
     t = sticks.time_s
     throttle = cut.signals[Channel.THROTTLE_STICK].at(t)[:, 0]
-    channels = channels_from_commands(settings, sticks.values * 500.0, throttle)
-    scale, battery_note = (_battery_scale(log, t, params.airframe.battery_reference_v) if battery
+    channels = replayer.channels(sticks.values * 500.0, throttle)
+    scale, battery_note = (_battery_scale(log, t, replayer.battery_reference_v) if battery
                            else (None, "not followed (as asked)"))
     wall = time.perf_counter()
-    trace = replay_sticks(plant, StickTrack(t, channels), progress=progress, thrust_scale=scale)
+    trace = replayer.fly(t, channels, progress=progress, thrust_scale=scale)
     wall = time.perf_counter() - wall
     rel = t - t[0]
     keep = t >= start - 1e-9
@@ -329,7 +333,7 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
     v = valid
     return LogReplay(
         log=log.name, window_s=(float(start), float(end)), airframe=airframe_source,
-        tune_report=plant.tune_report, time_s=t, setpoint_log=sp_log, setpoint_model=sp_model, setpoint_sim=sp_sim,
+        tune_report=replayer.tune_report, time_s=t, setpoint_log=sp_log, setpoint_model=sp_model, setpoint_sim=sp_sim,
         pid_sim=pid_sim,
         gyro_log=gyro_log, gyro_sim=gyro_sim, motors_log=motors_log, motors_sim=motors_sim, pid_log=pid,
         setpoint=tuple(AxisMatch.of(sp_sim[v, j], sp_log[v, j]) for j in range(3)),

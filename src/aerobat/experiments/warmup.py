@@ -14,7 +14,8 @@ batch, a complete arena trial with the onboard feedback (the arena's default, tr
 one in the open loop, and the kernels the RotorPy and Betaflight plants call one by one from
 Python (the onboard feedback, the supervisor's estimate and PD controller, motion capture,
 the Betaflight world and pilot), with the argument types those plants pass, and the Betaflight
-blackbox decoder (:mod:`aerobat.logs.blackbox_decode`).
+blackbox decoder (:mod:`aerobat.logs.blackbox_decode`). The plants' kernels are the plants' to name
+(:attr:`aerobat.plants.PlantSpec.kernels`): this module names no plant.
 """
 
 from __future__ import annotations
@@ -22,8 +23,6 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
-
-import numpy as np
 
 __all__ = ["warm_up"]
 
@@ -70,158 +69,49 @@ def warm_up(workers: int = 2, progress: Callable[[str], None] | None = None,
 
 PARTS = ("playback", "arena", "plants", "firmware")
 """The kernel groups: playback (simulate, the batch, the nominal model), the arena's trial, the kernels the
-RotorPy and Betaflight plants call from Python with the blackbox decoder, and the firmware design model."""
+RotorPy and Betaflight plants call from Python with the blackbox decoder, and the firmware design model. What
+each plant compiles, and in which group, its spec says (:attr:`aerobat.plants.PlantSpec.kernels`)."""
 
 
 def _warm_part(part: str) -> None:
+    if part == "playback":
+        _warm_playback()
+    if part == "plants":  # `log info` and `identify --log` on a Betaflight log
+        from aerobat.logs.blackbox_decode import warm_up as blackbox_decoder
+
+        blackbox_decoder()
+    for compile_kernels in plant_kernels(part):
+        compile_kernels()
+
+
+def plant_kernels(part: str) -> list[Callable[[], None]]:
+    """What compiles the kernels of group ``part`` that the registered plants declare
+    (:attr:`aerobat.plants.PlantSpec.kernels`; a group not in :data:`PARTS` joins ``plants``), each once."""
+    from aerobat.plants import PLANTS
+
+    chosen: list[Callable[[], None]] = []
+    for _name, spec in PLANTS.items():
+        for kernels in spec.kernels:
+            group = kernels.group if kernels.group in PARTS else "plants"
+            if group == part and kernels.compile not in chosen:
+                chosen.append(kernels.compile)
+    return chosen
+
+
+def _warm_playback() -> None:
+    """simulate (continuous, sampled, with rate-loop latency), the batch and the nominal model."""
     from aerobat.quadrotor.program import Program, Switch
     from aerobat.quadrotor.simulate import NominalModel, simulate, simulate_batch
     from aerobat.quadrotor.vehicle import ModelEffects, hummingbird
 
     config = hummingbird()
     program = Program(switches=(Switch(time_s=0.0, channel="rate_p", value=1.0),), duration_s=0.05)
-    if part == "firmware":  # the Betaflight plants' design model (quadrotor.firmware), both fidelities
-        from aerobat.plants.betaflight.design_model import firmware_design_model
-        from aerobat.plants.betaflight.params import BetaflightParams
-        from aerobat.quadrotor.firmware.sticks import frames_of
-        from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
-
-        frames_of(program.compile(), 0.004, 16)  # the plant's frames of a program
-        fpv5 = vehicle_from_name_or_file("fpv5")
-        for fidelity in ("design", "exact"):
-            model = firmware_design_model(fpv5, BetaflightParams(), fidelity=fidelity)
-            model.final_states([program])
-            model.trajectory(program)
-        return
-    if part == "arena":
-        from aerobat.plants.arena import Arena
-
-        Arena(config, seed=0, feedback="tracking").fly(program)
-        Arena(config, seed=0, feedback="none").fly(program)
-        return
-    if part == "plants":  # what RotorPy and Betaflight call from Python, and the blackbox decoder
-        from aerobat.logs.blackbox_decode import warm_up as blackbox_decoder
-
-        _plant_kernels(simulate(program, config))
-        blackbox_decoder()  # `log info` and `identify --log` on a Betaflight log
-        return
     # an identified vehicle's rate-loop latency runs its own continuous kernel
     lagging = dataclasses.replace(config, effects=ModelEffects(rate_latency_s=(0.005, 0.005, 0.005)))
     simulate(program, config, mode="sampled")
     simulate(program, lagging)
     simulate_batch([program, program], config)
     NominalModel(config).final_states([program])
-
-
-def _plant_kernels(nominal: object) -> None:
-    """The kernels RotorPy and Betaflight call from Python, once each with the types they pass."""
-    from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose, mocap_sample, pd_command
-    from aerobat.quadrotor.feedback import (
-        apply_feedback,
-        as_feedback,
-        feedback_vector,
-        onboard_propagate,
-        onboard_receive,
-        onboard_state,
-        reference_from_trajectory,
-        relay_deviation,
-    )
-
-    feedback = as_feedback("tracking")
-    reference = reference_from_trajectory(nominal.times_s, nominal.states,  # type: ignore[attr-defined]
-                                          feedback.gains.reference_rate_hz)
-    gains = feedback_vector(feedback)
-    x = nominal.states[-1].copy()  # type: ignore[attr-defined]
-    rows = np.zeros((8, MOCAP_COLUMNS))
-    noise = np.zeros((8, 6))
-    for k in range(rows.shape[0]):
-        mocap_sample(x, 0.01 * k, noise[k], rows[k])
-    pos, vel, quat = np.zeros(3), np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
-    estimate_pose(rows, rows.shape[0], pos, vel, quat)
-    cmd = np.array([9.81, 0.0, 0.0, 0.0])
-    pd_command(pos, vel, quat, np.zeros(3), np.zeros(3), np.array([4.0, 3.0, 10.0, 2.0, 1.0]),
-               np.array([0.0, 20.0, 5.0, 10.0, 9.81]), 1.0 / 70.0, cmd)
-    onboard, history = onboard_state()
-    scratch, relay = np.empty(10), np.empty(6)
-    moved = relay_deviation(rows, rows.shape[0], 0.0, np.zeros(3), reference.samples, reference.dt_s, scratch, relay)
-    onboard_receive(onboard, history, gains, float(rows[-1, 0]), rows[-1, 4:8].copy(), relay[0:3], relay[3:6], moved)
-    apply_feedback(cmd, onboard, gains, reference.samples, 0.0, 0.07, scratch)
-    onboard_propagate(onboard, history, 0.07, 0.0, 0.0, 0.0, 1.0 / 800.0)
-    _betaflight_kernels(x, cmd)
-
-
-def _betaflight_kernels(x: np.ndarray, cmd: np.ndarray) -> None:
-    """The Betaflight world's step and the pilot's sticks (no firmware needed to compile them)."""
-    from aerobat.plants.betaflight.params import BetaflightParams
-    from aerobat.plants.betaflight.physics import (
-        C_CONTACT,
-        C_DELAY,
-        N_COUNTERS,
-        PACKET_DOUBLES,
-        airframe_plant,
-        aux_vector,
-        ground_state,
-        prime,
-        step,
-    )
-    from aerobat.plants.betaflight.pilot import N_LIMITS, angle_sticks, program_sticks
-
-    params = BetaflightParams()
-    step_s = 1.0 / params.firmware.gyro_rate_hz
-    world = ground_state((0.0, 0.0, -2.5))
-    plant = airframe_plant(params)
-    aux = aux_vector(params, step_s=step_s, ground_z_m=-2.5, gravity_m_s2=9.81)
-    counters = np.zeros(N_COUNTERS, dtype=np.int64)
-    counters[C_DELAY] = 1
-    counters[C_CONTACT] = 1
-    noise = np.zeros((2, 6))
-    packet = np.zeros(PACKET_DOUBLES)
-    from aerobat.plants.betaflight.frames import HELD_ROW
-
-    scratch = np.zeros((HELD_ROW + 1, x.shape[0]))  # the physics' six rows and the shared-memory loop's held sample
-    prime(world, plant, aux, counters, noise[0], packet, scratch)
-    step(world, np.zeros(4, dtype=np.float32), plant, aux, np.zeros((2, 4)), counters, noise[1], packet, scratch)
-    # the compiled lockstep loop (a run of no steps: nothing is sent)
-    from aerobat.firmware.betaflight.packets import MOTOR_STRUCT
-    from aerobat.plants.betaflight.lockstep import N_IO, run_steps
-    from aerobat.plants.lab_kernels import MOCAP_COLUMNS
-
-    block = np.zeros(MOTOR_STRUCT.size, dtype=np.uint8)
-    run_steps(-1, -1, 0, 0, 0, 0, 8, step_s, world, block, block[:16].view(np.float32), plant, aux,
-              np.zeros((2, 4)), counters, noise, np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)),
-              np.zeros(N_IO, dtype=np.int64), packet, scratch)
-    # and its shared-memory twin, where the exchange's C helper can be compiled (no compiler: skipped)
-    from aerobat.firmware.betaflight.errors import FirmwareUnavailable
-
-    try:
-        from aerobat.plants.betaflight.lockstep_shm import run_steps_shm
-    except FirmwareUnavailable:
-        pass
-    else:
-        # the frame loop around both (a run of no frames), with the argument types Flight passes
-        from aerobat.plants.betaflight import frames as fr
-
-        run_steps_shm(0, 0, 0, 0, 0, 0, 0, 8, step_s, world, block, block[:16].view(np.float32), plant, aux,
-                      np.zeros((2, 4)), counters, noise, np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)),
-                      np.zeros(fr.N_ST, dtype=np.int64), packet, scratch, np.random.default_rng(0),
-                      np.zeros(fr.N_CFG, dtype=np.int64), np.zeros(fr.N_FCFG))
-        from aerobat.plants.betaflight.frame_loop import fly_frames
-
-        rc_block = np.zeros(40, dtype=np.uint8)
-        fly_frames(0, 0, 32, 0, 0, False, 0, np.random.default_rng(0), np.zeros(fr.N_CFG, dtype=np.int64),
-                   np.zeros(fr.N_FCFG), np.zeros(fr.N_ST, dtype=np.int64), np.zeros(fr.N_FST), world, block,
-                   block.view(np.float32), plant, aux, np.zeros((2, 4)), counters, packet, scratch, np.zeros((2, 6)),
-                   np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)), np.zeros(4, dtype=np.int64),
-                   np.zeros((4, 16), dtype=np.int64), rc_block, rc_block.view(np.uint16),
-                   np.zeros((1, 16), dtype=np.int64), np.zeros(fr.N_PILOT), np.zeros(3), np.zeros(3), np.zeros(4),
-                   np.zeros(N_LIMITS), np.zeros(3), np.zeros((3, 2)), np.empty((0, 1 + x.shape[0])), np.zeros(22),
-                   np.zeros((1, 4)), np.zeros(1), np.zeros((1, 3)), np.zeros(12), np.zeros(10), np.zeros(6))
-    limits = np.zeros(N_LIMITS)
-    limits[:] = 1.0
-    sticks = np.zeros(4)
-    program_sticks(cmd, limits, sticks)
-    angle_sticks(np.zeros(3), np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3), np.zeros(3),
-                 np.ones(4), limits, 1.0 / 50.0, sticks)
 
 
 def main() -> None:

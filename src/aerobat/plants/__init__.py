@@ -42,6 +42,7 @@ __all__ = [
     "Trial",
     "TrialStatus",
     "load_arena",
+    "replaying_plants",
     "sampled_plants",
 ]
 
@@ -62,3 +63,8 @@ for _module in BUILT_IN:
 def sampled_plants() -> tuple[str, ...]:
     """The registered plants a robustness study can sample: their spec says how (``PlantSpec.robustness``)."""
     return tuple(name for name, spec in PLANTS.items() if spec.robustness is not None)
+
+
+def replaying_plants() -> tuple[str, ...]:
+    """The registered plants that replay a blackbox log through their firmware (``PlantSpec.replay``)."""
+    return tuple(name for name, spec in PLANTS.items() if spec.replay is not None)

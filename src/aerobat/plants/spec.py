@@ -23,7 +23,7 @@ from aerobat.plants.sampling import DEFAULT_SCENARIO, Sampling, Scenario
 from aerobat.quadrotor.feedback import OPEN_LOOP, Feedback, FeedbackScheme, as_feedback
 from aerobat.quadrotor.vehicle import VehicleConfig
 
-__all__ = ["PLANTS", "DesignModel", "PlantChoice", "PlantFactory", "PlantSpec", "plant_spec"]
+__all__ = ["PLANTS", "DesignModel", "Kernels", "PlantChoice", "PlantFactory", "PlantSpec", "plant_spec"]
 
 
 class DesignModel(StrEnum):
@@ -61,6 +61,17 @@ class PlantFactory(Protocol):
 
 
 @dataclass(frozen=True)
+class Kernels:
+    """Compiled kernels a plant calls, and how to compile them before its first trial (``aerobat setup``)."""
+
+    group: str
+    """Which of setup's groups compiles them (:data:`aerobat.experiments.warmup.PARTS`: ``arena``,
+    ``plants``, ``firmware``; another name joins ``plants``); groups compile side by side."""
+    compile: Callable[[], None]
+    """Runs each kernel once with the argument types the plant passes (numba caches what it compiles)."""
+
+
+@dataclass(frozen=True)
 class PlantSpec:
     """How to build one kind of plant.
 
@@ -85,6 +96,10 @@ class PlantSpec:
     robustness : how a robustness study draws one vehicle of this plant (None: the plant is not sampled,
         and ``study robustness --plant NAME`` says so).
     scenarios : the feedback study's scenarios on this plant, ``default`` first (default: ``default`` only).
+    kernels : the compiled kernels the plant calls, each group with what compiles it (``aerobat setup``).
+    replay : ``replay(settings, *, tune, props_out, seed) -> replayer``: a blackbox log's sticks flown through
+        this plant's firmware (``aerobat log replay``; the replayer as
+        :class:`aerobat.plants.betaflight.replay.LogReplayer`); None: the plant replays no log.
     module : for a plant outside aerobat's built-ins registered without an entry point, the module whose
         import registers it (usually ``__name__`` where the spec is made). Every stored choice of the plant
         carries it, so that a study's spawned workers, a resumed session or a stored job find the plant.
@@ -105,6 +120,8 @@ class PlantSpec:
     firmware_model: Callable[[VehicleConfig, Any], tuple[Any, dict[str, Any]]] | None = None
     robustness: Sampling | None = None
     scenarios: tuple[Scenario, ...] = (DEFAULT_SCENARIO,)
+    kernels: tuple[Kernels, ...] = ()
+    replay: Callable[..., Any] | None = None
     module: str | None = None
 
     def scenario(self, name: str, *, source: str = "--scenarios") -> Scenario:

@@ -9,7 +9,8 @@ from aerobat.core.plant import Plant
 from aerobat.plants.arena.arena import Arena
 from aerobat.plants.arena.params import ArenaParams, load_arena
 from aerobat.plants.arena.sampling import SAMPLING, SCENARIOS
-from aerobat.plants.spec import PlantSpec
+from aerobat.plants.arena.warm import warm_arena
+from aerobat.plants.spec import Kernels, PlantSpec
 from aerobat.quadrotor.feedback import DEFAULT_SCHEME, Feedback, FeedbackScheme
 from aerobat.quadrotor.vehicle import VehicleConfig
 
@@ -27,4 +28,5 @@ SPEC = PlantSpec(
     load_settings=load_arena,
     settings_from_table=lambda table, source: dataclass_from_table(ArenaParams, table, source=source),
     settings_to_table=dataclass_to_table, default_settings=ArenaParams, option="--arena",
-    feedback=tuple(FeedbackScheme), default_feedback=DEFAULT_SCHEME, robustness=SAMPLING, scenarios=SCENARIOS)
+    feedback=tuple(FeedbackScheme), default_feedback=DEFAULT_SCHEME, robustness=SAMPLING, scenarios=SCENARIOS,
+    kernels=(Kernels("arena", warm_arena),))

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -40,7 +40,7 @@ from aerobat.plants.betaflight.physics import A_FMAX, airframe_plant
 if TYPE_CHECKING:
     from aerobat.plants.betaflight.plant import BetaflightPlant
 
-__all__ = ["MOTOR_LOG_ORDER", "ReplayTrace", "StickTrack", "channels_from_commands", "replay_sticks"]
+__all__ = ["MOTOR_LOG_ORDER", "LogReplayer", "ReplayTrace", "StickTrack", "channels_from_commands", "replay_sticks"]
 
 
 
@@ -172,3 +172,51 @@ def replay_sticks(plant: BetaflightPlant, track: StickTrack, *, samples_per_fram
     pid = pid_terms.reshape(-1, 3, 4).transpose(0, 2, 1)
     return ReplayTrace(time_s=rows[:, SAMPLE_TIME] - t0, rates_rad_s=rows[:, SAMPLE_RATES].copy(), motors=motors,
                        setpoint_deg_s=setpoint, pid=pid, armed_at_s=armed, steps=steps)
+
+
+class LogReplayer:
+    """A pilot's logged sticks through this plant's firmware, as :func:`aerobat.experiments.log_replay.replay_log`
+    asks of a plant (:attr:`aerobat.plants.PlantSpec.replay`).
+
+    ``params`` (:class:`~aerobat.plants.betaflight.params.BetaflightParams`, None: the defaults) gives the
+    airframe, sensors and firmware; ``tune`` replaces its tune (the log's header or a what-if's) and
+    ``props_out`` its propellers' direction. The plant is built around the ``fpv5`` model (a replay designs
+    nothing: the nominal vehicle only gives g).
+    """
+
+    def __init__(self, params: Any, *, tune: Any, props_out: bool, seed: int = 0) -> None:
+        import dataclasses
+
+        from aerobat.plants.betaflight.params import BetaflightParams
+        from aerobat.plants.betaflight.plant import BetaflightPlant
+        from aerobat.quadrotor.vehicle import fpv5
+
+        params = params if params is not None else BetaflightParams()
+        self.params = dataclasses.replace(params, tune=tune,
+                                          airframe=dataclasses.replace(params.airframe, props_out=props_out))
+        self.plant = BetaflightPlant(fpv5(), self.params, seed=seed)
+
+    @property
+    def settings(self) -> BetaflightSettings:
+        """The firmware's settings as the replay flies them (the tune applied)."""
+        return self.plant.settings
+
+    @property
+    def tune_report(self) -> Any:
+        """What became of the tune on the SITL (:class:`~aerobat.firmware.betaflight.translate.TuneReport`)."""
+        return self.plant.tune_report
+
+    @property
+    def battery_reference_v(self) -> float | None:
+        """The airframe's battery voltage at which thrust is as identified [V] (None: not known)."""
+        return self.params.airframe.battery_reference_v
+
+    def channels(self, rc_commands: np.ndarray, throttle: np.ndarray) -> np.ndarray:
+        """The pulses [µs] of the logged ``rcCommand`` roll, pitch, yaw (±500) and throttle (0..1)."""
+        return channels_from_commands(self.settings, rc_commands, throttle)
+
+    def fly(self, time_s: np.ndarray, channels_us: np.ndarray, *, progress: Callable[[float, float], None] | None,
+            thrust_scale: np.ndarray | None) -> ReplayTrace:
+        """Fly the channels (:meth:`channels`) at their times: :func:`replay_sticks`."""
+        return replay_sticks(self.plant, StickTrack(time_s, channels_us), progress=progress,
+                             thrust_scale=thrust_scale)

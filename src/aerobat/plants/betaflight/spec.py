@@ -11,7 +11,9 @@ from typing import Any
 
 from aerobat.core.plant import Plant
 from aerobat.plants.betaflight.sampling import SAMPLING
-from aerobat.plants.spec import PlantSpec
+from aerobat.plants.betaflight.warm import warm_design_model, warm_world
+from aerobat.plants.lab_warm import warm_lab_kernels
+from aerobat.plants.spec import Kernels, PlantSpec
 from aerobat.quadrotor.feedback import DEFAULT_SCHEME, Feedback, FeedbackScheme
 from aerobat.quadrotor.vehicle import VehicleConfig
 
@@ -32,6 +34,12 @@ def firmware_model(config: VehicleConfig, settings: Any) -> tuple[Any, dict[str,
 
     model = firmware_design_model(config, settings)
     return model, model_table(model)
+
+
+def _replayer(settings: Any, *, tune: Any, props_out: bool, seed: int = 0) -> Any:
+    from aerobat.plants.betaflight.replay import LogReplayer
+
+    return LogReplayer(settings, tune=tune, props_out=props_out, seed=seed)
 
 
 def _cores(settings: Any) -> int:
@@ -69,4 +77,7 @@ SPEC = PlantSpec(
     "betaflight", "a 5-inch racer flown by Betaflight 4.6's own firmware (SITL in lockstep) in the arena",
     _build, load_settings=_load, settings_from_table=_from_table, settings_to_table=_to_table,
     default_settings=_default, option="--betaflight", feedback=tuple(FeedbackScheme),
-    default_feedback=DEFAULT_SCHEME, cores=_cores, firmware_model=firmware_model, robustness=SAMPLING)
+    default_feedback=DEFAULT_SCHEME, cores=_cores, firmware_model=firmware_model, robustness=SAMPLING,
+    kernels=(Kernels("plants", warm_lab_kernels), Kernels("plants", warm_world),
+             Kernels("firmware", warm_design_model)),
+    replay=_replayer)

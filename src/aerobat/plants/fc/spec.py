@@ -6,7 +6,9 @@ from pathlib import Path
 from typing import Any
 
 from aerobat.core.plant import Plant
-from aerobat.plants.spec import PlantSpec
+from aerobat.plants.betaflight.warm import warm_world
+from aerobat.plants.lab_warm import warm_lab_kernels
+from aerobat.plants.spec import Kernels, PlantSpec
 from aerobat.quadrotor.feedback import Feedback, FeedbackScheme
 from aerobat.quadrotor.vehicle import VehicleConfig
 
@@ -56,4 +58,6 @@ SPEC = PlantSpec(
     _build, load_settings=_load, settings_from_table=_from_table, settings_to_table=_to_table,
     default_settings=_default, requires=(("serial", "fc"),), option="--fc", feedback=tuple(FeedbackScheme),
     # the paper flies open loop; the pilot-side feedback runs at the radio rate on motion capture
-    default_feedback=FeedbackScheme.NONE, firmware_model=_firmware_model)
+    default_feedback=FeedbackScheme.NONE, firmware_model=_firmware_model,
+    # the Betaflight plant's supervisor, pilot and stick map fly the board
+    kernels=(Kernels("plants", warm_lab_kernels), Kernels("plants", warm_world)))

@@ -5,13 +5,14 @@ from __future__ import annotations
 from typing import Any
 
 from aerobat.core.plant import Plant
+from aerobat.plants.lab_warm import warm_lab_kernels
 from aerobat.plants.rotorpy.settings import (
     RotorPySettings,
     load_rotorpy_settings,
     settings_from_table,
     settings_to_table,
 )
-from aerobat.plants.spec import PlantSpec
+from aerobat.plants.spec import Kernels, PlantSpec
 from aerobat.quadrotor.feedback import Feedback, FeedbackScheme
 from aerobat.quadrotor.vehicle import VehicleConfig
 
@@ -33,4 +34,4 @@ SPEC = PlantSpec(
     requires=(("rotorpy", "rotorpy"),), option="--rotorpy", feedback=tuple(FeedbackScheme),
     # measured (docs/results.md, Feedback): with the default rule, tracking is worse than the open
     # loop on RotorPy (last-10 0.051 vs 0.041 m); it wins only with --rule broyden (0.012 m)
-    default_feedback=FeedbackScheme.NONE)
+    default_feedback=FeedbackScheme.NONE, kernels=(Kernels("plants", warm_lab_kernels),))

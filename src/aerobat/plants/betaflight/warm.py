@@ -1,0 +1,100 @@
+"""Compile the Betaflight plant's kernels ahead of its first trial, with the argument types it passes.
+
+:func:`warm_world` compiles the world's step, the lockstep loops (UDP and, where the exchange's C helper
+can be built, shared memory), the frame loop and the pilot's sticks: no firmware is needed to compile
+them. :func:`warm_design_model` compiles the firmware design model (both fidelities). The plant's spec
+declares both (:attr:`aerobat.plants.PlantSpec.kernels`); ``aerobat setup`` runs them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["warm_design_model", "warm_world"]
+
+
+def warm_world() -> None:
+    """The Betaflight world's step, its lockstep and frame loops, and the pilot's sticks."""
+    from aerobat.firmware.betaflight.errors import FirmwareUnavailable
+    from aerobat.firmware.betaflight.packets import MOTOR_STRUCT
+    from aerobat.plants.betaflight import frames as fr
+    from aerobat.plants.betaflight.lockstep import N_IO, run_steps
+    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.plants.betaflight.physics import (
+        C_CONTACT,
+        C_DELAY,
+        N_COUNTERS,
+        PACKET_DOUBLES,
+        airframe_plant,
+        aux_vector,
+        ground_state,
+        prime,
+        step,
+    )
+    from aerobat.plants.betaflight.pilot import N_LIMITS, angle_sticks, program_sticks
+    from aerobat.plants.lab_kernels import MOCAP_COLUMNS
+    from aerobat.quadrotor.dynamics import N_STATE
+
+    params = BetaflightParams()
+    step_s = 1.0 / params.firmware.gyro_rate_hz
+    world = ground_state((0.0, 0.0, -2.5))
+    plant = airframe_plant(params)
+    aux = aux_vector(params, step_s=step_s, ground_z_m=-2.5, gravity_m_s2=9.81)
+    counters = np.zeros(N_COUNTERS, dtype=np.int64)
+    counters[C_DELAY] = 1
+    counters[C_CONTACT] = 1
+    noise = np.zeros((2, 6))
+    packet = np.zeros(PACKET_DOUBLES)
+    scratch = np.zeros((fr.HELD_ROW + 1, N_STATE))  # the physics' six rows and the shared-memory loop's held sample
+    prime(world, plant, aux, counters, noise[0], packet, scratch)
+    step(world, np.zeros(4, dtype=np.float32), plant, aux, np.zeros((2, 4)), counters, noise[1], packet, scratch)
+    # the compiled lockstep loop (a run of no steps: nothing is sent)
+    block = np.zeros(MOTOR_STRUCT.size, dtype=np.uint8)
+    run_steps(-1, -1, 0, 0, 0, 0, 8, step_s, world, block, block[:16].view(np.float32), plant, aux,
+              np.zeros((2, 4)), counters, noise, np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)),
+              np.zeros(N_IO, dtype=np.int64), packet, scratch)
+    # and its shared-memory twin, where the exchange's C helper can be compiled (no compiler: skipped)
+    try:
+        from aerobat.plants.betaflight.lockstep_shm import run_steps_shm
+    except FirmwareUnavailable:
+        pass
+    else:
+        # the frame loop around both (a run of no frames), with the argument types Flight passes
+        run_steps_shm(0, 0, 0, 0, 0, 0, 0, 8, step_s, world, block, block[:16].view(np.float32), plant, aux,
+                      np.zeros((2, 4)), counters, noise, np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)),
+                      np.zeros(fr.N_ST, dtype=np.int64), packet, scratch, np.random.default_rng(0),
+                      np.zeros(fr.N_CFG, dtype=np.int64), np.zeros(fr.N_FCFG))
+        from aerobat.plants.betaflight.frame_loop import fly_frames
+
+        rc_block = np.zeros(40, dtype=np.uint8)
+        fly_frames(0, 0, 32, 0, 0, False, 0, np.random.default_rng(0), np.zeros(fr.N_CFG, dtype=np.int64),
+                   np.zeros(fr.N_FCFG), np.zeros(fr.N_ST, dtype=np.int64), np.zeros(fr.N_FST), world, block,
+                   block.view(np.float32), plant, aux, np.zeros((2, 4)), counters, packet, scratch, np.zeros((2, 6)),
+                   np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)), np.zeros(4, dtype=np.int64),
+                   np.zeros((4, 16), dtype=np.int64), rc_block, rc_block.view(np.uint16),
+                   np.zeros((1, 16), dtype=np.int64), np.zeros(fr.N_PILOT), np.zeros(3), np.zeros(3), np.zeros(4),
+                   np.zeros(N_LIMITS), np.zeros(3), np.zeros((3, 2)), np.empty((0, 1 + N_STATE)), np.zeros(22),
+                   np.zeros((1, 4)), np.zeros(1), np.zeros((1, 3)), np.zeros(12), np.zeros(10), np.zeros(6))
+    limits = np.zeros(N_LIMITS)
+    limits[:] = 1.0
+    sticks = np.zeros(4)
+    program_sticks(np.array([9.81, 0.0, 0.0, 0.0]), limits, sticks)
+    angle_sticks(np.zeros(3), np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3), np.zeros(3),
+                 np.ones(4), limits, 1.0 / 50.0, sticks)
+
+
+def warm_design_model() -> None:
+    """The firmware design model of the Betaflight plants (:mod:`aerobat.quadrotor.firmware`), both fidelities."""
+    from aerobat.plants.betaflight.design_model import firmware_design_model
+    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.quadrotor.firmware.sticks import frames_of
+    from aerobat.quadrotor.program import Program, Switch
+    from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
+
+    program = Program(switches=(Switch(time_s=0.0, channel="rate_p", value=1.0),), duration_s=0.05)
+    frames_of(program.compile(), 0.004, 16)  # the plant's frames of a program
+    fpv5 = vehicle_from_name_or_file("fpv5")
+    for fidelity in ("design", "exact"):
+        model = firmware_design_model(fpv5, BetaflightParams(), fidelity=fidelity)
+        model.final_states([program])
+        model.trajectory(program)

@@ -22,6 +22,7 @@ from aerobat.core.rules import RuleChoice
 from aerobat.errors import ConfigError
 from aerobat.experiments.baselines import BASELINES, run_baseline
 from aerobat.experiments.job import job_kind
+from aerobat.experiments.job_specs import BenchmarkJob, DesignJob, LearnJob, RuleRunJob
 from aerobat.experiments.setup import build_rule
 from aerobat.plants import PlantChoice
 from aerobat.quadrotor.dynamics import POS
@@ -31,12 +32,12 @@ from aerobat.quadrotor.vehicle import VehicleConfig, vehicle_from_table
 __all__ = ["benchmark_job", "design_job", "learn_job", "learning_setup", "rule_run_job"]
 
 
-def learning_setup(spec: dict[str, Any]) -> tuple[Maneuver, Design, VehicleConfig, PlantChoice]:
+def learning_setup(spec: LearnJob | RuleRunJob) -> tuple[Maneuver, Design, VehicleConfig, PlantChoice]:
     """(maneuver, design, nominal vehicle, plant choice) of a learning job."""
-    maneuver = from_spec(spec["maneuver"], source="job maneuver")
-    model = vehicle_from_table(spec["model"], source="job model")
-    result = Design.from_json_dict(maneuver, spec["design"])
-    plant = PlantChoice.from_table(spec["plant"], source="job plant")
+    maneuver = from_spec(spec.maneuver, source="job maneuver")
+    model = vehicle_from_table(spec.model, source="job model")
+    result = Design.from_json_dict(maneuver, spec.design)
+    plant = PlantChoice.from_table(spec.plant, source="job plant")
     return maneuver, result, model, plant
 
 
@@ -50,15 +51,16 @@ def _position_errors(maneuver: Maneuver, errors: list[np.ndarray]) -> list[float
 
 
 @job_kind("learn")
-def learn_job(spec: dict[str, Any]) -> dict[str, Any]:
-    """One learning run (a robustness study's vehicle): the design travels in the spec."""
+def learn_job(table: dict[str, Any]) -> dict[str, Any]:
+    """One learning run (a robustness study's vehicle, :class:`LearnJob`): the design travels in the spec."""
     start = time.perf_counter()
+    spec = LearnJob.from_table(table)
     maneuver, result, model, plant_choice = learning_setup(spec)
-    choice = RuleChoice.parse(spec.get("rule", "paper"), source="job rule")
-    session = learn(maneuver, result, plant_choice.build(model), iterations=int(spec["iterations"]),
+    choice = RuleChoice.parse(spec.rule, source="job rule")
+    session = learn(maneuver, result, plant_choice.build(model), iterations=int(spec.iterations),
                     rule=build_rule(choice, result, model))
     errors = _position_errors(maneuver, [it.error for it in session.measured])
-    tol = float(spec.get("tolerance_m", 0.12))
+    tol = float(spec.tolerance_m)
     first_below = next((k + 1 for k, e in enumerate(errors) if e < tol), None)
     last = errors[-10:] if errors else [math.nan]
     return {
@@ -71,20 +73,21 @@ def learn_job(spec: dict[str, Any]) -> dict[str, Any]:
         "success": bool(session.status is SessionStatus.COMPLETED and float(np.mean(last)) <= tol),
         "final_params": session.final_params.tolist(),
         "lost_trials": sum(1 for it in session.iterations if it.status.retry),
-        "properties": spec.get("properties", {}),
+        "properties": spec.properties,
         "iterations": _records(session.iterations),
         "wall_s": time.perf_counter() - start,
     }
 
 
 @job_kind("design")
-def design_job(spec: dict[str, Any]) -> dict[str, Any]:
-    """Nominal design of one maneuver: feasibility, duration, apex height, conditioning."""
-    maneuver = from_spec(spec["maneuver"], source="job maneuver")
-    model = vehicle_from_table(spec["model"], source="job model")
+def design_job(table: dict[str, Any]) -> dict[str, Any]:
+    """Nominal design of one maneuver (:class:`DesignJob`): feasibility, duration, apex height, conditioning."""
+    spec = DesignJob.from_table(table)
+    maneuver = from_spec(spec.maneuver, source="job maneuver")
+    model = vehicle_from_table(spec.model, source="job model")
     result = design(maneuver, NominalModel(model))
     continued_from: list[float] = []
-    if not result.converged and spec.get("continuation"):
+    if not result.converged and spec.continuation:
         result, continued_from = _continued(spec, model, result)
     apex = lowest = math.nan
     if result.converged:
@@ -110,12 +113,12 @@ CONTINUATION_STEPS = (0.25, 0.5)
 fractions below and above its maximum rate, designed from their own guesses."""
 
 
-def _continued(spec: dict[str, Any], model: Any, failed: Any) -> tuple[Any, list[float]]:
+def _continued(spec: DesignJob, model: Any, failed: Any) -> tuple[Any, list[float]]:
     """A design of ``spec``'s flip that failed from its guess (eqs 37–39), tried again from the mean p⁰ of
     the same flip at a lower and a higher maximum rate (each of :data:`CONTINUATION_STEPS`) when both
     converge: the guess, not the flip, may be what failed. ``(design, [lower, upper] rates [deg/s])``, or
     the failed design and ``[]``."""
-    base = dict(spec["maneuver"])
+    base = dict(spec.maneuver)
     if not isinstance(base.get("max_rate_rad_s"), int | float):
         return failed, []  # not a flip: nothing to continue along
     rate = float(base["max_rate_rad_s"])
@@ -141,24 +144,26 @@ def _continued(spec: dict[str, Any], model: Any, failed: Any) -> tuple[Any, list
 
 
 @job_kind("benchmark")
-def benchmark_job(spec: dict[str, Any]) -> dict[str, Any]:
-    """One time-optimal solve (a point of a benchmark map)."""
+def benchmark_job(table: dict[str, Any]) -> dict[str, Any]:
+    """One time-optimal solve (a point of a benchmark map, :class:`BenchmarkJob`)."""
     from aerobat.quadrotor.timeoptimal import BenchmarkLimits, solve_translation
 
-    limits = BenchmarkLimits(**spec.get("limits", {}))
-    solution = solve_translation(float(spec["y_m"]), float(spec["z_m"]), limits=limits)
+    spec = BenchmarkJob.from_table(table)
+    limits = BenchmarkLimits(**spec.limits)
+    solution = solve_translation(float(spec.y_m), float(spec.z_m), limits=limits)
     return {"status": solution.status.value, "message": solution.message,
             "duration_s": solution.duration_s if solution.ok else math.nan}
 
 
 @job_kind("rule_run")
-def rule_run_job(spec: dict[str, Any]) -> dict[str, Any]:
-    """One method (update rule or model-free baseline) learning one maneuver on one plant seed."""
+def rule_run_job(table: dict[str, Any]) -> dict[str, Any]:
+    """One method (update rule or model-free baseline) learning one maneuver on one plant seed (:class:`RuleRunJob`)."""
     start = time.perf_counter()
+    spec = RuleRunJob.from_table(table)
     maneuver, result, model, plant_choice = learning_setup(spec)
     plant = plant_choice.build(model)
-    method = spec["method"]
-    trials = int(spec["trials"])
+    method = spec.method
+    trials = int(spec.trials)
     iterations: list[dict[str, Any]] = []
     if method in BASELINES:
         outcome = run_baseline(method, maneuver, result, plant, trials, int(plant_choice.seed))
@@ -169,14 +174,15 @@ def rule_run_job(spec: dict[str, Any]) -> dict[str, Any]:
         errors, status = [it.error for it in session.measured], session.status
         iterations = _records(session.iterations)
     pos = _position_errors(maneuver, errors)
-    tol = float(spec.get("tolerance_m", 0.12))
+    tol = float(spec.tolerance_m)
     first = next((k + 1 for k, e in enumerate(pos) if e < tol), None)
     later = pos[first:] if first is not None else []
     last = pos[-10:] if pos else [math.nan]
     diverged = bool(pos and np.mean(last) > pos[0])
     angle_idx = [k for k, e in enumerate(maneuver.errors) if e.kind is ErrorKind.ANGLE]
     tail = np.array([np.asarray(e)[angle_idx] for e in errors[-10:]]) if errors and angle_idx else None
-    labels: dict[str, Any] = {key: spec[key] for key in ("scenario", "scheme") if key in spec}
+    labels: dict[str, Any] = {key: getattr(spec, key) for key in ("scenario", "scheme")
+                              if getattr(spec, key) is not None}
     return {
         **labels,
         "last10_angle_deg": ([] if tail is None else np.degrees(np.mean(np.abs(tail), axis=0)).tolist()),

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.experiments.job import Job, JobStatus
+from aerobat.experiments.job_specs import DesignJob
 from aerobat.quadrotor.vehicle import VehicleConfig, vehicle_table
 
 __all__ = ["ENVELOPE_QUANTITIES", "envelope_grid", "envelope_jobs", "envelope_key"]
@@ -25,9 +26,10 @@ def envelope_jobs(base_spec: Mapping[str, Any], model: VehicleConfig, flips: Seq
                   rates_deg_s: Sequence[float]) -> list[Job]:
     """One design job per (flip count, max rate) of a flip specification; one that fails from its guess is
     tried again by continuation from its neighbours in rate (:func:`aerobat.experiments.jobs.design_job`)."""
-    return [Job(key=envelope_key(n, rate), kind="design", spec={
-        "maneuver": dict(base_spec, flips=int(n), max_rate_rad_s=math.radians(rate)), "model": vehicle_table(model),
-        "continuation": True}) for n in flips for rate in rates_deg_s]
+    model_table = vehicle_table(model)
+    return [Job(key=envelope_key(n, rate), kind=DesignJob.kind, spec=DesignJob(
+        maneuver=dict(base_spec, flips=int(n), max_rate_rad_s=math.radians(rate)), model=model_table,
+        continuation=True).to_table()) for n in flips for rate in rates_deg_s]
 
 
 def envelope_grid(results: Mapping[str, Mapping[str, Any]], flips: Sequence[int],

@@ -19,6 +19,7 @@ from aerobat.core.maneuver import Maneuver
 from aerobat.errors import ConfigError
 from aerobat.experiments.designing import NominalDesign, job_design
 from aerobat.experiments.job import Job
+from aerobat.experiments.job_specs import RuleRunJob
 from aerobat.plants import PlantChoice
 from aerobat.plants.spec import PLANTS
 from aerobat.quadrotor.feedback import Feedback, FeedbackScheme
@@ -63,10 +64,11 @@ def feedback_study_jobs(maneuver: Maneuver, design: Design | NominalDesign, mode
         for scheme in schemes:
             choice = PlantChoice(plant.kind, settings, plant.seed, Feedback(scheme, plant.feedback.gains))
             for k in range(seeds):
-                jobs.append(Job(key=f"{scenario}-{scheme.value}-seed-{plant.seed + k:04d}", kind="rule_run", spec={
-                    "maneuver": maneuver.spec(), "design": design_table, "model": model_table,
-                    "plant": {**choice.to_table(), "seed": plant.seed + k}, "method": rule, "trials": trials,
-                    "tolerance_m": tolerance_m, "scenario": scenario, "scheme": scheme.value}))
+                job_spec = RuleRunJob(maneuver=maneuver.spec(), design=design_table, model=model_table,
+                                      plant={**choice.to_table(), "seed": plant.seed + k}, method=rule,
+                                      trials=trials, tolerance_m=tolerance_m, scenario=scenario, scheme=scheme.value)
+                jobs.append(Job(key=f"{scenario}-{scheme.value}-seed-{plant.seed + k:04d}", kind=RuleRunJob.kind,
+                                spec=job_spec.to_table()))
     return jobs
 
 

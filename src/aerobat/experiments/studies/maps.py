@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.experiments.job import Job
+from aerobat.experiments.job_specs import BenchmarkJob
 
 __all__ = ["map_csv", "map_grid", "map_jobs"]
 
@@ -23,7 +24,8 @@ def _key(i: int, j: int) -> str:
 
 def map_jobs(ys_m: Grid, zs_m: Grid, limits: Mapping[str, float]) -> list[Job]:
     """One benchmark solve per target (y, z)."""
-    return [Job(key=_key(i, j), kind="benchmark", spec={"y_m": float(y), "z_m": float(z), "limits": dict(limits)})
+    return [Job(key=_key(i, j), kind=BenchmarkJob.kind,
+                spec=BenchmarkJob(y_m=float(y), z_m=float(z), limits=dict(limits)).to_table())
             for j, z in enumerate(zs_m) for i, y in enumerate(ys_m)]
 
 

@@ -23,6 +23,7 @@ from aerobat.core.rules import RuleChoice
 from aerobat.errors import ConfigError
 from aerobat.experiments.designing import NominalDesign, job_design
 from aerobat.experiments.job import Job
+from aerobat.experiments.job_specs import LearnJob
 from aerobat.plants import sampled_plants
 from aerobat.plants.sampling import RobustnessRanges
 from aerobat.plants.spec import PLANTS
@@ -78,10 +79,9 @@ def robustness_jobs(maneuver: Maneuver, design: Design | NominalDesign,
             table["module"] = spec.module
         if fb.enabled:
             table["feedback"] = fb.to_table()
-        jobs.append(Job(key=f"vehicle-{k:05d}", kind="learn", spec={
-            "maneuver": maneuver.spec(), "design": design_table, "model": model_table, "plant": table,
-            "properties": props, "iterations": iterations, "rule": rule.label, "tolerance_m": tolerance_m,
-        }))
+        job_spec = LearnJob(maneuver=maneuver.spec(), design=design_table, model=model_table, plant=table,
+                            properties=props, iterations=iterations, rule=rule.label, tolerance_m=tolerance_m)
+        jobs.append(Job(key=f"vehicle-{k:05d}", kind=LearnJob.kind, spec=job_spec.to_table()))
     return jobs
 
 

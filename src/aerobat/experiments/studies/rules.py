@@ -15,6 +15,7 @@ from aerobat.errors import ConfigError
 from aerobat.experiments.baselines import BASELINES
 from aerobat.experiments.designing import NominalDesign, job_design
 from aerobat.experiments.job import Job
+from aerobat.experiments.job_specs import RuleRunJob
 from aerobat.plants import PlantChoice
 from aerobat.quadrotor.vehicle import VehicleConfig
 
@@ -55,10 +56,10 @@ def rules_study_jobs(maneuver: Maneuver, design: Design | NominalDesign,
     """Every method on the same ``seeds`` plant seeds (``plant.seed``, ``plant.seed + 1``, …)."""
     design_table, model_table = job_design(design, model)
     return [
-        Job(key=f"{method}-seed-{plant.seed + k:04d}", kind="rule_run", spec={
-            "maneuver": maneuver.spec(), "design": design_table, "model": model_table,
-            "plant": {**plant.to_table(), "seed": plant.seed + k}, "method": method, "trials": trials,
-            "tolerance_m": tolerance_m})
+        Job(key=f"{method}-seed-{plant.seed + k:04d}", kind=RuleRunJob.kind, spec=RuleRunJob(
+            maneuver=maneuver.spec(), design=design_table, model=model_table,
+            plant={**plant.to_table(), "seed": plant.seed + k}, method=method, trials=trials,
+            tolerance_m=tolerance_m).to_table())
         for method in methods for k in range(seeds)
     ]
 

@@ -24,7 +24,7 @@ from aerobat.core.bounds import ITERATIONS, MAX_ITERATIONS
 from aerobat.core.design import Design
 from aerobat.core.maneuver import Maneuver, bounds_arrays, check_maneuver, error_scales, position_indices
 from aerobat.core.notes import IterationNote, NoteKind, message_with_notes
-from aerobat.core.outcomes import Iteration, IterationStatus, SessionStatus, step_to
+from aerobat.core.outcomes import Iteration, IterationStatus, SessionStatus, iteration_json, session_document, step_to
 from aerobat.core.plant import Plant, Trial, TrialStatus
 from aerobat.core.rules.base import PaperRule, UpdateRule
 from aerobat.core.rules.registry import RuleChoice, make_rule
@@ -86,20 +86,13 @@ class Session:
 
     def to_json_dict(self) -> dict[str, Any]:
         """The session as plain JSON types: its status, parameters and every iteration."""
-        return {
-            "maneuver": self.maneuver.spec(),
-            "plant": self.plant_name,
-            "error_names": [e.name for e in self.maneuver.errors],
-            "error_units": [e.unit for e in self.maneuver.errors],
-            "parameter_names": [p.name for p in self.maneuver.parameters],
-            "parameter_units": [p.unit for p in self.maneuver.parameters],
-            "p_nominal": self.design.p_nominal.tolist(),
-            "iterations": [it.to_json_dict() for it in self.iterations],
-            "final_params": self.final_params.tolist(),
-            "status": self.status.value,
-            "message": self.message,
-            "wall_s": self.wall_s,
-        }
+        return session_document(
+            maneuver=self.maneuver.spec(), plant=self.plant_name,
+            error_names=[e.name for e in self.maneuver.errors], error_units=[e.unit for e in self.maneuver.errors],
+            parameter_names=[p.name for p in self.maneuver.parameters],
+            parameter_units=[p.unit for p in self.maneuver.parameters], p_nominal=self.design.p_nominal.tolist(),
+            iterations=[iteration_json(it) for it in self.iterations], final_params=self.final_params.tolist(),
+            status=self.status.value, message=self.message, wall_s=self.wall_s)
 
 
 # ------------------------------------------------------------------- core

@@ -16,7 +16,7 @@ from aerobat.core.codec import Form, decode, decode_value, encode
 from aerobat.core.notes import IterationNote
 from aerobat.core.plant import Trial, TrialStatus
 
-__all__ = ["Iteration", "IterationStatus", "SessionStatus", "step_to"]
+__all__ = ["Iteration", "IterationStatus", "SessionStatus", "iteration_json", "session_document", "step_to"]
 
 
 class IterationStatus(StrEnum):
@@ -133,7 +133,7 @@ class Iteration:
 
     def to_json_dict(self) -> dict[str, Any]:
         """The iteration as plain JSON types (arrays as lists; the core's codec), as ``session.json`` keeps it."""
-        return encode(self, _JSON_FIELDS, form=Form.JSON, keys=_JSON_KEYS)
+        return iteration_json(self)
 
     @classmethod
     def from_json_dict(cls, table: dict[str, Any]) -> Iteration:
@@ -152,6 +152,25 @@ _JSON_FIELDS = ("index", "correction", "status", "params", "next_params", "error
 """What ``session.json`` keeps of an iteration (``next_params`` for the step: exact, and what a reader wants)."""
 _JSON_KEYS = {"index": "i"}
 """Fields kept under another key."""
+
+
+def iteration_json(record: Any) -> dict[str, Any]:
+    """An iteration as ``session.json`` keeps it: an :class:`Iteration`, or a stored record of one (a frozen
+    dataclass with the same fields, :class:`aerobat.store.records.IterationRecord`), through the codec."""
+    return encode(record, _JSON_FIELDS, form=Form.JSON, keys=_JSON_KEYS)
+
+
+def session_document(*, maneuver: dict[str, Any], plant: str, error_names: list[str], error_units: list[str],
+                     parameter_names: list[str], parameter_units: list[str], p_nominal: list[float],
+                     iterations: list[dict[str, Any]], final_params: list[float], status: str, message: str,
+                     **more: Any) -> dict[str, Any]:
+    """The one shape of a session as JSON, whether it comes from memory
+    (:meth:`aerobat.core.learning.Session.to_json_dict`) or from the store
+    (:func:`aerobat.experiments.reports.session_json`): the keys both have, then ``more`` (what the
+    source knows besides). ``iterations`` are :func:`iteration_json` tables."""
+    return {"maneuver": maneuver, "plant": plant, "error_names": error_names, "error_units": error_units,
+            "parameter_names": parameter_names, "parameter_units": parameter_units, "p_nominal": p_nominal,
+            "iterations": iterations, "final_params": final_params, "status": status, "message": message, **more}
 
 
 def step_to(params: np.ndarray, target: np.ndarray) -> np.ndarray:

@@ -8,8 +8,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from aerobat.core.codec import Form, encode_value
 from aerobat.core.learning import IterationStatus, SessionStatus
+from aerobat.core.outcomes import iteration_json, session_document
 from aerobat.core.registry import from_spec
 from aerobat.errors import ConfigError
 from aerobat.experiments.designing import design_model_of
@@ -41,12 +41,7 @@ def session_json(store: Store, session_id: int, *, trajectories: bool = False, f
     prec = store.plant(rec.plant_id)
     iterations = []
     for it in store.iterations(session_id, trajectories=trajectories):
-        entry: dict[str, Any] = {
-            "i": it.index, "correction": it.correction, "status": it.status,
-            "params": it.params.tolist(), "next_params": it.next_params.tolist(),
-            "error": finite_or_none(it.error), "gamma": it.gamma, "scale": it.scale, "message": it.message,
-            "notes": encode_value(it.notes, Form.JSON),
-        }
+        entry = iteration_json(it)
         if full:
             entry["final_state"] = None if it.final_state is None else finite_or_none(it.final_state)
             entry["start_state"] = None if it.start_state is None else finite_or_none(it.start_state)
@@ -57,20 +52,16 @@ def session_json(store: Store, session_id: int, *, trajectories: bool = False, f
                 "columns": ["t_s", *STATE_NAMES],
                 "times_s": it.times_s.tolist(), "states": [finite_or_none(row) for row in it.states]}
         iterations.append(entry)
-    data: dict[str, Any] = {
-        "session_id": session_id, "db": str(store.path),
-        "maneuver": mrec.spec, "maneuver_name": mrec.name, "plant": prec.kind,
-        "error_names": list(mrec.error_names), "error_units": list(mrec.error_units),
-        "error_kinds": list(mrec.error_kinds),
-        "parameter_names": list(mrec.parameter_names), "parameter_units": list(mrec.parameter_units),
-        "design_model": dict(zip(("kind", "description"), design_model_of(store.vehicle(drec.vehicle_id).config),
-                                 strict=True)),
-        "p_nominal": drec.p_nominal.tolist(), "start_params": rec.start_params.tolist(),
-        "iterations": iterations, "final_params": rec.current_params.tolist(),
-        "status": rec.display_state, "message": rec.message, "seed": rec.seed, "rule": rec.rule,
-        "target_iterations": rec.target_iterations, "started_at": rec.started_at, "ended_at": rec.ended_at,
-        "warm_start_from": rec.warm_start_from, "study_id": rec.study_id,
-    }
+    data = session_document(
+        maneuver=mrec.spec, plant=prec.kind, error_names=list(mrec.error_names),
+        error_units=list(mrec.error_units), parameter_names=list(mrec.parameter_names),
+        parameter_units=list(mrec.parameter_units), p_nominal=drec.p_nominal.tolist(), iterations=iterations,
+        final_params=rec.current_params.tolist(), status=rec.display_state, message=rec.message,
+        session_id=session_id, db=str(store.path), maneuver_name=mrec.name, error_kinds=list(mrec.error_kinds),
+        design_model=dict(zip(("kind", "description"), design_model_of(store.vehicle(drec.vehicle_id).config),
+                              strict=True)),
+        start_params=rec.start_params.tolist(), seed=rec.seed, rule=rec.rule, target_iterations=rec.target_iterations,
+        started_at=rec.started_at, ended_at=rec.ended_at, warm_start_from=rec.warm_start_from, study_id=rec.study_id)
     if full:
         data["plant_config"] = prec.config
         data["vehicle"] = store.vehicle(prec.vehicle_id).config

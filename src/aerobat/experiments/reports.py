@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from aerobat.core.codec import Form, encode
 from aerobat.core.learning import IterationStatus, SessionStatus
 from aerobat.core.outcomes import iteration_json, session_document
 from aerobat.core.registry import from_spec
@@ -31,6 +33,12 @@ __all__ = ["finite_or_none", "load_session", "session_figures", "session_from_js
 def finite_or_none(values: Any) -> list[float | None]:
     """JSON-ready floats: non-finite values become None."""
     return [float(v) if math.isfinite(v) else None for v in values]
+
+
+_NOT_EXPORTED = ("id", "maneuver_id", "vehicle_id", "converged", "compute_s", "evaluations")
+"""A stored design's fields ``export --format json`` leaves out: the store's keys, what ``status`` says, and the
+design's effort (its timing and simulation count, kept in the store; left out so that exports of one result
+compare equal)."""
 
 
 def session_json(store: Store, session_id: int, *, trajectories: bool = False, full: bool = False) -> dict[str, Any]:
@@ -68,15 +76,10 @@ def session_json(store: Store, session_id: int, *, trajectories: bool = False, f
         data["command"] = list(rec.command)
         data["tags"] = list(rec.tags)
         data["notes"] = [{"at": at, "text": text} for at, text in rec.notes]
-        data["design"] = {
-            "p_guess": drec.p_guess.tolist(), "p_nominal": drec.p_nominal.tolist(),
-            "residual": finite_or_none(drec.residual), "residual_norm": drec.residual_norm,
-            "jacobian": [finite_or_none(r) for r in drec.jacobian],
-            "correction": [finite_or_none(r) for r in drec.correction], "correction_kind": drec.correction_kind,
-            "singular_values": finite_or_none(drec.singular_values), "condition_number": drec.condition_number,
-            "rank": drec.rank, "status": drec.status, "message": drec.message, "duration_s": drec.duration_s,
-            "vehicle": store.vehicle(drec.vehicle_id).config,
-        }
+        # the stored design through the codec, as the library's Design.to_json_dict keeps it (its record's
+        # keys and the timings aside), with the vehicle it was designed on
+        data["design"] = {**encode(drec, (f.name for f in dataclasses.fields(drec) if f.name not in _NOT_EXPORTED),
+                                   form=Form.JSON), "vehicle": store.vehicle(drec.vehicle_id).config}
     return data
 
 

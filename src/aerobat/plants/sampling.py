@@ -13,9 +13,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from aerobat.core.bounds import Interval, Span, bounded, validate
 
-__all__ = ["DEFAULT_SCENARIO", "RobustnessRanges", "Sampling", "Scenario", "scaled_environment"]
+__all__ = ["DEFAULT_SCENARIO", "BodyDraws", "RobustnessRanges", "Sampling", "Scenario", "body_draws",
+           "scaled_environment", "uniform"]
 
 
 _RANGE = Span(Interval(low=0.0))
@@ -81,6 +84,30 @@ class Scenario:
 
 DEFAULT_SCENARIO = Scenario("default", "the plant's settings as given", lambda settings: settings)
 """The scenario every plant runs: its settings unchanged."""
+
+
+def uniform(rng: np.random.Generator, bounds: tuple[float, float]) -> float:
+    """One draw from the range ``bounds`` (low, high)."""
+    return float(rng.uniform(bounds[0], bounds[1]))
+
+
+@dataclass(frozen=True)
+class BodyDraws:
+    """What every sampled vehicle draws first, in this order: its inertia scales, per-motor thrust gains and
+    centre-of-mass offset (so that a plant's samples stay what they were when its other draws change)."""
+
+    inertia_scale: tuple[float, float, float]
+    thrust_gains: tuple[float, float, float, float]
+    com_offset_xy_m: tuple[float, float]
+
+
+def body_draws(ranges: RobustnessRanges, rng: np.random.Generator) -> BodyDraws:
+    """The :class:`BodyDraws` of one vehicle from ``rng``."""
+    inertia = (uniform(rng, ranges.inertia_scale), uniform(rng, ranges.inertia_scale),
+               uniform(rng, ranges.inertia_zz_scale))
+    g = 1.0 + ranges.thrust_gain_spread * rng.uniform(-1, 1, 4)
+    c = ranges.com_offset_m * rng.uniform(-1, 1, 2)
+    return BodyDraws(inertia, (float(g[0]), float(g[1]), float(g[2]), float(g[3])), (float(c[0]), float(c[1])))
 
 
 def scaled_environment(base: Any, aero: float, noise: float) -> dict[str, Any]:

@@ -9,7 +9,15 @@ import numpy as np
 
 from aerobat.config import dataclass_to_table
 from aerobat.plants.arena.params import ArenaParams
-from aerobat.plants.sampling import DEFAULT_SCENARIO, RobustnessRanges, Sampling, Scenario, scaled_environment
+from aerobat.plants.sampling import (
+    DEFAULT_SCENARIO,
+    RobustnessRanges,
+    Sampling,
+    Scenario,
+    body_draws,
+    scaled_environment,
+    uniform,
+)
 
 __all__ = ["ARENA_PROPERTIES", "SAMPLING", "SCENARIOS", "sample_arena"]
 
@@ -28,26 +36,21 @@ def sample_arena(ranges: RobustnessRanges, seed: int,
     ``base``: the settings sampled around (None: the defaults); the true vehicle's properties are drawn
     afresh, the aerodynamics and noise scaled from ``base``'s."""
     rng = np.random.default_rng(seed)
-
-    def u(bounds: tuple[float, float]) -> float:
-        return float(rng.uniform(bounds[0], bounds[1]))
-
     base = base or ArenaParams()
-    ixx, iyy, izz = u(ranges.inertia_scale), u(ranges.inertia_scale), u(ranges.inertia_zz_scale)
-    g = 1.0 + ranges.thrust_gain_spread * rng.uniform(-1, 1, 4)
-    gains = (float(g[0]), float(g[1]), float(g[2]), float(g[3]))
-    c = ranges.com_offset_m * rng.uniform(-1, 1, 2)
-    com = (float(c[0]), float(c[1]), 0.0)
-    aero = u(ranges.aerodynamics_scale)
-    noise = u(ranges.noise_scale)
+    body = body_draws(ranges, rng)
+    ixx, iyy, izz = body.inertia_scale
+    gains = body.thrust_gains
+    com = (*body.com_offset_xy_m, 0.0)
+    aero = uniform(rng, ranges.aerodynamics_scale)
+    noise = uniform(rng, ranges.noise_scale)
     props = {
-        "mass_scale": u(ranges.mass_scale),
+        "mass_scale": uniform(rng, ranges.mass_scale),
         "inertia_xx_scale": ixx,
         "inertia_yy_scale": iyy,
         "inertia_zz_scale": izz,
-        "drag_constant_scale": u(ranges.drag_constant_scale),
-        "motor_rate_up_per_s": u(ranges.motor_rate_up_per_s),
-        "motor_rate_down_per_s": u(ranges.motor_rate_down_per_s),
+        "drag_constant_scale": uniform(rng, ranges.drag_constant_scale),
+        "motor_rate_up_per_s": uniform(rng, ranges.motor_rate_up_per_s),
+        "motor_rate_down_per_s": uniform(rng, ranges.motor_rate_down_per_s),
         "thrust_gain_min": min(gains),
         "com_offset_norm_m": float(np.hypot(com[0], com[1])),
         "aerodynamics_scale": aero,

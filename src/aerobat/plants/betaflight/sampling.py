@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.plants.betaflight.params import BetaflightParams, params_to_table
-from aerobat.plants.sampling import RobustnessRanges, Sampling, scaled_environment
+from aerobat.plants.sampling import RobustnessRanges, Sampling, body_draws, scaled_environment, uniform
 
 __all__ = ["BETAFLIGHT_PROPERTIES", "SAMPLING", "sample_betaflight"]
 
@@ -35,28 +35,25 @@ def sample_betaflight(ranges: RobustnessRanges, seed: int,
     radio. The pilot's model of the vehicle is off by ``pilot_mass_scale`` (the mass it believes).
     """
     rng = np.random.default_rng(seed)
-
-    def u(bounds: tuple[float, float]) -> float:
-        return float(rng.uniform(bounds[0], bounds[1]))
-
     base = base or BetaflightParams()
     a = base.airframe
-    ixx, iyy, izz = u(ranges.inertia_scale), u(ranges.inertia_scale), u(ranges.inertia_zz_scale)
-    g = 1.0 + ranges.thrust_gain_spread * rng.uniform(-1, 1, 4)
-    c = ranges.com_offset_m * rng.uniform(-1, 1, 2)
+    body = body_draws(ranges, rng)
+    ixx, iyy, izz = body.inertia_scale
+    g = body.thrust_gains
+    c = body.com_offset_xy_m
     props = {
-        "mass_scale": u(ranges.mass_scale),
+        "mass_scale": uniform(rng, ranges.mass_scale),
         "inertia_xx_scale": ixx,
         "inertia_yy_scale": iyy,
         "inertia_zz_scale": izz,
-        "drag_constant_scale": u(ranges.drag_constant_scale),
-        "motor_tau_scale": u(ranges.motor_tau_scale),
+        "drag_constant_scale": uniform(rng, ranges.drag_constant_scale),
+        "motor_tau_scale": uniform(rng, ranges.motor_tau_scale),
         "thrust_gain_min": float(min(g)),
         "com_offset_norm_m": float(np.hypot(c[0], c[1])),
-        "aerodynamics_scale": u(ranges.aerodynamics_scale),
-        "noise_scale": u(ranges.noise_scale),
+        "aerodynamics_scale": uniform(rng, ranges.aerodynamics_scale),
+        "noise_scale": uniform(rng, ranges.noise_scale),
     }
-    props["pilot_mass_scale"] = u(ranges.pilot_mass_scale)
+    props["pilot_mass_scale"] = uniform(rng, ranges.pilot_mass_scale)
     aero, noise = props["aerodynamics_scale"], props["noise_scale"]
     s = base.sensors
     params = base.replace(

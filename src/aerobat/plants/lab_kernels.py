@@ -2,7 +2,8 @@
 
 ``mocap_sample`` takes one motion-capture sample of a state with pre-drawn noise,
 ``estimate_pose`` is the supervisor's estimate from the samples so far (last pose, line-fit
-velocity), and ``pd_command`` the supervisor's cascaded PD(+I) hover controller. The arena's
+velocity), ``pd_command`` the supervisor's cascaded PD(+I) hover controller and ``settled`` its
+test that the vehicle is at the start and still (every plant's settle uses it). The arena's
 compiled supervisor inlines them (``inline="always"``), the RotorPy and Betaflight plants call
 them from their own loops; :mod:`aerobat.plants.mocap` is the NumPy side (measured states and
 final-state estimates from the samples).
@@ -15,7 +16,7 @@ import math
 import numba as nb
 import numpy as np
 
-__all__ = ["MOCAP_COLUMNS", "estimate_pose", "mocap_sample", "pd_command"]
+__all__ = ["MOCAP_COLUMNS", "estimate_pose", "mocap_sample", "pd_command", "settled"]
 
 # mocap record columns: t, x, y, z, qw, qx, qy, qz
 MOCAP_COLUMNS = 8
@@ -150,3 +151,18 @@ def estimate_pose(log, available, est_pos, est_vel, est_quat):  # pragma: no cov
                 num += (log[k, 0] - tm) * (log[k, 1 + i] - pm)
             est_vel[i] = num / den
     return True
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def settled(pos, vel, quat, target, position_m, velocity_m_s, tilt_rad):  # pragma: no cover - compiled
+    """Is the estimate (``pos`` [m], ``vel`` [m/s], ``quat`` (w, x, y, z)) at ``target`` and still?
+
+    Within ``position_m`` of the target, slower than ``velocity_m_s``, and the body z axis within
+    ``tilt_rad`` of vertical. A supervisor's settle is this for its hold time.
+    """
+    dp = math.sqrt((pos[0] - target[0]) ** 2 + (pos[1] - target[1]) ** 2 + (pos[2] - target[2]) ** 2)
+    dv = math.sqrt(vel[0] ** 2 + vel[1] ** 2 + vel[2] ** 2)
+    qx = quat[1]
+    qy = quat[2]
+    tilt = math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (qx * qx + qy * qy))))
+    return dp < position_m and dv < velocity_m_s and tilt < tilt_rad

@@ -22,10 +22,9 @@ from aerobat.core.plant import Trial, TrialStatus
 from aerobat.plants.arena.kernel import supervise
 from aerobat.plants.arena.params import ArenaParams
 from aerobat.plants.lab_kernels import MOCAP_COLUMNS
-from aerobat.plants.mocap import estimate_final_state, measured_states
 from aerobat.plants.plant_state import StateLayout
+from aerobat.plants.supervisor import TrialStop, fly_phases
 from aerobat.quadrotor.dynamics import (
-    N_STATE,
     controller_vector,
     hover_state,
     plant_vector,
@@ -42,27 +41,15 @@ from aerobat.quadrotor.feedback import (
     onboard_state,
     reference_from_trajectory,
 )
-from aerobat.quadrotor.program import Program
+from aerobat.quadrotor.program import CompiledProgram, Program
 from aerobat.quadrotor.simulate import Trajectory, simulate
 from aerobat.quadrotor.vehicle import VehicleConfig, VehicleParams
 
 __all__ = ["Arena"]
 
 
-@dataclass(frozen=True)
-class _Failure:
-    """Why a stretch of flight ended early: the trial status it means and the supervisor's words."""
-
-    status: TrialStatus
-    message: str
-
-
 # the true state may hold NaN after a diverged trial: the next trial starts from hover again
 _LAYOUT = StateLayout("arena", counters=("trials_flown", "tick"), fractions=("capacity",), finite=False)
-
-_SETTLED = _Failure(TrialStatus.OK, "settled")
-"""Returned by a settling flight that reached its tolerance (not a failure)."""
-
 
 @dataclass
 class _Log:
@@ -251,14 +238,15 @@ class Arena:
         return noise
 
     def _supervise(self, n_ticks: int, log: _Log, target: np.ndarray, *, closed_loop: bool = True,
-                   program=None, man_start_tick: int = -1, settle: np.ndarray | None = None) -> _Failure | None:
-        """Fly ``n_ticks`` with radio commands every link period; returns the failure, or None.
+                   program=None, man_start_tick: int = -1, settle: np.ndarray | None = None) -> bool:
+        """Fly ``n_ticks`` with radio commands every link period; a crash or a diverged state raises
+        :class:`~aerobat.plants.supervisor.TrialStop`.
 
-        With ``settle`` = (hold ticks, position, velocity, tilt tolerances) it returns early,
-        with :data:`_SETTLED`, once the vehicle has stayed within tolerance.
+        With ``settle`` = (hold ticks, position, velocity, tilt tolerances) it returns True as soon as
+        the vehicle has stayed within tolerance, else False after ``n_ticks``.
         """
         if n_ticks <= 0:
-            return None
+            return False
         p = self.params
         period = 1.0 / p.links.command_rate_hz
         gains = np.array([p.supervisor.position_gain_per_s2, p.supervisor.velocity_gain_per_s,
@@ -293,12 +281,10 @@ class Arena:
         log.count = int(out[1])
         status = int(out[4])
         if status == 1:
-            return _Failure(TrialStatus.ABORTED, "non-finite vehicle state")
+            raise TrialStop(TrialStatus.ABORTED, "non-finite vehicle state")
         if status == 2:
-            return _Failure(TrialStatus.CRASHED, self._volume_message(log.rows[int(out[5])]))
-        if status == 3:
-            return _SETTLED
-        return None
+            raise TrialStop(TrialStatus.CRASHED, self._volume_message(log.rows[int(out[5])]))
+        return status == 3
 
     def _volume_message(self, row: np.ndarray) -> str:
         vol = self.params.volume
@@ -309,18 +295,16 @@ class Arena:
                 return f"left the arena volume at t = {row[0]:.3f} s: {name} = {rel:+.3f} m beyond {where}"
         return "left the arena volume"  # pragma: no cover - the kernel only reports real violations
 
-    def _settle(self, log: _Log) -> _Failure | None:
-        """Fly to the start until within tolerance for the hold time; a failure on timeout."""
+    def _settle(self, log: _Log) -> None:
+        """Fly to the start until within tolerance for the hold time; a trial stop on timeout."""
         s = self.params.supervisor
         hold_ticks = max(1, round(s.settle_hold_s / self.tick_s))
         settle = np.array([hold_ticks, s.settle_position_m, s.settle_velocity_m_s, s.settle_tilt_rad], dtype=float)
-        outcome = self._supervise(round(s.settle_timeout_s / self.tick_s), log, self.start_m, settle=settle)
-        if outcome is _SETTLED:
-            return None
-        return outcome or _Failure(TrialStatus.ABORTED, f"did not settle at the start within {s.settle_timeout_s:g} s")
+        if not self._supervise(round(s.settle_timeout_s / self.tick_s), log, self.start_m, settle=settle):
+            raise TrialStop(TrialStatus.ABORTED, f"did not settle at the start within {s.settle_timeout_s:g} s")
 
-    def _upload(self, program: Program, log: _Log) -> tuple[_Failure | None, int]:
-        """Send the switch list in packets, each acknowledged; retries cost a timeout each."""
+    def _upload(self, program: Program, log: _Log) -> int:
+        """Send the switch list in packets, each acknowledged; retries cost a timeout each. Returns the attempts."""
         links = self.params.links
         packets = max(1, math.ceil(len(program.switches) / links.upload_switches_per_packet))
         if self.feedback.enabled:  # the reference goes up with the program
@@ -332,100 +316,38 @@ class Arena:
                 sent = self.rng.random() >= links.upload_drop_probability
                 acked = sent and self.rng.random() >= links.upload_drop_probability
                 wait = 0.004 if acked else links.upload_timeout_s
-                failure = self._supervise(max(1, round(wait / self.tick_s)), log, self.start_m)
-                if failure:
-                    return failure, attempts_total
+                self._supervise(max(1, round(wait / self.tick_s)), log, self.start_m)
                 if acked:
                     break
             else:
-                return _Failure(TrialStatus.ABORTED, f"upload of packet {packet + 1}/{packets} not acknowledged "
-                                                     f"after {links.upload_max_attempts} attempts"), attempts_total
-        return None, attempts_total
+                raise TrialStop(TrialStatus.ABORTED, f"upload of packet {packet + 1}/{packets} not acknowledged "
+                                                     f"after {links.upload_max_attempts} attempts")
+        return attempts_total
 
     # ----------------------------------------------------------------- trial
     def fly(self, program: Program) -> Trial:
-        """One supervised trial of ``program`` (Fig. 8)."""
+        """One supervised trial of ``program`` (Fig. 8, :func:`~aerobat.plants.supervisor.fly_phases`)."""
         check_type("program", program, Program, "a Program")
-        p = self.params
-        nan_state = np.full(N_STATE, np.nan)
-        log = _Log(np.empty((4096, MOCAP_COLUMNS)))
         self.plant = self._plant_vector()
         nominal = simulate(program, self.design_model, record=True)  # what the program was designed to fly
         if self.feedback.enabled:
             self._reference = reference_from_trajectory(nominal.times_s, nominal.states,
                                                         self.feedback.gains.reference_rate_hz)
-        failure = self._settle(log)
-        if failure:
-            return self._abort(failure, log)
-        failure, attempts = self._upload(program, log)
-        if failure:
-            return self._abort(failure, log)
-        compiled = program.compile()
-        duration = compiled.duration_s
-        # the trigger: exactly one packet on the command link, sent at the next link period
-        period = 1.0 / p.links.command_rate_hz
-        send_tick = math.ceil((math.floor(self.tick * self.tick_s / period + 1e-9) + 1) * period / self.tick_s - 1e-9)
-        failure = self._supervise(send_tick - self.tick, log, self.start_m)
-        if failure:
-            return self._abort(failure, log)
-        triggered = self.rng.random() >= p.links.command_drop_probability
-        if p.disturbances.enabled:
-            self._hover_residual()
-        start_tick = self.tick + self.link_delay_ticks  # measured link delay: the supervisor knows it
-        man_start = start_tick if triggered else -1
-        self.radio_cmd = np.array([self.config.vehicle.gravity_m_s2, 0.0, 0.0, 0.0])
-        start_time = start_tick * self.tick_s
-        end_tick = start_tick + math.ceil(duration / self.tick_s - 1e-9)
-        self.trials_flown += 1
-        # placeholder hover commands until the trigger check
-        check_tick = start_tick + round(min(p.supervisor.trigger_timeout_s, 0.5 * duration) / self.tick_s)
-        failure = self._supervise(check_tick - self.tick, log, self.start_m, closed_loop=False,
-                                  program=compiled, man_start_tick=man_start)
-        if failure:
-            return self._abort(failure, log, start_time)
-        if not self._maneuver_started(log, nominal, start_time, check_tick):
-            failure = self._supervise(round(p.supervisor.return_time_s / self.tick_s), log, self.start_m)
-            return Trial(TrialStatus.NO_TRIGGER, "trigger lost: no maneuver motion within the timeout; no correction",
-                         nan_state, np.empty(0), np.empty((0, N_STATE)), nan_state.copy(),
-                         {"upload_attempts": attempts})
-        # the rest of the maneuver (placeholder commands are ignored by the vehicle)
-        margin = math.ceil(0.015 / self.tick_s)
-        failure = self._supervise(end_tick + margin - self.tick, log, self.start_m, closed_loop=False,
-                                  program=compiled, man_start_tick=man_start)
-        if failure:
-            return self._abort(failure, log, start_time)
-        # recover and return under closed-loop control
-        failure = self._supervise(round(p.supervisor.return_time_s / self.tick_s), log, self.start_m,
-                                  program=compiled, man_start_tick=man_start)
-        if p.drift.enabled:
-            self.capacity *= 1.0 - p.drift.thrust_loss_per_trial
-        if failure:
-            return self._abort(failure, log, start_time)
-        end_time = start_time + duration
-        times, states = measured_states(log.view(), start_time, end_time, self.start_m)
-        final = estimate_final_state(log.view(), start_time, end_time, self.start_m)
-        start_state = estimate_final_state(log.view(), start_time - 0.06, start_time, self.start_m)
-        if final is None or not (np.all(np.isfinite(final[:13])) and np.all(np.isfinite(final[17:]))):
-            return Trial(TrialStatus.ABORTED, "too few motion-capture samples to estimate the final state", nan_state,
-                         times, states, start_state if start_state is not None else nan_state.copy())
-        return Trial(TrialStatus.OK, f"maneuver flown ({attempts} upload packet attempts)", final, times, states,
-                     start_state if start_state is not None else nan_state.copy(),
-                     {"upload_attempts": attempts, "start_time_s": start_time})
+        sortie = _Sortie(self, program, nominal)
+        flown = fly_phases(sortie, program.compile())
+        if flown.ok:
+            return flown.trial(f"maneuver flown ({sortie.attempts} upload packet attempts)",
+                               {"upload_attempts": sortie.attempts, "start_time_s": flown.start_time_s})
+        return flown.trial("", {"upload_attempts": sortie.attempts} if flown.status is TrialStatus.NO_TRIGGER else {})
 
-    def _abort(self, failure: _Failure, log: _Log, start_time: float | None = None) -> Trial:
-        """Report a failed trial and put the vehicle back at the start (picked up, restarted)."""
-        nan_state = np.full(N_STATE, np.nan)
-        if start_time is not None:
-            times, states = measured_states(log.view(), start_time, self.tick * self.tick_s, self.start_m)
-        else:
-            times, states = np.empty(0), np.empty((0, N_STATE))
+    def _pick_up(self) -> None:
+        """After a failed trial: the vehicle back at the start, restarted."""
         self.x = hover_state(self.true_vehicle, (float(self.start_m[0]), float(self.start_m[1]),
                                                  float(self.start_m[2])))
         self.gyro_prev[:] = 0.0
         self.integral[:] = 0.0
         self.onboard, self.history = onboard_state()  # restarted: the estimator starts level
         self.radio_cmd = np.array([self.config.vehicle.gravity_m_s2, 0.0, 0.0, 0.0])
-        return Trial(failure.status, failure.message, nan_state, times, states, nan_state.copy())
 
     def _maneuver_started(self, log: _Log, nominal: Trajectory, start_time: float, check_tick: int) -> bool:
         """Did the vehicle start the maneuver? Nearest of two hypotheses at the check time.
@@ -451,3 +373,84 @@ class Arena:
                        + lever * np.linalg.norm(measured_rot - predicted_rot))
         d_lost = np.linalg.norm(measured_disp) + lever * np.linalg.norm(measured_rot)
         return bool(d_triggered < d_lost)
+
+
+class _Sortie:
+    """One arena trial as the supervisor flies it (:class:`~aerobat.plants.supervisor.Sortie`)."""
+
+    def __init__(self, arena: Arena, program: Program, nominal: Trajectory) -> None:
+        self.arena = arena
+        self.program = program
+        self.nominal = nominal  # the design model's flight: the trigger check's prediction
+        self.log = _Log(np.empty((4096, MOCAP_COLUMNS)))
+        self.start_m = arena.start_m
+        self.attempts = 0
+        self.start_tick = -1  # the tick the program starts at, as the supervisor knows it
+        self.man_start = -1  # the tick the vehicle starts the program at (-1: the trigger was lost)
+        self.compiled: CompiledProgram | None = None
+
+    def take_off(self) -> None:
+        self.arena._settle(self.log)
+
+    def hover(self) -> None:
+        """The settle ends in hover; the trigger follows at once."""
+
+    def trigger(self, compiled: CompiledProgram) -> float:
+        """Upload, then exactly one trigger packet on the command link, sent at the next link period."""
+        a, p = self.arena, self.arena.params
+        self.attempts = a._upload(self.program, self.log)
+        period = 1.0 / p.links.command_rate_hz
+        send_tick = math.ceil((math.floor(a.tick * a.tick_s / period + 1e-9) + 1) * period / a.tick_s - 1e-9)
+        a._supervise(send_tick - a.tick, self.log, a.start_m)
+        triggered = a.rng.random() >= p.links.command_drop_probability
+        if p.disturbances.enabled:
+            a._hover_residual()
+        start_tick = a.tick + a.link_delay_ticks  # measured link delay: the supervisor knows it
+        self.start_tick = start_tick
+        self.man_start = start_tick if triggered else -1
+        self.compiled = compiled
+        a.radio_cmd = np.array([a.config.vehicle.gravity_m_s2, 0.0, 0.0, 0.0])
+        a.trials_flown += 1
+        return start_tick * a.tick_s
+
+    def maneuver(self, compiled: CompiledProgram, start_time_s: float) -> None:
+        """Placeholder hover commands (the vehicle ignores them while the program runs); a lost
+        trigger is found by the trigger check and flown back."""
+        a, p = self.arena, self.arena.params
+        start_tick = self.start_tick
+        end_tick = start_tick + math.ceil(compiled.duration_s / a.tick_s - 1e-9)
+        check_tick = start_tick + round(min(p.supervisor.trigger_timeout_s, 0.5 * compiled.duration_s) / a.tick_s)
+        a._supervise(check_tick - a.tick, self.log, a.start_m, closed_loop=False, program=compiled,
+                     man_start_tick=self.man_start)
+        if not a._maneuver_started(self.log, self.nominal, start_time_s, check_tick):
+            lost = "trigger lost: no maneuver motion within the timeout; no correction"
+            try:
+                a._supervise(round(p.supervisor.return_time_s / a.tick_s), self.log, a.start_m)
+            except TrialStop as failure:  # the return failed too: picked up
+                raise TrialStop(TrialStatus.NO_TRIGGER, f"{lost}; then {failure}") from None
+            raise TrialStop(TrialStatus.NO_TRIGGER, lost, picked_up=False)
+        margin = math.ceil(0.015 / a.tick_s)
+        a._supervise(end_tick + margin - a.tick, self.log, a.start_m, closed_loop=False, program=compiled,
+                     man_start_tick=self.man_start)
+
+    def return_to_start(self) -> None:
+        """Recover and return under closed-loop control; the battery loses its share of capacity."""
+        a = self.arena
+        try:
+            a._supervise(round(a.params.supervisor.return_time_s / a.tick_s), self.log, a.start_m,
+                         program=self.compiled, man_start_tick=self.man_start)
+        finally:
+            if a.params.drift.enabled:
+                a.capacity *= 1.0 - a.params.drift.thrust_loss_per_trial
+
+    def land(self) -> None:
+        """The arena's vehicle hovers at the start between trials."""
+
+    def mocap(self) -> np.ndarray:
+        return self.log.view()
+
+    def now_s(self) -> float:
+        return self.arena.tick * self.arena.tick_s
+
+    def pick_up(self) -> None:
+        self.arena._pick_up()

@@ -21,7 +21,7 @@ import math
 import numba as nb
 import numpy as np
 
-from aerobat.plants.lab_kernels import estimate_pose, mocap_sample, pd_command
+from aerobat.plants.lab_kernels import estimate_pose, mocap_sample, pd_command, settled
 from aerobat.quadrotor.dynamics import controller_constants, plant_constants, thrust_commands
 from aerobat.quadrotor.feedback import apply_feedback, onboard_propagate, onboard_receive, relay_deviation
 from aerobat.quadrotor.playback import rk4_plant_step
@@ -199,13 +199,7 @@ def supervise(x, gyro_prev, tick0, end_tick, tick_s, plant, ctrl, sensor, latenc
             while available < log_count and log[available, 0] <= avail_time:
                 available += 1
             if estimate_pose(log, available, est_pos, est_vel, est_quat):
-                dp = math.sqrt((est_pos[0] - target[0]) ** 2 + (est_pos[1] - target[1]) ** 2
-                               + (est_pos[2] - target[2]) ** 2)
-                dv = math.sqrt(est_vel[0] ** 2 + est_vel[1] ** 2 + est_vel[2] ** 2)
-                qx = est_quat[1]
-                qy = est_quat[2]
-                tilt = math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (qx * qx + qy * qy))))
-                if dp < settle[1] and dv < settle[2] and tilt < settle[3]:
+                if settled(est_pos, est_vel, est_quat, target, settle[1], settle[2], settle[3]):
                     calm += tick - period_start
                     if calm >= settle[0]:
                         status = 3

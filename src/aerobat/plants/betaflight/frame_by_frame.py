@@ -11,7 +11,6 @@ holds them to it).
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -28,6 +27,7 @@ from aerobat.plants.betaflight.frames import (
     Until,
 )
 from aerobat.plants.betaflight.pilot import angle_sticks, program_sticks
+from aerobat.plants.lab_kernels import settled
 from aerobat.plants.world_params import Volume
 from aerobat.quadrotor.dynamics import quaternion_from_rotation_vector, quaternion_multiply
 from aerobat.quadrotor.feedback import apply_feedback, relay_deviation
@@ -39,11 +39,6 @@ def _estimate(flight: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     pos, vel, quat = np.zeros(3), np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
     flight.estimate(pos, vel, quat)
     return pos, vel, quat
-
-
-def _tilt_rad(quat: np.ndarray) -> float:
-    x, y = quat[1], quat[2]
-    return math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y))))
 
 
 def _apply_law(flight: Any, law: FeedbackLaw, tau: float, command: np.ndarray, scratch: np.ndarray,
@@ -146,8 +141,8 @@ def run_frames_by_frame(flight: Any, volume: Volume | None, mode: Mode, frames: 
             pos, vel, quat = _estimate(flight)
             if airborne is None and not flight.on_floor:
                 airborne = flight.time_s
-            ok = (np.linalg.norm(pos - start) < pilot.settle_position_m
-                  and np.linalg.norm(vel) < pilot.settle_velocity_m_s and _tilt_rad(quat) < pilot.settle_tilt_rad)
+            ok = settled(pos, vel, quat, start, pilot.settle_position_m, pilot.settle_velocity_m_s,
+                         pilot.settle_tilt_rad)
             calm = calm + 1 if ok else 0
             met = calm >= pilot.settle_hold_frames
         if met:

@@ -85,7 +85,7 @@ from aerobat.plants.betaflight.lockstep import DONE, IO_MOCAP_USED, SEND_FAILED,
 from aerobat.plants.betaflight.lockstep_shm import run_steps_shm
 from aerobat.plants.betaflight.physics import C_CONTACT
 from aerobat.plants.betaflight.pilot import angle_sticks, program_sticks
-from aerobat.plants.lab_kernels import estimate_pose
+from aerobat.plants.lab_kernels import estimate_pose, settled
 from aerobat.quadrotor.feedback import apply_feedback, relay_deviation
 
 __all__ = ["fly_frames"]
@@ -255,13 +255,6 @@ def _begin_frame(n, drop, rng, cfg, fcfg, st, channel_row, noise, mocap_noise, q
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _tilt(quat):  # pragma: no cover - compiled
-    x = quat[1]
-    y = quat[2]
-    return math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y))))
-
-
-@nb.njit(cache=True, error_model="numpy")
 def _outside(st, log, start, volume):  # pragma: no cover - compiled
     """CRASH_FLOOR, CRASH_VOLUME (axis in st) or DONE: the plant's flight-volume check after a frame."""
     if st[0] == 0:  # no motion-capture sample yet
@@ -352,8 +345,8 @@ def fly_frames(mode, frames, n, drop, resume, check, until, rng, cfg, fcfg, st, 
             else:
                 if math.isnan(fst[F_AIRBORNE_S]) and not counters[C_CONTACT]:
                     fst[F_AIRBORNE_S] = now_s
-                ok = (_norm3(pos - start) < pilot[P_SETTLE_POSITION_M]
-                      and _norm3(vel) < pilot[P_SETTLE_VELOCITY_M_S] and _tilt(quat) < pilot[P_SETTLE_TILT_RAD])
+                ok = settled(pos, vel, quat, start, pilot[P_SETTLE_POSITION_M], pilot[P_SETTLE_VELOCITY_M_S],
+                             pilot[P_SETTLE_TILT_RAD])
                 st[S_CALM] = st[S_CALM] + 1 if ok else 0
                 if st[S_CALM] >= pilot[P_SETTLE_HOLD]:
                     return UNTIL_MET, k + 1

@@ -45,8 +45,8 @@ from aerobat.plants.betaflight.frames import AnglePilot, FeedbackLaw, FramesEnd,
 from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import airframe_plant
 from aerobat.plants.betaflight.pilot import L_CLIMB, StickMap
-from aerobat.plants.mocap import estimate_final_state, measured_states
 from aerobat.plants.plant_state import StateLayout
+from aerobat.plants.supervisor import Phase, TrialStop, fly_phases
 from aerobat.quadrotor.dynamics import N_STATE
 from aerobat.quadrotor.feedback import (
     Feedback,
@@ -75,14 +75,6 @@ _LAYOUT = StateLayout("betaflight", counters=("trials_flown",), fractions=("capa
 
 _MARGIN_S = 0.015  # program's hover command after its end (the estimate looks 10 ms past it)
 _LANDING_SPEED_M_S = 1.0
-
-
-class TrialStop(Exception):
-    """A trial ends early with ``status`` (crash, abort); the message says why."""
-
-    def __init__(self, status: TrialStatus, message: str) -> None:
-        super().__init__(message)
-        self.status = status
 
 
 class BetaflightPlant:
@@ -262,43 +254,16 @@ class BetaflightPlant:
                      np.empty((0, N_STATE)) if states is None else states, nan_state.copy(), info, signals)
 
     def _fly(self, flight: Flight, compiled: CompiledProgram, info: dict[str, Any], wall: float) -> Trial:
-        pilot = self.params.pilot
-        start_time = None
-        truth: list[np.ndarray] = []
-        try:
-            info["armed_at_s"] = self.power_on_and_arm(flight)
-            info["airborne_at_s"], info["settled_at_s"] = self.settle(flight)
-            info["hover"] = self.hover(flight, pilot.hover_s)
-            dropped = flight.frames_dropped
-            start_time = self.maneuver(flight, compiled, truth)
-            info["start_time_s"] = start_time
-            info["maneuver_frames_dropped"] = flight.frames_dropped - dropped
-            self.fly_to(flight, self.start_m, pilot.return_time_s, check=True)
-            info["returned_error_m"] = float(np.linalg.norm(flight.x[0:3] - self.start_m))
-        except TrialStop as stop:
-            info.update(self._timing(flight, wall))
-            times, states = (measured_states(flight.mocap(), start_time, flight.time_s, self.start_m)
-                             if start_time is not None else (None, None))
-            self._keep_truth(truth, start_time)
-            return self._failed(stop.status, str(stop), info, times, states, self._signals(truth, start_time))
-        end_time = start_time + compiled.duration_s
-        rows = flight.mocap()
-        times, states = measured_states(rows, start_time, end_time, self.start_m)
-        final = estimate_final_state(rows, start_time, end_time, self.start_m)
-        start_state = estimate_final_state(rows, start_time - 0.06, start_time, self.start_m)
-        self._keep_truth(truth, start_time)
-        info["landed"], info["disarmed"] = self.land_and_disarm(flight)
-        info["frames_sent"], info["frames_dropped"] = flight.frames_sent, flight.frames_dropped
+        """The supervisor's phases (:func:`~aerobat.plants.supervisor.fly_phases`) on ``flight``."""
+        sortie = _Sortie(self, flight, info)
+        flown = fly_phases(sortie, compiled)
+        self._keep_truth(sortie.truth, flown.start_time_s)
+        signals = self._signals(sortie.truth, flown.start_time_s)
+        if flown.phase is Phase.LAND:
+            info["frames_sent"], info["frames_dropped"] = flight.frames_sent, flight.frames_dropped
         info.update(self._timing(flight, wall))
-        nan_state = np.full(N_STATE, np.nan)
-        start_state = start_state if start_state is not None else nan_state.copy()
-        signals = self._signals(truth, start_time)
-        if final is None or not (np.all(np.isfinite(final[:13])) and np.all(np.isfinite(final[17:]))):
-            return Trial(TrialStatus.ABORTED, "too few motion-capture samples to estimate the final state", nan_state,
-                         times, states, start_state, info, signals)
-        return Trial(TrialStatus.OK, f"maneuver flown through Betaflight ({info['steps']} lockstep steps, "
-                                     f"{info['frames_dropped']}/{info['frames_sent']} radio frames lost)",
-                     final, times, states, start_state, info, signals)
+        return flown.trial(f"maneuver flown through Betaflight ({info['steps']} lockstep steps, "
+                           f"{info.get('frames_dropped')}/{info.get('frames_sent')} radio frames lost)", info, signals)
 
     def _keep_truth(self, truth: list[np.ndarray], start_time: float | None) -> None:
         if truth and start_time is not None:
@@ -388,10 +353,15 @@ class BetaflightPlant:
             worst["max_error_measured_m"], worst["max_error_true_m"] = run.worst_estimated_m, run.worst_true_m
         return worst
 
-    def maneuver(self, flight: Flight, compiled: CompiledProgram, truth: list[np.ndarray]) -> float:
-        """Stream the program in ACRO; returns the maneuver's start (its first frame reaches the receiver)."""
+    @staticmethod
+    def trigger_time(flight: Flight) -> float:
+        """When a program streamed from now starts: its first frame reaches the receiver [s]."""
+        return flight.time_s + flight.latency_steps * flight.step_s
+
+    def maneuver(self, flight: Flight, compiled: CompiledProgram, truth: list[np.ndarray], start_time: float) -> None:
+        """Stream the program in ACRO from ``start_time`` (:meth:`trigger_time`): the truth, then the
+        firmware's motor packet, are appended to ``truth`` a row per frame."""
         period = 1.0 / self.params.radio.rate_hz
-        start_time = flight.time_s + flight.latency_steps * flight.step_s
         n = flight.frames_for(compiled.duration_s + _MARGIN_S)
         # each frame carries the program's mean over its period: the switch times survive the radio
         commands = frames_of(compiled, period, n)
@@ -403,7 +373,6 @@ class BetaflightPlant:
         truth.extend(record[:run.frames])
         self._raise_crash(flight, run)
         self._integral[0:2] = 0.0  # the hover throttle's integral (the pilot's mass error) carries into the return
-        return start_time
 
     def _feedback_law(self, compiled: CompiledProgram, start_time: float) -> FeedbackLaw:
         """The feedback law as the offboard pilot runs it, around the nominal trajectory of ``compiled``."""
@@ -427,3 +396,49 @@ class BetaflightPlant:
         flight.run_frames(Mode.STREAM, flight.frames_for(0.1), channels_us=self._rows(self.channels(low, arm=False,
                                                                                                     angle=True)))
         return landed, max(flight.motor_commands()) == 0.0
+
+
+class _Sortie:
+    """One Betaflight trial as the supervisor flies it (:class:`~aerobat.plants.supervisor.Sortie`): the
+    pilot's phases on ``flight`` (lockstep, or the wall clock for ``fc``), writing what they saw into ``info``."""
+
+    def __init__(self, plant: BetaflightPlant, flight: Flight, info: dict[str, Any]) -> None:
+        self.plant = plant
+        self.flight = flight
+        self.info = info
+        self.start_m = plant.start_m
+        self.truth: list[np.ndarray] = []
+        self._dropped = 0  # radio frames lost before the maneuver
+
+    def take_off(self) -> None:
+        self.info["armed_at_s"] = self.plant.power_on_and_arm(self.flight)
+        self.info["airborne_at_s"], self.info["settled_at_s"] = self.plant.settle(self.flight)
+
+    def hover(self) -> None:
+        self.info["hover"] = self.plant.hover(self.flight, self.plant.params.pilot.hover_s)
+
+    def trigger(self, compiled: CompiledProgram) -> float:
+        """The program streams from the next frame: no upload, no trigger packet."""
+        self._dropped = self.flight.frames_dropped
+        return self.plant.trigger_time(self.flight)
+
+    def maneuver(self, compiled: CompiledProgram, start_time_s: float) -> None:
+        self.plant.maneuver(self.flight, compiled, self.truth, start_time_s)
+        self.info["start_time_s"] = start_time_s
+        self.info["maneuver_frames_dropped"] = self.flight.frames_dropped - self._dropped
+
+    def return_to_start(self) -> None:
+        self.plant.fly_to(self.flight, self.start_m, self.plant.params.pilot.return_time_s, check=True)
+        self.info["returned_error_m"] = float(np.linalg.norm(self.flight.x[0:3] - self.start_m))
+
+    def land(self) -> None:
+        self.info["landed"], self.info["disarmed"] = self.plant.land_and_disarm(self.flight)
+
+    def mocap(self) -> np.ndarray:
+        return self.flight.mocap()
+
+    def now_s(self) -> float:
+        return self.flight.time_s
+
+    def pick_up(self) -> None:
+        """Every trial starts a new firmware on the floor: nothing to put back."""

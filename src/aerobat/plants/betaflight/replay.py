@@ -132,7 +132,7 @@ def replay_sticks(plant: BetaflightPlant, track: StickTrack, *, samples_per_fram
     ``progress(done_s, total_s)`` is called about once per simulated second. ``thrust_scale`` (one per
     ``track.time_s``) multiplies every rotor's thrust from frame to frame (a battery's sag); None: 1.
     """
-    from aerobat.plants.betaflight.plant import TrialStop
+    from aerobat.plants.supervisor import TrialStop
 
     params = plant.params
     flight = plant.open_flight(rng=np.random.default_rng(plant.seed), plant=airframe_plant(params))

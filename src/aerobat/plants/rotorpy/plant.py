@@ -41,8 +41,7 @@ import numpy as np
 
 from aerobat.core.plant import Trial, TrialStatus
 from aerobat.errors import MissingDependency
-from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose, mocap_sample, pd_command
-from aerobat.plants.mocap import estimate_final_state, measured_states
+from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose, mocap_sample, pd_command, settled
 from aerobat.plants.plant_state import StateLayout
 from aerobat.plants.rotorpy.settings import (
     RotorPySettings,
@@ -51,6 +50,7 @@ from aerobat.plants.rotorpy.settings import (
     import_rotorpy,
     load_rotorpy_settings,
 )
+from aerobat.plants.supervisor import Phase, TrialStop, fly_phases
 from aerobat.quadrotor.dynamics import N_STATE
 from aerobat.quadrotor.feedback import (
     Feedback,
@@ -155,20 +155,6 @@ class _Offset:
 
     def update(self, t: float, position: np.ndarray) -> np.ndarray:
         return self.mean + np.asarray(self.profile.update(t, position), dtype=float)
-
-
-def _tilt_rad(quat: np.ndarray) -> float:
-    """Angle between the body z axis and the world z axis for a (w, x, y, z) quaternion [rad]."""
-    x, y = quat[1], quat[2]
-    return math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y))))
-
-
-class _StepFailed(Exception):
-    """The vehicle's state went non-finite or left the volume: the trial ends with ``status``."""
-
-    def __init__(self, status: TrialStatus, message: str) -> None:
-        super().__init__(message)
-        self.status = status
 
 
 class RotorPyPlant:
@@ -341,7 +327,7 @@ class RotorPyPlant:
         truth = self.aerobat_state()
         t = self.tick * self.tick_s
         if not np.all(np.isfinite(truth[:13])):
-            raise _StepFailed(TrialStatus.ABORTED, f"non-finite vehicle state at t = {t:.3f} s")
+            raise TrialStop(TrialStatus.ABORTED, f"non-finite vehicle state at t = {t:.3f} s")
         row = self._rows[self._count]
         mocap_sample(truth, t, noise, row)
         self._count += 1
@@ -351,7 +337,7 @@ class RotorPyPlant:
             rel = row[1 + axis] - self.start_m[axis]
             if rel < lo or rel > hi:
                 where = "the floor" if (axis == 2 and rel < lo) else f"the {name} limits [{lo:g}, {hi:g}] m"
-                raise _StepFailed(TrialStatus.CRASHED, f"left the flyable volume at t = {t:.3f} s: "
+                raise TrialStop(TrialStatus.CRASHED, f"left the flyable volume at t = {t:.3f} s: "
                                              f"{name} = {rel:+.3f} m beyond {where}")
 
     def _step(self, cmd: np.ndarray) -> None:
@@ -367,7 +353,7 @@ class RotorPyPlant:
             with np.errstate(all="ignore"):
                 self.state = self.vehicle.step(state, control, self.tick_s)
         except ValueError as exc:  # solve_ivp refuses a non-finite state, wind or command
-            raise _StepFailed(TrialStatus.ABORTED, f"non-finite vehicle state, wind or command at t = {t:.4f} s "
+            raise TrialStop(TrialStatus.ABORTED, f"non-finite vehicle state, wind or command at t = {t:.4f} s "
                                          f"(RotorPy step: {exc})") from None
         self._rate_integral += 0.5 * self.tick_s * (state["w"] + self.state["w"])
         self.tick += 1
@@ -407,65 +393,52 @@ class RotorPyPlant:
         while self.tick < deadline:
             self._closed_loop(chunk)
             est = self._feedback()
-            if est is not None and np.linalg.norm(est[0] - self.start_m) < sup.settle_position_m and \
-                    np.linalg.norm(est[1]) < sup.settle_velocity_m_s and _tilt_rad(est[2]) < sup.settle_tilt_rad:
+            if est is not None and settled(est[0], est[1], est[2], self.start_m, sup.settle_position_m,
+                                           sup.settle_velocity_m_s, sup.settle_tilt_rad):
                 calm += chunk
                 if calm >= hold:
                     return
             else:
                 calm = 0
-        raise _StepFailed(TrialStatus.ABORTED, f"did not settle at the start within {sup.settle_timeout_s:g} s")
+        raise TrialStop(TrialStatus.ABORTED, f"did not settle at the start within {sup.settle_timeout_s:g} s")
 
     # ---------------------------------------------------------------- trial
     def fly(self, program: Program | CompiledProgram) -> Trial:
-        """One supervised trial: settle, run the program open loop at 800 Hz, measure, return."""
+        """One supervised trial (:func:`~aerobat.plants.supervisor.fly_phases`): settle, run the program open
+        loop at 800 Hz, measure, return."""
         wall = time.perf_counter()
         steps0 = self.steps_taken
         compiled = program.compile() if isinstance(program, Program) else program
-        duration = compiled.duration_s
         self._count = 0
         self._truth = []
         self._rate_integral[:] = 0.0  # the truth counts turns from this trial's start
         if self.uses_global_rng:
             # RotorPy's motor noise (and Dryden gusts) use numpy's global RNG: reseed it per trial
             np.random.seed(int(self.rng.integers(2**32)))  # noqa: NPY002 - RotorPy draws from it
-        start_time = None
         try:
-            self._settle()
-            start_tick = self.tick
-            start_time = start_tick * self.tick_s
-            n_man = math.ceil(duration / self.tick_s - 1e-9)
-            commands = compiled.evaluate(np.arange(n_man) * self.tick_s)
-            self.trials_flown += 1
-            if self.feedback.enabled:
-                self._fly_with_feedback(compiled, commands, start_time)
-            else:
-                for k in range(n_man):
-                    self._step(commands[k])
-            # hover commands until the supervisor's estimation window is filled, then recover
-            for _ in range(math.ceil(0.015 / self.tick_s)):
-                self._step(compiled.hover)
-            end_time = start_time + duration
-            rows = self._rows[: self._count]
-            times, states = measured_states(rows, start_time, end_time, self.start_m)
-            final = estimate_final_state(rows, start_time, end_time, self.start_m)
-            start_state = estimate_final_state(rows, start_time - 0.06, start_time, self.start_m)
-            self._supervisor_cmd[:] = compiled.hover
-            self._settle()
-        except _StepFailed as failure:
-            return self._abort(failure.status, str(failure), start_time, wall, steps0)
+            flown = fly_phases(_Sortie(self), compiled)
         finally:
             truth = np.array(self._truth) if self._truth else np.empty((0, N_STATE + 1))
             self.last_truth = (truth[:, 0], truth[:, 1:])
-        nan_state = np.full(N_STATE, np.nan)
-        start_state = start_state if start_state is not None else nan_state.copy()
-        info = {"start_time_s": start_time, "steps": self.steps_taken - steps0,
-                "wall_s": time.perf_counter() - wall}
-        if final is None or not (np.all(np.isfinite(final[:13])) and np.all(np.isfinite(final[17:]))):
-            return Trial(TrialStatus.ABORTED, "too few motion-capture samples to estimate the final state", nan_state,
-                         times, states, start_state, info)
-        return Trial(TrialStatus.OK, f"maneuver flown on RotorPy ({info['steps']} steps of {self.tick_s * 1e3:.3g} ms)",
-                     final, times, states, start_state, info)
+        info: dict[str, Any] = {"steps": self.steps_taken - steps0, "wall_s": time.perf_counter() - wall}
+        if flown.phase is not Phase.LAND:  # ended early
+            return flown.trial("", info)
+        info = {"start_time_s": flown.start_time_s, **info}
+        return flown.trial(f"maneuver flown on RotorPy ({info['steps']} steps of {self.tick_s * 1e3:.3g} ms)", info)
+
+    def _fly_program(self, compiled: CompiledProgram) -> None:
+        """The program's ticks, open loop (with the onboard feedback if there is one), then hover commands
+        until the supervisor's estimation window is filled."""
+        n_man = math.ceil(compiled.duration_s / self.tick_s - 1e-9)
+        commands = compiled.evaluate(np.arange(n_man) * self.tick_s)
+        self.trials_flown += 1
+        if self.feedback.enabled:
+            self._fly_with_feedback(compiled, commands, self.tick * self.tick_s)
+        else:
+            for k in range(n_man):
+                self._step(commands[k])
+        for _ in range(math.ceil(0.015 / self.tick_s)):
+            self._step(compiled.hover)
 
     def _fly_with_feedback(self, compiled: CompiledProgram, commands: np.ndarray, start_time: float) -> None:
         """The program's ticks with the onboard feedback: the estimator starts from the supervisor's
@@ -497,18 +470,49 @@ class RotorPyPlant:
             onboard_propagate(onboard, history, t, float(w[0]), float(w[1]), float(w[2]), self.tick_s)
             self._step(cmd)
 
-    def _abort(self, status: TrialStatus, message: str, start_time: float | None, wall: float, steps0: int) -> Trial:
-        """Report a failed trial and put the vehicle back in hover at the start (picked up, restarted)."""
-        nan_state = np.full(N_STATE, np.nan)
-        rows = self._rows[: self._count]
-        if start_time is not None and rows.shape[0]:
-            times, states = measured_states(rows, start_time, rows[-1, 0], self.start_m)
-        else:
-            times, states = np.empty(0), np.empty((0, N_STATE))
+    def _pick_up(self) -> None:
+        """After a failed trial: the vehicle back in hover at the start (picked up, restarted)."""
         self.state = self.hover_state()
         self.integral[:] = 0.0
         self._rate_integral[:] = 0.0
         self._supervisor_cmd[:] = self.hover_cmd
-        info = {"steps": self.steps_taken - steps0, "wall_s": time.perf_counter() - wall}
-        return Trial(status, message, nan_state, times, states, nan_state.copy(), info)
 
+
+class _Sortie:
+    """One RotorPy trial as the supervisor flies it (:class:`~aerobat.plants.supervisor.Sortie`)."""
+
+    def __init__(self, plant: RotorPyPlant) -> None:
+        self.plant = plant
+        self.start_m = plant.start_m
+        self.compiled: CompiledProgram | None = None
+
+    def take_off(self) -> None:
+        self.plant._settle()
+
+    def hover(self) -> None:
+        """The settle ends in hover; the program starts at once."""
+
+    def trigger(self, compiled: CompiledProgram) -> float:
+        """The program runs on the supervisor's computer: it starts at the next tick."""
+        self.compiled = compiled
+        return self.plant.tick * self.plant.tick_s
+
+    def maneuver(self, compiled: CompiledProgram, start_time_s: float) -> None:
+        self.plant._fly_program(compiled)
+
+    def return_to_start(self) -> None:
+        assert self.compiled is not None
+        self.plant._supervisor_cmd[:] = self.compiled.hover  # the program's last command, then the PD loop
+        self.plant._settle()
+
+    def land(self) -> None:
+        """The vehicle hovers at the start between trials."""
+
+    def mocap(self) -> np.ndarray:
+        return self.plant._rows[: self.plant._count]
+
+    def now_s(self) -> float:
+        return self.plant.tick * self.plant.tick_s
+
+    def pick_up(self) -> None:
+        self.plant._pick_up()

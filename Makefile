@@ -14,7 +14,7 @@ COMPILED := $(VENV)/.stamp-compiled
 DEMO_COMPILED := $(VENV)/.stamp-compiled-demo
 KERNEL_SOURCES := $(wildcard src/aerobat/quadrotor/*.py src/aerobat/quadrotor/firmware/*.py src/aerobat/plants/*.py \
 	src/aerobat/plants/arena/*.py \
-	src/aerobat/plants/betaflight/*.py src/aerobat/firmware/betaflight/*.py \
+	src/aerobat/plants/betaflight/*.py src/aerobat/plants/fpv/*.py src/aerobat/firmware/betaflight/*.py \
 	src/aerobat/logs/blackbox_*.py)
 OUT ?= out
 # the extras make installs: every optional piece, the tests' and the docs'

@@ -44,8 +44,8 @@ from aerobat.firmware.betaflight.build import ensure_sitl  # noqa: E402
 from aerobat.firmware.betaflight.configure import ensure_eeprom, step_at_rest  # noqa: E402
 from aerobat.firmware.betaflight.sitl import SitlProcess  # noqa: E402
 from aerobat.plants.betaflight.flight import Flight  # noqa: E402
-from aerobat.plants.betaflight.params import BetaflightParams  # noqa: E402
 from aerobat.plants.betaflight.plant import BetaflightPlant  # noqa: E402
+from aerobat.plants.fpv.params import BetaflightParams  # noqa: E402
 from aerobat.quadrotor.maneuvers import MultiFlip  # noqa: E402
 from aerobat.quadrotor.simulate import NominalModel  # noqa: E402
 from aerobat.quadrotor.vehicle import fpv5  # noqa: E402

@@ -40,8 +40,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import bench_betaflight as bench  # noqa: E402
 
-from aerobat.plants.betaflight.params import BetaflightParams  # noqa: E402
 from aerobat.plants.betaflight.plant import BetaflightPlant  # noqa: E402
+from aerobat.plants.fpv.params import BetaflightParams  # noqa: E402
 
 CHOICES: dict[str, dict[str, Any]] = {
     "default": {},

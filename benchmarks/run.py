@@ -223,8 +223,8 @@ def bench_firmware_design(rounds: int = 5) -> dict:
     model's speed: gyro periods (8 kHz) flown per second on one thread."""
     from aerobat.experiments.designing import nominal_design
     from aerobat.plants import PlantChoice
-    from aerobat.plants.betaflight.design_model import firmware_design_model
-    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.plants.fpv.design_model import firmware_design_model
+    from aerobat.plants.fpv.params import BetaflightParams
     from aerobat.quadrotor.simulate import set_batch_threads
     from aerobat.quadrotor.vehicle import fpv5
 

@@ -25,9 +25,9 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from aerobat.core.design import design
-from aerobat.plants.betaflight.params import BetaflightParams
-from aerobat.plants.betaflight.pilot import throttle_for_collective
 from aerobat.plants.betaflight.plant import BetaflightPlant
+from aerobat.plants.fpv.params import BetaflightParams
+from aerobat.plants.fpv.pilot import throttle_for_collective
 from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.program import Program, Switch
 from aerobat.quadrotor.simulate import NominalModel, simulate

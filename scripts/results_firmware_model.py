@@ -53,7 +53,7 @@ def roma_setup(work: Path) -> tuple[Any, Any]:
 
     from aerobat.cli.app import main
     from aerobat.firmware.betaflight.tune import load_tune
-    from aerobat.plants.betaflight.params import load_betaflight
+    from aerobat.plants.fpv.params import load_betaflight
     from aerobat.quadrotor.vehicle import vehicle_from_name_or_file
 
     vehicle, airframe = work / "roma.toml", work / "roma_bf.toml"
@@ -105,8 +105,8 @@ def jacobian_consistency(model: Any, maneuver: Any, p: np.ndarray) -> float:
 
 def saturation(config: Any, maneuver: Any, p: np.ndarray) -> dict[str, Any]:
     """How much of the triple flip's p⁰ the motors spend at idle or full output, in the design model."""
-    from aerobat.plants.betaflight.design_model import firmware_design_model
-    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.plants.fpv.design_model import firmware_design_model
+    from aerobat.plants.fpv.params import BetaflightParams
     from aerobat.quadrotor.firmware.layout import K_MIN_COMMAND, K_MOTOR_HIGH, K_MOTOR_LOW
 
     model = firmware_design_model(config, BetaflightParams())
@@ -125,8 +125,8 @@ def cmd_smoothness() -> dict[str, Any]:
     """Sweeps and Jacobians of both fidelities (and the paper's model) around the triple flip's firmware p⁰,
     and a design on each fidelity."""
     from aerobat.core.design import design
-    from aerobat.plants.betaflight.design_model import firmware_design_model
-    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.plants.fpv.design_model import firmware_design_model
+    from aerobat.plants.fpv.params import BetaflightParams
     from aerobat.quadrotor.simulate import NominalModel
     from aerobat.quadrotor.vehicle import fpv5
 
@@ -172,9 +172,9 @@ def agreement_case(name: str, config: Any, params: Any, maneuver: Any) -> dict[s
     """The firmware model (both fidelities) against the SITL flying the same program in a noiseless world."""
     from aerobat.experiments.designing import nominal_design
     from aerobat.plants import PlantChoice
-    from aerobat.plants.betaflight.design_model import firmware_design_model
     from aerobat.plants.betaflight.model_check import noiseless, sitl_flight
     from aerobat.plants.betaflight.plant import BetaflightPlant
+    from aerobat.plants.fpv.design_model import firmware_design_model
 
     nominal = nominal_design(maneuver, config, plant=PlantChoice("betaflight", params), design_model="firmware")
     program = maneuver.program(nominal.design.p_nominal)
@@ -205,7 +205,7 @@ def agreement_case(name: str, config: Any, params: Any, maneuver: Any) -> dict[s
 
 
 def cmd_agreement(work: Path) -> dict[str, Any]:
-    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.plants.fpv.params import BetaflightParams
     from aerobat.quadrotor.vehicle import fpv5
 
     rows = [agreement_case("aerobat's tune, fpv5", fpv5(), BetaflightParams(), _triple(fpv5()))]
@@ -337,8 +337,8 @@ def cmd_translation() -> dict[str, Any]:
     duration, near the paper model's p⁰, in steps of 0.1, 1 and 2 ms."""
     from aerobat.experiments.designing import nominal_design
     from aerobat.plants import PlantChoice
-    from aerobat.plants.betaflight.design_model import firmware_design_model
-    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.plants.fpv.design_model import firmware_design_model
+    from aerobat.plants.fpv.params import BetaflightParams
     from aerobat.quadrotor.maneuvers import translation_maneuver
     from aerobat.quadrotor.vehicle import fpv5
 
@@ -379,9 +379,9 @@ def decompose(config: Any, params: Any, maneuver: Any, seed: int) -> list[dict[s
     from aerobat.core.maneuver import position_indices
     from aerobat.experiments.designing import nominal_design
     from aerobat.plants import PlantChoice
-    from aerobat.plants.betaflight.design_model import firmware_design_model
     from aerobat.plants.betaflight.model_check import noiseless
     from aerobat.plants.betaflight.plant import BetaflightPlant
+    from aerobat.plants.fpv.design_model import firmware_design_model
 
     nominal = nominal_design(maneuver, config, plant=PlantChoice("betaflight", params), design_model="firmware")
     program = maneuver.program(nominal.design.p_nominal)
@@ -415,7 +415,7 @@ def decompose(config: Any, params: Any, maneuver: Any, seed: int) -> list[dict[s
 
 
 def cmd_decompose(work: Path) -> dict[str, Any]:
-    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.plants.fpv.params import BetaflightParams
     from aerobat.quadrotor.vehicle import fpv5
 
     data = {"default": decompose(fpv5(), BetaflightParams(), _triple(fpv5()), seed=1)}
@@ -438,8 +438,8 @@ def cmd_figure() -> dict[str, Any]:
     """The same program flown by the paper's model, the firmware model and the Betaflight plant (seed 1)."""
     from aerobat.experiments.designing import nominal_design
     from aerobat.plants import PlantChoice
-    from aerobat.plants.betaflight.design_model import firmware_design_model
-    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.plants.fpv.design_model import firmware_design_model
+    from aerobat.plants.fpv.params import BetaflightParams
     from aerobat.plotting.files import save_figure
     from aerobat.plotting.firmware import plot_model_comparison
     from aerobat.quadrotor.simulate import simulate

@@ -78,7 +78,7 @@ def twin() -> None:
 
     from aerobat.cli import main as cli
     from aerobat.experiments.log_replay import replay_log
-    from aerobat.plants.betaflight.params import load_betaflight
+    from aerobat.plants.fpv.params import load_betaflight
 
     with tempfile.TemporaryDirectory(prefix="aerobat-twin-") as work:
         airframe = Path(work) / "roma_bf.toml"
@@ -145,7 +145,7 @@ def gecko() -> None:
     67–134 s with the default 5-inch and with what identification wrote."""
     import tempfile
 
-    from aerobat.plants.betaflight.params import load_betaflight
+    from aerobat.plants.fpv.params import load_betaflight
 
     with tempfile.TemporaryDirectory(prefix="aerobat-gecko-") as work:
         airframe = load_betaflight(_identify_airframe(Path(work), str(GECKO), ["--window-s", "0", "67"]))

@@ -193,7 +193,7 @@ def test_a_study_runs_as_many_jobs_at_once_as_its_plant_leaves_cores(jobs, tmp_p
     from aerobat.experiments.execution import default_workers
     from aerobat.experiments.studies import runner
     from aerobat.plants import PlantChoice
-    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.plants.fpv.params import BetaflightParams
 
     monkeypatch.setattr(os, "cpu_count", lambda: 8)
     assert default_workers() == 8 and default_workers(2) == 4 and default_workers(16) == 1

@@ -93,8 +93,8 @@ def _error_spec():
 
 
 def _firmware_config():
-    from aerobat.plants.betaflight.design_model import firmware_config, plant_settings
-    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.plants.fpv.design_model import firmware_config, plant_settings
+    from aerobat.plants.fpv.params import BetaflightParams
 
     return firmware_config(plant_settings(BetaflightParams()), gyro_rate_hz=8000)
 

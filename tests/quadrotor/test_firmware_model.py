@@ -13,8 +13,8 @@ import pytest
 from aerobat.core.design import DesignStatus, design
 from aerobat.errors import ConfigError
 from aerobat.firmware.betaflight.settings import load_settings
-from aerobat.plants.betaflight.design_model import firmware_config, firmware_design_model
-from aerobat.plants.betaflight.params import BetaflightParams
+from aerobat.plants.fpv.design_model import firmware_config, firmware_design_model
+from aerobat.plants.fpv.params import BetaflightParams
 from aerobat.quadrotor.firmware import FirmwareConfig
 from aerobat.quadrotor.firmware import filters as f
 from aerobat.quadrotor.firmware.layout import rates_curve

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from aerobat.errors import ConfigError
-from aerobat.plants.betaflight.design_model import firmware_design_model, plant_settings
-from aerobat.plants.betaflight.params import BetaflightParams, params_to_table
+from aerobat.plants.fpv.design_model import firmware_design_model, plant_settings
+from aerobat.plants.fpv.params import BetaflightParams, params_to_table
 from aerobat.quadrotor.dynamics import P_KYAW
 from aerobat.quadrotor.program import Program, Switch
 from aerobat.quadrotor.vehicle import fpv5

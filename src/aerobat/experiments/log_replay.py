@@ -246,7 +246,7 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
 
     ``plant`` flies it: a registered plant whose spec replays logs (:attr:`aerobat.plants.PlantSpec.replay`;
     None: the first, :func:`aerobat.plants.replaying_plants`, which is ``betaflight`` among the built-ins).
-    ``params`` (the plant's settings, e.g. :class:`~aerobat.plants.betaflight.params.BetaflightParams`;
+    ``params`` (the plant's settings, e.g. :class:`~aerobat.plants.fpv.params.BetaflightParams`;
     None: its defaults) gives the airframe, sensors and firmware; its ``tune`` is replaced by the log's
     header, or by ``tune`` (a :class:`~aerobat.firmware.betaflight.tune.Tune`: what-if), with ``changes``
     (``NAME=VALUE`` each, :func:`~aerobat.firmware.betaflight.tune.with_settings`) on top. The propellers

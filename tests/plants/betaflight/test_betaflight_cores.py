@@ -82,8 +82,8 @@ def test_a_taken_pair_is_not_shared(child):
 
 @needs_two
 def test_a_betaflight_flight_holds_its_pair_while_it_flies(firmware):
-    from aerobat.plants.betaflight.params import BetaflightParams
     from aerobat.plants.betaflight.plant import BetaflightPlant
+    from aerobat.plants.fpv.params import BetaflightParams
     from aerobat.quadrotor.vehicle import fpv5
 
     def fly():

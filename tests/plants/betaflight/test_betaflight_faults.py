@@ -24,8 +24,8 @@ from aerobat.core.plant import TrialStatus
 from aerobat.firmware.betaflight.sitl import SitlProcess
 from aerobat.firmware.betaflight.transport import TcpTransport
 from aerobat.plants.betaflight.flight import Flight
-from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.plant import BetaflightPlant
+from aerobat.plants.fpv.params import BetaflightParams
 from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel
 from aerobat.quadrotor.vehicle import fpv5

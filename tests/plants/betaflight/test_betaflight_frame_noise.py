@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from aerobat.plants.betaflight import frames as fr
 from aerobat.plants.betaflight.frame_noise import ALL, begin_draws, draw_noise, sensor_draws_through
+from aerobat.plants.fpv import frames as fr
 
 
 def _config(sensor: bool, position: float, attitude: float) -> tuple[np.ndarray, np.ndarray]:

@@ -16,12 +16,12 @@ from aerobat.core.plant import Trial
 from aerobat.firmware.betaflight.errors import FirmwareNotResponding
 from aerobat.firmware.betaflight.packets import MOTOR_STRUCT
 from aerobat.plants.betaflight.flight import Flight, FramesEnd, FramesRun
-from aerobat.plants.betaflight.frame_by_frame import run_frames_by_frame
-from aerobat.plants.betaflight.frames import S_DROPPED, S_SENT, S_TICK, Mode, Radio, Until
 from aerobat.plants.betaflight.lockstep import IO_LOG
-from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import airframe_plant, step
 from aerobat.plants.betaflight.plant import BetaflightPlant
+from aerobat.plants.fpv.frame_by_frame import run_frames_by_frame
+from aerobat.plants.fpv.frames import S_DROPPED, S_SENT, S_TICK, Mode, Radio, Until
+from aerobat.plants.fpv.params import BetaflightParams
 from aerobat.plants.lab_kernels import mocap_sample
 from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel

@@ -12,8 +12,8 @@ import pytest
 from aerobat.core.design import design
 from aerobat.core.plant import Trial
 from aerobat.firmware.betaflight.rc import RADIO_LOST_US
-from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.plant import BetaflightPlant
+from aerobat.plants.fpv.params import BetaflightParams
 from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel
 from aerobat.quadrotor.vehicle import fpv5

@@ -23,9 +23,9 @@ from aerobat.firmware.betaflight.packets import Exchange
 from aerobat.firmware.betaflight.shm import ensure_library
 from aerobat.firmware.betaflight.sitl import SitlProcess
 from aerobat.plants.betaflight.flight import Flight
-from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import airframe_plant
 from aerobat.plants.betaflight.plant import BetaflightPlant
+from aerobat.plants.fpv.params import BetaflightParams
 from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel
 from aerobat.quadrotor.vehicle import fpv5

@@ -95,8 +95,8 @@ def test_a_trial_with_the_measured_spin_is_the_trial_with_the_fixed_one(firmware
     import numpy as np
 
     from aerobat.core.design import design
-    from aerobat.plants.betaflight.params import BetaflightParams
     from aerobat.plants.betaflight.plant import BetaflightPlant
+    from aerobat.plants.fpv.params import BetaflightParams
     from aerobat.quadrotor.maneuvers import MultiFlip
     from aerobat.quadrotor.simulate import NominalModel
     from aerobat.quadrotor.vehicle import fpv5

@@ -13,8 +13,8 @@ import pytest
 from aerobat.core.design import design
 from aerobat.experiments.job import run_job
 from aerobat.experiments.studies import RobustnessRanges, robustness_jobs
-from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.sampling import sample_betaflight
+from aerobat.plants.fpv.params import BetaflightParams
 from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel
 from aerobat.quadrotor.vehicle import fpv5

@@ -19,8 +19,8 @@ from aerobat.firmware.betaflight.tune import (
     tune_from_blackbox_header,
 )
 from aerobat.plants import PlantChoice
-from aerobat.plants.betaflight.params import Airframe, BetaflightParams
-from aerobat.plants.betaflight.pilot import StickMap, stick_for_rate, throttle_for_collective
+from aerobat.plants.fpv.params import Airframe, BetaflightParams
+from aerobat.plants.fpv.pilot import StickMap, stick_for_rate, throttle_for_collective
 
 DATA = Path("/work/shared/data")
 DIFF = DATA / "betaflight-configs" / "tii-racing-kakuteh7-4.3.1-diff.txt"
@@ -178,7 +178,7 @@ def test_the_tune_is_stored_with_the_plant_and_comes_back() -> None:
 
 @needs_data
 def test_a_settings_file_keeps_the_tune(tmp_path: Path) -> None:
-    from aerobat.plants.betaflight.params import load_betaflight, save_betaflight
+    from aerobat.plants.fpv.params import load_betaflight, save_betaflight
 
     tune = load_tune(DIFF)
     save_betaflight(BetaflightParams(tune=tune), tmp_path / "bf.toml")

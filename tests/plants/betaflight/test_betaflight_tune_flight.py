@@ -13,8 +13,8 @@ from aerobat.core.design import design
 from aerobat.firmware.betaflight.configure import AtRestStepper
 from aerobat.firmware.betaflight.sitl import SitlProcess
 from aerobat.firmware.betaflight.tune import load_tune
-from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.plant import BetaflightPlant
+from aerobat.plants.fpv.params import BetaflightParams
 from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.simulate import NominalModel
 from aerobat.quadrotor.vehicle import fpv5

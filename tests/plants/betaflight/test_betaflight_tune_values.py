@@ -21,7 +21,7 @@ from aerobat.firmware.betaflight.settings import load_settings
 from aerobat.firmware.betaflight.sitl_table import load_table
 from aerobat.firmware.betaflight.translate import translate
 from aerobat.firmware.betaflight.tune import TuneError, load_tune, parse_cli, tune_from_blackbox_header
-from aerobat.plants.betaflight.params import load_betaflight
+from aerobat.plants.fpv.params import load_betaflight
 
 HEADER = (b"H Product:Blackbox flight data recorder by Nicholas Sherlock\n"
           b"H Firmware revision:Betaflight 4.2.9 (e097f4ab7) STM32F7X2\n"

@@ -102,7 +102,7 @@ def test_thrust_follows_the_logged_battery(firmware) -> None:
     23.69 V, every rotor's thrust is scaled by (V/23.69)², and the flight differs from one at constant thrust."""
     import dataclasses
 
-    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.plants.fpv.params import BetaflightParams
 
     base = BetaflightParams()
     params = dataclasses.replace(base, airframe=dataclasses.replace(base.airframe, battery_reference_v=23.69))

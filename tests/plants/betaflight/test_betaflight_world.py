@@ -10,7 +10,6 @@ import pytest
 from aerobat.errors import ConfigError
 from aerobat.firmware.betaflight.settings import load_settings
 from aerobat.plants import PLANTS, PlantChoice
-from aerobat.plants.betaflight.params import Airframe, BetaflightParams, load_betaflight, save_betaflight
 from aerobat.plants.betaflight.physics import (
     A_GROUND,
     C_CONTACT,
@@ -24,7 +23,8 @@ from aerobat.plants.betaflight.physics import (
     prime,
     step,
 )
-from aerobat.plants.betaflight.pilot import StickMap, angle_sticks, program_sticks, throttle_for_collective
+from aerobat.plants.fpv.params import Airframe, BetaflightParams, load_betaflight, save_betaflight
+from aerobat.plants.fpv.pilot import StickMap, angle_sticks, program_sticks, throttle_for_collective
 from aerobat.quadrotor.dynamics import N_STATE, quaternion_from_rotation_vector
 
 IDEAL = BetaflightParams().replace(sensors__gyro_scale_error=(0.0, 0.0, 0.0), sensors__gyro_bias_rad_s=(0.0, 0.0, 0.0),

@@ -30,10 +30,10 @@ pytestmark = pytest.mark.xdist_group("real_time")  # flights on the wall clock: 
 
 from aerobat.core.design import design  # noqa: E402
 from aerobat.core.plant import TrialStatus  # noqa: E402
-from aerobat.plants.betaflight.params import BetaflightParams, Firmware, Radio  # noqa: E402
 from aerobat.plants.fc.plant import FlightControllerPlant, RehearsalConnection  # noqa: E402
 from aerobat.plants.fc.settings import fc_params  # noqa: E402
 from aerobat.plants.fc.wall_clock import WallClockFlight  # noqa: E402
+from aerobat.plants.fpv.params import BetaflightParams, Firmware, Radio  # noqa: E402
 from aerobat.quadrotor.maneuvers import MultiFlip  # noqa: E402
 from aerobat.quadrotor.simulate import NominalModel  # noqa: E402
 from aerobat.quadrotor.vehicle import fpv5  # noqa: E402

@@ -20,10 +20,10 @@ from aerobat.cli import main
 from aerobat.experiments.designing import nominal_design
 from aerobat.firmware.betaflight.tune import load_tune
 from aerobat.plants import PlantChoice
-from aerobat.plants.betaflight.design_model import firmware_design_model
 from aerobat.plants.betaflight.model_check import noiseless, sitl_flight
-from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.plant import BetaflightPlant
+from aerobat.plants.fpv.design_model import firmware_design_model
+from aerobat.plants.fpv.params import BetaflightParams
 from aerobat.quadrotor.maneuvers import MultiFlip
 from aerobat.quadrotor.vehicle import fpv5
 

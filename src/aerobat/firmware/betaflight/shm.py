@@ -37,7 +37,7 @@ LIBRARY_NAME = "libaerobat_shm.so"
 _SOURCE = Path(__file__).with_name("shm_exchange.c")
 SPIN_S = 20e-6
 """The default longest spin of the driver for the firmware's answer before it sleeps on the futex [s]
-(adaptive below it): :attr:`aerobat.plants.betaflight.params.Firmware.spin_us`."""
+(adaptive below it): :attr:`aerobat.plants.fpv.params.Firmware.spin_us`."""
 
 _OFF_DRIVER_SPIN_NS = 80  # shm_exchange.c's SHM_OFF_DRIVER_SPIN_NS
 _OFF_FIRMWARE_SPIN_NS = 136  # SHM_OFF_SPIN_NS

@@ -32,9 +32,7 @@ from aerobat.errors import ConfigError
 from aerobat.firmware.betaflight.packets import MOTOR_STRUCT, RC_STRUCT, Exchange, SpinPolicy
 from aerobat.firmware.betaflight.shm import SpinChoices
 from aerobat.firmware.betaflight.sitl import SitlProcess
-from aerobat.plants.betaflight import frames as fr
 from aerobat.plants.betaflight.cores import CorePair, claim_core_pair
-from aerobat.plants.betaflight.frames import AnglePilot, FramesEnd, FramesRun, Mode, ProgramPilot, Radio, Until
 from aerobat.plants.betaflight.lockstep import (
     DONE,
     IO_EXCHANGES,
@@ -45,7 +43,6 @@ from aerobat.plants.betaflight.lockstep import (
     RESUME_STEP,
     SEND_FAILED,
 )
-from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import (
     A_GROUND,
     C_CONTACT,
@@ -56,6 +53,9 @@ from aerobat.plants.betaflight.physics import (
     ground_state,
     prime,
 )
+from aerobat.plants.fpv import frames as fr
+from aerobat.plants.fpv.frames import AnglePilot, FramesEnd, FramesRun, Mode, ProgramPilot, Radio, Until
+from aerobat.plants.fpv.params import BetaflightParams
 from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose
 from aerobat.quadrotor.dynamics import N_STATE
 

@@ -34,7 +34,10 @@ from numba.core import types
 
 from aerobat.firmware.betaflight.packets import RC_STRUCT
 from aerobat.plants.betaflight.frame_noise import ALL, begin_draws, draw_noise
-from aerobat.plants.betaflight.frames import (
+from aerobat.plants.betaflight.lockstep import DONE, IO_MOCAP_USED, SEND_FAILED, run_steps
+from aerobat.plants.betaflight.lockstep_shm import run_steps_shm
+from aerobat.plants.betaflight.physics import C_CONTACT
+from aerobat.plants.fpv.frames import (
     CRASH_FLOOR,
     CRASH_VOLUME,
     F_AIRBORNE_S,
@@ -81,10 +84,7 @@ from aerobat.plants.betaflight.frames import (
     Radio,
     Until,
 )
-from aerobat.plants.betaflight.lockstep import DONE, IO_MOCAP_USED, SEND_FAILED, run_steps
-from aerobat.plants.betaflight.lockstep_shm import run_steps_shm
-from aerobat.plants.betaflight.physics import C_CONTACT
-from aerobat.plants.betaflight.pilot import angle_sticks, program_sticks
+from aerobat.plants.fpv.pilot import angle_sticks, program_sticks
 from aerobat.plants.lab_kernels import estimate_pose, settled
 from aerobat.quadrotor.feedback import apply_feedback, relay_deviation
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numba as nb
 
-from aerobat.plants.betaflight.frames import (
+from aerobat.plants.fpv.frames import (
     K_EVERY,
     K_SENSOR_NOISE,
     Q_ATTITUDE_NOISE_RAD,

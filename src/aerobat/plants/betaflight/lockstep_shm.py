@@ -17,7 +17,6 @@ from numba.core import types
 
 from aerobat.firmware.betaflight.shm import library
 from aerobat.plants.betaflight.frame_noise import ALL, draw_noise, sensor_draws_through
-from aerobat.plants.betaflight.frames import HELD_ROW, S_DRAW_TOTAL, S_DRAWN, S_HELD
 from aerobat.plants.betaflight.lockstep import (
     DONE,
     IO_EXCHANGES,
@@ -31,6 +30,7 @@ from aerobat.plants.betaflight.lockstep import (
     SEND_FAILED,
 )
 from aerobat.plants.betaflight.physics import C_DELAY, advance, step, store_motors
+from aerobat.plants.fpv.frames import HELD_ROW, S_DRAW_TOTAL, S_DRAWN, S_HELD
 from aerobat.plants.lab_kernels import mocap_sample
 
 __all__ = ["run_steps_shm"]

@@ -17,9 +17,9 @@ import dataclasses
 
 import numpy as np
 
-from aerobat.plants.betaflight.frames import Mode, Radio
-from aerobat.plants.betaflight.params import BetaflightParams, Sensors
-from aerobat.plants.betaflight.pilot import program_sticks
+from aerobat.plants.fpv.frames import Mode, Radio
+from aerobat.plants.fpv.params import BetaflightParams, Sensors
+from aerobat.plants.fpv.pilot import program_sticks
 from aerobat.plants.world_params import Aerodynamics, Disturbances, Drift
 from aerobat.quadrotor.firmware import FirmwareModel, FirmwareTrajectory
 from aerobat.quadrotor.firmware.sticks import frames_of

@@ -25,7 +25,7 @@ import math
 import numba as nb
 import numpy as np
 
-from aerobat.plants.betaflight.params import BetaflightParams
+from aerobat.plants.fpv.params import BetaflightParams
 from aerobat.quadrotor.dynamics import N_STATE, P_IZZ, normalize_quaternion, plant_derivative
 from aerobat.quadrotor.xframe import add_rotor_reaction, curve_thrust, xframe_plant
 

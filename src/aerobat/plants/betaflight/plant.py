@@ -41,10 +41,10 @@ from aerobat.firmware.betaflight.packets import MOTOR_LOG_ORDER
 from aerobat.firmware.betaflight.rc import RC_MIN_US, stick_to_us
 from aerobat.firmware.betaflight.settings import BetaflightSettings, load_settings
 from aerobat.plants.betaflight.flight import N_PACKET, Flight, NonFinite
-from aerobat.plants.betaflight.frames import AnglePilot, FeedbackLaw, FramesEnd, FramesRun, Mode, ProgramPilot, Until
-from aerobat.plants.betaflight.params import BetaflightParams
 from aerobat.plants.betaflight.physics import airframe_plant
-from aerobat.plants.betaflight.pilot import L_CLIMB, StickMap
+from aerobat.plants.fpv.frames import AnglePilot, FeedbackLaw, FramesEnd, FramesRun, Mode, ProgramPilot, Until
+from aerobat.plants.fpv.params import BetaflightParams
+from aerobat.plants.fpv.pilot import L_CLIMB, StickMap
 from aerobat.plants.plant_state import StateLayout
 from aerobat.plants.supervisor import Phase, TrialStop, fly_phases
 from aerobat.quadrotor.dynamics import N_STATE

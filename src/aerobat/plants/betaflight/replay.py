@@ -178,7 +178,7 @@ class LogReplayer:
     """A pilot's logged sticks through this plant's firmware, as :func:`aerobat.experiments.log_replay.replay_log`
     asks of a plant (:attr:`aerobat.plants.PlantSpec.replay`).
 
-    ``params`` (:class:`~aerobat.plants.betaflight.params.BetaflightParams`, None: the defaults) gives the
+    ``params`` (:class:`~aerobat.plants.fpv.params.BetaflightParams`, None: the defaults) gives the
     airframe, sensors and firmware; ``tune`` replaces its tune (the log's header or a what-if's) and
     ``props_out`` its propellers' direction. The plant is built around the ``fpv5`` model (a replay designs
     nothing: the nominal vehicle only gives g).
@@ -187,8 +187,8 @@ class LogReplayer:
     def __init__(self, params: Any, *, tune: Any, props_out: bool, seed: int = 0) -> None:
         import dataclasses
 
-        from aerobat.plants.betaflight.params import BetaflightParams
         from aerobat.plants.betaflight.plant import BetaflightPlant
+        from aerobat.plants.fpv.params import BetaflightParams
         from aerobat.quadrotor.vehicle import fpv5
 
         params = params if params is not None else BetaflightParams()

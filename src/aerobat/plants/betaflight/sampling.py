@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from aerobat.plants.betaflight.params import BetaflightParams, params_to_table
+from aerobat.plants.fpv.params import BetaflightParams, params_to_table
 from aerobat.plants.sampling import RobustnessRanges, Sampling, body_draws, scaled_environment, uniform
 
 __all__ = ["BETAFLIGHT_PROPERTIES", "SAMPLING", "sample_betaflight"]

@@ -30,7 +30,7 @@ def _build(config: VehicleConfig, settings: Any, *, seed: int, feedback: Feedbac
 def firmware_model(config: VehicleConfig, settings: Any) -> tuple[Any, dict[str, Any]]:
     """The design model with this plant's flight controller (``settings``: its params) around ``config``,
     and the model's stored form."""
-    from aerobat.plants.betaflight.design_model import firmware_design_model, model_table
+    from aerobat.plants.fpv.design_model import firmware_design_model, model_table
 
     model = firmware_design_model(config, settings)
     return model, model_table(model)
@@ -43,32 +43,32 @@ def _replayer(settings: Any, *, tune: Any, props_out: bool, seed: int = 0) -> An
 
 
 def _cores(settings: Any) -> int:
-    from aerobat.plants.betaflight.params import instance_cores
+    from aerobat.plants.fpv.params import instance_cores
 
     return instance_cores(settings)
 
 
 def _load(path: str | Path) -> Any:
-    from aerobat.plants.betaflight.params import load_betaflight
+    from aerobat.plants.fpv.params import load_betaflight
 
     return load_betaflight(path)
 
 
 def _from_table(table: Any, source: str) -> Any:
     from aerobat.config import dataclass_from_table
-    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.plants.fpv.params import BetaflightParams
 
     return dataclass_from_table(BetaflightParams, table, source=source)
 
 
 def _to_table(settings: Any) -> dict[str, Any]:
-    from aerobat.plants.betaflight.params import params_to_table
+    from aerobat.plants.fpv.params import params_to_table
 
     return params_to_table(settings)
 
 
 def _default() -> Any:
-    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.plants.fpv.params import BetaflightParams
 
     return BetaflightParams()
 

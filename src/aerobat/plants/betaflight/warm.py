@@ -17,9 +17,7 @@ def warm_world() -> None:
     """The Betaflight world's step, its lockstep and frame loops, and the pilot's sticks."""
     from aerobat.firmware.betaflight.errors import FirmwareUnavailable
     from aerobat.firmware.betaflight.packets import MOTOR_STRUCT
-    from aerobat.plants.betaflight import frames as fr
     from aerobat.plants.betaflight.lockstep import N_IO, run_steps
-    from aerobat.plants.betaflight.params import BetaflightParams
     from aerobat.plants.betaflight.physics import (
         C_CONTACT,
         C_DELAY,
@@ -31,7 +29,9 @@ def warm_world() -> None:
         prime,
         step,
     )
-    from aerobat.plants.betaflight.pilot import N_LIMITS, angle_sticks, program_sticks
+    from aerobat.plants.fpv import frames as fr
+    from aerobat.plants.fpv.params import BetaflightParams
+    from aerobat.plants.fpv.pilot import N_LIMITS, angle_sticks, program_sticks
     from aerobat.plants.lab_kernels import MOCAP_COLUMNS
     from aerobat.quadrotor.dynamics import N_STATE
 
@@ -85,8 +85,8 @@ def warm_world() -> None:
 
 def warm_design_model() -> None:
     """The firmware design model of the Betaflight plants (:mod:`aerobat.quadrotor.firmware`), both fidelities."""
-    from aerobat.plants.betaflight.design_model import firmware_design_model
-    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.plants.fpv.design_model import firmware_design_model
+    from aerobat.plants.fpv.params import BetaflightParams
     from aerobat.quadrotor.firmware.sticks import frames_of
     from aerobat.quadrotor.program import Program, Switch
     from aerobat.quadrotor.vehicle import vehicle_from_name_or_file

@@ -45,9 +45,9 @@ from aerobat.firmware.betaflight.msp import Battery, FailsafeConfig, MspClient, 
 from aerobat.firmware.betaflight.rc import RC_MIN_US
 from aerobat.firmware.betaflight.serial_link import SerialTransport
 from aerobat.firmware.betaflight.settings import BetaflightSettings, load_settings
-from aerobat.plants.betaflight.params import BetaflightParams
-from aerobat.plants.betaflight.pilot import program_sticks
 from aerobat.plants.betaflight.plant import BetaflightPlant
+from aerobat.plants.fpv.params import BetaflightParams
+from aerobat.plants.fpv.pilot import program_sticks
 from aerobat.quadrotor.firmware.sticks import frames_of
 from aerobat.quadrotor.program import CompiledProgram, Program
 from aerobat.quadrotor.vehicle import VehicleConfig

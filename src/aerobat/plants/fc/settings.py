@@ -37,7 +37,7 @@ from typing import Any
 from aerobat.config import as_path, dataclass_from_table, dataclass_to_table, read_toml
 from aerobat.core.bounds import Integer, Interval, Items, OneOf, bounded, validate
 from aerobat.errors import ConfigError
-from aerobat.plants.betaflight.params import BetaflightParams, Pilot, params_to_table
+from aerobat.plants.fpv.params import BetaflightParams, Pilot, params_to_table
 
 from .pose_source import MOTION_CAPTURE_SYSTEMS
 from .safety import SafetyLimits

@@ -27,8 +27,8 @@ import numpy as np
 
 from aerobat.firmware.betaflight.errors import LinkClosed, LinkTimeout
 from aerobat.firmware.betaflight.msp import MSP_BATTERY_STATE, MSP_SET_RAW_RC, Battery, MspClient
-from aerobat.plants.betaflight.frame_by_frame import run_frames_by_frame
-from aerobat.plants.betaflight.frames import FramesRun, Mode
+from aerobat.plants.fpv.frame_by_frame import run_frames_by_frame
+from aerobat.plants.fpv.frames import FramesRun, Mode
 from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose
 from aerobat.plants.world_params import Volume
 from aerobat.quadrotor.dynamics import N_STATE

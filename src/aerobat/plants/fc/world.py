@@ -44,7 +44,7 @@ from typing import TYPE_CHECKING, Any
 from .priority import fifo
 
 if TYPE_CHECKING:
-    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.plants.fpv.params import BetaflightParams
 
 __all__ = ["POSE_DATAGRAM", "SET_POINT_JUMP_DEG_S", "WORLD_FIFO_PRIORITY", "WORLD_NICENESS", "RealTimeWorld",
            "WorldReport", "world_params"]
@@ -143,7 +143,7 @@ def world_params(params: BetaflightParams | None) -> BetaflightParams:
     ``SCHED_FIFO`` held both cores from the ground station, whose link to the firmware then went
     silent (``link_lost`` in the rehearsal's drills).
     """
-    from aerobat.plants.betaflight.params import BetaflightParams
+    from aerobat.plants.fpv.params import BetaflightParams
 
     return (params or BetaflightParams()).replace(firmware__spin_us=0.0)
 

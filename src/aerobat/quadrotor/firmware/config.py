@@ -3,7 +3,7 @@
 Betaflight 4.6's own settings by their CLI names and in its own units (``p_roll = 45``,
 ``rc_smoothing_auto_factor = 30``, ``tpa_breakpoint = 1350``), the values the firmware actually
 runs: 4.6's defaults, then aerobat's settings, then a pilot's tune (the Betaflight plant
-resolves them: :func:`aerobat.plants.betaflight.design_model.firmware_config`). The design
+resolves them: :func:`aerobat.plants.fpv.design_model.firmware_config`). The design
 model is built from this and nothing else about the firmware, so what it models is written down
 in one place (:data:`READ`), and a setting it does not model refuses the model when it is not
 at the value the model assumes (:data:`ASSUMED`): one line naming the setting, its value and

@@ -12,7 +12,7 @@ rounding), so the firmware sees repeated frames as exact duplicates, as it does 
 ACRO sticks through the firmware's rate curves (tables, inverted) and the throttle through the
 pilot's model of the vehicle (its mass and the published thrust curve) and the firmware's
 throttle curve. The curves and the model are one flat vector (indices ``L_*``) that the plant
-builds from the firmware's settings (:class:`aerobat.plants.betaflight.pilot.StickMap`).
+builds from the firmware's settings (:class:`aerobat.plants.fpv.pilot.StickMap`).
 
 Frames: sticks are in Betaflight's sense (roll right, pitch forward = nose down, yaw right =
 nose right); rates in aerobat's body FLU: roll stick from p, pitch stick from q, yaw stick from −r.

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from aerobat.firmware.betaflight.rc import RC_MIN_US, stick_to_us
-from aerobat.plants.betaflight.frames import (
+from aerobat.plants.fpv.frames import (
     AnglePilot,
     FeedbackLaw,
     FramesEnd,
@@ -26,7 +26,7 @@ from aerobat.plants.betaflight.frames import (
     Radio,
     Until,
 )
-from aerobat.plants.betaflight.pilot import angle_sticks, program_sticks
+from aerobat.plants.fpv.pilot import angle_sticks, program_sticks
 from aerobat.plants.lab_kernels import settled
 from aerobat.plants.world_params import Volume
 from aerobat.quadrotor.dynamics import quaternion_from_rotation_vector, quaternion_multiply

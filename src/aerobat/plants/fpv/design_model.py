@@ -27,8 +27,8 @@ from typing import Any
 
 from aerobat.config import dataclass_to_table
 from aerobat.firmware.betaflight.settings import BetaflightSettings, load_settings
-from aerobat.plants.betaflight.params import BetaflightParams
-from aerobat.plants.betaflight.pilot import StickMap
+from aerobat.plants.fpv.params import BetaflightParams
+from aerobat.plants.fpv.pilot import StickMap
 from aerobat.quadrotor.firmware import Fidelity, FirmwareConfig, FirmwareModel
 from aerobat.quadrotor.firmware.config import ASSUMED, READ
 from aerobat.quadrotor.vehicle import VehicleConfig

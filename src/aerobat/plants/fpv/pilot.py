@@ -28,7 +28,7 @@ import numba as nb
 import numpy as np
 
 from aerobat.firmware.betaflight.settings import BetaflightSettings
-from aerobat.plants.betaflight.params import Airframe
+from aerobat.plants.fpv.params import Airframe
 from aerobat.quadrotor.firmware.sticks import (
     L_ANGLE_LIMIT,
     L_CLIMB,

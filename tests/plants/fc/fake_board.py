@@ -26,6 +26,10 @@ class FakeBoard:
         self.device = os.ttyname(slave)
         self._slave = slave
         self.answers = answers
+        self.hold: set[int] = set()
+        """Commands whose answers wait until another command is answered (may be changed live): a test
+        decides which side reads an acknowledgement, whatever the scheduler does."""
+        self._held = bytearray()
         self.received: list[tuple[int, bytes]] = []
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._serve, daemon=True)
@@ -51,7 +55,12 @@ class FakeBoard:
                 del buffer[:end]
                 self.received.append((command, payload))
                 if command in self.answers:
-                    os.write(self.master, b"noise" + _response(command, self.answers[command]))
+                    answer = b"noise" + _response(command, self.answers[command])
+                    if command in self.hold:
+                        self._held += answer
+                    else:
+                        os.write(self.master, bytes(self._held) + answer)
+                        self._held.clear()
 
     def unplug(self) -> None:
         """Close the board's side, as a USB board that reboots does."""

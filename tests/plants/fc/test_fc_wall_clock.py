@@ -93,10 +93,15 @@ def test_acknowledgements_stay_paired_with_their_frames_when_a_request_reads_som
     try:
         with SerialTransport(board.device) as port:
             flight = _flight(port, SafetyLimits(link_timeout_s=2.0), battery_period_s=60.0)
-            for _ in range(10):  # each status request reads the frame's acknowledgement, which it drops
+            # each frame's acknowledgement comes just before the status answer, so the status request reads
+            # and drops it (left to the scheduler, the frame's own read could take it first on a busy machine)
+            board.hold = {MSP_SET_RAW_RC, MSP_BATTERY_STATE}  # the first frame asks for the battery too
+            for _ in range(10):
                 flight.frame(CHANNELS)
                 time.sleep(0.02)
                 flight.msp.status_ex()
+            assert flight.msp.discarded[MSP_SET_RAW_RC] == 10
+            board.hold = set()
             for _ in range(20):
                 flight.frame(CHANNELS)
             time.sleep(0.5)  # every acknowledgement has come

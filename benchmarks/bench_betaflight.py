@@ -65,9 +65,9 @@ def bench_lockstep(binary: Path, eeprom: Path) -> dict[str, Any]:
     """Motor packets per state packet, and the firmware's task rates in simulated time."""
     plant = BetaflightPlant(CONFIG, _params(exchange="udp"), seed=1)  # reads the motor socket
     with plant.open_flight() as flight:
-        plant.power_on_and_arm(flight)
+        plant.pilot.power_on_and_arm(flight)
         for _ in range(flight.frames_for(0.5)):
-            flight.frame(plant.channels(np.array([0.0, 0.0, 0.0, 1000.0]), arm=True, angle=True))
+            flight.frame(plant.pilot.channels(np.array([0.0, 0.0, 0.0, 1000.0]), arm=True, angle=True))
         time.sleep(0.05)
         try:
             flight.sitl._motor_socket.recv(64, socket.MSG_DONTWAIT)
@@ -120,7 +120,7 @@ def bench_compiled_at_rest(seconds: float = 5.0, exchange: str = "udp") -> dict[
     "shm" (shared memory; its waits spin first, and the spinning counts as CPU time).
     """
     plant = BetaflightPlant(CONFIG, _params(exchange=exchange), seed=1)
-    idle = plant.channels(np.array([0.0, 0.0, 0.0, 1000.0]), arm=False, angle=True)
+    idle = plant.pilot.channels(np.array([0.0, 0.0, 0.0, 1000.0]), arm=False, angle=True)
     with plant.open_flight() as flight:
         for _ in range(flight.frames_for(0.5)):
             flight.frame(idle)

@@ -54,22 +54,22 @@ def measure_step(axis: str, rate_deg_s: float, seed: int = 1, params: Betaflight
     stick_index, state_index, sign, _, _ = AXES[axis]
     plant = BetaflightPlant(CONFIG, params, seed=seed, feedback="none")
     with plant.open_flight() as flight:
-        plant.power_on_and_arm(flight)
-        plant.settle(flight)
-        plant.hover(flight, 0.5)
+        plant.pilot.power_on_and_arm(flight)
+        plant.pilot.settle(flight)
+        plant.pilot.hover(flight, 0.5)
         sticks = np.zeros(4)
-        sticks[3] = throttle_for_collective(CONFIG.vehicle.gravity_m_s2, plant.limits)
-        sticks[stick_index] = sign * math.radians(rate_deg_s) / plant.sticks.rate_max_rad_s
+        sticks[3] = throttle_for_collective(CONFIG.vehicle.gravity_m_s2, plant.pilot.limits)
+        sticks[stick_index] = sign * math.radians(rate_deg_s) / plant.pilot.sticks.rate_max_rad_s
         arrival = flight.time_s + flight.latency_steps * flight.step_s
         times, rates = [], []
         for _ in range(flight.frames_for(0.3)):
-            flight.frame(plant.channels(sticks, arm=True, angle=False), lossless=True)
+            flight.frame(plant.pilot.channels(sticks, arm=True, angle=False), lossless=True)
             times.append(flight.time_s - arrival)
             rates.append(flight.x[state_index])
         sticks[stick_index] = 0.0
         for _ in range(flight.frames_for(0.1)):
-            flight.frame(plant.channels(sticks, arm=True, angle=False), lossless=True)
-        plant.fly_to(flight, plant.start_m, 1.0, check=False)
+            flight.frame(plant.pilot.channels(sticks, arm=True, angle=False), lossless=True)
+        plant.pilot.fly_to(flight, plant.start_m, 1.0, check=False)
     return np.array(times), np.degrees(np.array(rates))
 
 

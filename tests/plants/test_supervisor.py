@@ -148,10 +148,24 @@ def test_an_error_that_is_not_a_trial_stop_is_the_plants_to_handle():
 _PLANTS = Path(__file__).resolve().parents[2] / "src" / "aerobat" / "plants"
 
 
-@pytest.mark.parametrize("module", ["arena/arena.py", "rotorpy/plant.py", "betaflight/plant.py"])
-def test_every_plant_flies_its_trials_through_the_one_supervisor(module):
-    """No plant measures a trial itself: the final-state estimate is called only by the supervisor."""
-    tree = ast.parse((_PLANTS / module).read_text())
-    called = {node.func.id for node in ast.walk(tree) if isinstance(node, ast.Call) and isinstance(node.func, ast.Name)}
-    assert "fly_phases" in called
-    assert not called & {"estimate_final_state", "measured_states"}
+def _called(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text())
+    return {node.func.id if isinstance(node.func, ast.Name) else node.func.attr for node in ast.walk(tree)
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name | ast.Attribute)}
+
+
+@pytest.mark.parametrize("module", ["arena/arena.py", "rotorpy/plant.py", "fpv/phases.py"])
+def test_the_arena_rotorpy_and_the_betaflight_pilot_fly_through_the_one_supervisor(module):
+    assert "fly_phases" in _called(_PLANTS / module)
+
+
+def test_both_betaflight_plants_fly_the_one_pilot_and_no_plant_measures_a_trial_itself():
+    from aerobat.plants.betaflight.plant import BetaflightPlant
+    from aerobat.plants.fc.plant import FlightControllerPlant
+    from aerobat.plants.fpv.radio_plant import RadioPlant
+
+    assert issubclass(BetaflightPlant, RadioPlant) and issubclass(FlightControllerPlant, RadioPlant)
+    assert not issubclass(FlightControllerPlant, BetaflightPlant)
+    for package in ("arena", "rotorpy", "betaflight", "fc", "fpv"):
+        for path in sorted((_PLANTS / package).glob("*.py")):
+            assert not _called(path) & {"estimate_final_state", "measured_states"}, path

@@ -12,12 +12,21 @@ from dataclasses import dataclass
 
 from aerobat.core.bounds import Interval, Items, bounded, validate
 
-__all__ = ["Aerodynamics", "Disturbances", "Drift", "MotionCapture", "Supervisor", "Volume"]
+__all__ = ["SETTLE_HOLD_S", "SETTLE_POSITION_M", "SETTLE_TILT_RAD", "SETTLE_VELOCITY_M_S", "Aerodynamics",
+           "Disturbances", "Drift", "MotionCapture", "Supervisor", "Volume"]
 
 _SIDES = Items((Interval(high=0.0, closed="left", unit="m"), Interval(low=0.0, closed="right", unit="m")))
 """A side of the flight volume: (low, high) with low < 0 < high [m]."""
 _GAIN = Interval(0.0, 1000.0, closed="right")
 """A supervisor gain, in (0, 1000]."""
+
+# what every plant's settle at the start may ask (the arena's and RotorPy's supervisor, the Betaflight pilot):
+# within SETTLE_POSITION_M of the start, slower than SETTLE_VELOCITY_M_S, tilted less than SETTLE_TILT_RAD,
+# for SETTLE_HOLD_S (aerobat.plants.lab_kernels.settled)
+SETTLE_POSITION_M = Interval(0.001, 1.0, unit="m")
+SETTLE_VELOCITY_M_S = Interval(0.001, 1.0, unit="m/s")
+SETTLE_TILT_RAD = Interval(0.001, 0.5, unit="rad")
+SETTLE_HOLD_S = Interval(0.0, 10.0, unit="s")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -102,10 +111,10 @@ class Supervisor:
     velocity_gain_per_s: float = bounded(4.0, _GAIN)
     attitude_gain_per_s: float = bounded(10.0, _GAIN)
     yaw_gain_per_s: float = bounded(4.0, _GAIN)
-    settle_position_m: float = bounded(0.02, Interval(0.001, 1.0, unit="m"))
-    settle_velocity_m_s: float = bounded(0.05, Interval(0.001, 1.0, unit="m/s"))
-    settle_tilt_rad: float = bounded(0.015, Interval(0.001, 0.5, unit="rad"))
-    settle_hold_s: float = bounded(0.1, Interval(0.0, 10.0, unit="s"))
+    settle_position_m: float = bounded(0.02, SETTLE_POSITION_M)
+    settle_velocity_m_s: float = bounded(0.05, SETTLE_VELOCITY_M_S)
+    settle_tilt_rad: float = bounded(0.015, SETTLE_TILT_RAD)
+    settle_hold_s: float = bounded(0.1, SETTLE_HOLD_S)
     settle_timeout_s: float = bounded(8.0, Interval(0.1, 120.0, unit="s"))
     trigger_timeout_s: float = bounded(0.15, Interval(0.02, 5.0, unit="s"))
     return_time_s: float = bounded(2.5, Interval(0.1, 60.0, unit="s"))

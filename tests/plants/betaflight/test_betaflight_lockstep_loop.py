@@ -72,12 +72,12 @@ def _python_run_frames(flight: Flight, mode: Mode, frames: int, *, radio: Radio 
 
 
 def _arm_and_climb(plant: BetaflightPlant, flight: Flight) -> np.ndarray:
-    plant.power_on_and_arm(flight)
+    plant.pilot.power_on_and_arm(flight)
     sticks = np.array([0.0, 0.0, 0.0, 1000.0])
     motors = []
     for k in range(flight.frames_for(0.6)):
         sticks[3] = 1000.0 + 8.0 * k  # a throttle ramp: the vehicle lifts off
-        flight.frame(plant.channels(sticks, arm=True, angle=True))
+        flight.frame(plant.pilot.channels(sticks, arm=True, angle=True))
         motors.append(flight.motors.copy())
     return np.array(motors)
 

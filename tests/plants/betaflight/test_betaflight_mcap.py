@@ -10,7 +10,7 @@ import numpy as np
 from mcap.reader import make_reader
 
 from aerobat.cli import main
-from aerobat.plants.betaflight.plant import SIGNAL_NAMES
+from aerobat.plants.fpv.phases import SIGNAL_NAMES
 from aerobat.store import Store
 from browse_fixtures import check_session_mcap
 

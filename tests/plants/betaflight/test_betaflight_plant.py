@@ -45,28 +45,28 @@ def test_sticks_move_the_vehicle_the_way_aerobat_defines_its_rates(firmware: tup
     """Positive roll stick: +p about body x (FLU); pitch forward: +q (nose down); yaw right: −r."""
     plant = BetaflightPlant(FPV, seed=2)
     with plant.open_flight() as flight:
-        plant.power_on_and_arm(flight)
-        plant.settle(flight)
+        plant.pilot.power_on_and_arm(flight)
+        plant.pilot.settle(flight)
         hover_us = 1250.0
         for index, (axis, sign) in enumerate(((10, +1), (11, +1), (12, -1))):
             sticks = np.zeros(4)
             sticks[index] = 0.1  # 200 deg/s
             sticks[3] = hover_us
             for _ in range(flight.frames_for(0.08)):
-                flight.frame(plant.channels(sticks, arm=True, angle=False))
+                flight.frame(plant.pilot.channels(sticks, arm=True, angle=False))
             rate = flight.x[axis]
             assert sign * rate > math.radians(150), (axis, math.degrees(rate))
             assert all(abs(flight.x[a]) < 0.3 * abs(rate) for a in (10, 11, 12) if a != axis)
-            plant.fly_to(flight, plant.start_m, 1.5, check=True)
+            plant.pilot.fly_to(flight, plant.start_m, 1.5, check=True)
 
 
 def test_lost_radio_makes_betaflight_fail_safe(firmware: tuple[Path, Path]) -> None:
     """Out-of-range channels (a receiver's lost link): hold 0.3 s, stage 1 (idle), then disarm."""
     plant = BetaflightPlant(FPV, seed=3)
     with plant.open_flight() as flight:
-        plant.power_on_and_arm(flight)
-        plant.settle(flight)
-        plant.hover(flight, 1.5)  # well after boot: failsafe timing is shorter then
+        plant.pilot.power_on_and_arm(flight)
+        plant.pilot.settle(flight)
+        plant.pilot.hover(flight, 1.5)  # well after boot: failsafe timing is shorter then
         lost_at = flight.time_s
         samples = []
         for _ in range(flight.frames_for(3.0)):
@@ -113,7 +113,7 @@ def test_same_seed_same_trial_and_two_plants_at_once_without_cross_talk(firmware
 def test_every_step_is_one_firmware_loop(firmware: tuple[Path, Path]) -> None:
     plant = BetaflightPlant(FPV, seed=7)
     with plant.open_flight() as flight:
-        plant.power_on_and_arm(flight)
+        plant.pilot.power_on_and_arm(flight)
         assert flight.sitl.steps == flight.tick  # one motor packet answered every state packet
         assert flight.sitl.steps == round(flight.time_s * plant.params.firmware.gyro_rate_hz)
 

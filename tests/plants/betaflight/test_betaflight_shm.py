@@ -79,7 +79,7 @@ def test_the_firmware_takes_its_packets_from_the_region_and_no_file_is_left(firm
     before = _dev_shm()
     plant = BetaflightPlant(FPV, SHM, seed=4)
     with plant.open_flight() as flight:
-        plant.power_on_and_arm(flight)
+        plant.pilot.power_on_and_arm(flight)
         pid = flight.sitl.pid
         assert pid is not None and flight.sitl.shm_address is not None
         assert _mapped(pid) and _mapped(os.getpid())  # both map the memfd; no path names it

@@ -49,7 +49,7 @@ def test_the_431_diff_lands_in_the_sitl_which_arms_and_flies_a_trial(firmware: t
     assert re.search(r"roll_rc_rate = 202", rates)
     assert "align_board_roll" not in diff and "set small_angle" not in diff  # refused / pinned
     # the tune's rates top out at 462 deg/s: a flip within them flies, through the pilot's inverted curve
-    assert plant.sticks.full_rates_deg_s()[0] == pytest.approx(462.16)
+    assert plant.pilot.sticks.full_rates_deg_s()[0] == pytest.approx(462.16)
     flip, p0 = _flip(420.0)
     trial = plant.fly(flip.program(p0))
     assert trial.ok, trial.message

@@ -224,7 +224,7 @@ def _world_processes(parent: int) -> list[int]:
                 command = (entry / "cmdline").read_bytes().split(b"\0")
             except OSError:
                 continue
-            if int(fields[1]) == parent and b"aerobat.plants.fc.world" in command:
+            if int(fields[1]) == parent and b"aerobat.plants.betaflight.paced_world" in command:
                 found.append(int(entry.name))
     return found
 

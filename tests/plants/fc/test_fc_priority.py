@@ -7,8 +7,8 @@ import threading
 
 import pytest
 
-from aerobat.plants.fc.priority import GROUND_FIFO_PRIORITY, real_time_threads
 from aerobat.plants.fc.world import WORLD_FIFO_PRIORITY
+from aerobat.plants.fpv.priority import GROUND_FIFO_PRIORITY, real_time_threads
 
 
 def _may_set_fifo() -> bool:

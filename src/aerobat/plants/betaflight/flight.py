@@ -101,7 +101,7 @@ class Flight:
     gravity_m_s2 : g.
     """
 
-    records_packet = True
+    packet_columns = N_PACKET  # a record row ends with the firmware's motor packet
     """:meth:`run_frames` can record the firmware's motor packet after each frame (the lockstep SITL answers
     every step with it; a flight controller on a serial link sends its motors only when asked)."""
 
@@ -331,7 +331,8 @@ class Flight:
 
         ``mode`` says where each frame's channels come from: ``channels_us`` (k, 16) [us], a row per
         frame or one for all (:attr:`Mode.STREAM`), or ``pilot``'s sticks (:attr:`Mode.ANGLE`: an
-        :class:`~.frames.AnglePilot`; :attr:`Mode.PROGRAM`: a :class:`~.frames.ProgramPilot`);
+        :class:`~aerobat.plants.fpv.frames.AnglePilot`; :attr:`Mode.PROGRAM`: a
+        :class:`~aerobat.plants.fpv.frames.ProgramPilot`);
         ``radio`` what the radio does with them. After each frame: a truth row into ``record``
         (frames, 1 + state: time [s], true state; with :data:`N_PACKET` more columns, the firmware's
         motor packet after it: motors, set point, PID terms as in :data:`SAMPLE_MOTORS` on), the

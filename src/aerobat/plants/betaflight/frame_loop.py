@@ -10,17 +10,17 @@ frames, with the same arithmetic in the same order and the same draws from the s
 (numba's ``np.random.Generator`` is NumPy's stream), so a seed repeats a flight bit for bit
 whichever loop flies it.
 
-A call flies one :class:`~.frames.Mode` (steps only, given channels, or the ANGLE pilot's
-frames, sticks from the motion-capture estimate: :func:`.pilot.angle_sticks`) with one
-:class:`~.frames.Radio`; after each frame an optional truth row, the optional flight-volume
-check and an optional :class:`~.frames.Until` stop condition.
+A call flies one :class:`~aerobat.plants.fpv.frames.Mode` (steps only, given channels, or the ANGLE pilot's
+frames, sticks from the motion-capture estimate: :func:`~aerobat.plants.fpv.pilot.angle_sticks`) with one
+:class:`~aerobat.plants.fpv.frames.Radio`; after each frame an optional truth row, the optional flight-volume
+check and an optional :class:`~aerobat.plants.fpv.frames.Until` stop condition.
 
 A call returns ``(status, frames completed)``. Besides the statuses of :mod:`.lockstep`
 (:data:`~.lockstep.NO_ANSWER`, :data:`~.lockstep.SEND_FAILED`, :data:`~.lockstep.NON_FINITE`:
 the frame in progress stops at step ``st[S_STEP]``, and the caller finishes that step with the
-process's watchdog and calls again with ``resume``), :data:`~.frames.RC_FAILED` (the RC packet at the
+process's watchdog and calls again with ``resume``), :data:`~aerobat.plants.fpv.frames.RC_FAILED` (the RC packet at the
 queue's head could not be sent; the caller sends it, drops it from the queue and calls again),
-and the codes of :mod:`.frames` (a stop condition met, a crash, the axis in ``st[S_AXIS]``).
+and the codes of :mod:`aerobat.plants.fpv.frames` (a stop condition met, a crash, the axis in ``st[S_AXIS]``).
 :class:`.flight.Flight` owns the arrays and drives the calls.
 """
 
@@ -277,7 +277,7 @@ def fly_frames(mode, frames, n, drop, resume, check, until, rng, cfg, fcfg, st, 
 
     ``channels``: (k, 16) RC channels [us], one row per frame or one for all (:data:`M_ANGLE`:
     the row its sticks fill in). ``pilot``, ``target``, ``integral``, ``gains``, ``limits``: the
-    ANGLE pilot's (:func:`.pilot.angle_sticks`; the integral is updated in place). ``start`` and
+    ANGLE pilot's (:func:`~aerobat.plants.fpv.pilot.angle_sticks`; the integral is updated in place). ``start`` and
     ``volume`` (3, 2): the flight volume around the start [m]. ``record``: (frames, 1 + 21 [+ 19]) truth
     rows (time [s], state [, the motor packet: motors, set point, PID terms]) after each frame, or
     empty. ``est``: scratch (3 + 3 + 4 + 4).

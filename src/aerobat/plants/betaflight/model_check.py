@@ -60,9 +60,9 @@ def sitl_flight(plant: object, program: Program | CompiledProgram) -> FirmwareTr
     compiled = program.compile() if isinstance(program, Program) else program
     flight = plant.open_flight()
     with flight:
-        plant.power_on_and_arm(flight)
-        plant.settle(flight)
-        plant.hover(flight, plant.params.pilot.hover_s)
+        plant.pilot.power_on_and_arm(flight)
+        plant.pilot.settle(flight)
+        plant.pilot.hover(flight, plant.params.pilot.hover_s)
         period = flight.frame_steps * flight.step_s
         frames = flight.frames_for(compiled.duration_s) + 1
         commands = frames_of(compiled, period, frames)
@@ -74,8 +74,8 @@ def sitl_flight(plant: object, program: Program | CompiledProgram) -> FirmwareTr
         for i in range(total + 1):
             tick = flight.tick - start
             if tick % flight.frame_steps == 0 and tick // flight.frame_steps < frames:
-                program_sticks(commands[tick // flight.frame_steps], plant.limits, sticks)
-                channels = np.array([plant.channels(sticks, arm=True, angle=False)], dtype=np.int64)
+                program_sticks(commands[tick // flight.frame_steps], plant.pilot.limits, sticks)
+                channels = np.array([plant.pilot.channels(sticks, arm=True, angle=False)], dtype=np.int64)
                 flight.run_frames(Mode.STREAM, 1, steps=1, channels_us=channels, radio=Radio.LOSSLESS)
             else:
                 flight.run_frames(Mode.STEPS, 1, steps=1, radio=Radio.NONE)

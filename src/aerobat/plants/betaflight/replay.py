@@ -139,7 +139,7 @@ def replay_sticks(plant: BetaflightPlant, track: StickTrack, *, samples_per_fram
     with flight:
         flight.latency_steps = 0
         try:
-            armed = plant.power_on_and_arm(flight)
+            armed = plant.pilot.power_on_and_arm(flight)
         except TrialStop as stop:
             raise ConfigError(f"the tune does not arm: {stop}") from None
         flight.release()

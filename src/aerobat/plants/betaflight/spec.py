@@ -17,7 +17,7 @@ from aerobat.plants.spec import Kernels, PlantSpec
 from aerobat.quadrotor.feedback import DEFAULT_SCHEME, Feedback, FeedbackScheme
 from aerobat.quadrotor.vehicle import VehicleConfig
 
-__all__ = ["SPEC", "firmware_model"]
+__all__ = ["SPEC"]
 
 
 def _build(config: VehicleConfig, settings: Any, *, seed: int, feedback: Feedback,
@@ -27,13 +27,10 @@ def _build(config: VehicleConfig, settings: Any, *, seed: int, feedback: Feedbac
     return BetaflightPlant(config, settings, seed=seed, feedback=feedback, design_model=design_model)
 
 
-def firmware_model(config: VehicleConfig, settings: Any) -> tuple[Any, dict[str, Any]]:
-    """The design model with this plant's flight controller (``settings``: its params) around ``config``,
-    and the model's stored form."""
-    from aerobat.plants.fpv.design_model import firmware_design_model, model_table
+def _firmware_model(config: VehicleConfig, settings: Any) -> tuple[Any, dict[str, Any]]:
+    from aerobat.plants.fpv.design_model import firmware_model
 
-    model = firmware_design_model(config, settings)
-    return model, model_table(model)
+    return firmware_model(config, settings)
 
 
 def _replayer(settings: Any, *, tune: Any, props_out: bool, seed: int = 0) -> Any:
@@ -77,7 +74,7 @@ SPEC = PlantSpec(
     "betaflight", "a 5-inch racer flown by Betaflight 4.6's own firmware (SITL in lockstep) in the arena",
     _build, load_settings=_load, settings_from_table=_from_table, settings_to_table=_to_table,
     default_settings=_default, option="--betaflight", feedback=tuple(FeedbackScheme),
-    default_feedback=DEFAULT_SCHEME, cores=_cores, firmware_model=firmware_model, robustness=SAMPLING,
+    default_feedback=DEFAULT_SCHEME, cores=_cores, firmware_model=_firmware_model, robustness=SAMPLING,
     kernels=(Kernels("plants", warm_lab_kernels), Kernels("plants", warm_world),
              Kernels("firmware", warm_design_model)),
     replay=_replayer)

@@ -14,7 +14,8 @@ __all__ = ["warm_design_model", "warm_world"]
 
 
 def warm_world() -> None:
-    """The Betaflight world's step, its lockstep and frame loops, and the pilot's sticks."""
+    """The Betaflight world's step, its lockstep and frame loops, and the pilot's sticks
+    (:func:`~aerobat.plants.fpv.warm.warm_sticks`)."""
     from aerobat.firmware.betaflight.errors import FirmwareUnavailable
     from aerobat.firmware.betaflight.packets import MOTOR_STRUCT
     from aerobat.plants.betaflight.lockstep import N_IO, run_steps
@@ -31,7 +32,8 @@ def warm_world() -> None:
     )
     from aerobat.plants.fpv import frames as fr
     from aerobat.plants.fpv.params import BetaflightParams
-    from aerobat.plants.fpv.pilot import N_LIMITS, angle_sticks, program_sticks
+    from aerobat.plants.fpv.pilot import N_LIMITS
+    from aerobat.plants.fpv.warm import warm_sticks
     from aerobat.plants.lab_kernels import MOCAP_COLUMNS
     from aerobat.quadrotor.dynamics import N_STATE
 
@@ -75,12 +77,7 @@ def warm_world() -> None:
                    np.zeros((1, 16), dtype=np.int64), np.zeros(fr.N_PILOT), np.zeros(3), np.zeros(3), np.zeros(4),
                    np.zeros(N_LIMITS), np.zeros(3), np.zeros((3, 2)), np.empty((0, 1 + N_STATE)), np.zeros(22),
                    np.zeros((1, 4)), np.zeros(1), np.zeros((1, 3)), np.zeros(12), np.zeros(10), np.zeros(6))
-    limits = np.zeros(N_LIMITS)
-    limits[:] = 1.0
-    sticks = np.zeros(4)
-    program_sticks(np.array([9.81, 0.0, 0.0, 0.0]), limits, sticks)
-    angle_sticks(np.zeros(3), np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3), np.zeros(3),
-                 np.ones(4), limits, 1.0 / 50.0, sticks)
+    warm_sticks()
 
 
 def warm_design_model() -> None:

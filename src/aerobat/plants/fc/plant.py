@@ -1,9 +1,11 @@
 """``FlightControllerPlant``: the Fig. 8 supervisor flying a Betaflight board on the wall clock.
 
-The supervisor is the Betaflight plant's own (:class:`~aerobat.plants.betaflight.plant.BetaflightPlant`:
-power on and arm, take off and settle, hover, stream the program as sticks in ACRO, measure, fly
-back, land and disarm), the same code with the same pilot and stick map. What changes is the flight it
-drives: a :class:`~.wall_clock.WallClockFlight`, whose frames go out as ``MSP_SET_RAW_RC`` over a
+The supervisor and the pilot are the ones the lockstep Betaflight plant flies with
+(:func:`aerobat.plants.supervisor.fly_phases`, :class:`aerobat.plants.fpv.phases.RadioPilot`: power on
+and arm, take off and settle, hover, stream the program as sticks in ACRO, measure, fly back, land and
+disarm), with the same stick map; the two plants share them through :mod:`aerobat.plants.fpv` and
+neither imports the other. What changes is the flight it drives: a :class:`~.wall_clock.WallClockFlight`,
+whose frames go out as ``MSP_SET_RAW_RC`` over a
 serial port at their deadlines and whose measurements are motion-capture poses as they arrive, with the
 :class:`~.safety.SafetyMonitor` asked at every frame.
 
@@ -45,15 +47,16 @@ from aerobat.firmware.betaflight.msp import Battery, FailsafeConfig, MspClient, 
 from aerobat.firmware.betaflight.rc import RC_MIN_US
 from aerobat.firmware.betaflight.serial_link import SerialTransport
 from aerobat.firmware.betaflight.settings import BetaflightSettings, load_settings
-from aerobat.plants.betaflight.plant import BetaflightPlant
 from aerobat.plants.fpv.params import BetaflightParams
+from aerobat.plants.fpv.phases import failed_trial
 from aerobat.plants.fpv.pilot import program_sticks
+from aerobat.plants.fpv.priority import GROUND_FIFO_PRIORITY, real_time_threads
+from aerobat.plants.fpv.radio_plant import RadioPlant
 from aerobat.quadrotor.firmware.sticks import frames_of
 from aerobat.quadrotor.program import CompiledProgram, Program
 from aerobat.quadrotor.vehicle import VehicleConfig
 
 from .pose_source import MotionCaptureSource, PoseSource
-from .priority import GROUND_FIFO_PRIORITY, real_time_threads
 from .pty_bridge import PtyBridge
 from .safety import (
     SafetyLimits,
@@ -173,7 +176,7 @@ def _ground_threads(link: Link) -> tuple[int | None, ...]:
             link.bridge.thread_id if link.bridge is not None else None)
 
 
-class FlightControllerPlant(BetaflightPlant):
+class FlightControllerPlant(RadioPlant):
     """``--plant fc``: the Fig. 8 supervisor on the wall clock, with a Betaflight flight controller.
 
     Parameters
@@ -204,9 +207,16 @@ class FlightControllerPlant(BetaflightPlant):
                  limits: SafetyLimits | None = None, seed: int = 0, settings: BetaflightSettings | None = None,
                  feedback: Any = "none", dry_run: bool = False, start_m: Any = None,
                  design_model: VehicleConfig | None = None, **firmware: Any) -> None:
+        from aerobat.firmware.betaflight.build import ensure_sitl
+        from aerobat.firmware.betaflight.configure import ensure_eeprom
+
         settings = settings or load_settings().with_values(MSP_RC_SETTINGS, "RC frames over MSP")
         super().__init__(config, params if params is not None else fc_params(), seed=seed, settings=settings,
-                         feedback=feedback, design_model=design_model, **firmware)
+                         feedback=feedback, design_model=design_model)
+        # a rehearsal's firmware (a board runs its own: build_fc_plant passes no SITL)
+        binary, eeprom = firmware.get("binary"), firmware.get("eeprom")
+        self.binary = Path(binary) if binary is not None else ensure_sitl()
+        self.eeprom = Path(eeprom) if eeprom is not None else ensure_eeprom(self.binary, settings=self.settings)
         self.connection = connection
         self.dry_run = dry_run
         if start_m is not None:
@@ -220,7 +230,8 @@ class FlightControllerPlant(BetaflightPlant):
                                              **REHEARSAL_TIMEOUTS)
         self.safety = limits
         self.kill_requested = False
-        program_sticks(np.zeros(4), self.limits, np.zeros(4))  # compiled now, not inside a flight's frame deadline
+        # compiled now, not inside a flight's frame deadline
+        program_sticks(np.zeros(4), self.pilot.limits, np.zeros(4))
         if isinstance(connection, RehearsalConnection):
             connection.plant_args.update(config=config, params=self.params, binary=self.binary,
                                          eeprom=self.eeprom, settings=self.settings)
@@ -246,7 +257,7 @@ class FlightControllerPlant(BetaflightPlant):
             except (TimeoutError, RuntimeError, OSError, LinkTimeout, LinkClosed) as error:
                 # a rehearsal's firmware that does not start is a lost trial (flown again); a board that
                 # cannot be reached is a person's to look at
-                return self._failed(TrialStatus.LOST if rehearsal else TrialStatus.ABORTED,
+                return failed_trial(TrialStatus.LOST if rehearsal else TrialStatus.ABORTED,
                                     f"could not reach the flight controller: {error}", info)
             # the ground keeps its deadlines on a busy machine: its frames, poses and serial bytes ahead of
             # other work while the trial flies, where allowed (docs/real-vehicle.md, "Under load")
@@ -257,7 +268,7 @@ class FlightControllerPlant(BetaflightPlant):
         if report is not None:
             trial.info["world"] = dataclasses.asdict(report)
             if report.error and trial.status is not TrialStatus.OK:  # the firmware died or hung in flight
-                trial = self._failed(TrialStatus.LOST, f"firmware lost: {report.error}; the next trial starts a "
+                trial = failed_trial(TrialStatus.LOST, f"firmware lost: {report.error}; the next trial starts a "
                                                        f"new one", trial.info)
         start = trial.info.get("start_time_s")
         if start is not None:
@@ -266,9 +277,6 @@ class FlightControllerPlant(BetaflightPlant):
                 trial.info["command_latency_s"] = _command_latency(flight, report.set_point_jumps_wall_s, start)
                 trial.info["command_latency_world_s"] = _command_latency(flight, report.set_point_jumps_s, start)
         trial.info["frames"] = flight.jitter()
-        if trial.ok:
-            trial = dataclasses.replace(trial, message=f"maneuver flown over MSP on the wall clock "
-                                                       f"({flight.frames_sent} radio frames)")
         return trial
 
     def _supervise(self, link: Link, compiled: CompiledProgram, info: dict[str, Any],
@@ -282,20 +290,20 @@ class FlightControllerPlant(BetaflightPlant):
                                  time_zero_s=link.time_zero_s, start_m=self.start_m, floor_z_m=floor,
                                  command_latency_s=self.params.radio.latency_s,
                                  rotation_stick_us=self._rotation_stick_us(), volume=self.params.volume)
-        self.flight = flight  # type: ignore[assignment]
+        self.flight = flight
         try:
             problems = self._preflight(flight, link.msp)
             if problems:
                 info["preflight"] = list(problems)
-                return self._failed(TrialStatus.ABORTED, "pre-flight refused: " + "; ".join(problems), info), flight
+                return failed_trial(TrialStatus.ABORTED, "pre-flight refused: " + "; ".join(problems), info), flight
             if self.dry_run:
                 return self._dry_run(flight, compiled, info), flight
-            return self._fly(flight, compiled, info, wall), flight  # type: ignore[arg-type]
+            return self._fly(flight, compiled, info, wall), flight
         except SafetyStop as stop:
             info["safety_stop"] = stop.reason.value
             info["disarm_confirmed"] = confirmed = self._make_safe(flight, stop.reason)
             message = str(stop) if confirmed is not False else f"{stop}; THE BOARD STILL REPORTS ITSELF ARMED"
-            return self._failed(_STATUS_FOR.get(stop.reason, TrialStatus.ABORTED), message, info), flight
+            return failed_trial(_STATUS_FOR.get(stop.reason, TrialStatus.ABORTED), message, info), flight
         except KeyboardInterrupt:  # Ctrl-C is the operator's kill: disarm, then let the session stop
             flight.monitor.kill()
             if self._make_safe(flight, StopReason.KILL) is False:
@@ -311,10 +319,10 @@ class FlightControllerPlant(BetaflightPlant):
         sticks = np.zeros(4)
         start = flight.time_s
         for k in range(n):
-            program_sticks(commands[k], self.limits, sticks)
-            flight.frame(self.channels(sticks, arm=False, angle=False))
+            program_sticks(commands[k], self.pilot.limits, sticks)
+            flight.frame(self.pilot.channels(sticks, arm=False, angle=False))
         info["dry_run"] = flight.jitter(start)
-        return self._failed(TrialStatus.ABORTED, f"dry run: pre-flight passed; the program's {n} frames streamed "
+        return failed_trial(TrialStatus.ABORTED, f"dry run: pre-flight passed; the program's {n} frames streamed "
                                                  f"disarmed; nothing flew, nothing measured", info)
 
     def _rotation_stick_us(self) -> float:
@@ -323,7 +331,7 @@ class FlightControllerPlant(BetaflightPlant):
         return min(sticks) * 500.0
 
     def _preflight(self, flight: WallClockFlight, msp: MspClient) -> tuple[str, ...]:
-        idle = self.channels(np.array([0.0, 0.0, 0.0, float(RC_MIN_US)]), arm=False, angle=True)
+        idle = self.pilot.channels(np.array([0.0, 0.0, 0.0, float(RC_MIN_US)]), arm=False, angle=True)
         status: StatusEx | None = None
         battery: Battery | None = None
         # disarmed frames until the receiver sees a live link and the gyro has calibrated (a board
@@ -374,7 +382,7 @@ class FlightControllerPlant(BetaflightPlant):
                 if flight.on_floor and np.linalg.norm(flight.x[3:6]) < 0.05:
                     break
             return None
-        low = self.channels(np.array([0.0, 0.0, 0.0, float(RC_MIN_US)]), arm=False, angle=True)
+        low = self.pilot.channels(np.array([0.0, 0.0, 0.0, float(RC_MIN_US)]), arm=False, angle=True)
         for _attempt in range(_DISARM_ATTEMPTS):
             for _ in range(flight.frames_for(_SAFE_FRAMES_S)):
                 with contextlib.suppress(SafetyStop):
@@ -386,6 +394,9 @@ class FlightControllerPlant(BetaflightPlant):
             if not armed:
                 return True
         return False
+
+    def _ok_message(self, info: dict[str, Any]) -> str:
+        return f"maneuver flown over MSP on the wall clock ({info['frames_sent']} radio frames)"
 
     def _timing(self, flight: Any, wall: float) -> dict[str, Any]:
         elapsed = time.perf_counter() - wall

@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import Any
 
 from aerobat.core.plant import Plant
-from aerobat.plants.betaflight.warm import warm_world
+from aerobat.plants.fpv.warm import warm_sticks
 from aerobat.plants.lab_warm import warm_lab_kernels
 from aerobat.plants.spec import Kernels, PlantSpec
 from aerobat.quadrotor.feedback import Feedback, FeedbackScheme
@@ -23,7 +23,7 @@ def _build(config: VehicleConfig, settings: Any, *, seed: int, feedback: Feedbac
 
 
 def _firmware_model(config: VehicleConfig, settings: Any) -> tuple[Any, dict[str, Any]]:
-    from aerobat.plants.betaflight.spec import firmware_model
+    from aerobat.plants.fpv.design_model import firmware_model
 
     return firmware_model(config, settings.betaflight)
 
@@ -59,5 +59,6 @@ SPEC = PlantSpec(
     default_settings=_default, requires=(("serial", "fc"),), option="--fc", feedback=tuple(FeedbackScheme),
     # the paper flies open loop; the pilot-side feedback runs at the radio rate on motion capture
     default_feedback=FeedbackScheme.NONE, firmware_model=_firmware_model,
-    # the Betaflight plant's supervisor, pilot and stick map fly the board
-    kernels=(Kernels("plants", warm_lab_kernels), Kernels("plants", warm_world)))
+    # the supervisor and the pilot's sticks fly the board; a rehearsal's world is the lockstep plant's,
+    # whose kernels that plant's own spec compiles (setup compiles every registered plant's)
+    kernels=(Kernels("plants", warm_lab_kernels), Kernels("plants", warm_sticks)))

@@ -72,7 +72,7 @@ class WallClockFlight:
     volume : the flight volume around the start, for the supervisor's checks (:meth:`run_frames`).
     """
 
-    records_packet = False
+    packet_columns = 0  # no motor packet: a board sends none
     """Rows of ``record`` hold the truth only: the board's set point and PID terms never reach the link, and
     its motors only when asked (an MSP request per frame would take the link's time from the frames)."""
 

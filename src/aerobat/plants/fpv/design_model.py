@@ -33,7 +33,7 @@ from aerobat.quadrotor.firmware import Fidelity, FirmwareConfig, FirmwareModel
 from aerobat.quadrotor.firmware.config import ASSUMED, READ
 from aerobat.quadrotor.vehicle import VehicleConfig
 
-__all__ = ["firmware_config", "firmware_design_model", "model_table", "plant_settings"]
+__all__ = ["firmware_config", "firmware_design_model", "firmware_model", "model_table", "plant_settings"]
 
 
 def plant_settings(params: BetaflightParams) -> BetaflightSettings:
@@ -104,3 +104,10 @@ def model_table(model: FirmwareModel) -> dict[str, Any]:
             "firmware": model.firmware.to_table(), "airframe": airframe,
             "radio_rate_hz": 1.0 / model.radio_period_s,
             "aerodynamics": {k: list(v) if isinstance(v, tuple) else v for k, v in model.aerodynamics.items()}}
+
+
+def firmware_model(config: VehicleConfig, settings: BetaflightParams) -> tuple[FirmwareModel, dict[str, Any]]:
+    """The design model with the flight controller ``settings`` (a plant's params) give, around ``config``,
+    and the model's stored form (both Betaflight plants' :attr:`~aerobat.plants.PlantSpec.firmware_model`)."""
+    model = firmware_design_model(config, settings)
+    return model, model_table(model)

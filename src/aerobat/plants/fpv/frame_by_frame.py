@@ -3,9 +3,9 @@
 A flight controller on a serial port (:mod:`aerobat.plants.fc`) flies one frame per radio period
 of real time, with safety checks and MSP traffic in between; it cannot hand a run of frames to
 compiled code. :func:`run_frames_by_frame` gives such a flight the same ``run_frames`` as the
-compiled :class:`~.flight.Flight`: the same ANGLE pilot, checks and stop conditions, frame by
+compiled :class:`~aerobat.plants.betaflight.flight.Flight`: the same ANGLE pilot, checks and stop conditions, frame by
 frame, through the flight's ``frame``, ``estimate``, ``mocap``, ``on_floor`` and ``x``. On a
-lockstep :class:`~.flight.Flight` it flies what the compiled loop flies, bit for bit (a test
+lockstep :class:`~aerobat.plants.betaflight.flight.Flight` it flies what the compiled loop flies, bit for bit (a test
 holds them to it).
 """
 
@@ -81,7 +81,8 @@ def run_frames_by_frame(flight: Any, volume: Volume | None, mode: Mode, frames: 
                         radio: Radio = Radio.LOSSY, channels_us: np.ndarray | None = None,
                         pilot: AnglePilot | ProgramPilot | None = None, check: bool = False,
                         until: Until = Until.NONE, record: np.ndarray | None = None) -> FramesRun:
-    """:meth:`.flight.Flight.run_frames` through ``flight.frame()``; ``volume``: the flight volume (for ``check``)."""
+    """:meth:`~aerobat.plants.betaflight.flight.Flight.run_frames` through ``flight.frame()``; ``volume``: the
+    flight volume (for ``check``)."""
     if mode is Mode.STEPS or steps is not None:
         raise ValueError("a flight on the wall clock flies whole radio frames")
     if check and volume is None:

@@ -1,9 +1,10 @@
 """Runs of radio frames: what a run flies (:class:`Mode`, :class:`Radio`, :class:`AnglePilot`), when it stops
 (:class:`Until`), how it ended (:class:`FramesRun`), and the compiled loop's codes and slots.
 
-The supervisor (:class:`~.plant.BetaflightPlant`) flies its phases as runs of frames through any
-flight with a ``run_frames`` method: :class:`~.flight.Flight` runs them compiled
-(:mod:`.frame_loop`), a flight on the wall clock frame by frame (:mod:`.frame_by_frame`). A module
+The pilot (:class:`~aerobat.plants.fpv.phases.RadioPilot`) flies its phases as runs of frames through any
+flight with a ``run_frames`` method: :class:`~aerobat.plants.betaflight.flight.Flight` runs them compiled
+(:mod:`aerobat.plants.betaflight.frame_loop`), a flight on the wall clock frame by frame
+(:mod:`.frame_by_frame`). A module
 of its own so that both can name these without loading the compiled loop, whose import builds
 and loads the shared-memory exchange's C helper.
 """
@@ -115,7 +116,7 @@ N_FST = 3
 
 
 class FramesEnd(Enum):
-    """How a run of frames (:meth:`.flight.Flight.run_frames`) ended."""
+    """How a run of frames (:meth:`~aerobat.plants.betaflight.flight.Flight.run_frames`) ended."""
 
     DONE = "done"
     """Every frame was flown (a stop condition, if any, never held)."""
@@ -129,7 +130,7 @@ class FramesEnd(Enum):
 
 @dataclass(frozen=True)
 class FramesRun:
-    """The outcome of :meth:`.flight.Flight.run_frames`."""
+    """The outcome of :meth:`~aerobat.plants.betaflight.flight.Flight.run_frames`."""
 
     end: FramesEnd
     frames: int

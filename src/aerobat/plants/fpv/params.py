@@ -30,7 +30,17 @@ from aerobat.config import (
 from aerobat.core.bounds import Interval, Items, OneOf, bounded, validate
 from aerobat.firmware.betaflight.packets import Exchange, SpinPolicy
 from aerobat.firmware.betaflight.tune import Tune
-from aerobat.plants.world_params import Aerodynamics, Disturbances, Drift, MotionCapture, Volume
+from aerobat.plants.world_params import (
+    SETTLE_HOLD_S,
+    SETTLE_POSITION_M,
+    SETTLE_TILT_RAD,
+    SETTLE_VELOCITY_M_S,
+    Aerodynamics,
+    Disturbances,
+    Drift,
+    MotionCapture,
+    Volume,
+)
 from aerobat.quadrotor.xframe import Airframe
 
 __all__ = [
@@ -128,10 +138,10 @@ class Pilot:
     max_climb_m_s: float = bounded(2.5, Interval(0.1, 10.0, unit="m/s"))
     yaw_gain_per_s: float = bounded(3.0, _GAIN)
     calibration_s: float = bounded(1.5, Interval(1.3, 10.0, unit="s"))
-    settle_position_m: float = bounded(0.02, Interval(0.001, 1.0, unit="m"))
-    settle_velocity_m_s: float = bounded(0.05, Interval(0.001, 1.0, unit="m/s"))
-    settle_tilt_rad: float = bounded(0.03, Interval(0.001, 0.5, unit="rad"))
-    settle_hold_s: float = bounded(0.1, Interval(0.0, 10.0, unit="s"))
+    settle_position_m: float = bounded(0.02, SETTLE_POSITION_M)
+    settle_velocity_m_s: float = bounded(0.05, SETTLE_VELOCITY_M_S)
+    settle_tilt_rad: float = bounded(0.03, SETTLE_TILT_RAD)
+    settle_hold_s: float = bounded(0.1, SETTLE_HOLD_S)
     settle_timeout_s: float = bounded(10.0, Interval(1.0, 120.0, unit="s"))
     hover_s: float = bounded(0.5, Interval(0.0, 60.0, unit="s"))
     return_time_s: float = bounded(2.5, Interval(0.5, 60.0, unit="s"))

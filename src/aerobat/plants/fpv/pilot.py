@@ -16,7 +16,7 @@ per-rotor thrust m·c/4 (nominal mass) through the inverse of the airframe's thr
 motor command u, and Betaflight's throttle map ``u = idle + (1 − idle)·(us − min_check)/(2000 −
 min_check)`` (settings.toml) gives the pulse. Frames: sticks are in Betaflight's sense (roll
 right, pitch forward = nose down, yaw right = nose right), rates and attitudes in aerobat's body
-FLU: roll stick = p/ω_max, pitch stick = q/ω_max, yaw stick = −r/ω_max (see :mod:`.physics`).
+FLU: roll stick = p/ω_max, pitch stick = q/ω_max, yaw stick = −r/ω_max (see :mod:`aerobat.plants.betaflight.physics`).
 """
 
 from __future__ import annotations

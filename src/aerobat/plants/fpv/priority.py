@@ -7,7 +7,7 @@ afterwards: they block between deadlines (``time.sleep``, ``select``), so they t
 they have work, and the kernel keeps 5 % of every second for everything else
 (``sched_rt_runtime_us``). Elsewhere nothing changes and the trial reports ``"normal"``.
 
-Priorities: the world and its firmware (:data:`~.world.WORLD_FIFO_PRIORITY`) above the ground
+Priorities: the world and its firmware (:data:`~aerobat.plants.fpv.rehearsal.WORLD_FIFO_PRIORITY`) above the ground
 (:data:`GROUND_FIFO_PRIORITY`): the simulated vehicle must never wait for the station watching it.
 """
 

@@ -28,7 +28,6 @@ EDGES = ("cli/", "browse/", "store/codec.py")
 """Where text becomes an enum: the command line, the browser's pages, the store's codec."""
 STATUS_NAMES = {"status", "state", "display_state", "kind"}
 
-_PLANT = "a plant's kind names its plugin (PlantChoice, PlantRecord): a registry key, text by design"
 _MANEUVER = "a maneuver spec's kind names its registered class (aerobat.core.registry): a registry key"
 _CORRECTION = ("CorrectionKind is a Literal, not yet an enum: a design's correction_kind also holds 'none' "
                "(identification's stand-in design), so it changes with the design and store columns (follow-up)")
@@ -45,8 +44,6 @@ ALLOWED_TEXT_KINDS = {
         "reads a stored rule table: where its text becomes a ScheduleKind",
     ("experiments/reports.py", "kind == 'translation'"): _MANEUVER,
     ("experiments/reports.py", "kind in ('flip', 'multiflip')"): _MANEUVER,
-    ("experiments/sessions.py", "prec.kind != 'nominal'"): _PLANT,
-    ("experiments/setup.py", "kind == 'arena'"): _PLANT,
     ("logs/blackbox_header.py", "kind == 'P'"): "a blackbox header's frame letter (I, P): log file text at the edge",
     **{("firmware/betaflight/settings.py", f"kind == {word!r}"): _FIRMWARE
        for word in ("ACTUAL", "BETAFLIGHT", "RACEFLIGHT", "KISS", "QUICK", "SCALE", "CLIP")},

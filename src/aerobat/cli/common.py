@@ -353,11 +353,12 @@ def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | No
         if spec.option is not None and name in choices:
             p.add_argument(spec.option, metavar="FILE.toml",
                           help=f"{name} settings, only with --plant {name} (default: the {name} plant's own)")
-    if "betaflight" in choices:
+    tuned = [name for name in choices if PLANTS.get(name, source="--plant").tune is not None]
+    if tuned:
         p.add_argument("--tune", metavar="FILE[:N]",
-                       help="a real quad's Betaflight configuration flown by the SITL, only with --plant betaflight: "
-                            "a CLI diff or dump, or a blackbox log .bbl, .bfl or .txt whose header is used, FILE:N "
-                            "its log N (default: aerobat's own settings)")
+                       help=f"a real quad's Betaflight configuration flown by the firmware, only with --plant "
+                            f"{' or '.join(tuned)}: a CLI diff or dump, or a blackbox log .bbl, .bfl or .txt whose "
+                            f"header is used, FILE:N its log N (default: aerobat's own settings)")
         p.add_argument("--tune-log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
                        help=argparse.SUPPRESS)  # before FILE:N; kept so that older command lines still run
     p.add_argument("--seed", type=bounded_int(*SEEDS.bounds()), default=0, help="seed of the plant's random generator")
@@ -475,20 +476,18 @@ def with_tune_from_args(args: argparse.Namespace, choice: Any) -> Any:
         if log_index is not None:
             raise ConfigError("--tune-log-index applies only with --tune FILE")
         return choice
-    if choice.kind != "betaflight":
-        raise ConfigError(f"--tune applies only with --plant betaflight (got --plant {choice.kind})")
-    import dataclasses
-    import shlex
+    from aerobat.plants import PlantChoice, tuned_plants
 
-    from aerobat.plants import PlantChoice
+    if choice.spec.tune is None:
+        raise ConfigError(f"--tune applies only with --plant {' or '.join(tuned_plants())} (got --plant {choice.kind})")
+    import shlex
 
     report, rates, rates_type = read_tune(tune_path, log_index)
     shown = ", ".join(f"{axis} {rate:.0f}" for axis, rate in rates.items())
     whole = "aerobat tune " + shlex.quote(f"{tune_path}:{log_index}" if log_index is not None else str(tune_path))
     print(f"{report.summary(whole)}\n  the tune's full-stick rates [deg/s] ({rates_type}): {shown}; the pilot's "
           "sticks invert its rate and throttle curves", file=sys.stderr)
-    return PlantChoice(choice.kind, dataclasses.replace(choice.settings, tune=report.tune), choice.seed,
-                       choice.feedback)
+    return PlantChoice(choice.kind, choice.spec.tune(choice.settings, report.tune), choice.seed, choice.feedback)
 
 
 def rule_choice_from_args(args: argparse.Namespace) -> Any:

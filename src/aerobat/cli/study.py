@@ -254,11 +254,40 @@ def _sampled_plants() -> tuple[str, ...]:
     return sampled_plants()
 
 
+def _spec(plant: str) -> Any:
+    from aerobat.plants import PLANTS
+
+    return PLANTS.get(plant, source="--plant")
+
+
+def _studied_plants() -> tuple[str, ...]:
+    from aerobat.plants import studied_plants
+
+    return studied_plants()
+
+
 def _scenarios_of(plant: str) -> tuple[str, ...]:
     """The feedback study's scenarios the plant ``plant`` declares (``default`` first)."""
     from aerobat.plants import PLANTS
 
     return tuple(s.name for s in PLANTS.get(plant, source="--plant").scenarios)
+
+
+def _settings_file(args: argparse.Namespace) -> str | None:
+    """The settings file of ``--plant``'s own option (``--betaflight FILE``); another plant's is refused."""
+    from aerobat.plants import PLANTS
+
+    path = None
+    for name, spec in PLANTS.items():
+        given = getattr(args, spec.option.lstrip("-").replace("-", "_"), None) if spec.option else None
+        if given is None:
+            continue
+        if not str(given).strip():
+            raise ConfigError(f"{spec.option}: empty file name")
+        if name != args.plant:
+            raise ConfigError(f"{spec.option} applies only with --plant {name} (got --plant {args.plant})")
+        path = given
+    return path
 
 
 def _cmd_robustness(args: argparse.Namespace) -> int:
@@ -270,12 +299,11 @@ def _cmd_robustness(args: argparse.Namespace) -> int:
     if args.ranges is not None and not args.ranges.strip():  # it was ignored: the default ranges ran
         raise ConfigError("--ranges: empty file name")
     ranges = load_ranges(args.ranges) if args.ranges is not None else RobustnessRanges()
-    if args.betaflight is not None and args.plant != "betaflight":
-        raise ConfigError(f"--betaflight applies only with --plant betaflight (got --plant {args.plant})")
-    base = (with_tune_from_args(args, PlantChoice.from_file(args.plant, args.betaflight)).settings
-            if args.plant == "betaflight" else None)
-    if args.plant != "betaflight" and getattr(args, "tune", None) is not None:
-        raise ConfigError(f"--tune applies only with --plant betaflight (got --plant {args.plant})")
+    # the settings every vehicle is sampled around: the plant's file and tune where given (a plant that flies
+    # a tune always samples around its settings: aerobat's own tune when none is given), else its defaults
+    path = _settings_file(args)
+    chosen = with_tune_from_args(args, PlantChoice.from_file(args.plant, path))
+    base = chosen.settings if path is not None or chosen.spec.tune is not None else None
     written = ("trials_to_tolerance.png", "success_vs_property.png", "robustness.json")
     config, maneuver, nominal = _design(args, PlantChoice(args.plant, base), written)
     run = functools.partial(robustness_study, maneuver=maneuver, design=nominal, model=config,
@@ -482,13 +510,20 @@ def register(sub: Any) -> None:
     rob.add_argument("--feedback", choices=choices_of(FeedbackScheme), default=None,
                      help="onboard feedback of every vehicle, see docs/feedback.md "
                           "(default: the plant's best measured)")
-    rob.add_argument("--betaflight", metavar="FILE.toml",
-                     help="Betaflight plant settings to sample around (default: the shipped ones)")
-    rob.add_argument("--tune", metavar="FILE[:N]", help="a real quad's Betaflight diff/dump or blackbox log (FILE:N "
-                                                       "its log N), flown by every sampled vehicle, only with --plant "
-                                                       "betaflight (default: aerobat's own settings)")
-    rob.add_argument("--tune-log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
-                     help=argparse.SUPPRESS)  # before FILE:N; kept so that older command lines still run
+    for name in _sampled_plants():
+        spec = _spec(name)
+        if spec.option is not None:
+            rob.add_argument(spec.option, metavar="FILE.toml",
+                             help=f"{name} plant settings to sample around, only with --plant {name} (default: the "
+                                  f"shipped ones)")
+    tuned = [name for name in _sampled_plants() if _spec(name).tune is not None]
+    if tuned:
+        rob.add_argument("--tune", metavar="FILE[:N]",
+                         help=f"a real quad's Betaflight diff/dump or blackbox log (FILE:N its log N), flown by every "
+                              f"sampled vehicle, only with --plant {' or '.join(tuned)} (default: aerobat's own "
+                              f"settings)")
+        rob.add_argument("--tune-log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
+                         help=argparse.SUPPRESS)  # before FILE:N; kept so that older command lines still run
     add_design_model_option(rob)
     add_execution_options(rob)
     rob.set_defaults(func=_stoppable(_cmd_robustness))
@@ -502,7 +537,7 @@ def register(sub: Any) -> None:
     rules.add_argument("--trials", type=bounded_int(2, 1000), default=30, help="measured trials per run")
     rules.add_argument("--tolerance-m", type=finite_float(1e-6, 100.0, "m"), default=0.12,
                        help="position tolerance [m]")
-    add_plant_options(rules, kinds=("arena", "rotorpy", "betaflight"))
+    add_plant_options(rules, kinds=_studied_plants())
     rules.set_defaults(seed=0)
     add_execution_options(rules)
     rules.set_defaults(func=_stoppable(_cmd_rules))
@@ -520,7 +555,7 @@ def register(sub: Any) -> None:
     fb.add_argument("--rule", default="paper", help="update rule (see docs/method.md)")
     fb.add_argument("--tolerance-m", type=finite_float(1e-6, 100.0, "m"), default=0.12,
                     help="position tolerance [m]")
-    add_plant_options(fb, kinds=("arena", "rotorpy", "betaflight"), feedback=False)  # --schemes says which
+    add_plant_options(fb, kinds=_studied_plants(), feedback=False)  # --schemes says which
     fb.set_defaults(seed=0)
     add_execution_options(fb)
     fb.set_defaults(func=_stoppable(_cmd_feedback))

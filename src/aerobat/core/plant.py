@@ -14,7 +14,8 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["MaybeRepeatablePlant", "Plant", "Signals", "StatefulPlant", "Trial", "TrialStatus", "repeats_exactly"]
+__all__ = ["DeterministicPlant", "MaybeRepeatablePlant", "Plant", "Signals", "StatefulPlant", "Trial", "TrialStatus",
+           "is_deterministic", "repeats_exactly"]
 
 
 class TrialStatus(StrEnum):
@@ -163,6 +164,19 @@ class MaybeRepeatablePlant(Plant, Protocol):
     """
 
     repeatable: bool
+
+
+@runtime_checkable
+class DeterministicPlant(Plant, Protocol):
+    """A plant with nothing random and nothing that changes from trial to trial (the nominal model): with
+    ``deterministic = True`` a resumed session on it continues exactly without any stored state."""
+
+    deterministic: bool
+
+
+def is_deterministic(plant: Any) -> bool:
+    """True if the plant declares it has no randomness and no state (:class:`DeterministicPlant`)."""
+    return isinstance(plant, DeterministicPlant) and bool(plant.deterministic)
 
 
 def repeats_exactly(plant: Any) -> bool:

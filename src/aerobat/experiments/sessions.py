@@ -34,7 +34,7 @@ from aerobat.core.bounds import ITERATIONS
 from aerobat.core.design import Design
 from aerobat.core.learning import Iteration, IterationStatus, Learner, SessionStatus, learn
 from aerobat.core.maneuver import Maneuver, check_maneuver, position_indices
-from aerobat.core.plant import Plant, StatefulPlant, repeats_exactly
+from aerobat.core.plant import Plant, StatefulPlant, is_deterministic, repeats_exactly
 from aerobat.core.registry import from_spec
 from aerobat.core.rules import RuleChoice
 from aerobat.errors import ConfigError, DesignFailed, StoreError
@@ -329,7 +329,7 @@ def resume_session(store: Store, ref: int | str, *, iterations: int | None = Non
                 plant.set_state(last.plant_state)
             except (KeyError, TypeError, ValueError) as exc:
                 raise ConfigError(f"{where}: stored plant state: {exc}") from None
-        elif prec.kind != "nominal":
+        elif not is_deterministic(plant):
             exact = False  # the plant continues from a fresh random state
             because = f"the {prec.kind} plant's state was not stored"
     if exact and not repeats_exactly(plant):

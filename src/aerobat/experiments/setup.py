@@ -45,12 +45,12 @@ def plant_choice_from_record(kind: str, config: Mapping[str, Any], seed: int | N
 
     Today: ``{"settings": {...}}`` plus ``"feedback"`` when the plant ran onboard feedback (without
     it, the paper's open loop: every session stored before feedback existed). Before schema 4: the
-    arena as ``{"arena": {...}}``, RotorPy as ``{"settings": path or null}`` (the file is read again;
-    a missing file is an error).
+    arena as ``{"arena": {...}}`` (a plant's settings under its own name), RotorPy as
+    ``{"settings": path or null}`` (the file is read again; a missing file is an error).
     """
     settings_table: Any = config.get("settings") if isinstance(config, Mapping) else None
-    if kind == "arena" and isinstance(config, Mapping) and "arena" in config:
-        settings_table = config["arena"]
+    if isinstance(config, Mapping) and kind in config:  # before schema 4: under the plant's own name
+        settings_table = config[kind]
     table: dict[str, Any] = {"kind": kind, "settings": {}, "seed": int(seed or 0)}
     if isinstance(config, Mapping) and "feedback" in config:
         table["feedback"] = config["feedback"]

@@ -44,6 +44,8 @@ __all__ = [
     "load_arena",
     "replaying_plants",
     "sampled_plants",
+    "studied_plants",
+    "tuned_plants",
 ]
 
 BUILT_IN = (
@@ -63,6 +65,16 @@ for _module in BUILT_IN:
 def sampled_plants() -> tuple[str, ...]:
     """The registered plants a robustness study can sample: their spec says how (``PlantSpec.robustness``)."""
     return tuple(name for name, spec in PLANTS.items() if spec.robustness is not None)
+
+
+def tuned_plants() -> tuple[str, ...]:
+    """The registered plants that fly a real quad's firmware tune (``PlantSpec.tune``, ``--tune FILE``)."""
+    return tuple(name for name, spec in PLANTS.items() if spec.tune is not None)
+
+
+def studied_plants() -> tuple[str, ...]:
+    """The registered plants the comparative studies (rules, feedback) offer (``PlantSpec.in_studies``)."""
+    return tuple(name for name, spec in PLANTS.items() if spec.in_studies)
 
 
 def replaying_plants() -> tuple[str, ...]:

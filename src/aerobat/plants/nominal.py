@@ -24,6 +24,7 @@ class NominalPlant:
     """
 
     name = "nominal"
+    deterministic = True  # nothing random, nothing kept between trials (aerobat.core.plant.DeterministicPlant)
 
     def __init__(self, config: VehicleConfig, *, max_step_s: float = DEFAULT_MAX_STEP_S,
                  sample_rate_hz: float = 200.0) -> None:
@@ -57,5 +58,5 @@ def _build(config: VehicleConfig, settings: object, *, seed: int, feedback: Feed
 
 
 SPEC = PlantSpec("nominal", "the design model itself: continuous time, no noise", _build,
-                 feedback=tuple(FeedbackScheme))
+                 feedback=tuple(FeedbackScheme), in_studies=False)
 """The nominal plant's entry in the plant registry (``--plant nominal``)."""

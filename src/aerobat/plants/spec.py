@@ -100,6 +100,12 @@ class PlantSpec:
     replay : ``replay(settings, *, tune, props_out, seed) -> replayer``: a blackbox log's sticks flown through
         this plant's firmware (``aerobat log replay``; the replayer as
         :class:`aerobat.plants.betaflight.replay.LogReplayer`); None: the plant replays no log.
+    tune : ``tune(settings, tune) -> settings``: the settings with a real quad's firmware configuration
+        applied (a :class:`~aerobat.firmware.betaflight.tune.Tune`, ``--tune FILE``); None: the plant flies
+        no firmware tune.
+    in_studies : whether the comparative studies (rules, feedback) offer the plant; False for one where
+        there is nothing to compare (the nominal model) or a study's thousands of trials cannot fly (a
+        vehicle on the wall clock).
     module : for a plant outside aerobat's built-ins registered without an entry point, the module whose
         import registers it (usually ``__name__`` where the spec is made). Every stored choice of the plant
         carries it, so that a study's spawned workers, a resumed session or a stored job find the plant.
@@ -122,6 +128,8 @@ class PlantSpec:
     scenarios: tuple[Scenario, ...] = (DEFAULT_SCENARIO,)
     kernels: tuple[Kernels, ...] = ()
     replay: Callable[..., Any] | None = None
+    tune: Callable[[Any, Any], Any] | None = None
+    in_studies: bool = True
     module: str | None = None
 
     def scenario(self, name: str, *, source: str = "--scenarios") -> Scenario:

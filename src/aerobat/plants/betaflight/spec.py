@@ -33,6 +33,13 @@ def _firmware_model(config: VehicleConfig, settings: Any) -> tuple[Any, dict[str
     return firmware_model(config, settings)
 
 
+def _with_tune(settings: Any, tune: Any) -> Any:
+    """The plant's settings with a real quad's tune, flown by the SITL (``--tune FILE``)."""
+    import dataclasses
+
+    return dataclasses.replace(settings, tune=tune)
+
+
 def _replayer(settings: Any, *, tune: Any, props_out: bool, seed: int = 0) -> Any:
     from aerobat.plants.betaflight.replay import LogReplayer
 
@@ -77,4 +84,4 @@ SPEC = PlantSpec(
     default_feedback=DEFAULT_SCHEME, cores=_cores, firmware_model=_firmware_model, robustness=SAMPLING,
     kernels=(Kernels("plants", warm_lab_kernels), Kernels("plants", warm_world),
              Kernels("firmware", warm_design_model)),
-    replay=_replayer)
+    replay=_replayer, tune=_with_tune)

@@ -58,7 +58,7 @@ SPEC = PlantSpec(
     _build, load_settings=_load, settings_from_table=_from_table, settings_to_table=_to_table,
     default_settings=_default, requires=(("serial", "fc"),), option="--fc", feedback=tuple(FeedbackScheme),
     # the paper flies open loop; the pilot-side feedback runs at the radio rate on motion capture
-    default_feedback=FeedbackScheme.NONE, firmware_model=_firmware_model,
+    default_feedback=FeedbackScheme.NONE, firmware_model=_firmware_model, in_studies=False,
     # the supervisor and the pilot's sticks fly the board; a rehearsal's world is the lockstep plant's,
     # whose kernels that plant's own spec compiles (setup compiles every registered plant's)
     kernels=(Kernels("plants", warm_lab_kernels), Kernels("plants", warm_sticks)))

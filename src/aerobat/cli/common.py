@@ -12,6 +12,7 @@ import argparse
 import math
 import os
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -29,6 +30,7 @@ __all__ = [
     "add_db_option",
     "add_maneuver_options",
     "add_plant_options",
+    "add_tune_option",
     "old_spelling",
     "console",
     "each_of",
@@ -39,7 +41,7 @@ __all__ = [
     "parse_pair",
     "plural",
     "plant_choice_from_args",
-    "with_tune_from_args",
+    "plant_settings_path",
     "refuse_overwrite",
     "check_outputs",
     "check_plot_files",
@@ -353,14 +355,7 @@ def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | No
         if spec.option is not None and name in choices:
             p.add_argument(spec.option, metavar="FILE.toml",
                           help=f"{name} settings, only with --plant {name} (default: the {name} plant's own)")
-    tuned = [name for name in choices if PLANTS.get(name, source="--plant").tune is not None]
-    if tuned:
-        p.add_argument("--tune", metavar="FILE[:N]",
-                       help=f"a real quad's Betaflight configuration flown by the firmware, only with --plant "
-                            f"{' or '.join(tuned)}: a CLI diff or dump, or a blackbox log .bbl, .bfl or .txt whose "
-                            f"header is used, FILE:N its log N (default: aerobat's own settings)")
-        p.add_argument("--tune-log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
-                       help=argparse.SUPPRESS)  # before FILE:N; kept so that older command lines still run
+    add_tune_option(p, choices)
     p.add_argument("--seed", type=bounded_int(*SEEDS.bounds()), default=0, help="seed of the plant's random generator")
     add_design_model_option(p)
     if not feedback:
@@ -369,6 +364,41 @@ def add_plant_options(p: argparse.ArgumentParser, *, kinds: tuple[str, ...] | No
                    help="what the vehicle's onboard loop mixes into the program: none is the paper's open "
                         "loop, attitude, tracking; see docs/feedback.md (default: the plant's best measured, "
                         "tracking on the arena and Betaflight, none on RotorPy)")
+
+
+def add_tune_option(p: argparse.ArgumentParser, choices: Sequence[str], *, flown_by: str = "the firmware") -> None:
+    """``--tune FILE[:N]`` when one of the plants ``choices`` flies a pilot's tune
+    (:attr:`aerobat.plants.PlantSpec.tune`)."""
+    from aerobat.plants import PLANTS
+
+    tuned = [name for name in choices if PLANTS.get(name, source="--plant").tune is not None]
+    if not tuned:
+        return
+    p.add_argument("--tune", metavar="FILE[:N]",
+                   help=f"a real quad's Betaflight configuration flown by {flown_by}, only with --plant "
+                        f"{' or '.join(tuned)}: a CLI diff or dump, or a blackbox log .bbl, .bfl or .txt whose header "
+                        f"is used, FILE:N its log N (default: aerobat's own settings)")
+    p.add_argument("--tune-log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
+                   help=argparse.SUPPRESS)  # before FILE:N; kept so that older command lines still run
+
+
+def plant_settings_path(args: argparse.Namespace) -> str | None:
+    """The settings file given with ``--plant``'s own option (``--arena FILE``); another plant's is refused."""
+    from aerobat.plants import PLANTS
+
+    path = None
+    for name, spec in PLANTS.items():
+        if spec.option is None:
+            continue
+        given = getattr(args, spec.option.lstrip("-").replace("-", "_"), None)
+        if given is None:
+            continue
+        if not str(given).strip():  # Path("") is the working folder
+            raise ConfigError(f"{spec.option}: empty file name")
+        if name != args.plant:
+            raise ConfigError(f"{spec.option} applies only with --plant {name} (got --plant {args.plant})")
+        path = given
+    return path
 
 
 def add_design_model_option(p: argparse.ArgumentParser) -> None:
@@ -418,76 +448,15 @@ def plant_choice_from_args(args: argparse.Namespace) -> Any:
 
     A settings option of another plant is refused rather than ignored.
     """
-    from aerobat.plants import PLANTS, PlantChoice
+    from aerobat.plants import PlantChoice
 
-    path = None
-    for name, spec in PLANTS.items():
-        if spec.option is None:
-            continue
-        given = getattr(args, spec.option.lstrip("-").replace("-", "_"), None)
-        if given is None:
-            continue
-        if not str(given).strip():  # Path("") is the working folder
-            raise ConfigError(f"{spec.option}: empty file name")
-        if name != args.plant:
-            raise ConfigError(f"{spec.option} applies only with --plant {name} (got --plant {args.plant})")
-        path = given
+    path = plant_settings_path(args)
     choice = PlantChoice.from_file(args.plant, path, seed=args.seed, feedback=getattr(args, "feedback", None))
+    from aerobat.cli.tune_options import with_tune_from_args
+
     return with_tune_from_args(args, choice)
 
 
-def read_tune(path: str | Path, log_index: int | None = None,
-              option: str = "--tune-log-index") -> tuple[Any, dict[str, float], str]:
-    """What the tune in ``path`` (``FILE:N``: log N of a blackbox file) becomes on the SITL, checked as the
-    firmware would be configured; nothing runs. ``log_index`` is the log given by ``option`` instead.
-
-    Returns the :class:`~aerobat.firmware.betaflight.translate.TuneReport`, the tune's full-stick rates
-    [deg/s] per axis and its ``rates_type``. A tune that cannot be read, names an unknown setting or
-    holds a value that is no value of its setting is bad input (:class:`~aerobat.errors.ConfigError`).
-    """
-    from aerobat.firmware.betaflight.configure import check_commands
-    from aerobat.firmware.betaflight.settings import load_settings
-    from aerobat.firmware.betaflight.translate import translate
-    from aerobat.firmware.betaflight.tune import TuneError, load_tune
-    from aerobat.logs.refs import parse_log_ref
-
-    named = parse_log_ref(path)
-    ref = named.with_index(log_index, option)
-    try:
-        tune = load_tune(ref.path, log_index=ref.index)
-    except TuneError as exc:  # a log named by the option: the refusal says so
-        raise (TuneError(f"{exc} ({option} {log_index})") if log_index is not None and named.index is None
-               else exc) from None
-    report = translate(tune)  # unknown settings raise here, naming the file and line
-    tuned = load_settings().with_tune(report)
-    check_commands(tuned)  # the last check before the firmware's CLI, as configuring it runs it
-    rates = {axis: tuned.rate_deg_s(axis, 1.0) for axis in ("roll", "pitch", "yaw")}
-    return report, rates, tuned.value("rates_type")
-
-
-def with_tune_from_args(args: argparse.Namespace, choice: Any) -> Any:
-    """``choice`` with ``--tune FILE`` (``--tune-log-index N``) applied; prints what the tune became (stderr).
-
-    A tune that cannot be read or names an unknown setting is bad input (exit 2), before anything flies.
-    """
-    tune_path = getattr(args, "tune", None)
-    log_index = getattr(args, "tune_log_index", None)
-    if tune_path is None:
-        if log_index is not None:
-            raise ConfigError("--tune-log-index applies only with --tune FILE")
-        return choice
-    from aerobat.plants import PlantChoice, tuned_plants
-
-    if choice.spec.tune is None:
-        raise ConfigError(f"--tune applies only with --plant {' or '.join(tuned_plants())} (got --plant {choice.kind})")
-    import shlex
-
-    report, rates, rates_type = read_tune(tune_path, log_index)
-    shown = ", ".join(f"{axis} {rate:.0f}" for axis, rate in rates.items())
-    whole = "aerobat tune " + shlex.quote(f"{tune_path}:{log_index}" if log_index is not None else str(tune_path))
-    print(f"{report.summary(whole)}\n  the tune's full-stick rates [deg/s] ({rates_type}): {shown}; the pilot's "
-          "sticks invert its rate and throttle curves", file=sys.stderr)
-    return PlantChoice(choice.kind, choice.spec.tune(choice.settings, report.tune), choice.seed, choice.feedback)
 
 
 def rule_choice_from_args(args: argparse.Namespace) -> Any:

@@ -142,7 +142,7 @@ def _what_if(args: argparse.Namespace, params: Any, source: str, out: Path, wind
     say = console(args.json).print
     tune = None
     if args.tune is not None:
-        from aerobat.cli.common import read_tune
+        from aerobat.cli.tune_options import read_tune
 
         tune = read_tune(args.tune, option="--tune FILE:N")[0].tune  # checked as the firmware would be
     result = what_if(args.file, tune=tune, changes=tuple(args.set or ()), window_s=window, params=params,

@@ -31,6 +31,7 @@ from aerobat.cli.common import (
     add_design_model_option,
     add_maneuver_options,
     add_plant_options,
+    add_tune_option,
     bounded_int,
     check_outputs,
     console,
@@ -41,11 +42,12 @@ from aerobat.cli.common import (
     open_store,
     output_dir,
     plant_choice_from_args,
+    plant_settings_path,
     session_ref,
     text_path,
-    with_tune_from_args,
 )
 from aerobat.cli.stopping import Stopped, sigterm_stops
+from aerobat.cli.tune_options import with_tune_from_args
 from aerobat.core.bounds import choices_of
 from aerobat.errors import ConfigError, DesignFailed
 from aerobat.quadrotor.feedback import FeedbackScheme
@@ -273,23 +275,6 @@ def _scenarios_of(plant: str) -> tuple[str, ...]:
     return tuple(s.name for s in PLANTS.get(plant, source="--plant").scenarios)
 
 
-def _settings_file(args: argparse.Namespace) -> str | None:
-    """The settings file of ``--plant``'s own option (``--betaflight FILE``); another plant's is refused."""
-    from aerobat.plants import PLANTS
-
-    path = None
-    for name, spec in PLANTS.items():
-        given = getattr(args, spec.option.lstrip("-").replace("-", "_"), None) if spec.option else None
-        if given is None:
-            continue
-        if not str(given).strip():
-            raise ConfigError(f"{spec.option}: empty file name")
-        if name != args.plant:
-            raise ConfigError(f"{spec.option} applies only with --plant {name} (got --plant {args.plant})")
-        path = given
-    return path
-
-
 def _cmd_robustness(args: argparse.Namespace) -> int:
     from aerobat.core.rules import RuleChoice
     from aerobat.experiments.studies import RobustnessRanges, load_ranges, robustness_study
@@ -301,7 +286,7 @@ def _cmd_robustness(args: argparse.Namespace) -> int:
     ranges = load_ranges(args.ranges) if args.ranges is not None else RobustnessRanges()
     # the settings every vehicle is sampled around: the plant's file and tune where given (a plant that flies
     # a tune always samples around its settings: aerobat's own tune when none is given), else its defaults
-    path = _settings_file(args)
+    path = plant_settings_path(args)
     chosen = with_tune_from_args(args, PlantChoice.from_file(args.plant, path))
     base = chosen.settings if path is not None or chosen.spec.tune is not None else None
     written = ("trials_to_tolerance.png", "success_vs_property.png", "robustness.json")
@@ -516,14 +501,7 @@ def register(sub: Any) -> None:
             rob.add_argument(spec.option, metavar="FILE.toml",
                              help=f"{name} plant settings to sample around, only with --plant {name} (default: the "
                                   f"shipped ones)")
-    tuned = [name for name in _sampled_plants() if _spec(name).tune is not None]
-    if tuned:
-        rob.add_argument("--tune", metavar="FILE[:N]",
-                         help=f"a real quad's Betaflight diff/dump or blackbox log (FILE:N its log N), flown by every "
-                              f"sampled vehicle, only with --plant {' or '.join(tuned)} (default: aerobat's own "
-                              f"settings)")
-        rob.add_argument("--tune-log-index", type=bounded_int(1, 10**6), default=None, metavar="N",
-                         help=argparse.SUPPRESS)  # before FILE:N; kept so that older command lines still run
+    add_tune_option(rob, _sampled_plants(), flown_by="every sampled vehicle")
     add_design_model_option(rob)
     add_execution_options(rob)
     rob.set_defaults(func=_stoppable(_cmd_robustness))

@@ -11,7 +11,8 @@ import argparse
 import json
 from typing import Any
 
-from aerobat.cli.common import HelpFormatter, bounded_int, plural, read_tune
+from aerobat.cli.common import HelpFormatter, bounded_int, plural
+from aerobat.cli.tune_options import read_tune
 
 __all__ = ["register"]
 

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import pytest
 
+pytest_plugins = ["real_time_lock"]  # one wall-clock flight at a time, whatever the scheduler does
+
 
 @pytest.fixture(autouse=True, scope="session")
 def _the_suite_leaves_the_users_store_alone():

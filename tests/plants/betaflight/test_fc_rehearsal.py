@@ -74,6 +74,12 @@ def _ended_disarmed(trial) -> None:  # noqa: ANN001
     assert max(world["motors"]) == 0.0, f"the firmware's motors still ran when its world stopped: {world['motors']}"
 
 
+def _why(trial: Trial) -> str:
+    """A failed trial's message with what the world and the ground measured of their timing."""
+    return (f"{trial.message}; world {trial.info.get('world')}; ground {trial.info.get('ground_scheduling')}, "
+            f"frames {trial.info.get('frames')}")
+
+
 def _no_process_left(connection: RehearsalConnection) -> None:
     assert connection.current is None and connection.reports, "the trial's world was not stopped"
     for report in connection.reports:
@@ -93,7 +99,7 @@ def test_the_world_sleeps_while_it_waits_instead_of_spinning() -> None:
 def test_a_trial_flies_in_real_time_over_the_serial_path_and_reports_its_timing(firmware: tuple[Path, Path]) -> None:
     plant, connection = _plant(firmware, fc_params(radio=Radio(rate_hz=100.0)))  # 8 kHz, as in lockstep
     trial = plant.fly(FLIP.program(P0))
-    assert trial.status is TrialStatus.OK, trial.message
+    assert trial.status is TrialStatus.OK, _why(trial)
     info = trial.info
     assert info["landed"] and info["disarmed"]
     _ended_disarmed(trial)

@@ -198,8 +198,21 @@ class RadioPilot:
         self._integral = np.zeros(3)
         run = self.fly_to(flight, self.start_m, pilot.settle_timeout_s, check=False, until=Until.SETTLED)
         if run.end is not FramesEnd.MET:
-            raise TrialStop(TrialStatus.ABORTED, f"did not settle at the start within {pilot.settle_timeout_s:g} s")
+            raise TrialStop(TrialStatus.ABORTED, f"did not settle at the start within {pilot.settle_timeout_s:g} s: "
+                                                 f"{self._settle_miss(flight)}")
         return run.airborne_s, flight.time_s
+
+    def _settle_miss(self, flight: RadioFlight) -> str:
+        """Where the estimate was when the settle gave up, beside the tolerances it had to meet."""
+        pilot = self.params.pilot
+        pos, vel, quat = self._estimate(flight)
+        off_cm = (pos - self.start_m) * 100.0
+        tilt_rad = math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (quat[1] ** 2 + quat[2] ** 2))))
+        return (f"at the end {np.linalg.norm(off_cm):.1f} cm from it (x {off_cm[0]:+.1f}, y {off_cm[1]:+.1f}, "
+                f"z {off_cm[2]:+.1f} cm), {np.linalg.norm(vel) * 100.0:.1f} cm/s, tilted "
+                f"{math.degrees(tilt_rad):.2f}°, {flight.mocap().shape[0]} motion-capture samples (must hold "
+                f"{pilot.settle_position_m * 100:g} cm, {pilot.settle_velocity_m_s * 100:g} cm/s and "
+                f"{math.degrees(pilot.settle_tilt_rad):.2f}° for {pilot.settle_hold_s:g} s)")
 
     def hover(self, flight: RadioFlight, seconds: float) -> dict[str, float]:
         """Hover at the start; the largest position error seen (measured and true) [m]."""

@@ -128,3 +128,19 @@ def test_a_stored_state_repeats_the_next_trial(firmware: tuple[Path, Path]) -> N
     assert same(again.fly(FLIP.program(P0)), first)
     with pytest.raises(ValueError, match="format"):
         again.set_state({**saved, "format": 9})
+
+
+def test_a_settle_that_times_out_says_where_the_vehicle_was(firmware: tuple[Path, Path]) -> None:
+    """A second to settle is too short to take off and settle: the trial is aborted, and its message gives the
+    estimate's distance, speed and tilt beside the tolerances it had to meet."""
+    plant = BetaflightPlant(FPV, BetaflightParams().replace(pilot__settle_timeout_s=1.0), seed=1,
+                            eeprom=firmware[1])
+    trial = plant.fly(FLIP.program(P0))
+    assert trial.status.value == "aborted", trial.message
+    message = trial.message
+    assert message.startswith("did not settle at the start within 1 s: at the end "), message
+    pilot = plant.params.pilot
+    tolerances = (f"(must hold {pilot.settle_position_m * 100:g} cm, {pilot.settle_velocity_m_s * 100:g} cm/s and "
+                  f"{math.degrees(pilot.settle_tilt_rad):.2f}° for {pilot.settle_hold_s:g} s)")
+    for part in ("cm from it (x ", "cm/s, tilted", "motion-capture samples", tolerances):
+        assert part in message, message

@@ -403,7 +403,10 @@ def decompose(config: Any, params: Any, maneuver: Any, seed: int) -> list[dict[s
     }
     idx = position_indices(maneuver.errors)
     names = [e.name for e in maneuver.errors]
-    rows = []
+    motors = firmware_design_model(config, params).trajectory(program).motors  # the design model's own flight
+    rows = [{"world": "the design model (p⁰ on the model)", "status": "model",
+             "full_motor_steps": float(np.mean(motors.max(axis=1) >= 0.999)),
+             "p_nominal": [float(v) for v in nominal.design.p_nominal]}]
     for name, world in variants.items():
         trial = BetaflightPlant(config, world, seed=seed, feedback="none").fly(program)
         e = maneuver.error(trial.final_state)
@@ -422,10 +425,17 @@ def cmd_decompose(work: Path) -> dict[str, Any]:
     if ROMA_LOG.is_file():
         config, params = roma_setup(work)
         data["roma"] = decompose(config, params, _triple(config, 600.0), seed=0)
+        # the same without the pack's sag under load (issue 42): the chain as it was before identification wrote it
+        data["roma_no_battery"] = decompose(config, params.replace(airframe__battery_rest_v=None,
+                                                                   airframe__battery_sag_v=0.0),
+                                            _triple(config, 600.0), seed=0)
     _write("decompose", data)
     for case, rows in data.items():
         print(f"{case}: the firmware design's first attempt, one world effect at a time")
-        for r in rows:
+        model, *flown = rows
+        print(f"  p⁰ {np.round(model['p_nominal'], 3)}: on the model a motor at full output in "
+              f"{100 * model['full_motor_steps']:.1f} % of the gyro periods")
+        for r in flown:
             print(f"  {r['world']:32s} {r['status']:8s} position {r['position_m']:6.3f} m  "
                   f"flip angle {r['flip_angle_deg']:+6.1f} deg")
     return data

@@ -53,6 +53,34 @@ def test_hover_is_an_equilibrium_of_the_loop(config, fidelity):
     assert abs(x[6] - 1.0) < 1e-12
 
 
+def test_hover_is_an_equilibrium_with_a_sagging_battery(config):
+    """The hover command solves f(u) × battery factor = m g / 4 (here the pack at hover load is above the
+    reference voltage, so the command is lower than without the battery), and hover is still at rest."""
+    sagging = BetaflightParams().replace(airframe__battery_reference_v=15.6, airframe__battery_rest_v=16.3,
+                                         airframe__battery_sag_v=3.0)
+    model = firmware_design_model(config, sagging)
+    steady = firmware_design_model(config, BetaflightParams())
+    airframe = sagging.airframe
+    u = float(model.hover_packet[0])
+    assert airframe.battery_factor((u,) * 4) > 1.0 and u < float(steady.hover_packet[0])
+    assert airframe.thrust_n(u) * airframe.battery_factor((u,) * 4) == pytest.approx(model.hover_thrust_n, rel=1e-12)
+    x = model.final_states([_hover(1.0)])[0]
+    assert np.linalg.norm(x[0:2]) < 1e-12 and abs(x[2]) < 0.03 and np.linalg.norm(x[10:13]) < 1e-9
+
+
+def test_the_battery_factor_is_the_packs_voltage_squared():
+    """(V/V_ref)² with V = rest − sag · mean(u²), commands clipped to [0, 1]; 1 without a battery model."""
+    from aerobat.quadrotor.xframe import Airframe
+
+    airframe = Airframe(battery_reference_v=15.6, battery_rest_v=16.3, battery_sag_v=3.0)
+    assert airframe.battery_factor((0.0,) * 4) == pytest.approx((16.3 / 15.6) ** 2, rel=1e-14)
+    assert airframe.battery_factor((1.0, 1.0, 0.0, 0.0)) == pytest.approx(((16.3 - 1.5) / 15.6) ** 2, rel=1e-14)
+    assert airframe.battery_factor((2.0, -1.0, 1.0, 0.0)) == airframe.battery_factor((1.0, 0.0, 1.0, 0.0))
+    assert Airframe(battery_rest_v=16.3, battery_sag_v=3.0).battery_factor((1.0,) * 4) == 1.0  # no reference: off
+    with pytest.raises(ConfigError, match="battery_sag_v"):
+        Airframe(battery_reference_v=15.6, battery_rest_v=16.3, battery_sag_v=16.3)
+
+
 def test_a_roll_command_is_tracked_within_the_rate_loops_lag(model):
     """Half a second at 400 deg/s of roll stick: the body turns 200 degrees, less the loop's lag of some ms."""
     program = Program(switches=(Switch(time_s=0.0, channel="rate_p", value=math.radians(400.0)),

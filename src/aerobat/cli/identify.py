@@ -7,6 +7,7 @@ The run is :func:`aerobat.experiments.identify.identify` (or ``refit_session`` w
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 from pathlib import Path
 from typing import Any
@@ -169,8 +170,9 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
     save_figure(plot_log_fit(fit, result.prepared[0]), figure)
     warnings = identification_warnings(fit, prior)
     airframe = None
+    battery = result.battery
     if args.airframe:
-        airframe = airframe_from_log_fit(fit, battery_reference_v=result.battery_reference_v)
+        airframe = airframe_from_log_fit(fit, battery_reference_v=result.battery_reference_v, battery=battery)
         # the pilot flies with the mass the user gave, as a pilot who weighed the quad would
         pilot = {"vehicle_mass_kg": airframe["mass_kg"]}
         write_text(args.airframe, f"# [airframe] of the Betaflight plant from {fit.name} (prior {prior.name})\n"
@@ -187,9 +189,12 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
             "fit_segments_s": fit.fit_segments_s, "holdout_segments_s": fit.holdout_segments_s,
             "notes": list(fit.notes), "warnings": warnings, "prior": prior.name, "wall_s": fit.wall_s,
             "excitation_deg_s": dict(zip(("roll", "pitch", "yaw"), result.excitation.rms_deg_s, strict=True)),
+            "battery": None if battery is None else dataclasses.asdict(battery),
             "out": str(out), "figure": str(figure), "airframe": args.airframe}))
         return 0
     _print_log_fit(result)
+    say(battery.describe() if battery is not None else "battery: not identified (the logs record no voltage, or too "
+                                                        "little flight)", highlight=False)
     for line in warnings:
         say(f"check: {line}")
     say(f"vehicle written to {out} (figure {figure}" + (f", airframe {args.airframe}" if args.airframe else "") +

@@ -24,8 +24,9 @@ from aerobat.experiments.log_excitation import axis_excitation, with_prior_for_p
 from aerobat.logs import read_logs
 from aerobat.logs.files import LogFormat, check_log_file, detect_format
 from aerobat.logs.refs import LogRef, parse_log_ref
-from aerobat.quadrotor.flightlog import FlightLog
+from aerobat.quadrotor.flightlog import Channel, FlightLog
 from aerobat.quadrotor.identification import envelope_margins
+from aerobat.quadrotor.identification.battery import BatteryFit, fit_battery
 from aerobat.quadrotor.identification.logdata import PreparedLog, prepare_log
 from aerobat.quadrotor.identification.logfit import (
     ChannelMetrics,
@@ -75,6 +76,20 @@ class LogIdentification:
         if not volts:
             return None
         return float(sum(v * w for v, w in volts) / sum(w for _, w in volts))
+
+    @property
+    def battery(self) -> BatteryFit | None:
+        """The pack under load (:func:`~aerobat.quadrotor.identification.battery.fit_battery`) over the logs fitted;
+        None without a logged voltage and motor commands, or too little flight."""
+        from aerobat.experiments.log_replay import FLYING_MOTOR
+
+        series = []
+        for log in self.logs:
+            if log.has(Channel.BATTERY_VOLTAGE) and log.has(Channel.MOTOR_COMMAND):
+                motors = log.signals[Channel.MOTOR_COMMAND]
+                series.append((motors.time_s, log.signals[Channel.BATTERY_VOLTAGE].at(motors.time_s)[:, 0],
+                               motors.values))
+        return fit_battery(series, flying_command=FLYING_MOTOR) if series else None
 
     @property
     def idle_command(self) -> float | None:
@@ -214,13 +229,15 @@ def vehicle_from_log_fit(fit: LogFit, prior: VehicleConfig, *, name: str = "iden
     return dataclasses.replace(prior.with_vehicle(vehicle, name=name), effects=ModelEffects(), source=source)
 
 
-def airframe_from_log_fit(fit: LogFit, *, base: Any | None = None,
-                          battery_reference_v: float | None = None) -> dict[str, Any]:
+def airframe_from_log_fit(fit: LogFit, *, base: Any | None = None, battery_reference_v: float | None = None,
+                          battery: BatteryFit | None = None) -> dict[str, Any]:
     """The Betaflight plant's ``[airframe]`` table for the identified quad (fields of ``Airframe``).
 
     ``base`` (an :class:`~aerobat.quadrotor.xframe.Airframe`) gives what a log does not
     tell: motor spread, rotor inertia, output delay; its defaults otherwise. ``battery_reference_v``
-    (:attr:`LogIdentification.battery_reference_v`) is the voltage the fitted thrust holds at.
+    (:attr:`LogIdentification.battery_reference_v`) is the voltage the fitted thrust holds at; with it,
+    ``battery`` (:attr:`LogIdentification.battery`) makes thrust sag under load as the logged pack did
+    (``battery_rest_v``, ``battery_sag_v``; a sag the log shows as negative is written as none).
 
     The output delay stays the base's (the SITL's ESC delay), not the fit's ``delay_s``: the fit
     measures from the logged motor command to the logged, *filtered* gyro, so its delay includes
@@ -251,11 +268,18 @@ def airframe_from_log_fit(fit: LogFit, *, base: Any | None = None,
         table["battery_reference_v"] = battery_reference_v
     else:
         table.pop("battery_reference_v", None)  # TOML has no null
+    if battery is not None and battery_reference_v is not None and battery.sag_v > 0.0:
+        table["battery_rest_v"] = battery.rest_v
+        table["battery_sag_v"] = battery.sag_v
+    else:
+        table.pop("battery_rest_v", None)
+        table["battery_sag_v"] = 0.0
     for key, value in list(table.items()):
         if isinstance(value, tuple):
             table[key] = list(value)
     checked: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in table.items()}
     checked.setdefault("battery_reference_v", None)
+    checked.setdefault("battery_rest_v", None)
     Airframe(**checked)  # validates
     return table
 
@@ -263,6 +287,7 @@ def airframe_from_log_fit(fit: LogFit, *, base: Any | None = None,
 _FITTED_AIRFRAME = ("inertia_kg_m2", "thrust_max_n", "curve_min_speed_ratio", "curve_shape", "motor_tau_up_s",
                     "motor_tau_down_s", "kappa_m")
 _GIVEN_AIRFRAME = ("mass_kg", "motor_x_m", "motor_y_m")
+_LOG_AIRFRAME = ("props_out", "battery_reference_v", "battery_rest_v", "battery_sag_v")  # read from the log, not fitted
 
 
 def airframe_notes(fit: LogFit, base: Any | None = None) -> list[str]:
@@ -272,7 +297,7 @@ def airframe_notes(fit: LogFit, base: Any | None = None) -> list[str]:
     from aerobat.quadrotor.xframe import Airframe
 
     defaults = [name for name in dataclasses.asdict(base or Airframe())
-                if name not in _FITTED_AIRFRAME + _GIVEN_AIRFRAME + ("props_out", "battery_reference_v")]
+                if name not in _FITTED_AIRFRAME + _GIVEN_AIRFRAME + _LOG_AIRFRAME]
     return [f"fitted to the log: {', '.join(_FITTED_AIRFRAME)} (I_zz and kappa_m with the assumed I_zz ratio "
             f"{fit.geometry.inertia_zz_ratio:.3g} of I_xx + I_yy);",
             f"given, not identified: {', '.join(_GIVEN_AIRFRAME)} (--mass-kg, --motor-x-m, --motor-y-m, else the "
@@ -281,6 +306,9 @@ def airframe_notes(fit: LogFit, base: Any | None = None) -> list[str]:
             f"yaw_motors_reversed and the physics' spins follow it);",
             "battery_reference_v (when the log records a voltage): its median in flight, where thrust_max_n "
             "holds; a log replay scales thrust by (V/battery_reference_v)²;",
+            "battery_rest_v, battery_sag_v (with a logged voltage): the pack under load, V = rest - sag * mean(u^2) "
+            "fitted to the logged voltage; the plant and the firmware design model scale thrust by "
+            "(V/battery_reference_v)^2 (aerobat.quadrotor.identification.battery);",
             f"NOT identified, the Betaflight plant's defaults: {', '.join(defaults)};",
             f"the fit's delay from motor command to the logged (filtered) gyro: {fit.model.delay_s * 1e3:.1f} ms;",
             "not used as output_delay_s: it includes gyro filtering the SITL's firmware runs itself, a 250 Hz",

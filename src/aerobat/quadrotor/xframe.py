@@ -41,6 +41,7 @@ __all__ = [
     "MOTOR_SPIN_CCW",
     "Airframe",
     "add_rotor_reaction",
+    "battery_thrust_factor",
     "curve_thrust",
     "xframe_plant",
 ]
@@ -81,6 +82,12 @@ class Airframe:
     battery_reference_v : the battery voltage at which ``thrust_max_n`` holds [V] (an identified
         airframe: the fitted logs' median in flight); a log replay scales thrust by (V/this)² with the
         logged voltage V. None: the replayed log's own median in flight.
+    battery_rest_v, battery_sag_v : the battery under load (identified from a log's voltage against its
+        motor commands, :mod:`aerobat.quadrotor.identification.battery`): at motor commands u₁…u₄ the
+        pack gives V = rest − sag · mean(uᵢ²) [V] and every rotor's thrust is × (V / battery_reference_v)²,
+        so a punch to full throttle sags as the real pack does. Flown when ``battery_rest_v`` and
+        ``battery_reference_v`` are both given (a log replay that follows the logged voltage uses that
+        instead); None: thrust does not depend on the load.
     """
 
     mass_kg: float = bounded(0.752, _MASS)
@@ -103,9 +110,15 @@ class Airframe:
     output_delay_s: float = bounded(125e-6, Interval(0.0, 0.05, unit="s"))
     props_out: bool = False
     battery_reference_v: float | None = bounded(None, Interval(1.0, 100.0, unit="V"))
+    battery_rest_v: float | None = bounded(None, Interval(1.0, 100.0, unit="V"))
+    battery_sag_v: float = bounded(0.0, Interval(0.0, 50.0, unit="V"))
 
     def __post_init__(self) -> None:
-        validate(self, skip=("battery_reference_v",) if self.battery_reference_v is None else ())
+        validate(self, skip=tuple(name for name in ("battery_reference_v", "battery_rest_v")
+                                  if getattr(self, name) is None))
+        if self.battery_rest_v is not None and self.battery_sag_v >= self.battery_rest_v:
+            raise ConfigError(f"battery_sag_v = {self.battery_sag_v:g}: allowed [0, battery_rest_v = "
+                              f"{self.battery_rest_v:g}) V (the pack would reach 0 V at full load)")
         if not isinstance(self.props_out, bool):
             raise ConfigError(f"props_out = {self.props_out!r}: expected true or false")
 
@@ -114,6 +127,23 @@ class Airframe:
         """Whether each motor slot's propeller turns counter-clockwise seen from above: :data:`MOTOR_SPIN_CCW`
         (props in), every one reversed with ``props_out``."""
         return tuple(not ccw for ccw in MOTOR_SPIN_CCW) if self.props_out else MOTOR_SPIN_CCW
+
+    @property
+    def battery_flown(self) -> bool:
+        """Thrust follows the battery's sag under load (``battery_rest_v`` and ``battery_reference_v`` given)."""
+        return self.battery_rest_v is not None and self.battery_reference_v is not None
+
+    def battery_constants(self) -> tuple[float, float, float]:
+        """(rest, sag, reference) [V] for :func:`battery_thrust_factor`; a reference of 0 turns it off."""
+        if not self.battery_flown:
+            return 0.0, 0.0, 0.0
+        assert self.battery_rest_v is not None and self.battery_reference_v is not None
+        return self.battery_rest_v, self.battery_sag_v, self.battery_reference_v
+
+    def battery_factor(self, commands: Any) -> float:
+        """Every rotor's thrust factor at motor ``commands`` (four, 0 … 1): (V/V_ref)², 1 without a battery."""
+        rest, sag, ref = self.battery_constants()
+        return float(battery_thrust_factor(np.asarray(commands, dtype=float), rest, sag, ref))
 
     def thrust_n(self, command: float) -> float:
         """Steady-state thrust of one rotor at motor command ``command`` (0 = stopped)."""
@@ -169,6 +199,20 @@ def curve_thrust(u, thrust_max, r, k):  # pragma: no cover - compiled
         u = 1.0
     s = (1.0 - r) * math.sqrt(k * u * u + (1.0 - k) * u) + r
     return thrust_max * s * s
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def battery_thrust_factor(u, rest_v, sag_v, reference_v):  # pragma: no cover - compiled
+    """Every rotor's thrust factor (V / ``reference_v``)² with V = ``rest_v`` − ``sag_v`` · mean(uᵢ²) for
+    the four motor commands ``u`` (each clipped to [0, 1]); 1.0 when ``reference_v`` is 0 (no battery)."""
+    if reference_v <= 0.0:
+        return 1.0
+    load = 0.0
+    for j in range(4):
+        c = min(max(u[j], 0.0), 1.0)
+        load += c * c
+    v = (rest_v - 0.25 * sag_v * load) / reference_v
+    return v * v
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")

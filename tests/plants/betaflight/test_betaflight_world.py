@@ -188,3 +188,31 @@ def test_firmware_settings_file_errors(tmp_path) -> None:
     path.write_text("schema = 2\n")
     with pytest.raises(ConfigError, match="schema"):
         load_settings(path)
+
+
+def test_the_battery_sags_every_rotors_thrust_under_load() -> None:
+    """Half a second at constant commands in the air: each rotor's thrust settles at f(u) × ((rest − sag ·
+    mean(u²)) / reference)², and an airframe without a rest voltage flies exactly as before the battery model."""
+    commands = np.array([0.3, 0.5, 0.7, 0.9], dtype=np.float32)
+
+    def settled(params: BetaflightParams) -> np.ndarray:
+        aux = aux_vector(params, step_s=125e-6, ground_z_m=-1e6, gravity_m_s2=9.81)
+        x = ground_state((0.0, 0.0, 100.0))
+        counters = np.zeros(N_COUNTERS, dtype=np.int64)
+        counters[C_DELAY] = 1
+        args = (airframe_plant(params), aux, np.zeros((2, 4)), counters, np.zeros(6), np.zeros(PACKET_DOUBLES),
+                np.zeros((6, N_STATE)))
+        for _ in range(4000):  # 0.5 s: fifteen motor time constants
+            assert step(x, commands, *args) == 0
+        return x[13:17].copy()
+
+    sagging = IDEAL.replace(airframe__battery_reference_v=15.6, airframe__battery_rest_v=16.3,
+                            airframe__battery_sag_v=3.0)
+    u = commands.astype(float)
+    factor = ((16.3 - 3.0 * np.mean(u**2)) / 15.6) ** 2
+    expected = np.array([sagging.airframe.thrust_n(c) for c in u]) * factor
+    assert settled(sagging) == pytest.approx(expected, rel=1e-6)
+    assert sagging.airframe.battery_factor(u) == pytest.approx(factor, rel=1e-12)
+    without = IDEAL.replace(airframe__battery_reference_v=15.6)  # a replay's reference only: no model flown
+    assert np.array_equal(settled(without), settled(IDEAL))
+    assert settled(IDEAL) == pytest.approx([IDEAL.airframe.thrust_n(c) for c in u], rel=1e-6)

@@ -27,11 +27,12 @@ import numpy as np
 
 from aerobat.plants.fpv.params import BetaflightParams
 from aerobat.quadrotor.dynamics import N_STATE, P_IZZ, normalize_quaternion, plant_derivative
-from aerobat.quadrotor.xframe import add_rotor_reaction, curve_thrust, xframe_plant
+from aerobat.quadrotor.xframe import add_rotor_reaction, battery_thrust_factor, curve_thrust, xframe_plant
 
 __all__ = [
     "A_ACCEL_NOISE",
     "A_ATT_ERR",
+    "A_BATTERY",
     "A_BIAS",
     "A_CURVE_K",
     "A_CURVE_R",
@@ -77,7 +78,8 @@ A_ACCEL_NOISE = 15
 A_ROTOR_J = 16  # rotor (prop + bell) inertia about its axis [kg m²]
 A_THRUST_COEF = 17  # f = k Ω² [N/(rad/s)²]
 A_SPIN = 18  # 4 spin signs (+1: counter-clockwise seen from above)
-N_AUX = 22
+A_BATTERY = 22  # the battery under load: rest, sag, reference [V] (reference 0: none; Airframe.battery_constants)
+N_AUX = 25
 
 # counters: integers the step keeps
 C_TICK = 0  # steps taken
@@ -121,6 +123,7 @@ def aux_vector(params: BetaflightParams, *, step_s: float, ground_z_m: float, gr
     aux[A_ROTOR_J] = a.rotor_inertia_kg_m2
     aux[A_THRUST_COEF] = a.thrust_coefficient_n_s2
     aux[A_SPIN : A_SPIN + 4] = [1.0 if ccw else -1.0 for ccw in a.spins_ccw]
+    aux[A_BATTERY : A_BATTERY + 3] = a.battery_constants()
     return aux
 
 
@@ -244,6 +247,10 @@ def advance(x, plant, aux, pending, counters, noise, packet, scratch):  # pragma
     ft = scratch[5]
     for j in range(4):
         ft[j] = thrust_curve(pending[applied, j], aux) if applied >= 0 else 0.0
+    if applied >= 0 and aux[A_BATTERY + 2] > 0.0:  # the pack sags under this step's load
+        sag = battery_thrust_factor(pending[applied], aux[A_BATTERY], aux[A_BATTERY + 1], aux[A_BATTERY + 2])
+        for j in range(4):
+            ft[j] *= sag
     t = tick * h
     k1 = scratch[0]
     k2 = scratch[1]

@@ -35,7 +35,7 @@ from aerobat.plants.betaflight.flight import (
     SAMPLE_SETPOINT,
     SAMPLE_TIME,
 )
-from aerobat.plants.betaflight.physics import A_FMAX, airframe_plant
+from aerobat.plants.betaflight.physics import A_BATTERY, A_FMAX, airframe_plant
 
 if TYPE_CHECKING:
     from aerobat.plants.betaflight.plant import BetaflightPlant
@@ -130,7 +130,8 @@ def replay_sticks(plant: BetaflightPlant, track: StickTrack, *, samples_per_fram
     """Fly ``track`` through ``plant``'s firmware (a :class:`~.plant.BetaflightPlant`) in ACRO, in the air.
 
     ``progress(done_s, total_s)`` is called about once per simulated second. ``thrust_scale`` (one per
-    ``track.time_s``) multiplies every rotor's thrust from frame to frame (a battery's sag); None: 1.
+    ``track.time_s``) multiplies every rotor's thrust from frame to frame (a battery's sag, the logged voltage's);
+    None: 1. The airframe's own battery model (``battery_rest_v``, for learning) never flies in a replay.
     """
     from aerobat.plants.supervisor import TrialStop
 
@@ -154,6 +155,9 @@ def replay_sticks(plant: BetaflightPlant, track: StickTrack, *, samples_per_fram
         scale = None if thrust_scale is None else np.asarray(thrust_scale, dtype=float)
         if scale is not None and scale.shape != track.time_s.shape:
             raise ValueError(f"thrust_scale: {scale.shape}, expected one per track sample {track.time_s.shape}")
+        # a replay's thrust follows the logged voltage or stays as identified: the airframe's battery model (for
+        # learning, where no log says the voltage) stands down, as the logged voltage already holds the pack's sag
+        flight.aux[A_BATTERY + 2] = 0.0
         for k in range(frames):
             c = track.at(track.time_s[0] + k * period)
             if scale is not None:

@@ -98,8 +98,11 @@ def model_table(model: FirmwareModel) -> dict[str, Any]:
     airframe = dataclass_to_table(model.airframe)
     if not model.airframe.props_out:  # props in: the stored form before props_out existed
         airframe.pop("props_out", None)
-    if model.airframe.battery_reference_v is None:
-        airframe.pop("battery_reference_v", None)
+    for name in ("battery_reference_v", "battery_rest_v"):  # TOML has no null
+        if getattr(model.airframe, name) is None:
+            airframe.pop(name, None)
+    if model.airframe.battery_sag_v == 0.0:  # no sag: the stored form before the battery model
+        airframe.pop("battery_sag_v", None)
     return {"kind": "firmware", "description": model.description, "fidelity": model.fidelity.value,
             "firmware": model.firmware.to_table(), "airframe": airframe,
             "radio_rate_hz": 1.0 / model.radio_period_s,

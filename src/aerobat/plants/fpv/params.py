@@ -250,8 +250,11 @@ def params_to_table(params: BetaflightParams) -> dict[str, Any]:
     table = dataclass_to_table(params)
     if not params.airframe.props_out:  # props in, as every stored form before props_out existed
         table["airframe"].pop("props_out", None)
-    if params.airframe.battery_reference_v is None:  # TOML has no null; stored forms before it had none
-        table["airframe"].pop("battery_reference_v", None)
+    for name in ("battery_reference_v", "battery_rest_v"):  # TOML has no null; stored forms before them had none
+        if getattr(params.airframe, name) is None:
+            table["airframe"].pop(name, None)
+    if params.airframe.battery_sag_v == 0.0:  # no sag: as every stored form before the battery model
+        table["airframe"].pop("battery_sag_v", None)
     if params.tune is None:
         del table["tune"]
     else:

@@ -31,6 +31,7 @@ from aerobat.firmware.betaflight.settings import BetaflightSettings
 from aerobat.plants.fpv.params import Airframe
 from aerobat.quadrotor.firmware.sticks import (
     L_ANGLE_LIMIT,
+    L_BATTERY,
     L_CLIMB,
     L_CURVE_K,
     L_CURVE_R,
@@ -166,6 +167,7 @@ class StickMap:
             out[L_THROTTLE_TABLE] = 1.0
             out[L_MOTOR_TABLE:L_MOTOR_TABLE + N_TABLE] = self.motor_table
         out[L_DEADBAND:L_DEADBAND + 3] = self.deadbands_us
+        out[L_BATTERY:L_BATTERY + 3] = self.airframe.battery_constants()
         return out
 
 

@@ -21,10 +21,10 @@ from aerobat.quadrotor.dynamics import P_IZZ, derivative, normalize_quaternion, 
 from aerobat.quadrotor.firmware.layout import K_GYRO_DT, K_QUANTIZE, Q_GYRO, Q_PULSES, Z_PACKET, Z_PID, Z_PID_SETPOINT
 from aerobat.quadrotor.firmware.loop import step
 from aerobat.quadrotor.firmware.sticks import frame_commands, program_sticks
-from aerobat.quadrotor.xframe import add_rotor_reaction, curve_thrust
+from aerobat.quadrotor.xframe import add_rotor_reaction, battery_thrust_factor, curve_thrust
 
-__all__ = ["A_CURVE_K", "A_CURVE_R", "A_FMAX", "A_ROTOR_J", "A_SPIN", "A_THRUST_COEF", "N_AIRFRAME", "N_RECORD",
-           "fly", "gyro_reading", "work_size"]
+__all__ = ["A_BATTERY", "A_CURVE_K", "A_CURVE_R", "A_FMAX", "A_ROTOR_J", "A_SPIN", "A_THRUST_COEF", "N_AIRFRAME",
+           "N_RECORD", "fly", "gyro_reading", "work_size"]
 
 # the airframe's constants beside the dynamics' plant vector
 A_FMAX = 0
@@ -33,7 +33,8 @@ A_CURVE_K = 2
 A_ROTOR_J = 3
 A_THRUST_COEF = 4
 A_SPIN = 5  # 4 spin signs (+1 counter-clockwise seen from above)
-N_AIRFRAME = 9
+A_BATTERY = 9  # the battery under load: rest, sag, reference [V] (reference 0: none; Airframe.battery_constants)
+N_AIRFRAME = 12
 N_RECORD = 1 + 20 + 4 + 3 + 12  # time, state, motor packet, set point, P I D F per axis
 _GYRO_LSB = 16.4  # the SITL's LSB per deg/s (sitl.c GYRO_SCALE)
 _GYRO_SCALE = 2000.0 / 32768.0  # Betaflight's deg/s per LSB (GYRO_SCALE_2000DPS)
@@ -127,6 +128,11 @@ def fly(breaks, coefficients, hover_command, steps_per_frame, duration_s, k, mem
         applied = (i - delay) % slots
         for m in range(4):
             thrust[m] = curve_thrust(pending[applied, m], airframe[A_FMAX], airframe[A_CURVE_R], airframe[A_CURVE_K])
+        if airframe[A_BATTERY + 2] > 0.0:  # the pack sags under this step's load
+            sag = battery_thrust_factor(pending[applied], airframe[A_BATTERY], airframe[A_BATTERY + 1],
+                                        airframe[A_BATTERY + 2])
+            for m in range(4):
+                thrust[m] *= sag
         h = dt if i < whole else rest
         _rk4(x, i * dt, h, thrust, plant, const, airframe, scratch)
         for j in range(n):

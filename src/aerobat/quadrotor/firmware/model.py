@@ -32,6 +32,7 @@ from aerobat.errors import ConfigError
 from aerobat.quadrotor.dynamics import N_STATE, P_GRAV
 from aerobat.quadrotor.firmware.config import FirmwareConfig
 from aerobat.quadrotor.firmware.flight import (
+    A_BATTERY,
     A_CURVE_K,
     A_CURVE_R,
     A_FMAX,
@@ -131,11 +132,12 @@ class FirmwareModel:
         self.frame[A_ROTOR_J] = airframe.rotor_inertia_kg_m2
         self.frame[A_THRUST_COEF] = airframe.thrust_coefficient_n_s2
         self.frame[A_SPIN:A_SPIN + 4] = [1.0 if ccw else -1.0 for ccw in airframe.spins_ccw]
+        self.frame[A_BATTERY:A_BATTERY + 3] = airframe.battery_constants()
         self.hover_thrust_n = airframe.mass_kg * self.gravity_m_s2 / 4.0
         if self.hover_thrust_n >= airframe.thrust_max_n:
             raise ConfigError(f"airframe: {airframe.mass_kg} kg cannot hover on four rotors of "
                               f"{airframe.thrust_max_n} N")
-        u = airframe.command_for_thrust(self.hover_thrust_n)
+        u = _hover_command(airframe, self.hover_thrust_n)
         self.hover_packet = np.full(4, u)
         self.memory = np.zeros(N_MEMORY)
         hover(self.k, self.memory, u)
@@ -212,3 +214,20 @@ def _compiled(program: Any, name: str) -> CompiledProgram:
     if isinstance(program, Program):
         return program.compile()
     raise ConfigError(f"{name}: expected a Program, got {type(program).__name__}")
+
+
+def _hover_command(airframe: Airframe, thrust_n: float) -> float:
+    """The motor command at which each rotor gives ``thrust_n`` [N], the battery's sag at that load included."""
+    u = airframe.command_for_thrust(thrust_n)
+    if not airframe.battery_flown:
+        return u
+    for _ in range(50):  # the sag changes slowly with u: a fixed point in a few steps
+        factor = airframe.battery_factor((u, u, u, u))
+        if factor <= 0.0:
+            raise ConfigError(f"airframe: the battery ({airframe.battery_rest_v} V less {airframe.battery_sag_v} V at "
+                              f"full load) gives no thrust at hover")
+        nxt = airframe.command_for_thrust(thrust_n / factor)
+        if abs(nxt - u) < 1e-14:
+            return nxt
+        u = nxt
+    return u

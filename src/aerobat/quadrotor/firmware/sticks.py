@@ -28,6 +28,7 @@ import numpy as np
 __all__ = [
     "L_ANGLE_LIMIT",
     "L_CLIMB",
+    "L_BATTERY",
     "L_CURVE_K",
     "L_CURVE_R",
     "L_DEADBAND",
@@ -69,7 +70,8 @@ N_TABLE = 129  # samples per table: stick |x| = i/(N-1), or throttle pulse 1000 
 L_ROLL_TABLE = 13  # rate [rad/s] at stick i/(N-1), roll, pitch, yaw one after the other
 L_MOTOR_TABLE = L_ROLL_TABLE + 3 * N_TABLE  # motor command at pulse 1000 + 1000 i/(N-1) us
 L_DEADBAND = L_MOTOR_TABLE + N_TABLE  # the firmware's stick deadband per axis [µs of 500] (the tables start past it)
-N_LIMITS = L_DEADBAND + 3
+L_BATTERY = L_DEADBAND + 3  # the pack under load: rest, sag, reference [V] (0: none; Airframe.battery_constants)
+N_LIMITS = L_BATTERY + 3
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
@@ -121,17 +123,36 @@ def throttle_for_motor(u, limits):  # pragma: no cover - compiled
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
 def throttle_for_collective(collective, limits):  # pragma: no cover - compiled
-    """Throttle pulse [us] for a mass-normalised collective [m/s²] (the pilot's inverted model)."""
+    """Throttle pulse [us] for a mass-normalised collective [m/s²] (the pilot's inverted model).
+
+    With a battery (``L_BATTERY``) the command is the one whose thrust, the pack's sag at that load on
+    all four motors included, gives the collective (a fixed point: the sag changes slowly with u).
+    """
     per_rotor = max(collective, 0.0) * limits[L_MASS] / 4.0
+    u = _command_for_thrust(per_rotor, limits)
+    reference = limits[L_BATTERY + 2]
+    if reference > 0.0:
+        for _ in range(30):
+            load = min(u, 1.0)
+            v = (limits[L_BATTERY] - limits[L_BATTERY + 1] * load * load) / reference
+            nxt = _command_for_thrust(per_rotor / max(v * v, 1e-6), limits)
+            if abs(nxt - u) < 1e-13:
+                u = nxt
+                break
+            u = nxt
+    return throttle_for_motor(u, limits)
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _command_for_thrust(per_rotor, limits):  # pragma: no cover - compiled
+    """The motor command whose steady thrust is ``per_rotor`` [N] on the pilot's curve (clamped to [0, 1])."""
     r = limits[L_CURVE_R]
     k = limits[L_CURVE_K]
     s = (math.sqrt(per_rotor / limits[L_FMAX]) - r) / (1.0 - r)
     s = min(max(s, 0.0), 1.0)
     if k > 0.0:
-        u = ((k - 1.0) + math.sqrt((1.0 - k) ** 2 + 4.0 * k * s * s)) / (2.0 * k)
-    else:
-        u = s * s
-    return throttle_for_motor(u, limits)
+        return ((k - 1.0) + math.sqrt((1.0 - k) ** 2 + 4.0 * k * s * s)) / (2.0 * k)
+    return s * s
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy")

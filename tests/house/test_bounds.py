@@ -102,7 +102,8 @@ def _firmware_config():
 def _airframe():
     from aerobat.quadrotor.xframe import Airframe
 
-    return Airframe(battery_reference_v=23.7)  # a value, so that its bound is tested too (None: the log's median)
+    # values, so that their bounds are tested too (None: the log's median; no battery model)
+    return Airframe(battery_reference_v=23.7, battery_rest_v=24.2, battery_sag_v=4.2)
 
 
 EXAMPLES = {

@@ -144,3 +144,35 @@ def test_a_settle_that_times_out_says_where_the_vehicle_was(firmware: tuple[Path
                   f"{math.degrees(pilot.settle_tilt_rad):.2f}° for {pilot.settle_hold_s:g} s)")
     for part in ("cm from it (x ", "cm/s, tilted", "motion-capture samples", tolerances):
         assert part in message, message
+
+
+class _ArmsOnTheSecondSwitch:
+    """A flight whose firmware ignores the first ARM switch (as after a gap in the link) and arms at the second."""
+
+    def __init__(self) -> None:
+        self.time_s = 0.0
+        self.runs: list[tuple[int, int, bool]] = []  # (frames, AUX1 pulse, until ARMED)
+
+    def frames_for(self, seconds: float) -> int:
+        return max(1, math.ceil(seconds * 100.0 - 1e-9))
+
+    def run_frames(self, mode, frames, *, channels_us, until=None, **_):  # noqa: ANN001, ANN003
+        from aerobat.plants.fpv.frames import FramesEnd, FramesRun, Until
+
+        self.time_s += frames / 100.0
+        self.runs.append((frames, int(channels_us[0][4]), until is Until.ARMED))
+        arming = [r for r in self.runs if r[2]]
+        met = until is Until.ARMED and len(arming) == 2
+        return FramesRun(FramesEnd.MET if met else FramesEnd.DONE, frames)
+
+
+def test_a_switch_that_did_not_arm_is_cycled_once_as_a_pilot_would(firmware: tuple[Path, Path]) -> None:
+    pilot = BetaflightPlant(FPV, BetaflightParams(), seed=1, eeprom=firmware[1]).pilot
+    flight = _ArmsOnTheSecondSwitch()
+    pilot.power_on_and_arm(flight)
+    assert pilot.arm_attempts == 2
+    calibrate, arm = flight.runs[0], flight.runs[1]
+    assert [r[2] for r in flight.runs] == [False, True, False, True]  # calibrate, arm, switch off, arm again
+    off_run, rearm = flight.runs[2], flight.runs[3]
+    assert off_run[1] == calibrate[1] != arm[1] == rearm[1]  # the switch went off, then on again
+    assert off_run[0] == 30  # 0.3 s at 100 Hz

@@ -149,7 +149,7 @@ def test_a_trial_flies_real_time_beside_two_busy_loops(firmware: tuple[Path, Pat
     trial flies, both sides run under SCHED_FIFO, the world keeps the wall clock and the typical frame is on time.
     (How many frames may be late is a measurement of the machine: the slow suite's bar, below.)"""
     trial = _fly_beside_two_busy_loops(firmware)
-    assert trial.status is TrialStatus.OK, (trial.message, trial.info.get("world"), trial.info.get("frames"))
+    assert trial.status is TrialStatus.OK, _why(trial)
     info = trial.info
     assert info["ground_scheduling"] == "fifo" and info["world"]["scheduling"] == "fifo"
     assert info["world"]["simulated_s"] == pytest.approx(info["world"]["wall_s"], abs=0.5)
@@ -165,7 +165,7 @@ def test_a_trial_keeps_its_deadlines_with_two_busy_loops_beside_it(firmware: tup
     machine (it missed by 1-2 frames, or 0.2 % of the world's chunks, in runs of ``make test``), so it runs
     in ``make test-slow``."""
     trial = _fly_beside_two_busy_loops(firmware)
-    assert trial.status is TrialStatus.OK, (trial.message, trial.info.get("world"), trial.info.get("frames"))
+    assert trial.status is TrialStatus.OK, _why(trial)
     info = trial.info
     frames = info["maneuver_frames"]
     assert frames["late_frames"] <= 0.02 * frames["frames"], frames

@@ -84,6 +84,10 @@ class RadioFlight(Protocol):
     def motor_commands(self) -> tuple[float, float, float, float]: ...
 
 
+_REARM_OFF_S = 0.3
+"""How long the pilot turns the ARM switch off before trying again when the firmware did not arm [s]."""
+
+
 def failed_trial(status: TrialStatus, message: str, info: dict[str, Any]) -> Trial:
     """A trial that ended before anything was measured (a firmware that did not start, a refused pre-flight)."""
     nan_state = np.full(N_STATE, np.nan)
@@ -129,6 +133,8 @@ class RadioPilot:
         self.gains = np.array([pilot.position_gain_per_s2, pilot.velocity_gain_per_s, pilot.integral_gain_per_s3,
                                pilot.yaw_gain_per_s])
         self._integral = np.zeros(3)
+        self.arm_attempts = 0
+        """How many times the last :meth:`power_on_and_arm` turned the ARM switch on (1: at once)."""
 
     def fly(self, flight: RadioFlight, compiled: CompiledProgram,
             info: dict[str, Any]) -> tuple[Flown, list[np.ndarray]]:
@@ -148,15 +154,26 @@ class RadioPilot:
 
     # --------------------------------------------------------------- phases
     def power_on_and_arm(self, flight: RadioFlight) -> float:
-        """Calibrate on the floor, then arm through AUX1; returns the time the firmware armed."""
+        """Calibrate on the floor, then arm through AUX1; returns the time the firmware armed.
+
+        As a pilot would, a switch that did not arm within 1 s is turned off for :data:`_REARM_OFF_S` and on
+        again, once: Betaflight refuses an ARM switch that was on while arming was blocked (a gap in the
+        radio link, say) until the switch is cycled. A lockstep flight arms at the first try.
+        """
         idle = np.array([0.0, 0.0, 0.0, float(RC_MIN_US)])
-        flight.run_frames(Mode.STREAM, flight.frames_for(self.params.pilot.calibration_s),
-                          channels_us=self._rows(self.channels(idle, arm=False, angle=True)))
-        armed = flight.run_frames(Mode.STREAM, flight.frames_for(1.0),
-                                  channels_us=self._rows(self.channels(idle, arm=True, angle=True)), until=Until.ARMED)
-        if armed.end is FramesEnd.MET:
-            return flight.time_s
-        raise TrialStop(TrialStatus.ABORTED, "the firmware did not arm within 1 s of the ARM switch")
+        disarmed = self._rows(self.channels(idle, arm=False, angle=True))
+        flight.run_frames(Mode.STREAM, flight.frames_for(self.params.pilot.calibration_s), channels_us=disarmed)
+        for attempt in range(2):
+            if attempt:
+                flight.run_frames(Mode.STREAM, flight.frames_for(_REARM_OFF_S), channels_us=disarmed)
+            armed = flight.run_frames(Mode.STREAM, flight.frames_for(1.0),
+                                      channels_us=self._rows(self.channels(idle, arm=True, angle=True)),
+                                      until=Until.ARMED)
+            if armed.end is FramesEnd.MET:
+                self.arm_attempts = attempt + 1
+                return flight.time_s
+        raise TrialStop(TrialStatus.ABORTED, "the firmware did not arm within 1 s of the ARM switch, twice (the "
+                                             f"switch cycled off for {_REARM_OFF_S:g} s in between)")
 
     @staticmethod
     def _rows(*channels: tuple[int, ...]) -> np.ndarray:
@@ -282,6 +299,8 @@ class _Sortie:
 
     def take_off(self) -> None:
         self.info["armed_at_s"] = self.plant.power_on_and_arm(self.flight)
+        if self.plant.arm_attempts > 1:  # the switch was cycled: a trial that armed at once says nothing
+            self.info["arm_attempts"] = self.plant.arm_attempts
         self.info["airborne_at_s"], self.info["settled_at_s"] = self.plant.settle(self.flight)
 
     def hover(self) -> None:

@@ -49,13 +49,10 @@ def _cmd_design(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps({**result.to_json_dict(), "design_model": nominal.model.value,
                           "design_model_description": nominal.description,
-                          "design_model_compute_s": nominal.compute_s}))
+                          "design_model_compute_s": nominal.compute_s,
+                          "full_output_share": nominal.full_output_share}))
     else:
-        model = [f"  design model: {nominal.model.value} — {nominal.description}"]
-        if nominal.paper is not None:
-            model.append(f"  started from the paper model's p⁰ ({nominal.paper.evaluations} simulations); both "
-                         f"stages {nominal.compute_s:.2f} s")
-        _print_design(result, model)
+        _print_design(result, nominal.model_lines())
     if not result.converged:
         raise DesignFailed(result.message, result)
     if args.program is not None:

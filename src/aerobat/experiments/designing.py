@@ -19,6 +19,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from aerobat.config import check_type
 from aerobat.core.design import Design, design
 from aerobat.core.maneuver import Maneuver
@@ -27,12 +29,17 @@ from aerobat.plants import DesignModel, PlantChoice
 from aerobat.quadrotor.simulate import NominalModel
 from aerobat.quadrotor.vehicle import VehicleConfig, vehicle_table
 
-__all__ = ["DESIGN_MODEL_KEY", "NominalDesign", "design_model_of", "design_vehicle_table", "job_design",
-           "nominal_design", "resolve_design_model"]
+__all__ = ["DESIGN_MODEL_KEY", "LITTLE_MARGIN_SHARE", "NominalDesign", "design_model_of", "design_vehicle_table",
+           "job_design", "nominal_design", "resolve_design_model"]
 
 DESIGN_MODEL_KEY = "design_model"
 """The key of a design vehicle's stored table that says which model designed (absent: the paper's)."""
 _PAPER_TABLE = {"kind": DesignModel.PAPER.value, "description": "the paper's model"}
+LITTLE_MARGIN_SHARE = 0.15
+"""A design that holds a motor at full output in more of its steps than this has little thrust margin
+(measured, docs/plants.md: the default triple flip 8.6 %, first attempt 0.095 m; the ROMA F5's 2.2 %
+without its pack's sag, 0.25 m; 19.5 % with it, 0.58 m)."""
+_FULL_OUTPUT = 0.999
 
 
 @dataclass(frozen=True)
@@ -47,6 +54,9 @@ class NominalDesign:
     table : its stored form (:func:`design_vehicle_table` keeps it with the vehicle).
     paper : the paper model's design the firmware design started from (None for a paper design).
     compute_s : wall time of both stages [s].
+    full_output_share : on a model that records its motors (the firmware model), the share of p⁰'s steps
+        with a motor at full output (None: not known). Much of it means little thrust margin: what the
+        model does not know of the world (a centre-of-mass offset, uneven motors) then saturates a motor.
     """
 
     design: Design
@@ -55,14 +65,26 @@ class NominalDesign:
     table: dict[str, Any] = field(default_factory=dict)
     paper: Design | None = None
     compute_s: float = 0.0
+    full_output_share: float | None = None
 
     def summary(self) -> str:
-        """The design's summary, then the model it ran on."""
-        lines = [self.design.summary(), f"  design model: {self.model.value} — {self.description}"]
+        """The design's summary, then the model it ran on (:meth:`model_lines`)."""
+        return "\n".join([self.design.summary(), *self.model_lines()])
+
+    def model_lines(self) -> list[str]:
+        """What a person reads about the model: which one, the paper's stage before it, the thrust margin."""
+        lines = [f"  design model: {self.model.value} — {self.description}"]
         if self.paper is not None:
             lines.append(f"  started from the paper model's p⁰ ({self.paper.status.value}, {self.paper.evaluations} "
                          f"simulations); both stages {self.compute_s:.2f} s")
-        return "\n".join(lines)
+        if self.full_output_share is not None:
+            share = self.full_output_share
+            lines.append(f"  on the model, p⁰ holds a motor at full output in {share:.1%} of its steps"
+                         + (f"; above {LITTLE_MARGIN_SHARE:.0%} the thrust margin is small: a centre-of-mass "
+                            f"offset or uneven motors the model does not know will saturate a motor and cost "
+                            f"height (docs/plants.md, the ROMA F5 with its pack's sag)"
+                            if share > LITTLE_MARGIN_SHARE else ""))
+        return lines
 
 
 def resolve_design_model(plant: PlantChoice | None, choice: DesignModel | str | None) -> DesignModel:
@@ -114,8 +136,23 @@ def nominal_design(maneuver: Maneuver, config: VehicleConfig, *, plant: PlantCho
         if result.converged:
             break
     assert best is not None
-    return NominalDesign(best, kind, str(table.get("description", "")), table, paper=paper,
-                         compute_s=time.perf_counter() - started)
+    compute_s = time.perf_counter() - started
+    return NominalDesign(best, kind, str(table.get("description", "")), table, paper=paper, compute_s=compute_s,
+                         full_output_share=_full_output_share(model, maneuver, best))
+
+
+def _full_output_share(model: Any, maneuver: Maneuver, result: Design) -> float | None:
+    """The share of p⁰'s steps with a motor at full output on ``model``, if it records its motors."""
+    trajectory = getattr(model, "trajectory", None)
+    if not callable(trajectory) or not np.all(np.isfinite(result.p_nominal)):
+        return None
+    try:
+        motors = np.asarray(trajectory(maneuver.program(result.p_nominal)).motors, dtype=float)
+    except (AttributeError, ValueError, ConfigError):
+        return None
+    if motors.ndim != 2 or motors.shape[0] == 0:
+        return None
+    return float(np.mean(motors.max(axis=1) >= _FULL_OUTPUT))
 
 
 def design_vehicle_table(config: VehicleConfig, nominal: NominalDesign | None) -> dict[str, Any]:

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from aerobat.cli import main
-from aerobat.experiments.designing import nominal_design
+from aerobat.experiments.designing import LITTLE_MARGIN_SHARE, nominal_design
 from aerobat.firmware.betaflight.tune import load_tune
 from aerobat.plants import PlantChoice
 from aerobat.plants.betaflight.model_check import noiseless, sitl_flight
@@ -105,9 +105,14 @@ def test_design_runs_on_the_firmware_by_default_on_betaflight_and_says_so(capsys
     out = json.loads(capsys.readouterr().out)
     assert out["design_model"] == "firmware" and out["converged"]
     assert "Betaflight 4.6.0" in out["design_model_description"]
+    assert 0.0 <= out["full_output_share"] < LITTLE_MARGIN_SHARE  # a single flip at 800 °/s: thrust to spare
+    assert main([*argv, "--plant", "betaflight"]) == 0
+    said = capsys.readouterr().out
+    assert f"on the model, p⁰ holds a motor at full output in {100 * out['full_output_share']:.1f}% of its steps\n" \
+        in said, said
     assert main([*argv, "--plant", "betaflight", "--design-model", "paper", "--json"]) == 0
     paper = json.loads(capsys.readouterr().out)
-    assert paper["design_model"] == "paper"
+    assert paper["design_model"] == "paper" and paper["full_output_share"] is None  # the paper's model has no motors
     assert np.max(np.abs(np.array(paper["p_nominal"]) - np.array(out["p_nominal"]))) > 1e-3
     assert main([*argv, "--json"]) == 0  # no plant: the paper's model, as before
     assert json.loads(capsys.readouterr().out)["design_model"] == "paper"
@@ -133,3 +138,15 @@ def test_a_session_keeps_the_model_it_was_designed_on(firmware: tuple[Path, Path
     # a full command line naming the other model describes another session: refused, nothing flown
     assert main([*argv[:-4], "--resume", "1", "--trials", "3", "--design-model", "paper", "--db", db]) == 2
     assert "--design-model paper (stored: firmware)" in capsys.readouterr().err
+
+
+def test_a_design_that_holds_the_motors_at_full_output_says_its_thrust_margin_is_small() -> None:
+    """The summary names the share of p⁰'s steps at full output, and warns above LITTLE_MARGIN_SHARE."""
+    import dataclasses
+
+    flip = MultiFlip(vehicle=FPV.vehicle, flips=1, max_rate_rad_s=math.radians(800.0), dims=2)
+    nominal = nominal_design(flip, FPV, plant=PlantChoice("betaflight"))
+    assert nominal.full_output_share is not None
+    assert "thrust margin is small" not in nominal.summary()
+    tight = dataclasses.replace(nominal, full_output_share=0.195)
+    assert "full output in 19.5% of its steps; above 15% the thrust margin is small" in tight.summary()

@@ -42,7 +42,9 @@ __all__ = [
     "Airframe",
     "add_rotor_reaction",
     "battery_thrust_factor",
+    "curve_command",
     "curve_thrust",
+    "sagging_command",
     "xframe_plant",
 ]
 
@@ -199,6 +201,34 @@ def curve_thrust(u, thrust_max, r, k):  # pragma: no cover - compiled
         u = 1.0
     s = (1.0 - r) * math.sqrt(k * u * u + (1.0 - k) * u) + r
     return thrust_max * s * s
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def curve_command(thrust, thrust_max, r, k):  # pragma: no cover - compiled
+    """The motor command whose steady thrust is ``thrust`` [N] (:func:`curve_thrust` inverted, clamped to [0, 1])."""
+    s = (math.sqrt(thrust / thrust_max) - r) / (1.0 - r)
+    s = min(max(s, 0.0), 1.0)
+    if k > 0.0:
+        return ((k - 1.0) + math.sqrt((1.0 - k) ** 2 + 4.0 * k * s * s)) / (2.0 * k)
+    return s * s
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def sagging_command(thrust, thrust_max, r, k, rest_v, sag_v, reference_v):  # pragma: no cover - compiled
+    """The command at which each of four equal rotors gives ``thrust`` [N] with the pack's sag at that load
+    (:func:`battery_thrust_factor`; a reference of 0: no battery, :func:`curve_command`). A fixed point: the
+    sag changes slowly with the command."""
+    u = curve_command(thrust, thrust_max, r, k)
+    if reference_v <= 0.0:
+        return u
+    for _ in range(30):
+        load = min(u, 1.0)
+        v = (rest_v - sag_v * load * load) / reference_v
+        nxt = curve_command(thrust / max(v * v, 1e-6), thrust_max, r, k)
+        if abs(nxt - u) < 1e-13:
+            return nxt
+        u = nxt
+    return u
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")

@@ -49,7 +49,7 @@ from aerobat.quadrotor.firmware.loop import hover
 from aerobat.quadrotor.firmware.sticks import N_LIMITS
 from aerobat.quadrotor.program import CompiledProgram, Program
 from aerobat.quadrotor.simulate import batch_threads
-from aerobat.quadrotor.xframe import Airframe, xframe_plant
+from aerobat.quadrotor.xframe import Airframe, sagging_command, xframe_plant
 
 __all__ = ["Fidelity", "FirmwareModel", "FirmwareTrajectory"]
 
@@ -218,16 +218,7 @@ def _compiled(program: Any, name: str) -> CompiledProgram:
 
 def _hover_command(airframe: Airframe, thrust_n: float) -> float:
     """The motor command at which each rotor gives ``thrust_n`` [N], the battery's sag at that load included."""
-    u = airframe.command_for_thrust(thrust_n)
     if not airframe.battery_flown:
-        return u
-    for _ in range(50):  # the sag changes slowly with u: a fixed point in a few steps
-        factor = airframe.battery_factor((u, u, u, u))
-        if factor <= 0.0:
-            raise ConfigError(f"airframe: the battery ({airframe.battery_rest_v} V less {airframe.battery_sag_v} V at "
-                              f"full load) gives no thrust at hover")
-        nxt = airframe.command_for_thrust(thrust_n / factor)
-        if abs(nxt - u) < 1e-14:
-            return nxt
-        u = nxt
-    return u
+        return airframe.command_for_thrust(thrust_n)
+    return float(sagging_command(thrust_n, airframe.thrust_max_n, airframe.curve_min_speed_ratio,
+                                 airframe.curve_shape, *airframe.battery_constants()))

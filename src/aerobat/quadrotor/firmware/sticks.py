@@ -25,6 +25,8 @@ import math
 import numba as nb
 import numpy as np
 
+from aerobat.quadrotor.xframe import sagging_command
+
 __all__ = [
     "L_ANGLE_LIMIT",
     "L_CLIMB",
@@ -129,30 +131,9 @@ def throttle_for_collective(collective, limits):  # pragma: no cover - compiled
     all four motors included, gives the collective (a fixed point: the sag changes slowly with u).
     """
     per_rotor = max(collective, 0.0) * limits[L_MASS] / 4.0
-    u = _command_for_thrust(per_rotor, limits)
-    reference = limits[L_BATTERY + 2]
-    if reference > 0.0:
-        for _ in range(30):
-            load = min(u, 1.0)
-            v = (limits[L_BATTERY] - limits[L_BATTERY + 1] * load * load) / reference
-            nxt = _command_for_thrust(per_rotor / max(v * v, 1e-6), limits)
-            if abs(nxt - u) < 1e-13:
-                u = nxt
-                break
-            u = nxt
+    u = sagging_command(per_rotor, limits[L_FMAX], limits[L_CURVE_R], limits[L_CURVE_K], limits[L_BATTERY],
+                        limits[L_BATTERY + 1], limits[L_BATTERY + 2])
     return throttle_for_motor(u, limits)
-
-
-@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _command_for_thrust(per_rotor, limits):  # pragma: no cover - compiled
-    """The motor command whose steady thrust is ``per_rotor`` [N] on the pilot's curve (clamped to [0, 1])."""
-    r = limits[L_CURVE_R]
-    k = limits[L_CURVE_K]
-    s = (math.sqrt(per_rotor / limits[L_FMAX]) - r) / (1.0 - r)
-    s = min(max(s, 0.0), 1.0)
-    if k > 0.0:
-        return ((k - 1.0) + math.sqrt((1.0 - k) ** 2 + 4.0 * k * s * s)) / (2.0 * k)
-    return s * s
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy")

@@ -16,6 +16,7 @@ inside the run and one loaded from the cache may differ in the last bits.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import hashlib
 import json
 import sys
@@ -57,8 +58,14 @@ def fly(plants: list[str], seed: int) -> dict[str, list[dict[str, Any]]]:
     from aerobat.quadrotor.program import Program, Switch
 
     out = {}
-    for kind in plants:
+    for name in plants:
+        # "betaflight-udp": the firmware over loopback sockets instead of shared memory; "nominal-lagged":
+        # a vehicle with rate-loop latency (the delayed continuous playback)
+        kind = name.split("-")[0]
         config = preset("fpv5") if kind in ("betaflight",) else hummingbird()
+        if name == "nominal-lagged":
+            lagged = dataclasses.replace(config.effects, rate_latency_s=(0.004, 0.004, 0.006))
+            config = dataclasses.replace(config, effects=lagged)
         flip = MultiFlip(vehicle=config.vehicle, flips=3, dims=3)
         program = flip.program(design(flip, NominalModel(config)).p_nominal)
         hover = config.vehicle.gravity_m_s2
@@ -70,11 +77,15 @@ def fly(plants: list[str], seed: int) -> dict[str, list[dict[str, Any]]]:
             from aerobat.plants import ArenaParams
 
             settings = ArenaParams().replace(links__command_drop_probability=0.2, links__upload_drop_probability=0.3)
+        if name == "betaflight-udp":
+            from aerobat.plants.fpv.params import BetaflightParams
+
+            settings = BetaflightParams().replace(firmware__exchange="udp")
         plant = PlantChoice(kind, settings, seed=seed).build(config)
         good = 8 if kind in ("arena", "nominal") else 2
         trials = [plant.fly(program) for _ in range(good)] + [plant.fly(cut) for _ in range(3)] + [plant.fly(program)]
-        out[kind] = [_digest(t) for t in trials]
-        print(kind, [t.status.value for t in trials], file=sys.stderr)
+        out[name] = [_digest(t) for t in trials]
+        print(name, [t.status.value for t in trials], file=sys.stderr)
     return out
 
 
@@ -97,7 +108,8 @@ def compare(before: dict[str, Any], after: dict[str, Any]) -> int:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--plants", default="arena,nominal,rotorpy,betaflight", help="comma list of plants")
+    parser.add_argument("--plants", default="arena,nominal,nominal-lagged,rotorpy,betaflight,betaflight-udp",
+                        help="comma list of plants")
     parser.add_argument("--seed", type=int, default=3)
     parser.add_argument("--compare", nargs=2, metavar=("BEFORE", "AFTER"), help="compare two digests")
     args = parser.parse_args()

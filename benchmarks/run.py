@@ -113,8 +113,8 @@ def bench_kernel(rounds: int = 31) -> dict:
     c = constants(CONFIG.vehicle, CONFIG.controller)
     repeats = 20
 
-    one = (x0[None, :], bp[None, :], coeffs[None], np.array([len(bp) - 1]), plant[None, :], ctrl[None, :], MAX_STEP_S,
-           np.empty((1, N_STATE)), np.zeros(1, dtype=np.int64), *EMPTY)
+    one = (x0[None, :], bp[None, :], coeffs[None], np.array([len(bp) - 1]), plant[None, :], ctrl[None, :],
+           np.zeros((1, 3)), MAX_STEP_S, np.empty((1, N_STATE)), np.zeros(1, dtype=np.int64), *EMPTY)
 
     def kernel():  # one vehicle, one program, nothing recorded: what simulate(record=False) runs
         for _ in range(repeats):

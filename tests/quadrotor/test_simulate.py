@@ -29,6 +29,7 @@ from aerobat.quadrotor.dynamics import (
     rotation_matrices,
     thrust_commands,
 )
+from aerobat.quadrotor.playback import run_continuous, run_continuous_lagged
 from aerobat.quadrotor.program import Program, RampDown, Switch, load_program
 from aerobat.quadrotor.simulate import (
     DEFAULT_MAX_STEP_S,
@@ -383,7 +384,7 @@ def test_batch_with_vehicles_states_and_plants(single_flip):
 
 
 def test_batch_mixing_vehicles_with_and_without_latency_equals_separate_runs(single_flip):
-    """Rows with rate-loop latency run their own kernel, the others the plain one: same bits as simulate()."""
+    """Rows with rate-loop latency run the loop's lagged version, the others the plain one: same bits as simulate()."""
     lagging = dataclasses.replace(CFG, effects=ModelEffects(rate_latency_s=(0.004, 0.006, 0.0),
                                                             rotor_drag_axial_s_m=0.02))
     configs = [CFG, lagging, lagging, CFG, lagging]
@@ -397,6 +398,33 @@ def test_batch_mixing_vehicles_with_and_without_latency_equals_separate_runs(sin
         for b, config in enumerate(configs):
             assert batch[b].tobytes() == simulate(programs[b], config, record=False).final_state.tobytes()
     assert not np.array_equal(batch[0], simulate(programs[0], lagging, record=False).final_state)
+
+
+def test_the_lagged_loop_without_latency_flies_the_plain_loop(triple_flip):
+    """One loop, two compiled versions: with every delay 0 the lagged version takes the rates of the state itself.
+
+    They agree to rounding, not bit for bit: each version is optimised on its own (fastmath), so the compiler may
+    fuse other multiply-adds in each. What is promised bit for bit is that a vehicle runs the same version wherever
+    it is simulated (the batch tests above).
+    """
+    compiled = triple_flip.compile()
+    bp, coeffs = compiled.breakpoints_s, compiled.coefficients
+    packed = (hover_state(CFG.vehicle)[None], bp[None], coeffs[None], np.array([len(bp) - 1]),
+              plant_vector(CFG.vehicle)[None], controller_vector(CFG.controller)[None], np.zeros((1, 3)),
+              DEFAULT_MAX_STEP_S)
+    flown = []
+    for play in (run_continuous, run_continuous_lagged):
+        out = np.empty((1, N_STATE))
+        rec_t, rec_x, rec_u = np.empty(4000), np.empty((4000, N_STATE)), np.empty((4000, 4))
+        count = play(*packed, out, np.zeros(1, dtype=np.int64), rec_t, rec_x, rec_u)
+        flown.append((out[0], rec_t[:count], rec_x[:count], rec_u[:count]))
+    (plain_final, plain_t, plain_x, plain_u), (lagged_final, lagged_t, lagged_x, lagged_u) = flown
+    assert len(plain_t) > 100
+    assert plain_t.tobytes() == lagged_t.tobytes()
+    assert plain_u.tobytes() == lagged_u.tobytes()  # the program, sampled at the same times
+    np.testing.assert_allclose(lagged_x, plain_x, rtol=0, atol=1e-12)  # 4e-16 here
+    np.testing.assert_allclose(lagged_final, plain_final, rtol=0, atol=1e-12)
+    assert not np.allclose(plain_final, hover_state(CFG.vehicle))  # a flip flown, not nothing
 
 
 # ------------------------------------------------------------- bad input

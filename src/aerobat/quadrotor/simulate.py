@@ -48,7 +48,7 @@ from aerobat.quadrotor.dynamics import (
     model_plant_vector,
     rotation_angles,
 )
-from aerobat.quadrotor.playback import run_continuous, run_continuous_delayed, run_sampled
+from aerobat.quadrotor.playback import run_continuous, run_continuous_lagged, run_sampled
 from aerobat.quadrotor.program import CompiledProgram, Program
 from aerobat.quadrotor.vehicle import VehicleConfig
 
@@ -111,10 +111,10 @@ def _play(rows: np.ndarray, x0: np.ndarray, bp: np.ndarray, coeffs: np.ndarray, 
     """Rows ``rows`` of a packed batch into ``out``: the rows without rate-loop latency, then those with."""
     lagged = np.any(delays[rows] > 0.0, axis=1)
     if not lagged.all():
-        run_continuous(x0, bp, coeffs, nseg, plants, ctrl, max_step_s, out, rows[~lagged], _NO_T, _NO_X, _NO_U)
+        run_continuous(x0, bp, coeffs, nseg, plants, ctrl, delays, max_step_s, out, rows[~lagged], _NO_T, _NO_X, _NO_U)
     if lagged.any():
-        run_continuous_delayed(x0, bp, coeffs, nseg, plants, ctrl, delays, max_step_s, out, rows[lagged], _NO_T, _NO_X,
-                               _NO_U)
+        run_continuous_lagged(x0, bp, coeffs, nseg, plants, ctrl, delays, max_step_s, out, rows[lagged], _NO_T, _NO_X,
+                              _NO_U)
 
 
 def _run_batch(x0: np.ndarray, bp: np.ndarray, coeffs: np.ndarray, nseg: np.ndarray, plants: np.ndarray,
@@ -325,10 +325,8 @@ def simulate(
         final = np.empty((1, N_STATE))
         packed = (x[None, :], bp[None, :], coeffs[None], np.array([nseg]), plant_v[None, :], ctrl_v[None, :])
         row = np.zeros(1, dtype=np.int64)
-        if np.any(delay > 0.0):
-            count = run_continuous_delayed(*packed, delay[None, :], max_step_s, final, row, rec_t, rec_x, rec_u)
-        else:
-            count = run_continuous(*packed, max_step_s, final, row, rec_t, rec_x, rec_u)
+        play = run_continuous_lagged if np.any(delay > 0.0) else run_continuous
+        count = play(*packed, delay[None, :], max_step_s, final, row, rec_t, rec_x, rec_u)
         x = final[0]
     else:
         count = run_sampled(x, bp, coeffs, nseg, plant_v, ctrl_v, tick_s, substeps, rec_t, rec_x, rec_u, delay)

@@ -26,7 +26,8 @@ import numba as nb
 import numpy as np
 
 from aerobat.plants.fpv.params import BetaflightParams
-from aerobat.quadrotor.dynamics import N_STATE, P_IZZ, normalize_quaternion, plant_derivative
+from aerobat.quadrotor.dynamics import N_STATE, P_IZZ, plant_derivative
+from aerobat.quadrotor.playback import rk4_after_first_stage
 from aerobat.quadrotor.xframe import add_rotor_reaction, battery_thrust_factor, curve_thrust, xframe_plant
 
 __all__ = [
@@ -266,18 +267,7 @@ def advance(x, plant, aux, pending, counters, noise, packet, scratch):  # pragma
             x[13 + j] += h * k1[13 + j]
     else:
         counters[C_CONTACT] = 0
-        for j in range(n):
-            tmp[j] = x[j] + 0.5 * h * k1[j]
-        derivative(t + 0.5 * h, tmp, ft, plant, aux, k2)
-        for j in range(n):
-            tmp[j] = x[j] + 0.5 * h * k2[j]
-        derivative(t + 0.5 * h, tmp, ft, plant, aux, k3)
-        for j in range(n):
-            tmp[j] = x[j] + h * k3[j]
-        derivative(t + h, tmp, ft, plant, aux, k4)
-        for j in range(n):
-            x[j] += h / 6.0 * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
-        normalize_quaternion(x)
+        rk4_after_first_stage(derivative, t, x, ft, plant, aux, h, k1, k2, k3, k4, tmp)
         if x[2] < aux[A_GROUND]:
             # the floor: stop, stand level on the legs, keep the heading
             x[2] = aux[A_GROUND]

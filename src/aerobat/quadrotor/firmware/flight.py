@@ -17,10 +17,11 @@ import math
 import numba as nb
 import numpy as np
 
-from aerobat.quadrotor.dynamics import P_IZZ, derivative, normalize_quaternion, plant_constants
+from aerobat.quadrotor.dynamics import P_IZZ, derivative, plant_constants
 from aerobat.quadrotor.firmware.layout import K_GYRO_DT, K_QUANTIZE, Q_GYRO, Q_PULSES, Z_PACKET, Z_PID, Z_PID_SETPOINT
 from aerobat.quadrotor.firmware.loop import step
 from aerobat.quadrotor.firmware.sticks import frame_commands, program_sticks
+from aerobat.quadrotor.playback import rk4_after_first_stage
 from aerobat.quadrotor.xframe import add_rotor_reaction, battery_thrust_factor, curve_thrust
 
 __all__ = ["A_BATTERY", "A_CURVE_K", "A_CURVE_R", "A_FMAX", "A_ROTOR_J", "A_SPIN", "A_THRUST_COEF", "N_AIRFRAME",
@@ -51,32 +52,20 @@ def gyro_reading(rate_rad_s, quantize):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _derivative(t, x, thrust, plant, const, airframe, dx):  # pragma: no cover - compiled
+def _derivative(t, x, thrust, plant, consts, dx):  # pragma: no cover - compiled
+    """:func:`~aerobat.quadrotor.dynamics.derivative` plus the rotors' reaction torque on yaw; ``consts``:
+    (the plant's constants, the airframe's)."""
+    const, airframe = consts
     derivative(t, x, thrust, plant, const, dx)
     add_rotor_reaction(x, dx, airframe[A_ROTOR_J], airframe[A_THRUST_COEF], airframe[A_SPIN:A_SPIN + 4], plant[P_IZZ])
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def _rk4(x, t, h, thrust, plant, const, airframe, scratch):  # pragma: no cover - compiled
-    k1 = scratch[0]
-    k2 = scratch[1]
-    k3 = scratch[2]
-    k4 = scratch[3]
-    tmp = scratch[4]
-    n = x.shape[0]
-    _derivative(t, x, thrust, plant, const, airframe, k1)
-    for j in range(n):
-        tmp[j] = x[j] + 0.5 * h * k1[j]
-    _derivative(t + 0.5 * h, tmp, thrust, plant, const, airframe, k2)
-    for j in range(n):
-        tmp[j] = x[j] + 0.5 * h * k2[j]
-    _derivative(t + 0.5 * h, tmp, thrust, plant, const, airframe, k3)
-    for j in range(n):
-        tmp[j] = x[j] + h * k3[j]
-    _derivative(t + h, tmp, thrust, plant, const, airframe, k4)
-    for j in range(n):
-        x[j] += h / 6.0 * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
-    normalize_quaternion(x)
+    consts = (const, airframe)
+    _derivative(t, x, thrust, plant, consts, scratch[0])
+    rk4_after_first_stage(_derivative, t, x, thrust, plant, consts, h, scratch[0], scratch[1], scratch[2], scratch[3],
+                          scratch[4])
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", nogil=True)

@@ -7,7 +7,7 @@ creates that region as a memfd (no file in ``/dev/shm``: the memory goes when th
 that maps it is gone, whichever way it ends), maps it here and hands the descriptor to the
 firmware process. The atomics and the futex calls are in ``shm_exchange.c``, compiled once with
 the host C compiler into ``<cache>/shm-<source sha256[:12]>/`` (:func:`ensure_library`) and
-called through ctypes here and from the compiled loop (:mod:`aerobat.plants.betaflight.lockstep_shm`).
+called through ctypes here and from the compiled loop (:mod:`aerobat.plants.betaflight.lockstep`).
 """
 
 from __future__ import annotations

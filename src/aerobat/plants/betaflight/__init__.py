@@ -7,8 +7,8 @@ library :mod:`aerobat.firmware.betaflight`, which the flight controller on the w
 * :mod:`.plant` — :class:`~.plant.BetaflightPlant`: one iteration of Fig. 8 flown through the firmware.
 * :mod:`.flight` — one flight: a firmware process, the physical world, the radio and motion capture.
 * :mod:`.physics` — the world around the firmware: one compiled step of rigid body and rotors.
-* :mod:`.lockstep` — the lockstep exchange and the physics in one compiled loop (many steps per call).
-* :mod:`.lockstep_shm` — the same loop over the shared-memory exchange (``firmware.exchange = "shm"``).
+* :mod:`.lockstep` — the lockstep exchange and the physics in one compiled loop (many steps per call),
+  over shared memory or UDP (``firmware.exchange``).
 * :mod:`.cores` — a core each for the driver and the firmware (``firmware.pin_cores``).
 * :mod:`.frame_loop`, :mod:`.frame_noise` — the compiled loop that flies the radio's frames, the sensors' noise.
 * :mod:`.replay` — a recorded flight's sticks replayed into the SITL (``aerobat log replay``).

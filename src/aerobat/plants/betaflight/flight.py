@@ -9,9 +9,9 @@ samples the true state at its rate with seeded noise into a log the supervisor r
 latency. Nothing here decides what to fly: that is the plant's supervisor.
 
 Frames run in one compiled loop (:mod:`.frame_loop`): the radio's draw and latency queue, the
-noise, the RC packets, and each step's motion capture, exchange (:mod:`.lockstep`: the C
-library's ``send``/``recv`` on the process's sockets; :mod:`.lockstep_shm`: shared memory with
-``firmware.exchange = "shm"``) and physics — and, for :meth:`Flight.run_frames`, the
+noise, the RC packets, and each step's motion capture, exchange (:mod:`.lockstep`: shared memory
+with ``firmware.exchange = "shm"``, the C library's ``send``/``recv`` on the process's sockets
+with ``"udp"``) and physics — and, for :meth:`Flight.run_frames`, the
 supervisor's pilot and checks between frames. Python is back at least every
 :data:`CHUNK_FRAMES` frames and whenever an answer is late: then the process's watchdog takes
 over.

@@ -35,7 +35,6 @@ from numba.core import types
 from aerobat.firmware.betaflight.packets import RC_STRUCT
 from aerobat.plants.betaflight.frame_noise import ALL, begin_draws, draw_noise
 from aerobat.plants.betaflight.lockstep import DONE, IO_MOCAP_USED, SEND_FAILED, run_steps
-from aerobat.plants.betaflight.lockstep_shm import run_steps_shm
 from aerobat.plants.betaflight.physics import C_CONTACT
 from aerobat.plants.fpv.frames import (
     CRASH_FLOOR,
@@ -43,15 +42,10 @@ from aerobat.plants.fpv.frames import (
     F_AIRBORNE_S,
     F_WORST_MEASURED_M,
     F_WORST_TRUE_M,
-    K_EVERY,
     K_EXCHANGE,
     K_LATENCY_STEPS,
-    K_MOTOR_FD,
     K_RC_FD,
     K_SHM,
-    K_SPIN_NS,
-    K_STATE_FD,
-    K_WAIT_NS,
     P_AHEAD_S,
     P_DURATION_S,
     P_FEEDBACK,
@@ -207,18 +201,11 @@ def _steps(n, resume, rng, cfg, fcfg, st, x, block, motors, plant, aux, pending,
                 st[S_Q_HEAD] = (st[S_Q_HEAD] + 1) % size
                 st[S_Q_COUNT] -= 1
         stop = min(n, queue_due[st[S_Q_HEAD]] - tick0) if st[S_Q_COUNT] > 0 else n
-        if cfg[K_EXCHANGE] == X_SHM:
-            if cfg[K_SHM] == 0:
-                status = SEND_FAILED  # the region is closed: the Python exchange raises
-            else:
-                status, i = run_steps_shm(cfg[K_SHM], cfg[K_SPIN_NS], cfg[K_WAIT_NS], i, stop, resume, tick0,
-                                          cfg[K_EVERY], fcfg[Q_STEP_S], x, block, motors, plant, aux, pending,
-                                          counters, noise, mocap_noise, log, st, packet, scratch, rng, cfg, fcfg)
+        if cfg[K_EXCHANGE] == X_SHM and cfg[K_SHM] == 0:
+            status = SEND_FAILED  # the region is closed: the Python exchange raises
         else:
-            draw_noise(ALL, rng, cfg, fcfg, st, noise, mocap_noise)
-            status, i = run_steps(cfg[K_STATE_FD], cfg[K_MOTOR_FD], i, stop, resume, tick0, cfg[K_EVERY],
-                                  fcfg[Q_STEP_S], x, block, motors, plant, aux, pending, counters, noise,
-                                  mocap_noise, log, st, packet, scratch)
+            status, i = run_steps(cfg, i, stop, resume, tick0, fcfg[Q_STEP_S], x, block, motors, plant, aux, pending,
+                                  counters, noise, mocap_noise, log, st, packet, scratch, rng, fcfg)
         resume = 0
         if status != DONE:
             st[S_STEP] = i

@@ -6,7 +6,7 @@ noise (``n // every + 2`` rows: 3 position values, then the same rows' 3 attitud
 scaled, when nonzero). :func:`begin_draws` lays the frame's draws out in ``st`` and draws nothing;
 :func:`draw_noise` takes them in that order up to a count. The values do not depend on when they
 are drawn, only on the order, so a step loop draws what the next step needs just in time and
-the rest while it waits for the firmware's answer (:mod:`.lockstep_shm`): ~200 draws of ~12 ns
+the rest while it waits for the firmware's answer (:mod:`.lockstep`, over shared memory): ~200 draws of ~12 ns
 each at the frame's start had kept the firmware waiting long enough to fall asleep once a frame
 (docs/performance.md, issue 27). Over UDP the frame draws everything at its start, as before.
 """

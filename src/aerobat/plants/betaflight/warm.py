@@ -18,7 +18,6 @@ def warm_world() -> None:
     (:func:`~aerobat.plants.fpv.warm.warm_sticks`)."""
     from aerobat.firmware.betaflight.errors import FirmwareUnavailable
     from aerobat.firmware.betaflight.packets import MOTOR_STRUCT
-    from aerobat.plants.betaflight.lockstep import N_IO, run_steps
     from aerobat.plants.betaflight.physics import (
         C_CONTACT,
         C_DELAY,
@@ -50,22 +49,18 @@ def warm_world() -> None:
     scratch = np.zeros((fr.HELD_ROW + 1, N_STATE))  # the physics' six rows and the shared-memory loop's held sample
     prime(world, plant, aux, counters, noise[0], packet, scratch)
     step(world, np.zeros(4, dtype=np.float32), plant, aux, np.zeros((2, 4)), counters, noise[1], packet, scratch)
-    # the compiled lockstep loop (a run of no steps: nothing is sent)
     block = np.zeros(MOTOR_STRUCT.size, dtype=np.uint8)
-    run_steps(-1, -1, 0, 0, 0, 0, 8, step_s, world, block, block[:16].view(np.float32), plant, aux,
-              np.zeros((2, 4)), counters, noise, np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)),
-              np.zeros(N_IO, dtype=np.int64), packet, scratch)
-    # and its shared-memory twin, where the exchange's C helper can be compiled (no compiler: skipped)
+    # the compiled lockstep loop, where the shared-memory exchange's C helper can be compiled (no compiler: skipped)
     try:
-        from aerobat.plants.betaflight.lockstep_shm import run_steps_shm
+        from aerobat.plants.betaflight.lockstep import run_steps
     except FirmwareUnavailable:
         pass
     else:
-        # the frame loop around both (a run of no frames), with the argument types Flight passes
-        run_steps_shm(0, 0, 0, 0, 0, 0, 0, 8, step_s, world, block, block[:16].view(np.float32), plant, aux,
-                      np.zeros((2, 4)), counters, noise, np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)),
-                      np.zeros(fr.N_ST, dtype=np.int64), packet, scratch, np.random.default_rng(0),
-                      np.zeros(fr.N_CFG, dtype=np.int64), np.zeros(fr.N_FCFG))
+        # a run of no steps (nothing is sent), then the frame loop around it (a run of no frames), with the
+        # argument types Flight passes
+        run_steps(np.zeros(fr.N_CFG, dtype=np.int64), 0, 0, 0, 0, step_s, world, block, block[:16].view(np.float32),
+                  plant, aux, np.zeros((2, 4)), counters, noise, np.zeros((2, 6)), np.zeros((2, MOCAP_COLUMNS)),
+                  np.zeros(fr.N_ST, dtype=np.int64), packet, scratch, np.random.default_rng(0), np.zeros(fr.N_FCFG))
         from aerobat.plants.betaflight.frame_loop import fly_frames
 
         rc_block = np.zeros(40, dtype=np.uint8)

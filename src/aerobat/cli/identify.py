@@ -171,6 +171,7 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
     warnings = identification_warnings(fit, prior)
     airframe = None
     battery = result.battery
+    vibration = result.vibration
     if args.airframe:
         airframe = airframe_from_log_fit(fit, battery_reference_v=result.battery_reference_v, battery=battery)
         # the pilot flies with the mass the user gave, as a pilot who weighed the quad would
@@ -190,11 +191,14 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
             "notes": list(fit.notes), "warnings": warnings, "prior": prior.name, "wall_s": fit.wall_s,
             "excitation_deg_s": dict(zip(("roll", "pitch", "yaw"), result.excitation.rms_deg_s, strict=True)),
             "battery": None if battery is None else dataclasses.asdict(battery),
+            "vibration": None if vibration is None else dataclasses.asdict(vibration),
             "out": str(out), "figure": str(figure), "airframe": args.airframe}))
         return 0
     _print_log_fit(result)
     say(battery.describe() if battery is not None else "battery: not identified (the logs record no voltage, or too "
                                                         "little flight)", highlight=False)
+    if vibration is not None:
+        say(vibration.describe(), highlight=False)
     for line in warnings:
         say(f"check: {line}")
     say(f"vehicle written to {out} (figure {figure}" + (f", airframe {args.airframe}" if args.airframe else "") +

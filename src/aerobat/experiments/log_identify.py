@@ -37,6 +37,7 @@ from aerobat.quadrotor.identification.logfit import (
     thrust_curve,
     validate,
 )
+from aerobat.quadrotor.identification.vibration import VibrationFit, fit_vibration
 from aerobat.quadrotor.vehicle import ModelEffects, VehicleConfig, VehicleParams
 
 __all__ = ["KAPPA_RATIO_WARNING", "LogIdentification", "LogRef", "airframe_from_log_fit", "airframe_notes",
@@ -90,6 +91,27 @@ class LogIdentification:
                 series.append((motors.time_s, log.signals[Channel.BATTERY_VOLTAGE].at(motors.time_s)[:, 0],
                                motors.values))
         return fit_battery(series, flying_command=FLYING_MOTOR) if series else None
+
+    @property
+    def vibration(self) -> VibrationFit | None:
+        """The rotors' speed through the folded rotor lines of the logs' unfiltered gyro
+        (:func:`~aerobat.quadrotor.identification.vibration.fit_vibration`, around the Betaflight airframe's default
+        thrust coefficient, with the fit's thrust curve); None when no log fitted records the unfiltered gyro
+        (Betaflight's ``debug_mode`` GYRO_SCALED) with motor commands, or none has a steady window."""
+        from aerobat.experiments.log_replay import FLYING_MOTOR
+        from aerobat.quadrotor.xframe import Airframe, curve_thrust
+
+        series = []
+        for log in self.logs:
+            if log.has(Channel.GYRO_UNFILTERED) and log.has(Channel.MOTOR_COMMAND):
+                motors = log.signals[Channel.MOTOR_COMMAND]
+                series.append((motors.time_s, log.signals[Channel.GYRO_UNFILTERED].at(motors.time_s), motors.values))
+        if not series:
+            return None
+        f_max = _require(self.fit, "thrust_max_n")
+        ratio, shape = min(max(self.fit.model.r, 0.0), 0.9), min(max(self.fit.model.k, 0.0), 1.0)
+        thrust = np.vectorize(lambda u: curve_thrust(float(u), f_max, ratio, shape))
+        return fit_vibration(series, thrust, Airframe().thrust_coefficient_n_s2, flying_command=FLYING_MOTOR)
 
     @property
     def idle_command(self) -> float | None:

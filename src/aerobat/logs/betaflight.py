@@ -7,7 +7,9 @@ aerobat's compiled decoder reads the frames (orangebox 0.4.0, which read them be
 can be applied to the firmware as the pilot had it (:mod:`aerobat.firmware.betaflight.tune`).
 
 Units (Betaflight 4.x, data version 2): ``time`` µs; ``gyroADC`` and ``setpoint[0..2]``
-deg/s; ``accSmooth`` in units of the header's ``acc_1G``; ``motor`` in the header's
+deg/s; with ``debug_mode`` GYRO_SCALED (6 in 4.x), ``debug[0..2]`` is the gyro before the firmware's
+filters in deg/s (:attr:`~aerobat.quadrotor.flightlog.Channel.GYRO_UNFILTERED`); ``accSmooth`` in
+units of the header's ``acc_1G``; ``motor`` in the header's
 ``motorOutput`` range (DShot 48..2047 is the full range, the low end of ``motorOutput`` is
 the idle); ``setpoint[3]`` throttle 0..1000; ``rcCommand[0..2]`` ±500 (after the deadband);
 ``rcCommand[3]`` 1000..2000 us (after the throttle curve); ``vbatLatest`` 0.01 V.
@@ -107,6 +109,20 @@ FIELDS = ("time", *(f"gyroADC[{i}]" for i in range(3)), *(f"accSmooth[{i}]" for 
           *(f"motor[{i}]" for i in range(8)), *(f"axis{x}[{i}]" for x in "PIDF" for i in range(3)), "vbatLatest")
 
 
+_GYRO_SCALED = "6"  # Betaflight 4.x's debug mode GYRO_SCALED: debug[0..2] = the gyro before its filters [deg/s]
+#: kept besides :data:`FIELDS` when the log's debug mode is GYRO_SCALED (the unfiltered gyro)
+GYRO_SCALED_FIELDS = tuple(f"debug[{i}]" for i in range(3))
+
+
+def _debug_is_gyro_scaled(headers: dict[str, str]) -> bool:
+    """Whether the log's ``debug[0..2]`` hold the unfiltered gyro (Betaflight 4.x with ``debug_mode`` GYRO_SCALED).
+
+    The debug modes are numbered per version (3.x numbered 6 otherwise), so only a 4.x header counts."""
+    version = _VERSION.search(headers.get("Firmware revision", ""))
+    return (headers.get("debug_mode", "").strip() == _GYRO_SCALED and version is not None
+            and version.group(1).split(".")[0] == "4")
+
+
 def props_out(layout: MotorLayout | None) -> bool:
     """True when ``layout`` is Betaflight's QUADX with the propellers turned out (every spin reversed)."""
     return (layout is not None and layout.mixer.startswith("QUADX")
@@ -174,7 +190,8 @@ def _read_one(path: Path, data: bytes, index: int, count: int, start: int, end: 
     headers = raw_headers(data, start)
     where = f"{path}: log {index}"
     one_g = blackbox_header.one_g(headers, where)
-    frames = decode_blackbox(data, start, end, headers, where, fields=FIELDS, other_frames=False, drop_same_time=True)
+    kept = FIELDS + GYRO_SCALED_FIELDS if _debug_is_gyro_scaled(headers) else FIELDS
+    frames = decode_blackbox(data, start, end, headers, where, fields=kept, other_frames=False, drop_same_time=True)
     notes = frames.notes()
     if not len(frames.main):
         if cut_short:
@@ -209,6 +226,9 @@ def _read_one(path: Path, data: bytes, index: int, count: int, start: int, end: 
     if have("gyroADC[0]", "gyroADC[1]", "gyroADC[2]"):
         v, f = vector("gyroADC", 3)
         signals[Channel.GYRO] = Signal(Channel.GYRO, t, np.radians(v, out=v), xyz, "rad/s", f)
+    if _debug_is_gyro_scaled(headers) and have("debug[0]", "debug[1]", "debug[2]"):
+        v, f = vector("debug", 3)
+        signals[Channel.GYRO_UNFILTERED] = Signal(Channel.GYRO_UNFILTERED, t, np.radians(v, out=v), xyz, "rad/s", f)
     if have("accSmooth[0]", "accSmooth[1]", "accSmooth[2]"):
         v, f = vector("accSmooth", 3)
         v *= G_M_S2 / one_g

@@ -63,6 +63,7 @@ class Channel(enum.Enum):
     """The standard series a log may hold; ``value`` is the name used in files and on the CLI."""
 
     GYRO = "gyro"                          # body rates [rad/s], body FLU (x, y, z)
+    GYRO_UNFILTERED = "gyro_unfiltered"    # the gyro before the firmware's filters [rad/s], body FLU (x, y, z)
     SPECIFIC_FORCE = "specific_force"      # accelerometer [m/s²], body FLU
     MOTOR_COMMAND = "motor_command"        # per motor, fraction of full range [0, 1]
     RATE_SETPOINT = "rate_setpoint"        # the firmware's body-rate set point [rad/s], body FLU
@@ -85,6 +86,7 @@ class Channel(enum.Enum):
 
 _DESCRIPTIONS = {
     Channel.GYRO: "body rates, body FLU [rad/s]",
+    Channel.GYRO_UNFILTERED: "body rates before the firmware's filters, body FLU [rad/s]",
     Channel.SPECIFIC_FORCE: "specific force (accelerometer), body FLU [m/s²]",
     Channel.MOTOR_COMMAND: "motor commands, fraction of full range",
     Channel.RATE_SETPOINT: "rate set point, body FLU [rad/s]",

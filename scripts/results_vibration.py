@@ -1,0 +1,127 @@
+"""The frame's vibration in real logs (issue 42): the numbers docs/plants.md quotes.
+
+Run (needs ../shared/data; about 10 s):
+
+    .venv/bin/python scripts/results_vibration.py
+    .venv/bin/python scripts/results_vibration.py --json
+
+The ROMA F5's three flights record the gyro before the firmware's filters (Betaflight's debug_mode
+GYRO_SCALED), sampled at the log's 250 Hz. For each flight alone, with flight 1's identified thrust curve:
+the thrust coefficient whose folded rotor lines carry the most gyro power
+(:func:`aerobat.quadrotor.identification.vibration.fit_vibration`), the rotors' frequency at the median
+command, the share of steady windows whose strongest line lies on a folded rotor line (at that k and at the
+prior's), and the lines' rms per axis. Then, per throttle band, the strongest line above 30 Hz that the log
+shows (median over the band's steady windows) beside where the fold puts the rotors' line at the fitted and
+at the prior's k.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+LOG = ROOT.parent / "shared" / "data" / "flight-logs" / "betaflight" / "diatone-roma-f5.bbl"
+GEOMETRY = {"mass_kg": 0.55, "motor_x_m": 0.08, "motor_y_m": 0.08}
+
+
+def run() -> dict[str, Any]:
+    """Every number: per-flight fits with flight 1's thrust curve, then the folded lines per throttle band."""
+    from aerobat import preset
+    from aerobat.experiments.log_identify import identify_from_logs, parse_log_ref
+    from aerobat.experiments.log_replay import FLYING_MOTOR
+    from aerobat.logs import read_log
+    from aerobat.quadrotor.flightlog import Channel
+    from aerobat.quadrotor.identification.logfit import Geometry
+    from aerobat.quadrotor.identification.vibration import LOW_HZ, WINDOW, fit_vibration, folded_hz
+    from aerobat.quadrotor.xframe import Airframe, curve_thrust
+
+    ref = parse_log_ref(f"{LOG}:1")
+    identified = identify_from_logs([ref], Geometry(**GEOMETRY), prior=preset("fpv5"))
+    fit = identified.fit
+    f_max = fit.values["thrust_max_n"][0]
+    ratio, shape = min(max(fit.model.r, 0.0), 0.9), min(max(fit.model.k, 0.0), 1.0)
+
+    def thrust(u: Any) -> np.ndarray:
+        return np.vectorize(lambda c: curve_thrust(float(c), f_max, ratio, shape))(u)
+
+    k_prior = Airframe().thrust_coefficient_n_s2
+    flights = []
+    bands: dict[float, list[float]] = {}
+    k_first = None
+    for index in (1, 2, 3):
+        log = read_log(LOG, index)
+        motors = log.signals[Channel.MOTOR_COMMAND]
+        gyro = log.signals[Channel.GYRO_UNFILTERED].at(motors.time_s)
+        v = fit_vibration([(motors.time_s, gyro, motors.values)], thrust, k_prior, flying_command=FLYING_MOTOR)
+        if v is None:
+            raise SystemExit(f"{LOG.name}:{index}: no steady window")
+        k_first = k_first or v.thrust_coefficient_n_s2
+        flights.append({"flight": index, "thrust_coefficient_n_s2": v.thrust_coefficient_n_s2,
+                        "ratio_to_prior": v.thrust_coefficient_n_s2 / k_prior, "rotor_hz": v.rotor_hz,
+                        "windows": v.windows, "matched_share": v.matched_share,
+                        "matched_share_prior": v.matched_share_prior, "contrast": v.contrast,
+                        "runner_up": v.runner_up, "line_rms_deg_s": [math.degrees(x) for x in v.line_rms_rad_s]})
+        # the strongest line above LOW_HZ of each steady window, by its mean command's band
+        rate = 1.0 / float(np.median(np.diff(motors.time_s)))
+        freqs = np.fft.rfftfreq(WINDOW, 1.0 / rate)
+        taper = np.hanning(WINDOW)
+        for s in range(0, len(motors.time_s) - WINDOW + 1, WINDOW // 2):
+            u = motors.values[s:s + WINDOW]
+            if u.mean() <= FLYING_MOTOR or u.std(axis=0).max() >= 0.03:
+                continue
+            g = gyro[s:s + WINDOW]
+            power = (np.abs(np.fft.rfft((g - g.mean(axis=0)) * taper[:, None], axis=0)) ** 2).sum(axis=1)
+            scored = freqs >= LOW_HZ
+            band = math.floor(u.mean() / 0.05) * 0.05
+            bands.setdefault(round(band, 2), []).append(float(freqs[scored][np.argmax(power[scored])]))
+    table = []
+    for band in sorted(bands):
+        centre = band + 0.025
+        t = float(thrust(centre))
+        table.append({"command": [band, round(band + 0.05, 2)], "windows": len(bands[band]),
+                      "log_line_hz": float(np.median(bands[band])),
+                      "folded_at_fit_hz": float(folded_hz(math.sqrt(t / k_first) / (2 * math.pi), 250.0)),
+                      "rotor_at_fit_hz": math.sqrt(t / k_first) / (2 * math.pi),
+                      "folded_at_prior_hz": float(folded_hz(math.sqrt(t / k_prior) / (2 * math.pi), 250.0))})
+    return {"prior_thrust_coefficient_n_s2": k_prior, "flights": flights, "bands": table}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    args = parser.parse_args(argv)
+    if not LOG.exists():
+        print(f"{LOG}: not found (the shared data folder is missing)", file=sys.stderr)
+        return 2
+    result = run()
+    if args.json:
+        print(json.dumps(result, indent=1))
+        return 0
+    print(f"prior thrust coefficient {result['prior_thrust_coefficient_n_s2']:.3g} N/(rad/s)^2")
+    print("| flight | k [N/(rad/s)²] | × prior | rotors at the median command | steady windows | strongest line on a "
+          "folded rotor line: fitted k | prior's k | contrast | runner-up | lines' rms roll, pitch, yaw [°/s] |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for f in result["flights"]:
+        rms = ", ".join(f"{x:.1f}" for x in f["line_rms_deg_s"])
+        print(f"| {f['flight']} | {f['thrust_coefficient_n_s2']:.3g} | {f['ratio_to_prior']:.2f} | "
+              f"{f['rotor_hz']:.0f} Hz | {f['windows']} | {f['matched_share']:.0%} | {f['matched_share_prior']:.0%} | "
+              f"{f['contrast']:.1f} | {f['runner_up']:.2f} | {rms} |")
+    print()
+    print("| motor command | steady windows | the log's strongest line above 30 Hz | rotor line at flight 1's k: "
+          "true, folded | folded at the prior's k |")
+    print("|---|---|---|---|---|")
+    for b in result["bands"]:
+        print(f"| {b['command'][0]:.2f}–{b['command'][1]:.2f} | {b['windows']} | {b['log_line_hz']:.0f} Hz | "
+              f"{b['rotor_at_fit_hz']:.0f} Hz, {b['folded_at_fit_hz']:.0f} Hz | {b['folded_at_prior_hz']:.0f} Hz |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

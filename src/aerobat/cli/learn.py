@@ -187,6 +187,7 @@ def _check_same_session(args: argparse.Namespace, store: Any, run: Any) -> None:
 
 
 def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
+    from aerobat.experiments.designing import thrust_margin_line
     from aerobat.experiments.reports import session_figures, session_json
     from aerobat.experiments.sessions import position_error_m
     from aerobat.plotting import write_text
@@ -211,6 +212,8 @@ def _run(store: Any, run: Any, args: argparse.Namespace) -> int:
         f"(seed {run.plant_choice.seed}, feedback {run.plant_choice.feedback.scheme.value}, rule "
         f"{run.rule_choice.label}), {run.measured} of {plural(run.target, 'measured iteration')} done")
     say(f"  designed on the {run.design_model.value} model: {run.design_model_description}")
+    if run.full_output_share is not None:
+        say(thrust_margin_line(run.full_output_share))
     if not run.exact:
         say(f"  note: resumed trials will not repeat an uninterrupted run exactly: {run.inexact_because}")
 

@@ -30,7 +30,7 @@ from aerobat.quadrotor.simulate import NominalModel
 from aerobat.quadrotor.vehicle import VehicleConfig, vehicle_table
 
 __all__ = ["DESIGN_MODEL_KEY", "LITTLE_MARGIN_SHARE", "NominalDesign", "design_model_of", "design_vehicle_table",
-           "job_design", "nominal_design", "resolve_design_model"]
+           "job_design", "nominal_design", "resolve_design_model", "thrust_margin_line"]
 
 DESIGN_MODEL_KEY = "design_model"
 """The key of a design vehicle's stored table that says which model designed (absent: the paper's)."""
@@ -78,13 +78,18 @@ class NominalDesign:
             lines.append(f"  started from the paper model's p⁰ ({self.paper.status.value}, {self.paper.evaluations} "
                          f"simulations); both stages {self.compute_s:.2f} s")
         if self.full_output_share is not None:
-            share = self.full_output_share
-            lines.append(f"  on the model, p⁰ holds a motor at full output in {share:.1%} of its steps"
-                         + (f"; above {LITTLE_MARGIN_SHARE:.0%} the thrust margin is small: a centre-of-mass "
-                            f"offset or uneven motors the model does not know will saturate a motor and cost "
-                            f"height (docs/plants.md, the ROMA F5 with its pack's sag)"
-                            if share > LITTLE_MARGIN_SHARE else ""))
+            lines.append(thrust_margin_line(self.full_output_share))
         return lines
+
+
+def thrust_margin_line(full_output_share: float) -> str:
+    """The line that says how much of p⁰ holds a motor at full output, with a warning above
+    :data:`LITTLE_MARGIN_SHARE` (``aerobat design`` and ``aerobat learn`` print it)."""
+    share = full_output_share
+    return (f"  on the model, p⁰ holds a motor at full output in {share:.1%} of its steps"
+            + (f"; above {LITTLE_MARGIN_SHARE:.0%} the thrust margin is small: a centre-of-mass offset or uneven "
+               f"motors the model does not know will saturate a motor and cost height (docs/plants.md, the ROMA F5 "
+               f"with its pack's sag)" if share > LITTLE_MARGIN_SHARE else ""))
 
 
 def resolve_design_model(plant: PlantChoice | None, choice: DesignModel | str | None) -> DesignModel:

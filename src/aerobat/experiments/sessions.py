@@ -105,6 +105,9 @@ class StoredSession:
     design_model: DesignModel = DesignModel.PAPER
     """Which model designed it (the stored design is kept on resume)."""
     design_model_description: str = ""
+    full_output_share: float | None = None
+    """On a model that records its motors, the share of p⁰'s steps with a motor at full output, when this call
+    designed it (:attr:`~.designing.NominalDesign.full_output_share`; None on resume or for a design passed in)."""
 
     @property
     def measured(self) -> int:
@@ -268,7 +271,8 @@ def start_session(
         command=command, study_id=study_id)
     kind, description = design_model_of(design_vehicle_table(model, nominal))
     return StoredSession(store, session_id, maneuver, result, model, plant, rule, flying, learner, target,
-                         design_model=kind, design_model_description=description)
+                         design_model=kind, design_model_description=description,
+                         full_output_share=nominal.full_output_share if nominal is not None else None)
 
 
 def resume_session(store: Store, ref: int | str, *, iterations: int | None = None,

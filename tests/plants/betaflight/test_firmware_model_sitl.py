@@ -129,6 +129,7 @@ def test_a_session_keeps_the_model_it_was_designed_on(firmware: tuple[Path, Path
     assert main(argv) == 0
     out = capsys.readouterr().out
     assert "designed on the firmware model: Betaflight 4.6.0, aerobat settings revision" in out
+    assert "  on the model, p⁰ holds a motor at full output in " in out  # the thrust margin, as design says it
     assert main(["show", "1", "--db", db]) == 0
     assert "designed on the firmware model" in capsys.readouterr().out
     session = json.loads((tmp_path / "o" / "session.json").read_text())

@@ -90,6 +90,12 @@ class Airframe:
         so a punch to full throttle sags as the real pack does. Flown when ``battery_rest_v`` and
         ``battery_reference_v`` are both given (a log replay that follows the logged voltage uses that
         instead); None: thrust does not depend on the load.
+    vibration_rms_rad_s, vibration_thrust_n : the frame's vibration in the gyro (identified from a log's
+        unfiltered gyro, :mod:`aerobat.quadrotor.identification.vibration`): each rotor adds a line at its
+        rotation frequency √(f / thrust_coefficient_n_s2) / 2π, whose amplitude grows with its thrust f (an
+        imbalance's force grows with Ω²); with every rotor at ``vibration_thrust_n`` [N] the four lines
+        together have rms ``vibration_rms_rad_s`` per body axis (roll, pitch, yaw) [rad/s]. Roll and yaw
+        follow the sine of each rotor's angle, pitch its cosine. A thrust of 0 (the default): no vibration.
     """
 
     mass_kg: float = bounded(0.752, _MASS)
@@ -114,6 +120,9 @@ class Airframe:
     battery_reference_v: float | None = bounded(None, Interval(1.0, 100.0, unit="V"))
     battery_rest_v: float | None = bounded(None, Interval(1.0, 100.0, unit="V"))
     battery_sag_v: float = bounded(0.0, Interval(0.0, 50.0, unit="V"))
+    vibration_rms_rad_s: tuple[float, float, float] = bounded(
+        (0.0, 0.0, 0.0), Items.each(Interval(0.0, 10.0, unit="rad/s"), 3, "three numbers (roll, pitch, yaw)"))
+    vibration_thrust_n: float = bounded(0.0, Interval(0.0, 1000.0, unit="N"))
 
     def __post_init__(self) -> None:
         validate(self, skip=tuple(name for name in ("battery_reference_v", "battery_rest_v")
@@ -141,6 +150,19 @@ class Airframe:
             return 0.0, 0.0, 0.0
         assert self.battery_rest_v is not None and self.battery_reference_v is not None
         return self.battery_rest_v, self.battery_sag_v, self.battery_reference_v
+
+    @property
+    def vibration_flown(self) -> bool:
+        """The gyro carries the rotors' vibration lines (``vibration_thrust_n`` > 0 and some rms)."""
+        return self.vibration_thrust_n > 0.0 and any(v > 0.0 for v in self.vibration_rms_rad_s)
+
+    def vibration_constants(self) -> tuple[float, float, float, float]:
+        """(roll, pitch, yaw amplitude of one rotor's line at the reference thrust [rad/s], that thrust [N]); a
+        thrust of 0 turns it off. Four lines of amplitude a have rms a √2 together, so a = rms / √2."""
+        if not self.vibration_flown:
+            return 0.0, 0.0, 0.0, 0.0
+        roll, pitch, yaw = (v / math.sqrt(2.0) for v in self.vibration_rms_rad_s)
+        return roll, pitch, yaw, self.vibration_thrust_n
 
     def battery_factor(self, commands: Any) -> float:
         """Every rotor's thrust factor at motor ``commands`` (four, 0 … 1): (V/V_ref)², 1 without a battery."""

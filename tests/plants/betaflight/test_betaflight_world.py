@@ -16,6 +16,7 @@ from aerobat.plants.betaflight.physics import (
     C_DELAY,
     N_COUNTERS,
     PACKET_DOUBLES,
+    SCRATCH_ROWS,
     airframe_plant,
     aux_vector,
     derivative,
@@ -38,7 +39,7 @@ def packet_for(x: np.ndarray, *, contact: int = 0, motors: tuple[float, ...] = (
     counters = np.zeros(N_COUNTERS, dtype=np.int64)
     counters[C_CONTACT] = contact
     packet = np.zeros(PACKET_DOUBLES)
-    prime(x, plant, aux, counters, np.zeros(6), packet, np.zeros((6, N_STATE)))
+    prime(x, plant, aux, counters, np.zeros(6), packet, np.zeros((SCRATCH_ROWS, N_STATE)))
     return packet
 
 
@@ -122,7 +123,8 @@ def test_floor_holds_the_vehicle_until_thrust_exceeds_weight() -> None:
     x = ground_state((0.0, 0.0, aux[A_GROUND]))
     counters = np.zeros(N_COUNTERS, dtype=np.int64)
     counters[C_CONTACT], counters[C_DELAY] = 1, 1
-    args = (plant, aux, np.zeros((2, 4)), counters, np.zeros(6), np.zeros(PACKET_DOUBLES), np.zeros((6, N_STATE)))
+    args = (plant, aux, np.zeros((2, 4)), counters, np.zeros(6), np.zeros(PACKET_DOUBLES),
+            np.zeros((SCRATCH_ROWS, N_STATE)))
     idle = np.full(4, 0.055, dtype=np.float32)
     for _ in range(4000):
         assert step(x, idle, *args) == 0
@@ -131,6 +133,42 @@ def test_floor_holds_the_vehicle_until_thrust_exceeds_weight() -> None:
     for _ in range(4000):
         step(x, full, *args)
     assert counters[C_CONTACT] == 0 and x[2] > 0.1
+
+
+def test_the_gyro_carries_each_rotors_vibration_line_at_its_rotation_frequency() -> None:
+    """On the floor at a steady command: the gyro's roll line lies at √(f/k)/2π with the airframe's rms; without a
+    vibration (the default) the packet is the true rate, bit for bit."""
+    thrust = Airframe().thrust_n(0.2)
+    shaking = IDEAL.replace(airframe__vibration_rms_rad_s=(0.2, 0.1, 0.05), airframe__vibration_thrust_n=thrust)
+    step_s = 125e-6
+    rolls = {}
+    for name, params in (("still", IDEAL), ("shaking", shaking)):
+        plant = airframe_plant(params)
+        aux = aux_vector(params, step_s=step_s, ground_z_m=0.0, gravity_m_s2=9.81)
+        x = ground_state((0.0, 0.0, aux[A_GROUND]))
+        counters = np.zeros(N_COUNTERS, dtype=np.int64)
+        counters[C_CONTACT], counters[C_DELAY] = 1, 1
+        packet, scratch, pending = np.zeros(PACKET_DOUBLES), np.zeros((SCRATCH_ROWS, N_STATE)), np.zeros((2, 4))
+        prime(x, plant, aux, counters, np.zeros(6), packet, scratch)
+        command = np.full(4, 0.2, dtype=np.float32)
+        roll, thrusts = [], []
+        for i in range(24000):  # 3 s: the rotors settle, then 2 s of gyro
+            assert step(x, command, plant, aux, pending, counters, np.zeros(6), packet, scratch) == 0
+            if i >= 8000:
+                roll.append(packet[1])
+                thrusts.append(x[13:17].copy())
+        assert counters[C_CONTACT] == 1  # below its weight: on the floor
+        rolls[name] = np.array(roll)
+    assert np.all(rolls["still"] == 0.0)  # the frame stands still on the floor: no rate, no line
+    line = rolls["shaking"]
+    forces = np.array(Airframe().thrust_gains) * np.mean(thrusts, axis=0)  # each rotor's gain: its own speed
+    rotor_hz = np.sqrt(forces / Airframe().thrust_coefficient_n_s2) / (2.0 * math.pi)
+    spectrum = np.abs(np.fft.rfft(line * np.hanning(line.size)))
+    peak_hz = np.fft.rfftfreq(line.size, step_s)[np.argmax(spectrum)]
+    assert rotor_hz.min() - 1.0 <= peak_hz <= rotor_hz.max() + 1.0
+    assert 100.0 < peak_hz < 200.0
+    # the four lines' amplitudes grow with each rotor's thrust (the uneven motors: 0.97-1.01 of the reference)
+    assert float(np.sqrt(np.mean(line**2))) == pytest.approx(0.2, rel=0.15)
 
 
 def test_pilot_sticks_signs() -> None:
@@ -201,7 +239,7 @@ def test_the_battery_sags_every_rotors_thrust_under_load() -> None:
         counters = np.zeros(N_COUNTERS, dtype=np.int64)
         counters[C_DELAY] = 1
         args = (airframe_plant(params), aux, np.zeros((2, 4)), counters, np.zeros(6), np.zeros(PACKET_DOUBLES),
-                np.zeros((6, N_STATE)))
+                np.zeros((SCRATCH_ROWS, N_STATE)))
         for _ in range(4000):  # 0.5 s: fifteen motor time constants
             assert step(x, commands, *args) == 0
         return x[13:17].copy()

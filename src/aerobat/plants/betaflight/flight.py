@@ -49,6 +49,7 @@ from aerobat.plants.betaflight.physics import (
     C_DELAY,
     N_COUNTERS,
     PACKET_DOUBLES,
+    SCRATCH_ROWS,
     aux_vector,
     ground_state,
     prime,
@@ -128,7 +129,7 @@ class Flight:
         self.counters[C_DELAY] = delay
         self.counters[C_CONTACT] = 1
         self.pending = np.zeros((delay + 1, 4))
-        self.scratch = np.zeros((fr.HELD_ROW + 1, N_STATE))  # the physics' six rows, a held sample's state
+        self.scratch = np.zeros((SCRATCH_ROWS, N_STATE))  # the physics' rows, a held sample's state, the rotors' angles
         self.packet = np.zeros(PACKET_DOUBLES)
         # the firmware's packet, whole (packets.MOTOR_STRUCT): 4 motor commands, then the rate loop's
         # set point (3) and P, I, D, F per axis (12)

@@ -26,7 +26,7 @@ import numba as nb
 import numpy as np
 
 from aerobat.plants.fpv.params import BetaflightParams
-from aerobat.quadrotor.dynamics import N_STATE, P_IZZ, plant_derivative
+from aerobat.quadrotor.dynamics import N_STATE, P_GAIN, P_IZZ, plant_derivative
 from aerobat.quadrotor.playback import rk4_after_first_stage
 from aerobat.quadrotor.xframe import add_rotor_reaction, battery_thrust_factor, curve_thrust, xframe_plant
 
@@ -35,6 +35,7 @@ __all__ = [
     "A_ATT_ERR",
     "A_BATTERY",
     "A_BIAS",
+    "A_VIBRATION",
     "A_CURVE_K",
     "A_CURVE_R",
     "A_FMAX",
@@ -49,6 +50,8 @@ __all__ = [
     "N_AUX",
     "N_COUNTERS",
     "PACKET_DOUBLES",
+    "PHASE_ROW",
+    "SCRATCH_ROWS",
     "advance",
     "airframe_plant",
     "aux_vector",
@@ -80,7 +83,16 @@ A_ROTOR_J = 16  # rotor (prop + bell) inertia about its axis [kg m²]
 A_THRUST_COEF = 17  # f = k Ω² [N/(rad/s)²]
 A_SPIN = 18  # 4 spin signs (+1: counter-clockwise seen from above)
 A_BATTERY = 22  # the battery under load: rest, sag, reference [V] (reference 0: none; Airframe.battery_constants)
-N_AUX = 25
+A_VIBRATION = 25  # the rotors' vibration lines: roll, pitch, yaw amplitude [rad/s] at a reference thrust [N]
+# (reference 0: none; Airframe.vibration_constants)
+N_AUX = 29
+
+PHASE_ROW = 7
+"""``scratch``'s row whose first four entries are the rotors' angles [rad] (their vibration lines' phases); rows
+0–5 are the step's work space, row 6 the frame loop's held motion-capture sample (``fpv.frames.HELD_ROW``)."""
+SCRATCH_ROWS = 8
+"""Rows of the ``scratch`` a flight gives :func:`step`, :func:`advance` and :func:`prime`."""
+_FIRST_ANGLES = 2.399963229728653  # the rotors start a golden angle apart [rad], not in phase
 
 # counters: integers the step keeps
 C_TICK = 0  # steps taken
@@ -125,6 +137,7 @@ def aux_vector(params: BetaflightParams, *, step_s: float, ground_z_m: float, gr
     aux[A_THRUST_COEF] = a.thrust_coefficient_n_s2
     aux[A_SPIN : A_SPIN + 4] = [1.0 if ccw else -1.0 for ccw in a.spins_ccw]
     aux[A_BATTERY : A_BATTERY + 3] = a.battery_constants()
+    aux[A_VIBRATION : A_VIBRATION + 4] = a.vibration_constants()
     return aux
 
 
@@ -210,6 +223,34 @@ def write_packet(x, t, deriv, aux, contact, noise, packet):  # pragma: no cover 
     packet[17] = _SEA_LEVEL_PA * (1.0 - 2.25577e-5 * altitude) ** 5.25588
 
 
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _vibrate(x, plant, aux, angles, h, packet):  # pragma: no cover - compiled
+    """Turn each rotor by its speed over ``h`` (``angles``), then add its vibration line to the packet's gyro.
+
+    Rotor m turns at Ω = √(f / k) (f its thrust: its gain × the state's x[13 + m]; k ``A_THRUST_COEF``), so
+    rotors with other gains turn at other speeds and their lines beat; a line's amplitude is the reference
+    amplitude × f / the reference thrust (an imbalance's force grows with Ω²).
+    """
+    reference = aux[A_VIBRATION + 3]
+    k = aux[A_THRUST_COEF]
+    roll = 0.0
+    pitch = 0.0
+    yaw = 0.0
+    for m in range(4):
+        f = max(plant[P_GAIN + m] * x[13 + m], 0.0)
+        angle = angles[m] + h * math.sqrt(f / k)
+        angle -= 2.0 * math.pi * math.floor(angle / (2.0 * math.pi))
+        angles[m] = angle
+        share = f / reference
+        s = math.sin(angle)
+        roll += share * s
+        pitch += share * math.cos(angle)
+        yaw += share * s
+    packet[1] += aux[A_VIBRATION] * roll  # gyro FRD: (p, −q, −r)
+    packet[2] -= aux[A_VIBRATION + 1] * pitch
+    packet[3] -= aux[A_VIBRATION + 2] * yaw
+
+
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
 def step(x, motors, plant, aux, pending, counters, noise, packet, scratch):  # pragma: no cover - compiled
     """Advance the world one gyro period with the firmware's latest ``motors``; write the next packet.
@@ -217,7 +258,8 @@ def step(x, motors, plant, aux, pending, counters, noise, packet, scratch):  # p
     ``motors`` (4, float32): the motor packet just received (commands in [0, 1], 0 = stopped).
     ``pending`` (D+1, 4): ring of motor commands for the output delay of D steps (``counters``).
     ``noise`` (6,): standard normal draws for the next packet's gyro and accelerometer noise.
-    ``scratch`` (6, N_STATE): work space. Returns 1 if the state went non-finite, else 0.
+    ``scratch`` (:data:`SCRATCH_ROWS`, N_STATE): work space, and the rotors' angles (:data:`PHASE_ROW`).
+    Returns 1 if the state went non-finite, else 0.
     :func:`store_motors` then :func:`advance`.
     """
     store_motors(motors, pending, counters[C_TICK])
@@ -287,12 +329,17 @@ def advance(x, plant, aux, pending, counters, noise, packet, scratch):  # pragma
             return 1
     derivative(t + h, x, ft, plant, aux, k1)
     write_packet(x, t + h, k1, aux, counters[C_CONTACT], noise, packet)
+    if aux[A_VIBRATION + 3] > 0.0:
+        _vibrate(x, plant, aux, scratch[PHASE_ROW], h, packet)
     return 0
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
 def prime(x, plant, aux, counters, noise, packet, scratch):  # pragma: no cover - compiled
-    """Write the packet of the current instant (before the first :func:`step`), motors stopped."""
+    """Write the packet of the current instant (before the first :func:`step`), motors stopped; the rotors'
+    angles start a golden angle apart."""
+    for m in range(4):
+        scratch[PHASE_ROW, m] = m * _FIRST_ANGLES
     ft = scratch[5]
     for j in range(4):
         ft[j] = 0.0

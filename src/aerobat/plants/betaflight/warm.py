@@ -23,6 +23,7 @@ def warm_world() -> None:
         C_DELAY,
         N_COUNTERS,
         PACKET_DOUBLES,
+        SCRATCH_ROWS,
         airframe_plant,
         aux_vector,
         ground_state,
@@ -46,7 +47,7 @@ def warm_world() -> None:
     counters[C_CONTACT] = 1
     noise = np.zeros((2, 6))
     packet = np.zeros(PACKET_DOUBLES)
-    scratch = np.zeros((fr.HELD_ROW + 1, N_STATE))  # the physics' six rows and the shared-memory loop's held sample
+    scratch = np.zeros((SCRATCH_ROWS, N_STATE))  # the physics' rows, the held sample, the rotors' angles
     prime(world, plant, aux, counters, noise[0], packet, scratch)
     step(world, np.zeros(4, dtype=np.float32), plant, aux, np.zeros((2, 4)), counters, noise[1], packet, scratch)
     block = np.zeros(MOTOR_STRUCT.size, dtype=np.uint8)

@@ -105,3 +105,30 @@ def test_the_roma_f5s_flights_agree_on_its_rotors_speed_and_beat_the_prior() -> 
 def test_a_log_without_the_unfiltered_gyro_has_no_vibration_fit() -> None:
     log = read_log(GECKO, 1)
     assert not log.has(Channel.GYRO_UNFILTERED)  # debug_mode 0
+
+
+@needs_data
+def test_identify_prints_the_vibration_and_writes_it_as_lines_to_move_into_the_airframe(tmp_path, capsys) -> None:
+    import tomllib
+
+    from aerobat.cli import main
+    from aerobat.plants.fpv.params import load_betaflight
+
+    airframe = tmp_path / "roma_bf.toml"
+    assert main(["identify", "--log", f"{ROMA}:1", "--vehicle", "fpv5", "--mass-kg", "0.55", "--motor-x-m", "0.08",
+                 "--motor-y-m", "0.08", "--output", str(tmp_path / "roma.toml"), "--airframe", str(airframe)]) == 0
+    said = capsys.readouterr().out
+    assert "vibration: rotors at " in said and "thrust coefficient " in said
+    text = airframe.read_text()
+    as_written = load_betaflight(airframe).airframe
+    assert not as_written.vibration_flown  # not flown unless the user moves the lines in
+    assert as_written.thrust_coefficient_n_s2 == Airframe().thrust_coefficient_n_s2
+    moved = [line[4:] for line in text.splitlines() if line.startswith("#   ")]
+    fields = tomllib.loads("\n".join(moved))
+    assert set(fields) == {"thrust_coefficient_n_s2", "vibration_rms_rad_s", "vibration_thrust_n"}
+    flown = tmp_path / "roma_vibrating.toml"
+    flown.write_text(text.replace("[airframe]\n", "[airframe]\n" + "\n".join(moved) + "\n", 1))
+    vibrating = load_betaflight(flown).airframe
+    assert vibrating.vibration_flown
+    assert 0.5 < vibrating.thrust_coefficient_n_s2 / Airframe().thrust_coefficient_n_s2 < 0.8
+    assert all(0.05 < v < 0.5 for v in vibrating.vibration_rms_rad_s)  # 3-20 °/s

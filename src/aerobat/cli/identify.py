@@ -179,6 +179,7 @@ def _cmd_identify_log(args: argparse.Namespace, out: Path, figure: Path) -> int:
         write_text(args.airframe, f"# [airframe] of the Betaflight plant from {fit.name} (prior {prior.name})\n"
                                   + "".join(f"# {line}\n" for line in airframe_notes(fit))
                                   + "".join(f"# CHECK: {line}\n" for line in [*result.excitation_notes, *warnings])
+                                  + _vibration_comment(vibration)
                                   + tomli_w.dumps({"airframe": airframe, "pilot": pilot}))
     if args.json:
         print(json_text({
@@ -313,3 +314,15 @@ def register(sub: Any) -> None:
                      help="fit a stored identification session again instead of flying: an id or 'last' (default: fly)")
     add_db_option(p)
     p.set_defaults(func=_cmd_identify)
+
+
+def _vibration_comment(vibration: Any) -> str:
+    """The identified vibration as [airframe] lines to copy in, commented out: not flown unless the user does."""
+    if vibration is None:
+        return ""
+    import tomli_w
+
+    lines = tomli_w.dumps(vibration.airframe_fields()).splitlines()
+    return ("# vibration, identified from the log's unfiltered gyro; not flown unless these lines are moved under\n"
+            "# [airframe] (the thrust coefficient also sets the rotors' reaction torque):\n"
+            + "".join(f"#   {line}\n" for line in lines if line.strip()))

@@ -296,6 +296,8 @@ def airframe_from_log_fit(fit: LogFit, *, base: Any | None = None, battery_refer
     else:
         table.pop("battery_rest_v", None)
         table["battery_sag_v"] = 0.0
+    for key in _VIBRATION_AIRFRAME:  # left to the defaults: identify prints the vibration's, to be moved in by hand
+        table.pop(key, None)
     for key, value in list(table.items()):
         if isinstance(value, tuple):
             table[key] = list(value)
@@ -310,6 +312,8 @@ _FITTED_AIRFRAME = ("inertia_kg_m2", "thrust_max_n", "curve_min_speed_ratio", "c
                     "motor_tau_down_s", "kappa_m")
 _GIVEN_AIRFRAME = ("mass_kg", "motor_x_m", "motor_y_m")
 _LOG_AIRFRAME = ("props_out", "battery_reference_v", "battery_rest_v", "battery_sag_v")  # read from the log, not fitted
+#: not written (the defaults: no vibration): ``identify`` prints the vibration it found as lines to move in
+_VIBRATION_AIRFRAME = ("thrust_coefficient_n_s2", "vibration_rms_rad_s", "vibration_thrust_n")
 
 
 def airframe_notes(fit: LogFit, base: Any | None = None) -> list[str]:

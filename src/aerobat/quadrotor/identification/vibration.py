@@ -58,6 +58,8 @@ class VibrationFit:
     prior_thrust_coefficient_n_s2 : the prior's k, the grid's centre.
     log_rate_hz : the log's sample rate [Hz]; its Nyquist frequency is half of it.
     rotor_hz : a rotor's rotation frequency at the flights' median command, with that k [Hz].
+    reference_thrust_n : a rotor's thrust at that command [N]: the lines' rms holds there (an airframe's
+        ``vibration_thrust_n``).
     line_rms_rad_s : per body axis (roll, pitch, yaw), the rms of the gyro within the folded lines' bands above the
         window's median level, the median over the windows [rad/s].
     windows : steady windows scored.
@@ -71,6 +73,7 @@ class VibrationFit:
     prior_thrust_coefficient_n_s2: float
     log_rate_hz: float
     rotor_hz: float
+    reference_thrust_n: float
     line_rms_rad_s: tuple[float, float, float]
     windows: int
     matched_share: float
@@ -87,6 +90,11 @@ class VibrationFit:
                 f"the strongest line of {self.matched_share:.0%} of {self.windows} steady windows lies on a folded "
                 f"rotor line ({self.matched_share_prior:.0%} at the prior's k); lines' rms {rms} °/s (roll, pitch, "
                 f"yaw)")
+
+    def airframe_fields(self) -> dict[str, object]:
+        """The Betaflight airframe's fields that fly this vibration (:class:`~aerobat.quadrotor.xframe.Airframe`)."""
+        return {"thrust_coefficient_n_s2": self.thrust_coefficient_n_s2,
+                "vibration_rms_rad_s": list(self.line_rms_rad_s), "vibration_thrust_n": self.reference_thrust_n}
 
 
 def _steady_windows(commands: np.ndarray, flying_command: float) -> list[int]:
@@ -168,7 +176,7 @@ def fit_vibration(series: list[tuple[np.ndarray, np.ndarray, np.ndarray]], thrus
     median_thrust = float(np.median(thrust))
     return VibrationFit(
         thrust_coefficient_n_s2=k, prior_thrust_coefficient_n_s2=float(prior_thrust_coefficient_n_s2),
-        log_rate_hz=rate, rotor_hz=math.sqrt(median_thrust / k) / (2.0 * math.pi),
+        log_rate_hz=rate, rotor_hz=math.sqrt(median_thrust / k) / (2.0 * math.pi), reference_thrust_n=median_thrust,
         line_rms_rad_s=(rms[0], rms[1], rms[2]), windows=len(same), matched_share=matched(k),
         matched_share_prior=matched(float(prior_thrust_coefficient_n_s2)),
         contrast=float(scores[best] / np.median(scores)) if np.median(scores) > 0 else math.inf,

@@ -6,6 +6,7 @@ Run (needs ../shared/data and the Betaflight SITL; about 1.5 min a seed on two c
     .venv/bin/python scripts/results_roma.py --design-model paper
     .venv/bin/python scripts/results_roma.py --seeds 1 --json
     .venv/bin/python scripts/results_roma.py --no-battery    # without the pack's sag under load (issue 42)
+    .venv/bin/python scripts/results_roma.py --vibration     # flying the vibration identify found (issue 42)
 
 1. ``aerobat identify --log diatone-roma-f5.bbl:1`` (0.55 kg and motors at ±0.08 m given, as the
    log does not know them) writes the design model and the Betaflight plant's airframe;
@@ -55,11 +56,13 @@ def _aerobat(argv: list[str], *, may_fail: bool = False) -> str | None:
 
 
 def run(seeds: list[int], work: Path, trials: int = 30, design_model: str = "firmware",
-        battery: bool = True) -> dict[str, Any]:
+        battery: bool = True, vibration: bool = False) -> dict[str, Any]:
     """Identify once, then learn the triple flip once per seed; every number read from the store.
 
     ``battery``: the identified pack's sag under load stays in the airframe (plant and firmware model);
     False drops it (thrust as identified at any load, the chain before issue 42's battery model).
+    ``vibration``: the vibration ``identify`` found moves into the airframe, as its comment says (the gyro
+    carries the rotors' lines; the thrust coefficient the rotors' speed); False leaves the file as written.
     """
     import tomllib
 
@@ -73,10 +76,17 @@ def run(seeds: list[int], work: Path, trials: int = 30, design_model: str = "fir
     _aerobat(["identify", "--log", f"{LOG}:1", *IDENTIFY, "--output", str(vehicle), "--airframe", str(airframe),
               "--figure", str(work / "roma.png")])
     identify_s = time.perf_counter() - started
-    table = tomllib.loads(airframe.read_text())
+    text = airframe.read_text()
+    table = tomllib.loads(text)
     if not battery:
         table["airframe"].pop("battery_rest_v", None)
         table["airframe"]["battery_sag_v"] = 0.0
+    if vibration:  # the commented lines identify wrote, moved under [airframe] as a user would
+        lines = [line[4:] for line in text.splitlines() if line.startswith("#   ")]
+        if not lines:
+            raise SystemExit(f"{airframe}: identify wrote no vibration (the log has no unfiltered gyro)")
+        table["airframe"].update(tomllib.loads("\n".join(lines)))
+    if not battery or vibration:
         write_output(airframe, tomli_w.dumps(table))
     pack = {"rest_v": table["airframe"].get("battery_rest_v"), "sag_v": table["airframe"].get("battery_sag_v"),
             "reference_v": table["airframe"].get("battery_reference_v")}
@@ -109,6 +119,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--trials", type=int, default=30, help="trials per session")
     parser.add_argument("--no-battery", action="store_true",
                         help="drop the identified pack's sag under load from the airframe (thrust as identified)")
+    parser.add_argument("--vibration", action="store_true",
+                        help="fly the vibration identify found (the rotors' lines in the gyro, their speed)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args(argv)
     if not LOG.is_file():
@@ -116,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     with tempfile.TemporaryDirectory(prefix="aerobat-roma-") as work:
         result = run(args.seeds, Path(work), trials=args.trials, design_model=args.design_model,
-                     battery=not args.no_battery)
+                     battery=not args.no_battery, vibration=args.vibration)
     ended = any(r["ended"] for r in result["seeds"])  # a session a crash ended is reported, and the exit says so
     if args.json:
         print(json.dumps(result))

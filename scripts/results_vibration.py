@@ -4,6 +4,7 @@ Run (needs ../shared/data; about 10 s):
 
     .venv/bin/python scripts/results_vibration.py
     .venv/bin/python scripts/results_vibration.py --json
+    .venv/bin/python scripts/results_vibration.py --fly    # and the ROMA chain's first attempts (~3 min)
 
 The ROMA F5's three flights record the gyro before the firmware's filters (Betaflight's debug_mode
 GYRO_SCALED), sampled at the log's 250 Hz. For each flight alone, with flight 1's identified thrust curve:
@@ -13,6 +14,11 @@ command, the share of steady windows whose strongest line lies on a folded rotor
 prior's), and the lines' rms per axis. Then, per throttle band, the strongest line above 30 Hz that the log
 shows (median over the band's steady windows) beside where the fold puts the rotors' line at the fitted and
 at the prior's k.
+
+With ``--fly``: the first attempt of the ROMA F5 chain (``scripts/results_roma.py``: the 3D triple flip at
+600 °/s designed on the firmware model, flown open loop on the identified airframe with the log's tune),
+seeds 0–3, with the airframe as ``identify`` writes it, with only the identified thrust coefficient, with only
+the vibration lines (at the default k), and with both (what ``results_roma.py --vibration`` flies).
 """
 
 from __future__ import annotations
@@ -93,14 +99,64 @@ def run() -> dict[str, Any]:
     return {"prior_thrust_coefficient_n_s2": k_prior, "flights": flights, "bands": table}
 
 
+def fly(seeds: tuple[int, ...] = (0, 1, 2, 3)) -> dict[str, list[Any]]:
+    """The chain's first attempt [m] per seed for each share of the identified vibration (a status if lost)."""
+    import tempfile
+    import tomllib
+
+    import tomli_w
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import results_roma as chain
+
+    from aerobat.store import Store
+
+    out: dict[str, list[Any]] = {}
+    with tempfile.TemporaryDirectory(prefix="aerobat-vibration-") as tmp:
+        work = Path(tmp)
+        vehicle, airframe = work / "roma.toml", work / "roma_bf.toml"
+        chain._aerobat(["identify", "--log", f"{LOG}:1", *chain.IDENTIFY, "--output", str(vehicle), "--airframe",
+                        str(airframe)])
+        text = airframe.read_text()
+        found = tomllib.loads("\n".join(line[4:] for line in text.splitlines() if line.startswith("#   ")))
+        lines = {k: found[k] for k in ("vibration_rms_rad_s", "vibration_thrust_n")}
+        shares = {"as identify writes it": {}, "the thrust coefficient only": {
+            "thrust_coefficient_n_s2": found["thrust_coefficient_n_s2"]}, "the lines only": lines, "both": found}
+        for n, (name, extra) in enumerate(shares.items()):
+            table = tomllib.loads(text)
+            table["airframe"].update(extra)
+            flown = work / f"airframe-{n}.toml"
+            flown.write_text(tomli_w.dumps(table))
+            firsts: list[Any] = []
+            for seed in seeds:
+                db = work / f"{n}-{seed}.sqlite"
+                chain._aerobat(["learn", *chain.FLIP, "--vehicle", str(vehicle), "--plant", "betaflight",
+                                "--betaflight", str(flown), "--tune", str(LOG), "--feedback", "none", "--trials", "1",
+                                "--seed", str(seed), "--db", str(db), "--out", str(work / f"out-{n}-{seed}")],
+                               may_fail=True)
+                with Store(db, create=False) as store:
+                    sid = store.list_sessions()[-1].id
+                    records = store.iterations(sid)
+                    mask = np.array(store.maneuver(store.session(sid).maneuver_id).position_mask, dtype=bool)
+                first = records[0] if records else None
+                firsts.append(float(np.linalg.norm(first.error[mask])) if first is not None and first.status == "ok"
+                              else (first.status if first is not None else "not flown"))
+            out[name] = firsts
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--fly", action="store_true",
+                        help="also fly the ROMA chain's first attempts with each share of the vibration (~3 min)")
     args = parser.parse_args(argv)
     if not LOG.exists():
         print(f"{LOG}: not found (the shared data folder is missing)", file=sys.stderr)
         return 2
     result = run()
+    if args.fly:
+        result["first_attempt_m"] = fly()
     if args.json:
         print(json.dumps(result, indent=1))
         return 0
@@ -120,6 +176,13 @@ def main(argv: list[str] | None = None) -> int:
     for b in result["bands"]:
         print(f"| {b['command'][0]:.2f}–{b['command'][1]:.2f} | {b['windows']} | {b['log_line_hz']:.0f} Hz | "
               f"{b['rotor_at_fit_hz']:.0f} Hz, {b['folded_at_fit_hz']:.0f} Hz | {b['folded_at_prior_hz']:.0f} Hz |")
+    if args.fly:
+        print()
+        print("| the ROMA chain's airframe | first attempt, seeds 0-3 [m] |")
+        print("|---|---|")
+        for name, firsts in result["first_attempt_m"].items():
+            shown = ", ".join(f"{v:.3f}" if isinstance(v, float) else str(v) for v in firsts)
+            print(f"| {name} | {shown} |")
     return 0
 
 

@@ -5,6 +5,7 @@ Run (needs ../shared/data; about 10 s):
     .venv/bin/python scripts/results_vibration.py
     .venv/bin/python scripts/results_vibration.py --json
     .venv/bin/python scripts/results_vibration.py --fly    # and the ROMA chain's first attempts (~3 min)
+    .venv/bin/python scripts/results_vibration.py --figure docs/figures/logs/roma_vibration.png
 
 The ROMA F5's three flights record the gyro before the firmware's filters (Betaflight's debug_mode
 GYRO_SCALED), sampled at the log's 250 Hz. For each flight alone, with flight 1's identified thrust curve:
@@ -60,6 +61,7 @@ def run() -> dict[str, Any]:
     k_prior = Airframe().thrust_coefficient_n_s2
     flights = []
     bands: dict[float, list[float]] = {}
+    windows: list[tuple[float, np.ndarray]] = []  # (mean command, spectrum over its median) of every steady window
     k_first = None
     for index in (1, 2, 3):
         log = read_log(LOG, index)
@@ -85,6 +87,7 @@ def run() -> dict[str, Any]:
             g = gyro[s:s + WINDOW]
             power = (np.abs(np.fft.rfft((g - g.mean(axis=0)) * taper[:, None], axis=0)) ** 2).sum(axis=1)
             scored = freqs >= LOW_HZ
+            windows.append((float(u.mean()), power / np.median(power[scored])))
             band = math.floor(u.mean() / 0.05) * 0.05
             bands.setdefault(round(band, 2), []).append(float(freqs[scored][np.argmax(power[scored])]))
     table = []
@@ -96,7 +99,50 @@ def run() -> dict[str, Any]:
                       "folded_at_fit_hz": float(folded_hz(math.sqrt(t / k_first) / (2 * math.pi), 250.0)),
                       "rotor_at_fit_hz": math.sqrt(t / k_first) / (2 * math.pi),
                       "folded_at_prior_hz": float(folded_hz(math.sqrt(t / k_prior) / (2 * math.pi), 250.0))})
-    return {"prior_thrust_coefficient_n_s2": k_prior, "flights": flights, "bands": table}
+    commands = np.linspace(0.15, 0.5, 71)
+    curve = np.array([float(thrust(c)) for c in commands])
+    return {"prior_thrust_coefficient_n_s2": k_prior, "flights": flights, "bands": table,
+            "figure": {"freqs_hz": freqs.tolist(), "windows": [(c, p.tolist()) for c, p in windows],
+                       "commands": commands.tolist(),
+                       "folded_fit_hz": folded_hz(np.sqrt(curve / k_first) / (2 * math.pi), 250.0).tolist(),
+                       "folded_prior_hz": folded_hz(np.sqrt(curve / k_prior) / (2 * math.pi), 250.0).tolist()}}
+
+
+def figure(data: dict[str, Any], path: Path) -> None:
+    """The unfiltered gyro's spectrum against motor command (steady windows of the three flights, each over its
+    median), with where the fold puts the rotors' line at flight 1's k and at the default k."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from aerobat.plotting import save_figure
+
+    freqs = np.array(data["freqs_hz"])
+    edges = np.arange(0.15, 0.5001, 0.025)
+    image = np.full((len(edges) - 1, freqs.size), np.nan)
+    for i in range(len(edges) - 1):
+        rows = [np.array(p) for c, p in data["windows"] if edges[i] <= c < edges[i + 1]]
+        if rows:
+            image[i] = 10.0 * np.log10(np.mean(rows, axis=0))
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    df = freqs[1] - freqs[0]
+    freq_edges = np.append(freqs - df / 2.0, freqs[-1] + df / 2.0)
+    mesh = ax.pcolormesh(edges, freq_edges, image.T, shading="flat", cmap="magma", vmin=0.0, vmax=30.0)
+    fig.colorbar(mesh, ax=ax, label="power over the window's median [dB]")
+    ax.plot(data["commands"], data["folded_fit_hz"], color="cyan", lw=1.6, label="rotor line, folded: flight 1's k")
+    ax.plot(data["commands"], data["folded_prior_hz"], color="white", lw=1.2, ls="--",
+            label="rotor line, folded: the default k")
+    ax.axhline(30.0, color="grey", lw=0.8, ls=":")
+    ax.set_xlim(edges[0], edges[-1])
+    ax.set_ylim(0.0, 125.0)
+    ax.set_xlabel("mean motor command of the window")
+    ax.set_ylabel("frequency in the 250 Hz log [Hz]")
+    ax.set_title("ROMA F5, flights 1-3: the unfiltered gyro (roll + pitch + yaw) against motor command")
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    save_figure(fig, path)
+    plt.close(fig)
 
 
 def fly(seeds: tuple[int, ...] = (0, 1, 2, 3)) -> dict[str, list[Any]]:
@@ -148,6 +194,8 @@ def fly(seeds: tuple[int, ...] = (0, 1, 2, 3)) -> dict[str, list[Any]]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--figure", metavar="PNG", type=Path,
+                        help="draw the unfiltered gyro's spectrum against motor command with the folded rotor lines")
     parser.add_argument("--fly", action="store_true",
                         help="also fly the ROMA chain's first attempts with each share of the vibration (~3 min)")
     args = parser.parse_args(argv)
@@ -155,6 +203,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{LOG}: not found (the shared data folder is missing)", file=sys.stderr)
         return 2
     result = run()
+    if args.figure:
+        figure(result["figure"], args.figure)
+    result.pop("figure")
     if args.fly:
         result["first_attempt_m"] = fly()
     if args.json:

@@ -40,7 +40,7 @@ IDENTIFY = ["--vehicle", "fpv5", "--mass-kg", "0.55", "--motor-x-m", "0.08", "--
 FLIP = ["flip", "--flips", "3", "--dims", "3", "--max-rate-deg-s", "600"]
 
 
-def _aerobat(argv: list[str], *, may_fail: bool = False) -> str | None:
+def run_aerobat(argv: list[str], *, may_fail: bool = False) -> str | None:
     """Run one aerobat command; its failure ends the script, or with ``may_fail`` is returned (its last line)."""
     from aerobat.cli.app import main
 
@@ -73,7 +73,7 @@ def run(seeds: list[int], work: Path, trials: int = 30, design_model: str = "fir
 
     vehicle, airframe, db = work / "roma.toml", work / "roma_bf.toml", work / "roma.sqlite"
     started = time.perf_counter()
-    _aerobat(["identify", "--log", f"{LOG}:1", *IDENTIFY, "--output", str(vehicle), "--airframe", str(airframe),
+    run_aerobat(["identify", "--log", f"{LOG}:1", *IDENTIFY, "--output", str(vehicle), "--airframe", str(airframe),
               "--figure", str(work / "roma.png")])
     identify_s = time.perf_counter() - started
     text = airframe.read_text()
@@ -94,7 +94,7 @@ def run(seeds: list[int], work: Path, trials: int = 30, design_model: str = "fir
     for seed in seeds:
         started = time.perf_counter()
         # a session a crash ends is a result: its trials are read back and the crash is reported
-        ended = _aerobat(["learn", *FLIP, "--vehicle", str(vehicle), "--plant", "betaflight", "--betaflight",
+        ended = run_aerobat(["learn", *FLIP, "--vehicle", str(vehicle), "--plant", "betaflight", "--betaflight",
                           str(airframe), "--tune", str(LOG), "--feedback", "none", "--trials", str(trials), "--seed",
                           str(seed), "--design-model", design_model,
                           "--db", str(db), "--out", str(work / f"seed-{seed}")], may_fail=True)

@@ -161,7 +161,7 @@ def fly(seeds: tuple[int, ...] = (0, 1, 2, 3)) -> dict[str, list[Any]]:
     with tempfile.TemporaryDirectory(prefix="aerobat-vibration-") as tmp:
         work = Path(tmp)
         vehicle, airframe = work / "roma.toml", work / "roma_bf.toml"
-        chain._aerobat(["identify", "--log", f"{LOG}:1", *chain.IDENTIFY, "--output", str(vehicle), "--airframe",
+        chain.run_aerobat(["identify", "--log", f"{LOG}:1", *chain.IDENTIFY, "--output", str(vehicle), "--airframe",
                         str(airframe)])
         text = airframe.read_text()
         found = tomllib.loads("\n".join(line[4:] for line in text.splitlines() if line.startswith("#   ")))
@@ -176,7 +176,7 @@ def fly(seeds: tuple[int, ...] = (0, 1, 2, 3)) -> dict[str, list[Any]]:
             firsts: list[Any] = []
             for seed in seeds:
                 db = work / f"{n}-{seed}.sqlite"
-                chain._aerobat(["learn", *chain.FLIP, "--vehicle", str(vehicle), "--plant", "betaflight",
+                chain.run_aerobat(["learn", *chain.FLIP, "--vehicle", str(vehicle), "--plant", "betaflight",
                                 "--betaflight", str(flown), "--tune", str(LOG), "--feedback", "none", "--trials", "1",
                                 "--seed", str(seed), "--db", str(db), "--out", str(work / f"out-{n}-{seed}")],
                                may_fail=True)

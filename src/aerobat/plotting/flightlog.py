@@ -238,13 +238,18 @@ def plot_log_spectra(log: FlightLog, *, window_s: tuple[float, float] | None = N
 def plot_log_spectrogram(log: FlightLog, *, window_s: tuple[float, float] | None = None) -> Any | None:
     """The gyro's spectrum against throttle per axis (as Blackbox Explorer and PIDtoolbox draw it).
 
-    Motor-harmonic noise is a line that climbs with throttle; a frame resonance stays put. None if the log
-    has no gyro or no throttle.
+    Motor-harmonic noise is a line that climbs with throttle; a frame resonance stays put. A line above the
+    log's Nyquist frequency appears folded, so it falls as it climbs (docs/logs.md: the ROMA F5's rotors at
+    140–270 Hz in a 250 Hz log). The gyro before the firmware's filters where the log has it
+    (:attr:`~aerobat.quadrotor.flightlog.Channel.GYRO_UNFILTERED`), else the logged one. None if the log has no
+    gyro or no throttle.
     """
     log, crash = _flight(log, window_s)
     if not _enough(log, Channel.GYRO, Channel.THROTTLE):
         return None
-    g = log.signals[Channel.GYRO]
+    unfiltered = log.has(Channel.GYRO_UNFILTERED)
+    g = log.signals[Channel.GYRO_UNFILTERED if unfiltered else Channel.GYRO]
+    which = "unfiltered gyro" if unfiltered else "gyro"
     throttle = log.signals[Channel.THROTTLE].at(g.time_s)[:, 0]
     maps = [throttle_spectrogram(g.time_s, np.degrees(g.values[:, k]), throttle) for k in range(3)]
     if any(m is None for m in maps):
@@ -259,7 +264,7 @@ def plot_log_spectrogram(log: FlightLog, *, window_s: tuple[float, float] | None
         centres = 50.0 * (m.throttle_edges[:-1] + m.throttle_edges[1:])
         image = ax.pcolormesh(m.frequency_hz, centres, m.power_db, shading="nearest", cmap="inferno",
                               vmin=vmin, vmax=vmax)
-        ax.set_title(f"gyro {name}", fontsize=10)
+        ax.set_title(f"{which} {name}", fontsize=10)
         ax.set_xlabel("frequency [Hz]")
     axes[0].set_ylabel("throttle [%]")
     if image is not None:
@@ -267,8 +272,9 @@ def plot_log_spectrogram(log: FlightLog, *, window_s: tuple[float, float] | None
     m0 = maps[0]
     assert m0 is not None
     covers = _covers(log, crash, g.rate_hz, g.samples, int(round(m0.segment_s * g.rate_hz)))
-    fig.suptitle(f"{log.name}: gyro spectrum against throttle over {covers}; bins without a segment blank",
-                 fontsize=10)
+    fig.suptitle(f"{log.name}: {which} spectrum against throttle over {covers}\n"
+                 f"bins without a segment blank; sampled at {g.rate_hz:.0f} Hz, a line above {g.rate_hz / 2:.0f} Hz "
+                 f"appears folded (it falls as it climbs)", fontsize=10)
     return fig
 
 

@@ -45,9 +45,9 @@ def run() -> dict[str, Any]:
     from aerobat.experiments.log_replay import FLYING_MOTOR
     from aerobat.logs import read_log
     from aerobat.quadrotor.flightlog import Channel
-    from aerobat.quadrotor.identification.logfit import Geometry
+    from aerobat.quadrotor.identification.logfit import Geometry, thrust_curve
     from aerobat.quadrotor.identification.vibration import LOW_HZ, WINDOW, fit_vibration, folded_hz
-    from aerobat.quadrotor.xframe import Airframe, curve_thrust
+    from aerobat.quadrotor.xframe import Airframe
 
     ref = parse_log_ref(f"{LOG}:1")
     identified = identify_from_logs([ref], Geometry(**GEOMETRY), prior=preset("fpv5"))
@@ -56,7 +56,7 @@ def run() -> dict[str, Any]:
     ratio, shape = min(max(fit.model.r, 0.0), 0.9), min(max(fit.model.k, 0.0), 1.0)
 
     def thrust(u: Any) -> np.ndarray:
-        return np.vectorize(lambda c: curve_thrust(float(c), f_max, ratio, shape))(u)
+        return f_max * thrust_curve(np.asarray(u, dtype=float), ratio, shape)
 
     k_prior = Airframe().thrust_coefficient_n_s2
     flights = []

@@ -11,10 +11,10 @@ import pytest
 from aerobat.experiments.log_identify import identify_from_logs
 from aerobat.logs import read_log
 from aerobat.quadrotor.flightlog import Channel
-from aerobat.quadrotor.identification.logfit import Geometry
+from aerobat.quadrotor.identification.logfit import Geometry, thrust_curve
 from aerobat.quadrotor.identification.vibration import fit_vibration, folded_hz
 from aerobat.quadrotor.vehicle import fpv5
-from aerobat.quadrotor.xframe import Airframe, curve_thrust
+from aerobat.quadrotor.xframe import Airframe
 
 DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "flight-logs"
 ROMA = DATA / "betaflight" / "diatone-roma-f5.bbl"
@@ -86,7 +86,9 @@ def test_the_roma_f5s_flights_agree_on_its_rotors_speed_and_beat_the_prior() -> 
     whole = identified.vibration
     assert whole is not None
     f_max, ratio, shape = identified.fit.values["thrust_max_n"][0], identified.fit.model.r, identified.fit.model.k
-    curve = np.vectorize(lambda c: curve_thrust(float(c), f_max, ratio, shape))
+    def curve(u: np.ndarray) -> np.ndarray:
+        return f_max * thrust_curve(u, ratio, shape)
+
     found = []
     for index in (1, 2, 3):
         log = read_log(ROMA, index)

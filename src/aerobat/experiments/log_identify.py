@@ -99,7 +99,7 @@ class LogIdentification:
         thrust coefficient, with the fit's thrust curve); None when no log fitted records the unfiltered gyro
         (Betaflight's ``debug_mode`` GYRO_SCALED) with motor commands, or none has a steady window."""
         from aerobat.experiments.log_replay import FLYING_MOTOR
-        from aerobat.quadrotor.xframe import Airframe, curve_thrust
+        from aerobat.quadrotor.xframe import Airframe
 
         series = []
         for log in self.logs:
@@ -110,8 +110,8 @@ class LogIdentification:
             return None
         f_max = _require(self.fit, "thrust_max_n")
         ratio, shape = min(max(self.fit.model.r, 0.0), 0.9), min(max(self.fit.model.k, 0.0), 1.0)
-        thrust = np.vectorize(lambda u: curve_thrust(float(u), f_max, ratio, shape))
-        return fit_vibration(series, thrust, Airframe().thrust_coefficient_n_s2, flying_command=FLYING_MOTOR)
+        return fit_vibration(series, lambda u: f_max * thrust_curve(u, ratio, shape),
+                             Airframe().thrust_coefficient_n_s2, flying_command=FLYING_MOTOR)
 
     @property
     def idle_command(self) -> float | None:

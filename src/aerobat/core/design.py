@@ -201,10 +201,31 @@ def finite_difference_jacobian(
     return _jacobian_from(_errors(maneuver, model, batch), steps)
 
 
-def _jacobian(evaluate: _Evaluations, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`finite_difference_jacobian` through the design's evaluations (one batch, nothing repeated)."""
-    batch, steps = _difference_batch(evaluate.maneuver, p, evaluate.relative_step)
-    return _jacobian_from(evaluate(batch), steps)
+def _forward_difference_batch(maneuver: Maneuver, p: np.ndarray, relative_step: float) -> tuple[np.ndarray, np.ndarray]:
+    """The n + 1 parameter vectors of a one-sided J at ``p``, and the steps taken (up, or down at an upper bound)."""
+    p = np.asarray(p, dtype=float)
+    lower, upper = bounds_arrays(maneuver.parameters)
+    h = relative_step * parameter_scales(maneuver.parameters)
+    plus = np.minimum(p + h, upper)
+    # a parameter at (or within half a step of) its upper bound steps down
+    other = np.where(plus - p < 0.5 * h, np.maximum(p - h, lower), plus)
+    batch = np.repeat(p[None, :], p.size + 1, axis=0)
+    batch[1:][np.diag_indices(p.size)] = other
+    return batch, other - p
+
+
+def _jacobian(evaluate: _Evaluations, p: np.ndarray, *, central: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`finite_difference_jacobian` through the design's evaluations (one batch, nothing repeated).
+
+    ``central=False``: forward differences, n + 1 simulations instead of 2·n + 1 (the coarse Newton pass,
+    which needs the step's direction, not J to the last digits).
+    """
+    if central:
+        batch, steps = _difference_batch(evaluate.maneuver, p, evaluate.relative_step)
+        return _jacobian_from(evaluate(batch), steps)
+    batch, steps = _forward_difference_batch(evaluate.maneuver, p, evaluate.relative_step)
+    errs = evaluate(batch)
+    return np.ascontiguousarray((errs[1:] - errs[0]).T / steps[None, :]), errs[0]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -272,8 +293,11 @@ def design(
     message = ""
     # Newton in two passes: first ignoring nearly unobservable directions (they send a full
     # Newton step wandering along a valley), then a polishing pass with all of them
+    # (the coarse pass steers by forward differences, n + 1 simulations per Jacobian instead of 2·n + 1: the
+    # 3D triple flip designs in 191 simulations instead of 262, p⁰ the same to 2e-10; the polish and the final
+    # J, from which C comes, keep central differences)
     coarse = _newton(evaluate, x0, lower, upper, p_scales, e_scales, 1e5 * tolerance, rcond=1e-4,
-                     max_iterations=15)[0]
+                     max_iterations=15, central=False)[0]
     p0, solver_message, ok = _newton(evaluate, coarse, lower, upper, p_scales, e_scales, tolerance)
     if not ok:
         # Newton did not get there: a bounded trust-region solve finds the best reachable
@@ -377,18 +401,19 @@ def _newton(
     max_scaled_step: float = 5.0,
     rcond: float = 1e-8,
     line_batch: int = 2,
+    central: bool = True,
 ) -> tuple[np.ndarray, str, bool]:
     """Bounded Newton iteration in scaled coordinates with backtracking.
 
     A fresh finite-difference Jacobian whenever progress is slow, chord steps (reusing
     it) while the residual falls fast. The backtracking line search tries its step lengths
     1, ½, ¼, … ``line_batch`` at a time in one model call (they run in parallel) and takes
-    the first that lowers the residual, as a one-at-a-time search would. Returns (best p,
-    message, converged).
+    the first that lowers the residual, as a one-at-a-time search would. ``central``: central
+    differences for J, else forward ones. Returns (best p, message, converged).
     """
     x = x0.copy()
     try:
-        J, e = _jacobian(evaluate, x)
+        J, e = _jacobian(evaluate, x, central=central)
     except ValueError as exc:
         return x, f"Jacobian not computable at the initial guess: {exc}", False
     if not np.all(np.isfinite(e)):
@@ -418,7 +443,7 @@ def _newton(
         x, e = candidate, e_new
         if slow or t < 1.0:  # otherwise a chord step: keep the Jacobian
             try:
-                J, e = _jacobian(evaluate, x)
+                J, e = _jacobian(evaluate, x, central=central)
             except ValueError as exc:
                 return x, f"Jacobian not computable near the iterate: {exc}", False
     norm = float(np.linalg.norm(e))

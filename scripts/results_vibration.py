@@ -6,6 +6,8 @@ Run (needs ../shared/data; about 10 s):
     .venv/bin/python scripts/results_vibration.py --json
     .venv/bin/python scripts/results_vibration.py --fly    # and the ROMA chain's first attempts (~3 min)
     .venv/bin/python scripts/results_vibration.py --figure docs/figures/logs/roma_vibration.png
+    .venv/bin/python scripts/results_vibration.py --replay  # flights 2 and 3 replayed, gyro before the filters (~1 min)
+    .venv/bin/python scripts/results_vibration.py --replay --replay-figure docs/figures/logs/roma_replay_vibration.png
 
 The ROMA F5's three flights record the gyro before the firmware's filters (Betaflight's debug_mode
 GYRO_SCALED), sampled at the log's 250 Hz. For each flight alone, with flight 1's identified thrust curve:
@@ -15,6 +17,11 @@ command, the share of steady windows whose strongest line lies on a folded rotor
 prior's), and the lines' rms per axis. Then, per throttle band, the strongest line above 30 Hz that the log
 shows (median over the band's steady windows) beside where the fold puts the rotors' line at the fitted and
 at the prior's k.
+
+With ``--replay``: flights 2 and 3 replayed through the SITL on the airframe ``identify`` writes from flight 1,
+with its vibration lines and without them; per axis the rms above 30 Hz of the log's gyro before the filters and
+of the gyro the SITL's firmware read, and the strongest line there (``aerobat log replay``'s vibration line;
+``--replay-figure``: flight 2's spectra figure, with the lines).
 
 With ``--fly``: the first attempt of the ROMA F5 chain (``scripts/results_roma.py``: the 3D triple flip at
 600 °/s designed on the firmware model, flown open loop on the identified airframe with the log's tune),
@@ -191,11 +198,64 @@ def fly(seeds: tuple[int, ...] = (0, 1, 2, 3)) -> dict[str, list[Any]]:
     return out
 
 
+def _airframes(work: Path) -> tuple[Path, Path]:
+    """The airframe ``identify`` writes from flight 1 as written, and with its commented vibration lines in it."""
+    import tomllib
+
+    import tomli_w
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import results_roma as chain
+
+    vehicle, airframe = work / "roma.toml", work / "roma_bf.toml"
+    chain.run_aerobat(["identify", "--log", f"{LOG}:1", *chain.IDENTIFY, "--output", str(vehicle), "--airframe",
+                       str(airframe)])
+    text = airframe.read_text()
+    table = tomllib.loads(text)
+    commented = "\n".join(line[4:] for line in text.splitlines() if line.startswith("#   "))
+    table["airframe"].update(tomllib.loads(commented))
+    shaking = work / "roma_bf_vibration.toml"
+    shaking.write_text(tomli_w.dumps(table))
+    return airframe, shaking
+
+
+def replay(figure_path: Path | None = None) -> list[dict[str, Any]]:
+    """Flights 2 and 3 replayed on flight 1's airframe, without and with its vibration lines (whole flights)."""
+    import tempfile
+
+    from aerobat.experiments.log_replay import AXES, replay_log
+    from aerobat.plants.fpv.params import load_betaflight
+
+    rows: list[dict[str, Any]] = []
+    with tempfile.TemporaryDirectory(prefix="aerobat-vibration-") as tmp:
+        quiet_file, shaking_file = _airframes(Path(tmp))
+        quiet, shaking = load_betaflight(quiet_file), load_betaflight(shaking_file)
+        for flight in (2, 3):
+            without = replay_log(LOG, index=flight, params=quiet)
+            with_lines = replay_log(LOG, index=flight, params=shaking)
+            if figure_path is not None and flight == 2:
+                from aerobat.plotting import save_figure
+                from aerobat.plotting.log_replay import plot_replay_spectra
+
+                save_figure(plot_replay_spectra(with_lines), figure_path)
+            for k, axis in enumerate(AXES):
+                a, b = without.vibration[k], with_lines.vibration[k]
+                rows.append({"flight": flight, "axis": axis, "log_rms_deg_s": a.rms_log_deg_s,
+                             "sim_rms_without_deg_s": a.rms_sim_deg_s, "sim_rms_with_deg_s": b.rms_sim_deg_s,
+                             "log_line_hz": a.peak_log_hz, "sim_line_with_hz": b.peak_sim_hz,
+                             "window_s": list(with_lines.window_s)})
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--figure", metavar="PNG", type=Path,
                         help="draw the unfiltered gyro's spectrum against motor command with the folded rotor lines")
+    parser.add_argument("--replay", action="store_true",
+                        help="also replay flights 2 and 3 and compare the gyro before the filters (~1 min)")
+    parser.add_argument("--replay-figure", metavar="PNG", type=Path,
+                        help="with --replay: flight 2's spectra figure, with the vibration lines")
     parser.add_argument("--fly", action="store_true",
                         help="also fly the ROMA chain's first attempts with each share of the vibration (~3 min)")
     args = parser.parse_args(argv)
@@ -206,6 +266,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.figure:
         figure(result["figure"], args.figure)
     result.pop("figure")
+    if args.replay:
+        result["replay"] = replay(args.replay_figure)
     if args.fly:
         result["first_attempt_m"] = fly()
     if args.json:
@@ -227,6 +289,15 @@ def main(argv: list[str] | None = None) -> int:
     for b in result["bands"]:
         print(f"| {b['command'][0]:.2f}–{b['command'][1]:.2f} | {b['windows']} | {b['log_line_hz']:.0f} Hz | "
               f"{b['rotor_at_fit_hz']:.0f} Hz, {b['folded_at_fit_hz']:.0f} Hz | {b['folded_at_prior_hz']:.0f} Hz |")
+    if args.replay:
+        print()
+        print("| flight | axis | log: rms above 30 Hz | SITL without the lines | SITL with them | "
+              "log's strongest line | SITL's, with the lines |")
+        print("|---|---|---|---|---|---|---|")
+        for r in result["replay"]:
+            print(f"| {r['flight']} | {r['axis']} | {r['log_rms_deg_s']:.1f} °/s | "
+                  f"{r['sim_rms_without_deg_s']:.1f} °/s | {r['sim_rms_with_deg_s']:.1f} °/s | "
+                  f"{r['log_line_hz']:.0f} Hz | {r['sim_line_with_hz']:.0f} Hz |")
     if args.fly:
         print()
         print("| the ROMA chain's airframe | first attempt, seeds 0-3 [m] |")

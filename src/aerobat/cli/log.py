@@ -257,7 +257,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     import math
     import sys
 
-    from aerobat.experiments.log_replay import AXES, replay_log
+    from aerobat.experiments.log_replay import AXES, VIBRATION_LOW_HZ, replay_log
     from aerobat.plotting import save_figure
     from aerobat.plotting.log_replay import plot_replay, plot_replay_spectra, plot_replay_steps
 
@@ -339,6 +339,15 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         f"{term} " + ", ".join(f"{axis} {m.rms:.1f} r {m.correlation:.2f} of {m.logged_rms:.1f}"
                                for axis, m in zip(AXES, row, strict=True) if m is not None)
         for term, row in zip("PIDF", result.pid, strict=True)), highlight=False)
+    if result.vibration:
+        say(f"  vibration before the filters ({VIBRATION_LOW_HZ:g} Hz to the log's Nyquist frequency; the log's "
+            "unfiltered gyro against the gyro the SITL's firmware read): " + "; ".join(
+                f"{axis} rms {m.rms_log_deg_s:.1f} / {m.rms_sim_deg_s:.1f} deg/s, strongest line "
+                f"{m.peak_log_hz:.0f} / {m.peak_sim_hz:.0f} Hz" for axis, m in zip(AXES, result.vibration, strict=True))
+            + " (log / SITL)", highlight=False)
+    else:
+        say("  vibration: not compared (the log records no gyro before the firmware's filters: debug_mode "
+            "GYRO_SCALED)", highlight=False)
     say(f"wrote {figure}, {steps_figure} and {spectra_figure}", highlight=False)
     return 0
 

@@ -22,6 +22,11 @@ pilot's sticks explain) are left out of every number, and the result says how ma
 
 * **PID terms**: the firmware's P, I, D, F per axis against the logged ``axisP/I/D/F``
   (firmware units; Betaflight logs no yaw D).
+* **vibration**: where the log records the gyro before the firmware's filters (``debug_mode`` GYRO_SCALED,
+  :attr:`~aerobat.quadrotor.flightlog.Channel.GYRO_UNFILTERED`), it against the gyro the SITL's firmware
+  read (the sensor's errors and the airframe's vibration lines), sampled at the log's instants as the blackbox
+  samples the real gyro, so that a rotor line above the log's Nyquist frequency folds alike: the rms above
+  :data:`VIBRATION_LOW_HZ` and the strongest line there, per axis (:class:`VibrationMatch`).
 """
 
 from __future__ import annotations
@@ -39,10 +44,11 @@ from aerobat.errors import ConfigError
 from aerobat.logs import read_logs
 from aerobat.logs.refs import parse_log_ref
 from aerobat.quadrotor.flightlog import Channel, FlightLog, LogFormat
-from aerobat.quadrotor.log_analysis import band_pass
+from aerobat.quadrotor.identification.vibration import LOW_HZ
+from aerobat.quadrotor.log_analysis import band_pass, welch
 
-__all__ = ["FLYING_MOTOR", "AxisMatch", "LogReplay", "StepMatch", "find_steps", "flying_voltage_v",
-           "load_betaflight_log", "log_props_out", "replay_log"]
+__all__ = ["FLYING_MOTOR", "VIBRATION_LOW_HZ", "AxisMatch", "LogReplay", "StepMatch", "VibrationMatch", "find_steps",
+           "flying_voltage_v", "load_betaflight_log", "log_props_out", "replay_log"]
 
 AXES = ("roll", "pitch", "yaw")
 _STEP_RISE_S = 0.10
@@ -75,6 +81,44 @@ class AxisMatch:
         band = (_correlation(band_pass(sim, dt_s), band_pass(real, dt_s))
                 if dt_s is not None and dt_s > 0 and sim.size > 8 else math.nan)
         return AxisMatch(diff, _correlation(sim, real), float(np.sqrt(np.mean(real ** 2))), band)
+
+
+VIBRATION_LOW_HZ = LOW_HZ
+"""The vibration band starts here [Hz] and ends at the log's Nyquist frequency: above the pilot's sticks and the
+frame's rigid-body motion, where a 5-inch's rotor lines land once folded (identification's
+:data:`~aerobat.quadrotor.identification.vibration.LOW_HZ`)."""
+_VIBRATION_SEGMENT = 256
+
+
+@dataclass(frozen=True)
+class VibrationMatch:
+    """The gyro before the firmware's filters on one axis, logged against the SITL's (the gyro its firmware read).
+
+    Attributes
+    ----------
+    rms_log_deg_s, rms_sim_deg_s : rms of the band from :data:`VIBRATION_LOW_HZ` to the log's Nyquist frequency
+        [deg/s] (Welch's spectrum, 256-sample segments, over the replayed window).
+    peak_log_hz, peak_sim_hz : the frequency of the band's strongest line [Hz], as sampled (a line above the
+        Nyquist frequency appears folded).
+    """
+
+    rms_log_deg_s: float
+    rms_sim_deg_s: float
+    peak_log_hz: float
+    peak_sim_hz: float
+
+    @staticmethod
+    def of(sim_deg_s: np.ndarray, log_deg_s: np.ndarray, rate_hz: float) -> VibrationMatch:
+        def band(x: np.ndarray) -> tuple[float, float]:
+            f, p = welch(x - x.mean(), rate_hz, _VIBRATION_SEGMENT)
+            inside = f >= VIBRATION_LOW_HZ
+            if not inside.any():
+                return math.nan, math.nan
+            df = float(f[1] - f[0])
+            return float(np.sqrt(np.sum(p[inside]) * df)), float(f[inside][np.argmax(p[inside])])
+
+        (rms_log, peak_log), (rms_sim, peak_sim) = band(log_deg_s), band(sim_deg_s)
+        return VibrationMatch(rms_log, rms_sim, peak_log, peak_sim)
 
 
 @dataclass(frozen=True)
@@ -110,6 +154,9 @@ class LogReplay:
     props : which way the propellers turned (``in`` or ``out``, from the log's mixer) and why: the SITL's
         ``yaw_motors_reversed`` and the physics' spins follow it.
     battery : how thrust followed the logged battery voltage (or why not).
+    gyro_unfiltered_log, gyro_sensor_sim : (n, 3) the logged gyro before the firmware's filters and the gyro the
+        SITL's firmware read, at the log's instants [deg/s]; None where the log or the plant does not have it.
+    vibration : per axis, the two above :data:`VIBRATION_LOW_HZ` (:class:`VibrationMatch`); empty without both.
     """
 
     log: str
@@ -138,6 +185,9 @@ class LogReplay:
     excluded_s: float = 0.0
     props: str = "in"
     battery: str = "not followed"
+    gyro_unfiltered_log: np.ndarray | None = None
+    gyro_sensor_sim: np.ndarray | None = None
+    vibration: tuple[VibrationMatch, ...] = ()
 
     def step_summary(self) -> dict[str, dict[str, float]]:
         """Per axis: steps found, median rise time [s] and overshoot (fraction), logged and simulated."""
@@ -171,6 +221,8 @@ class LogReplay:
                 "tracking": axes(self.tracking, AXES), "motors": axes(self.motors, ("M1", "M2", "M3", "M4")),
                 "steps": self.step_summary(), "step_list": [dataclasses.asdict(s) for s in self.steps],
                 "excluded_s": self.excluded_s, "props": self.props, "battery": self.battery,
+                "vibration": {a: dataclasses.asdict(m) for a, m in zip(AXES, self.vibration, strict=True)}
+                if self.vibration else None,
                 "wall_s": self.wall_s, "lockstep_steps": self.lockstep_steps}
 
 
@@ -313,13 +365,24 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
     sp_sim = np.column_stack([np.interp(rel, trace.time_s, trace.setpoint_deg_s[:, j]) for j in range(3)])
     pid_sim = np.stack([np.column_stack([np.interp(rel, trace.time_s, trace.pid[:, k, j]) for j in range(3)])
                         for k in range(4)], axis=1)
+    # the gyro the firmware read, sampled at the log's instants (the latest sample at or before each): a point
+    # sample, as the blackbox takes the real gyro's, so that lines above the log's Nyquist frequency fold alike
+    if trace.gyro_sensor_rad_s is not None:
+        at = np.clip(np.searchsorted(trace.time_s, rel + 1e-9, side="right") - 1, 0, trace.time_s.shape[0] - 1)
+        sensor_sim = np.degrees(trace.gyro_sensor_rad_s[at])
+    else:
+        sensor_sim = np.full((t.shape[0], 3), math.nan)
+    unfiltered_log = (np.degrees(cut.signals[Channel.GYRO_UNFILTERED].at(t)) if cut.has(Channel.GYRO_UNFILTERED)
+                      else np.full((t.shape[0], 3), math.nan))
     pid = np.full((t.shape[0], 4, 3), math.nan)
     for k, channel in enumerate((Channel.PID_P, Channel.PID_I, Channel.PID_D, Channel.PID_F)):
         if cut.has(channel):
             values = cut.signals[channel].at(t)
             pid[:, k, : values.shape[1]] = values
-    t, sp_model, sp_sim, sp_log, gyro_log, gyro_sim, motors_log, motors_sim, pid, pid_sim = (
-        a[keep] for a in (t, sp_model, sp_sim, sp_log, gyro_log, gyro_sim, motors_log, motors_sim, pid, pid_sim))
+    (t, sp_model, sp_sim, sp_log, gyro_log, gyro_sim, motors_log, motors_sim, pid, pid_sim, sensor_sim,
+     unfiltered_log) = (
+        a[keep] for a in (t, sp_model, sp_sim, sp_log, gyro_log, gyro_sim, motors_log, motors_sim, pid, pid_sim,
+                          sensor_sim, unfiltered_log))
     saturated = t[np.any(np.abs(gyro_log) >= SATURATED_DEG_S, axis=1)]
     valid = np.ones(t.shape[0], dtype=bool)
     for ts in saturated:
@@ -331,6 +394,9 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
     if not np.all(np.isfinite(gyro_sim)):
         raise ConfigError(f"{where}: the simulated flight went non-finite")
     v = valid
+    both = bool(np.all(np.isfinite(sensor_sim)) and np.all(np.isfinite(unfiltered_log)) and dt > 0)
+    vibration = tuple(VibrationMatch.of(sensor_sim[:, j], unfiltered_log[:, j], 1.0 / dt) for j in range(3)) \
+        if both else ()
     return LogReplay(
         log=log.name, window_s=(float(start), float(end)), airframe=airframe_source,
         tune_report=replayer.tune_report, time_s=t, setpoint_log=sp_log, setpoint_model=sp_model, setpoint_sim=sp_sim,
@@ -349,7 +415,9 @@ def replay_log(file: str | Path, *, index: int | None = None, window_s: tuple[fl
                     if v[int(np.searchsorted(t, s.time_s))]),
         wall_s=wall, lockstep_steps=trace.steps, excluded_s=float((~v).sum() * dt),
         props=("out" if props_out else "in") + (f" ({_mixer_note(log)})" if from_log else " (as asked)"),
-        battery=battery_note)
+        battery=battery_note,
+        gyro_unfiltered_log=unfiltered_log if np.all(np.isfinite(unfiltered_log)) else None,
+        gyro_sensor_sim=sensor_sim if np.all(np.isfinite(sensor_sim)) else None, vibration=vibration)
 
 
 FLYING_MOTOR = 0.15

@@ -17,6 +17,7 @@ from aerobat.quadrotor.log_analysis import (
     find_crash,
     plot_limits,
     throttle_spectrogram,
+    welch,
 )
 
 __all__ = ["draw_step", "log_crash", "plot_log_fit", "plot_log_pid", "plot_log_spectra", "plot_log_spectrogram",
@@ -144,28 +145,6 @@ def plot_log_pid(log: FlightLog, *, window_s: tuple[float, float] | None = None)
     _mark_crash(axes, crash if crash is not None and crash.time_s <= end else None, end, label_axis=axes[0])
     fig.suptitle(f"{log.name}: rate loop terms (P, I, D, feedforward)")
     return fig
-
-
-def welch(x: np.ndarray, fs: float, nperseg: int = 1024) -> tuple[np.ndarray, np.ndarray]:
-    """One-sided power spectral density of ``x`` by Welch's method: ``scipy.signal.welch``'s defaults (periodic
-    Hann window, half overlap, each segment's mean removed, density scaling), in NumPy.
-
-    Here so that ``aerobat log plot`` does not import ``scipy.signal`` (about 45 MB of the process's memory)
-    for it; segment by segment, without a table of them all.
-    """
-    n = min(nperseg, len(x))
-    if n < 2:
-        return np.zeros(0), np.zeros(0)
-    window = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(n) / n)
-    step = n - n // 2
-    total = np.zeros(n // 2 + 1)
-    starts = range(0, len(x) - n + 1, step)
-    for start in starts:
-        segment = x[start: start + n]
-        total += np.abs(np.fft.rfft((segment - segment.mean()) * window)) ** 2
-    p = total / (len(starts) * fs * float(np.sum(window ** 2)))
-    p[1: n // 2 + (n % 2)] *= 2.0  # one-sided: every bin but 0 and (n even) the Nyquist one counts twice
-    return np.fft.rfftfreq(n, 1.0 / fs), p
 
 
 def _psd(t: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

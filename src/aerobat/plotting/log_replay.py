@@ -99,32 +99,48 @@ def plot_replay_steps(result: Any) -> Any:
 
 
 def plot_replay_spectra(result: Any) -> Any:
-    """Per axis the power spectra of the logged and the simulated gyro over the replayed window (Welch, 256-sample
-    segments): what the firmware's filters meet in the air and in the SITL.
+    """Per axis the power spectra over the replayed window (Welch, 256-sample segments): the logged gyro (after the
+    firmware's filters) against the SITL's true rates; and, where the log records it, the gyro before the filters
+    against the gyro the SITL's firmware read (its sensor errors and the airframe's vibration lines, sampled at the
+    log's instants): what the firmware's filters meet in the air and in the SITL.
 
     ``result`` is an :class:`aerobat.experiments.log_replay.LogReplay`.
     """
-    from aerobat.plotting.flightlog import welch
+    from aerobat.quadrotor.identification.vibration import LOW_HZ
+    from aerobat.quadrotor.log_analysis import welch
 
-    fig = new_figure(figsize=(12, 4.2))
-    axes = fig.subplots(1, 3, sharey=True)
+    before = result.gyro_unfiltered_log is not None and result.gyro_sensor_sim is not None
+    rows: list[tuple[tuple[np.ndarray, str], tuple[np.ndarray, str]]] = [
+        ((result.gyro_log, "log (after the filters)"), (result.gyro_sim, "SITL (true rates)"))]
+    if before:
+        rows.append(((result.gyro_unfiltered_log, "log (before the filters)"),
+                     (result.gyro_sensor_sim, "SITL (the gyro its firmware read)")))
+    fig = new_figure(figsize=(12, 4.2 * len(rows)))
+    grid = np.atleast_2d(fig.subplots(len(rows), 3, sharey="row"))
     t = result.time_s
     fs = 1.0 / float(np.median(np.diff(t))) if t.size > 1 else 1.0
     segment = int(min(256, t.size))
-    for k, (ax, name) in enumerate(zip(axes, _AXES, strict=True)):
-        for series, label, color in ((result.gyro_log[:, k], "log", "tab:blue"),
-                                     (result.gyro_sim[:, k], "SITL", "tab:red")):
-            f, p = welch(series - series.mean(), fs, segment)
-            keep = p > 0
-            ax.semilogy(f[keep], p[keep], lw=0.8, color=color, label=label)
-        ax.set_title(name, fontsize=10)
-        ax.set_xlabel("frequency [Hz]")
-        ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=8)
-    axes[0].set_ylabel("gyro PSD [(°/s)²/Hz]")
+    for r, pair in enumerate(rows):
+        for k, (ax, name) in enumerate(zip(grid[r], _AXES, strict=True)):
+            for (series, label), color in zip(pair, ("tab:blue", "tab:red"), strict=True):
+                x = series[:, k]
+                f, p = welch(x - x.mean(), fs, segment)
+                keep = p > 0
+                ax.semilogy(f[keep], p[keep], lw=0.8, color=color, label=label)
+            title = name
+            if r == 1 and result.vibration:
+                m = result.vibration[k]
+                title += (f", before the filters; log / SITL above {LOW_HZ:g} Hz:\nrms {m.rms_log_deg_s:.1f} / "
+                          f"{m.rms_sim_deg_s:.1f} °/s, strongest line {m.peak_log_hz:.0f} / {m.peak_sim_hz:.0f} Hz")
+            ax.set_title(title, fontsize=8 if r else 10, loc="left" if r else "center")
+            ax.set_xlabel("frequency [Hz]")
+            ax.grid(alpha=0.3, which="both")
+            ax.legend(fontsize=7)
+        grid[r][0].set_ylabel("gyro PSD [(°/s)²/Hz]")
     lo, hi = result.window_s
     fig.suptitle(f"{result.log} {lo:g}–{hi:g} s: gyro spectra, logged and through the SITL "
-                 f"(Welch, {segment}-sample segments at {fs:.0f} Hz)", fontsize=10)
+                 f"(Welch, {segment}-sample segments at {fs:.0f} Hz; above {fs / 2:.0f} Hz a line appears folded)",
+                 fontsize=10)
     return fig
 
 

@@ -27,7 +27,7 @@ import numpy as np
 
 __all__ = ["BAND_HZ", "CALM_SPECIFIC_FORCE_G", "CRASH_SEARCH_S", "CRASH_SPECIFIC_FORCE_G", "GYRO_SATURATION_DEG_S",
            "RESPONSE_S", "Crash", "StepResponse", "ThrottleSpectrogram", "estimate_step_response", "band_pass",
-           "find_crash", "plot_limits", "throttle_spectrogram"]
+           "find_crash", "plot_limits", "throttle_spectrogram", "welch"]
 
 GYRO_SATURATION_DEG_S = 1900.0
 """A gyro sample at or above this [°/s] is saturated (95 % of Betaflight's 2000 °/s full scale)."""
@@ -76,6 +76,28 @@ def find_crash(time_s: np.ndarray, gyro_deg_s: np.ndarray, specific_force_m_s2: 
             found.append(Crash(_onset(ft, a, int(hit[0]), CALM_SPECIFIC_FORCE_G),
                                f"specific force {a[hit[0]]:.1f} g"))
     return min(found, key=lambda c: c.time_s) if found else None
+
+
+def welch(x: np.ndarray, fs: float, nperseg: int = 1024) -> tuple[np.ndarray, np.ndarray]:
+    """One-sided power spectral density of ``x`` by Welch's method: ``scipy.signal.welch``'s defaults (periodic
+    Hann window, half overlap, each segment's mean removed, density scaling), in NumPy.
+
+    Here so that ``aerobat log plot`` and the replay's vibration bands do not import ``scipy.signal`` (about 45 MB
+    of the process's memory) for it; segment by segment, without a table of them all.
+    """
+    n = min(nperseg, len(x))
+    if n < 2:
+        return np.zeros(0), np.zeros(0)
+    window = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(n) / n)
+    step = n - n // 2
+    total = np.zeros(n // 2 + 1)
+    starts = range(0, len(x) - n + 1, step)
+    for start in starts:
+        segment = x[start: start + n]
+        total += np.abs(np.fft.rfft((segment - segment.mean()) * window)) ** 2
+    p = total / (len(starts) * fs * float(np.sum(window ** 2)))
+    p[1: n // 2 + (n % 2)] *= 2.0  # one-sided: every bin but 0 and (n even) the Nyquist one counts twice
+    return np.fft.rfftfreq(n, 1.0 / fs), p
 
 
 def band_pass(x: np.ndarray, dt_s: float, band_hz: tuple[float, float] = BAND_HZ) -> np.ndarray:

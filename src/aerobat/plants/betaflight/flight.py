@@ -60,8 +60,8 @@ from aerobat.plants.fpv.params import BetaflightParams
 from aerobat.plants.lab_kernels import MOCAP_COLUMNS, estimate_pose
 from aerobat.quadrotor.dynamics import N_STATE
 
-__all__ = ["CHUNK_FRAMES", "N_PACKET", "N_SAMPLE", "SAMPLE_MOTORS", "SAMPLE_PID", "SAMPLE_RATES", "SAMPLE_SETPOINT",
-           "SAMPLE_TIME", "Flight", "NonFinite"]
+__all__ = ["CHUNK_FRAMES", "N_PACKET", "N_SAMPLE", "SAMPLE_GYRO", "SAMPLE_MOTORS", "SAMPLE_PID", "SAMPLE_RATES",
+           "SAMPLE_SETPOINT", "SAMPLE_TIME", "Flight", "NonFinite"]
 
 # the columns of a row of :meth:`Flight.sampled_frame`
 SAMPLE_TIME = 0
@@ -74,9 +74,12 @@ SAMPLE_SETPOINT = slice(8, 11)
 """The firmware's rate set point roll, pitch, yaw [deg/s]."""
 SAMPLE_PID = slice(11, 23)
 """The PID terms, axis-major: roll's P, I, D, F, then pitch's, then yaw's (firmware units)."""
-N_SAMPLE = 23
-N_PACKET = N_SAMPLE - SAMPLE_MOTORS.start
+N_PACKET = SAMPLE_PID.stop - SAMPLE_MOTORS.start
 """The motor packet's floats (motors, set point, PID terms) in a sample row, and at the end of a record row."""
+SAMPLE_GYRO = slice(23, 26)
+"""The gyro the firmware reads p, q, r [rad/s], body FLU: the true rates with the sensor's scale error, bias and
+noise and the frame's vibration (the state packet's, as the firmware gets it next)."""
+N_SAMPLE = 26
 
 _SLICE_S = 0.05  # the compiled shared-memory wait's timeout: then the watchdog takes the step
 
@@ -311,8 +314,9 @@ class Flight:
         """One lossless radio frame, sampled: ``rows`` (k, :data:`N_SAMPLE`) gets k evenly spaced samples of the frame.
 
         Row j (columns ``SAMPLE_*``: time [s], true body rates p, q, r [rad/s] FLU, the firmware's four motor
-        commands in packet order, its set point roll, pitch, yaw [deg/s] and P, I, D, F of roll, pitch, yaw)
-        is taken after the frame's (j + 1)-th k-th part; k must divide the frame's gyro periods.
+        commands in packet order, its set point roll, pitch, yaw [deg/s], P, I, D, F of roll, pitch, yaw, and
+        the gyro the firmware reads, FLU [rad/s]) is taken after the frame's (j + 1)-th k-th part; k must
+        divide the frame's gyro periods.
         """
         parts = rows.shape[0]
         if self.frame_steps % parts:
@@ -323,7 +327,9 @@ class Flight:
                             channels_us=channels, radio=Radio.LOSSLESS if j == 0 else Radio.NONE)
             rows[j, SAMPLE_TIME] = self.time_s
             rows[j, SAMPLE_RATES] = self.x[10:13]
-            rows[j, SAMPLE_MOTORS.start:N_SAMPLE] = self.motors  # the motor packet: motors, set point, PID terms
+            rows[j, SAMPLE_MOTORS.start:SAMPLE_PID.stop] = self.motors  # the motor packet: motors, set point, PID
+            gyro = self.packet[1:4]  # the state packet's gyro, FRD (p, −q, −r)
+            rows[j, SAMPLE_GYRO] = gyro[0], -gyro[1], -gyro[2]
 
     def run_frames(self, mode: Mode, frames: int, *, steps: int | None = None, radio: Radio = Radio.LOSSY,
                    channels_us: np.ndarray | None = None, pilot: AnglePilot | ProgramPilot | None = None,

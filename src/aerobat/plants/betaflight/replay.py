@@ -29,6 +29,7 @@ from aerobat.firmware.betaflight.rc import RC_MAX_US, RC_MID_US, RC_MIN_US
 from aerobat.firmware.betaflight.settings import BetaflightSettings
 from aerobat.plants.betaflight.flight import (
     N_SAMPLE,
+    SAMPLE_GYRO,
     SAMPLE_MOTORS,
     SAMPLE_PID,
     SAMPLE_RATES,
@@ -93,6 +94,9 @@ class ReplayTrace:
         likewise.
     armed_at_s : simulated time of arming since power-on.
     steps : lockstep steps taken.
+    gyro_sensor_rad_s : (m, 3) the gyro the firmware read, body FLU: the true rates with the sensor's scale
+        error, bias and noise and the frame's vibration (the airframe's ``vibration_*``); None from a plant that
+        does not say it.
     """
 
     time_s: np.ndarray
@@ -102,6 +106,7 @@ class ReplayTrace:
     pid: np.ndarray
     armed_at_s: float
     steps: int
+    gyro_sensor_rad_s: np.ndarray | None = None
 
 
 def channels_from_commands(settings: BetaflightSettings, roll_pitch_yaw: np.ndarray, throttle: np.ndarray
@@ -175,7 +180,8 @@ def replay_sticks(plant: BetaflightPlant, track: StickTrack, *, samples_per_fram
         pid_terms[:] = np.nan
     pid = pid_terms.reshape(-1, 3, 4).transpose(0, 2, 1)
     return ReplayTrace(time_s=rows[:, SAMPLE_TIME] - t0, rates_rad_s=rows[:, SAMPLE_RATES].copy(), motors=motors,
-                       setpoint_deg_s=setpoint, pid=pid, armed_at_s=armed, steps=steps)
+                       setpoint_deg_s=setpoint, pid=pid, armed_at_s=armed, steps=steps,
+                       gyro_sensor_rad_s=rows[:, SAMPLE_GYRO].copy())
 
 
 class LogReplayer:
